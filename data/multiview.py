@@ -1,0 +1,64 @@
+"""In-memory containers of multi-view frames: what every dataset loader yields to the pipeline."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from reconstruction.camera import Rig
+
+
+@dataclass
+class ViewDetections:
+    """The 2D detections of one camera in one frame, N persons, COCO-23 keypoints.
+
+    keypoints (N, 23, 3): x, y in distorted pixels of the original image, score (0 = missing).
+    bboxes (N, 4): x, y, w, h in pixels. scores (N,): detection confidence.
+    person_ids (N,): ground-truth identity, -1 for a false positive or when unknown.
+    occluded (N, 23): ground-truth "hidden behind another body" flags where known, else all False.
+    """
+
+    keypoints: np.ndarray
+    bboxes: np.ndarray
+    scores: np.ndarray
+    person_ids: np.ndarray
+    occluded: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        n = len(self.keypoints)
+        self.keypoints = np.asarray(self.keypoints, dtype=np.float64).reshape(n, -1, 3)
+        self.bboxes = np.asarray(self.bboxes, dtype=np.float64).reshape(n, 4)
+        self.scores = np.asarray(self.scores, dtype=np.float64).reshape(n)
+        self.person_ids = np.asarray(self.person_ids, dtype=np.int64).reshape(n)
+        if self.occluded is None:
+            self.occluded = np.zeros(self.keypoints.shape[:2], dtype=bool)
+
+    def __len__(self) -> int:
+        return len(self.keypoints)
+
+    @classmethod
+    def empty(cls, num_joints: int = 23) -> "ViewDetections":
+        """No detections."""
+        return cls(np.zeros((0, num_joints, 3)), np.zeros((0, 4)), np.zeros(0), np.zeros(0, np.int64))
+
+
+@dataclass
+class Frame:
+    """One multi-view frame: detections per view (rig order) and, where known, 3D ground truth.
+
+    gt_poses (P, J, 4): x, y, z (m, world) and validity (1 = annotated); gt_ids (P,).
+    """
+
+    index: int
+    views: list[ViewDetections]
+    gt_poses: np.ndarray | None = None
+    gt_ids: np.ndarray | None = None
+
+
+@dataclass
+class Sequence:
+    """A rig and its frames, with a free-form description of where they came from."""
+
+    rig: Rig
+    frames: list[Frame]
+    meta: dict = field(default_factory=dict)

@@ -1,0 +1,54 @@
+"""Reading and writing the pose files users see (DESIGN.md): poses3d.json; atomic writes."""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from data.keypoints import COCO23_NAMES
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write a file under a temporary name in the same folder, then rename it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def poses3d_document(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera_names: list[str]) -> dict:
+    """The poses3d.json document of (frame, poses (P, 23, 4), assignment (P, V)) triples."""
+    out_frames = []
+    for frame, poses, assignment in frames:
+        people = []
+        for p, pose in enumerate(np.asarray(poses, dtype=np.float64)):
+            kps = np.where(pose[:, 3:4] > 0, pose, 0.0)
+            views = {camera_names[v]: int(d) for v, d in enumerate(assignment[p]) if d >= 0}
+            people.append({"id": p, "keypoints": np.round(kps, 6).tolist(), "views": views})
+        out_frames.append({"frame": int(frame), "poses": people})
+    return {"keypoints": list(COCO23_NAMES), "units": "m", "frames": out_frames}
+
+
+def write_poses3d(path: str | Path, frames: Iterable[tuple[int, np.ndarray, np.ndarray]],
+                  camera_names: list[str]) -> None:
+    """Write poses3d.json atomically from (frame, poses (P, 23, 4), assignment (P, V)) triples."""
+    atomic_write_text(path, json.dumps(poses3d_document(frames, camera_names)))
+
+
+def read_poses3d(path: str | Path) -> dict[int, np.ndarray]:
+    """Read poses3d.json: {frame: (P, 23, 4) x, y, z, score}."""
+    doc = json.loads(Path(path).read_text())
+    if doc.get("units") != "m" or len(doc.get("keypoints", [])) != len(COCO23_NAMES):
+        raise ValueError(f"{path}: not a poses3d.json with 23 keypoints in metres")
+    return {int(f["frame"]): np.array([p["keypoints"] for p in f["poses"]], dtype=np.float64).reshape(-1, 23, 4)
+            for f in doc["frames"]}

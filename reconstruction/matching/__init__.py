@@ -1,0 +1,8 @@
+"""Cross-view person matching. A matcher maps the detections of one frame to persons:
+``matcher(views, rig) -> assignment`` with assignment (P, V) int, the detection index of person p in
+view v or -1. Each matcher is a small callable class configured from ``configs/matching/*.yaml``.
+"""
+from reconstruction.matching.assignment import assignment_from_labels, views_per_person
+from reconstruction.matching.oracle import OracleMatcher
+
+__all__ = ["OracleMatcher", "assignment_from_labels", "views_per_person"]

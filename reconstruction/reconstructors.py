@@ -1,0 +1,22 @@
+"""3D reconstruction stages behind one interface: ``stage(poses2d, bboxes, rig) -> (P, J, 4)``.
+
+poses2d (V, P, J, 3) are distorted pixels + score as detected (0 = missing); bboxes (V, P, 4) x, y,
+w, h. Each stage is configured from ``configs/reconstruction/*.yaml``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from reconstruction.camera import Rig
+from reconstruction.triangulation import triangulate_dlt
+
+
+class VanillaTriangulation:
+    """Score-weighted DLT on undistorted pixels (the paper's "vanilla triangulation")."""
+
+    def __init__(self, min_views: int = 2) -> None:
+        self.min_views = min_views
+
+    def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig) -> np.ndarray:
+        """Triangulate matched persons: (V, P, J, 3), (V, P, 4) -> (P, J, 4)."""
+        return triangulate_dlt(rig.undistort(poses2d), rig.projection_matrices(), self.min_views)

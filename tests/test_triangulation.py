@@ -1,0 +1,91 @@
+import cv2
+import numpy as np
+import pytest
+
+from reconstruction.camera import Camera, Rig
+from reconstruction.triangulation import reprojection_error, triangulate_dlt
+
+
+def ring(num: int, radius: float = 6.0, height: float = 2.5) -> Rig:
+    cams = []
+    K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
+    for i in range(num):
+        a = 2 * np.pi * i / num
+        c = np.array([radius * np.cos(a), radius * np.sin(a), height])
+        z = -c / np.linalg.norm(c)
+        x = np.cross(z, [0, 0, 1.0]); x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        R = np.stack([x, y, z])
+        cams.append(Camera(str(i), K, np.zeros(5), R, -R @ c, (1280, 720)))
+    return Rig(tuple(cams))
+
+
+def observe(rig: Rig, X: np.ndarray) -> np.ndarray:
+    uv = rig.project(X)                      # (V, P, J, 2)
+    return np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
+
+
+def test_noise_free_points_are_recovered_to_a_micrometre():
+    rng = np.random.default_rng(0)
+    X = rng.uniform([-2, -2, 0], [2, 2, 2], size=(7, 23, 3))
+    rig = ring(5)
+    out = triangulate_dlt(observe(rig, X), rig.projection_matrices())
+    assert out.shape == (7, 23, 4)
+    np.testing.assert_allclose(out[..., :3], X, atol=1e-6)
+    np.testing.assert_allclose(out[..., 3], 1.0)
+
+
+def test_two_views_match_cv2_triangulate_points():
+    rng = np.random.default_rng(1)
+    X = rng.uniform([-2, -2, 0], [2, 2, 2], size=(1, 50, 3))
+    rig = ring(2)
+    obs = observe(rig, X) + np.concatenate([rng.normal(0, 2.0, (2, 1, 50, 2)), np.zeros((2, 1, 50, 1))], -1)
+    ours = triangulate_dlt(obs, rig.projection_matrices())[0, :, :3]
+    P0, P1 = rig.projection_matrices()
+    h = cv2.triangulatePoints(P0, P1, obs[0, 0, :, :2].T.copy(), obs[1, 0, :, :2].T.copy())
+    theirs = (h[:3] / h[3]).T
+    # with noise the two algebraic solutions differ (we normalise the rows); neither may be worse
+    err_ours = np.linalg.norm(ours - X[0], axis=-1).mean()
+    err_cv2 = np.linalg.norm(theirs - X[0], axis=-1).mean()
+    assert err_ours <= 1.05 * err_cv2
+    rig_exact = observe(rig, X)
+    h = cv2.triangulatePoints(P0, P1, rig_exact[0, 0, :, :2].T.copy(), rig_exact[1, 0, :, :2].T.copy())
+    np.testing.assert_allclose(triangulate_dlt(rig_exact, rig.projection_matrices())[0, :, :3],
+                               (h[:3] / h[3]).T, atol=1e-6)
+
+
+def test_joint_seen_in_one_view_gets_score_zero():
+    rig = ring(3)
+    X = np.array([[[0.0, 0.0, 1.0], [0.5, 0.2, 1.5]]])
+    obs = observe(rig, X)
+    obs[1:, 0, 1, 2] = 0.0          # joint 1 only in view 0
+    out = triangulate_dlt(obs, rig.projection_matrices())
+    assert out[0, 1, 3] == 0 and np.all(out[0, 1, :3] == 0)
+    np.testing.assert_allclose(out[0, 0, :3], X[0, 0], atol=1e-6)
+
+
+def test_scores_weight_the_views():
+    rig = ring(4)
+    X = np.array([[[0.3, -0.2, 1.2]]])
+    obs = observe(rig, X)
+    obs[0, 0, 0, :2] += 40.0        # an outlier in view 0
+    low = obs.copy(); low[0, 0, 0, 2] = 0.05
+    err_high = np.linalg.norm(triangulate_dlt(obs, rig.projection_matrices())[0, 0, :3] - X[0, 0])
+    err_low = np.linalg.norm(triangulate_dlt(low, rig.projection_matrices())[0, 0, :3] - X[0, 0])
+    assert err_low < 0.25 * err_high
+    np.testing.assert_allclose(triangulate_dlt(low, rig.projection_matrices())[0, 0, 3], (0.05 + 3) / 4)
+
+
+def test_reprojection_error_is_zero_on_exact_data_and_nan_where_unseen():
+    rig = ring(3)
+    X = np.random.default_rng(2).uniform(-1, 1, (2, 23, 3)) + [0, 0, 1]
+    obs = observe(rig, X)
+    obs[2, 1, 5, 2] = 0
+    out = triangulate_dlt(obs, rig.projection_matrices())
+    err = reprojection_error(out, obs, rig.projection_matrices())
+    assert np.isnan(err[2, 1, 5]) and np.nanmax(err) < 1e-6
+
+
+def test_bad_projection_shape_is_an_error():
+    with pytest.raises(ValueError, match="expected"):
+        triangulate_dlt(np.zeros((3, 1, 23, 3)), np.zeros((2, 3, 4)))
