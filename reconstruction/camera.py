@@ -71,8 +71,9 @@ class Camera:
         flat = points.reshape(-1, 3)
         if flat.shape[0] == 0:
             return np.zeros(points.shape[:-1] + (2,))
-        rvec, _ = cv2.Rodrigues(self.R)
-        uv, _ = cv2.projectPoints(flat, rvec, self.t, self.K, self.dist)
+        # Transform with R as stored: cv2.Rodrigues would snap a slightly non-orthogonal R to a
+        # rotation, and projection would then disagree with P and the ground homographies.
+        uv, _ = cv2.projectPoints(self.world_to_camera(flat), np.zeros(3), np.zeros(3), self.K, self.dist)
         return uv.reshape(points.shape[:-1] + (2,))
 
     def undistort_points(self, uv: np.ndarray) -> np.ndarray:
