@@ -120,8 +120,11 @@ class Camera:
         border = np.concatenate([np.stack([xs, np.zeros_like(xs)], 1), np.stack([xs, np.full_like(xs, h - 1)], 1),
                                  np.stack([np.zeros_like(ys), ys], 1), np.stack([np.full_like(ys, w - 1), ys], 1)])
         und = self.undistort_points(border)
-        norm = (und - self.K[:2, 2]) / np.diag(self.K)[:2]
-        return float(np.max(np.sum(norm ** 2, axis=1)))
+        # Where strong distortion is not invertible (e.g. Wildtrack's corners) the iterative undistortion
+        # lands on a wrong point; keep only border points it maps back onto themselves.
+        exact = np.linalg.norm(self.distort_points(und) - border, axis=1) < 0.5
+        norm = (und[exact] - self.K[:2, 2]) / np.diag(self.K)[:2]
+        return float(np.max(np.sum(norm ** 2, axis=1))) if len(norm) else float("inf")
 
     # --- ground plane z = 0 -----------------------------------------------------------------------
     def ground_to_image_homography(self) -> np.ndarray:

@@ -3,6 +3,7 @@
 view v or -1. Each matcher is a small callable class configured from ``configs/matching/*.yaml``.
 """
 from reconstruction.matching.assignment import assignment_from_labels, views_per_person
+from reconstruction.matching.feet import FeetMatcher
 from reconstruction.matching.oracle import OracleMatcher
 
-__all__ = ["OracleMatcher", "assignment_from_labels", "views_per_person"]
+__all__ = ["FeetMatcher", "OracleMatcher", "assignment_from_labels", "views_per_person"]
