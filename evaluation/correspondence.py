@@ -1,0 +1,106 @@
+"""Cross-view correspondence metrics of a matcher's assignment against ground-truth identities.
+
+Pairs: every two detections a predicted person holds is a predicted pair; it is correct when both
+have the same ground-truth id >= 0. The ground-truth pairs are the pairs of detections in different
+views sharing an id >= 0. A ground-truth person (an id seen in >= 2 views) is recovered when one
+predicted person holds all and only their detections (pure and complete).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class CorrespondenceCounts:
+    """Counts of one or more frames; add them over frames, then read the ratios (NaN when undefined)."""
+
+    predicted_pairs: int = 0
+    correct_pairs: int = 0
+    true_pairs: int = 0
+    persons: int = 0
+    persons_recovered: int = 0
+
+    def __add__(self, other: "CorrespondenceCounts") -> "CorrespondenceCounts":
+        return CorrespondenceCounts(*(a + b for a, b in zip(self._values(), other._values())))
+
+    def _values(self) -> tuple[int, ...]:
+        return (self.predicted_pairs, self.correct_pairs, self.true_pairs, self.persons, self.persons_recovered)
+
+    @property
+    def precision(self) -> float:
+        """Correct predicted pairs / predicted pairs."""
+        return self.correct_pairs / self.predicted_pairs if self.predicted_pairs else float("nan")
+
+    @property
+    def recall(self) -> float:
+        """Correct predicted pairs / ground-truth pairs."""
+        return self.correct_pairs / self.true_pairs if self.true_pairs else float("nan")
+
+    @property
+    def recovered_share(self) -> float:
+        """Share of ground-truth persons (ids in >= 2 views) recovered pure and complete."""
+        return self.persons_recovered / self.persons if self.persons else float("nan")
+
+    def as_dict(self) -> dict[str, float]:
+        """Counts and ratios, for reports."""
+        return {"predicted_pairs": self.predicted_pairs, "correct_pairs": self.correct_pairs,
+                "true_pairs": self.true_pairs, "persons": self.persons,
+                "persons_recovered": self.persons_recovered, "precision": self.precision,
+                "recall": self.recall, "recovered_share": self.recovered_share}
+
+
+def _validate(assignment: np.ndarray, person_ids: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Check shapes and indices: (P, V), V arrays (N_v,) -> int64 copies."""
+    a = np.asarray(assignment, dtype=np.int64).reshape(-1, len(person_ids))
+    ids = [np.asarray(p, dtype=np.int64).reshape(-1) for p in person_ids]
+    for v, view_ids in enumerate(ids):
+        if np.any(a[:, v] >= len(view_ids)) or np.any(a[:, v] < -1):
+            raise ValueError(f"assignment column {v} indexes outside the {len(view_ids)} detections of view {v}")
+        used = a[a[:, v] >= 0, v]
+        if len(np.unique(used)) != len(used):
+            raise ValueError(f"a detection of view {v} is assigned to two persons")
+    return a, ids
+
+
+def _pairs(n: np.ndarray) -> np.ndarray:
+    """Number of unordered pairs among n items: (...,) -> (...,)."""
+    return n * (n - 1) // 2
+
+
+def correspondence_counts(assignment: np.ndarray, person_ids: list[np.ndarray]) -> CorrespondenceCounts:
+    """Pair and person counts of one frame: assignment (P, V), V arrays person_ids (N_v,) -> counts."""
+    a, ids = _validate(assignment, person_ids)
+    V = len(ids)
+    row_ids = np.full(a.shape, -1, dtype=np.int64)
+    for v in range(V):
+        have = a[:, v] >= 0
+        row_ids[have, v] = ids[v][a[have, v]]
+    held = np.sum(a >= 0, axis=1)
+    predicted = int(_pairs(held).sum())
+    correct = 0
+    for row in row_ids:
+        _, c = np.unique(row[row >= 0], return_counts=True)
+        correct += int(_pairs(c).sum())
+
+    all_ids = np.concatenate(ids) if V else np.zeros(0, np.int64)
+    gt = np.unique(all_ids[all_ids >= 0])
+    per_view = np.stack([np.sum(ids[v][None, :] == gt[:, None], axis=1) for v in range(V)], 1) \
+        if V else np.zeros((0, 0), np.int64)
+    total = per_view.sum(axis=1)
+    true_pairs = int(((total ** 2 - np.sum(per_view ** 2, axis=1)) // 2).sum())
+    persons = gt[np.sum(per_view > 0, axis=1) >= 2]
+    total_of = dict(zip(gt.tolist(), total.tolist()))
+
+    recovered = 0
+    for row, mask, n in zip(row_ids, a >= 0, held):
+        vals = row[mask]  # a false positive (id -1) in the row makes it impure
+        if n and np.all(vals == vals[0]) and vals[0] in persons and total_of[int(vals[0])] == n:
+            recovered += 1
+    return CorrespondenceCounts(predicted, correct, true_pairs, len(persons), recovered)
+
+
+def correspondence_metrics(assignment: np.ndarray, person_ids: list[np.ndarray]) -> dict[str, float]:
+    """Precision, recall, recovered share and their counts: (P, V), V arrays (N_v,) -> dict."""
+    return correspondence_counts(assignment, person_ids).as_dict()

@@ -1,0 +1,123 @@
+"""Pieces shared by the pairwise matchers: a gated two-view assignment and the multi-view merger.
+
+A matcher scores the detections of every view pair (l < m), solves each pair with
+:func:`solve_pair`, collects the accepted edges with :func:`pair_edges` and turns them into persons
+with :func:`merge_edges`, which resolves cross-view conflicts giving priority to cheaper edges
+(paper Sec. 3.2, "Solver").
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+EDGE_COLUMNS = ("view_a", "det_a", "view_b", "det_b", "cost")
+
+
+def solve_pair(cost: np.ndarray, gate: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+    """Gated rectangular assignment: cost (Na, Nb) -> rows (K,), cols (K,) of the accepted pairs.
+
+    Pairs with a non-finite cost or a cost above ``gate`` are never accepted. They get a large finite
+    cost M > min(Na, Nb) * (largest allowed cost), so ``linear_sum_assignment`` (a Jonker-Volgenant
+    shortest augmenting path solver) first maximises the number of allowed pairs and then minimises
+    their total cost, as the equality constraints of the paper's Eq. 5 ask; the gated pairs it still
+    has to use are dropped afterwards.
+    """
+    cost = np.asarray(cost, dtype=np.float64)
+    if cost.ndim != 2:
+        raise ValueError(f"cost must be 2-D (Na, Nb), got shape {cost.shape}")
+    empty = np.zeros(0, dtype=np.int64)
+    allowed = np.isfinite(cost) & (cost <= gate)
+    if not allowed.any():
+        return empty, empty.copy()
+    largest = float(np.max(np.abs(cost[allowed])))
+    big = (min(cost.shape) + 1) * largest + 1.0
+    rows, cols = linear_sum_assignment(np.where(allowed, cost, big))
+    keep = allowed[rows, cols]
+    return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+
+
+def pair_edges(view_a: int, view_b: int, rows: np.ndarray, cols: np.ndarray,
+               cost: np.ndarray) -> np.ndarray:
+    """Edges of one solved view pair: rows (K,), cols (K,), cost (Na, Nb) -> (K, 5) see EDGE_COLUMNS."""
+    rows = np.asarray(rows, dtype=np.int64)
+    cols = np.asarray(cols, dtype=np.int64)
+    k = len(rows)
+    return np.column_stack([np.full(k, view_a), rows, np.full(k, view_b), cols,
+                            np.asarray(cost, dtype=np.float64)[rows, cols]]).astype(np.float64)
+
+
+class _Components:
+    """Union-find over global detection indices that tracks the set of views of each component."""
+
+    def __init__(self, view_of: np.ndarray, num_views: int) -> None:
+        self.parent = np.arange(len(view_of))
+        self.views = np.zeros((len(view_of), num_views), dtype=bool)
+        self.views[np.arange(len(view_of)), view_of] = True
+
+    def find(self, i: int) -> int:
+        """Root of i, with path halving."""
+        while self.parent[i] != i:
+            self.parent[i] = self.parent[self.parent[i]]
+            i = self.parent[i]
+        return int(i)
+
+    def union_if_compatible(self, i: int, j: int) -> bool:
+        """Merge the components of i and j unless they share a view; whether they are now one."""
+        a, b = self.find(i), self.find(j)
+        if a == b:
+            return True
+        if np.any(self.views[a] & self.views[b]):
+            return False
+        self.parent[b] = a
+        self.views[a] |= self.views[b]
+        return True
+
+
+def _as_edges(edges: np.ndarray) -> np.ndarray:
+    """Validate an edge table: (E, 5) -> (E, 5) float64 (a copy)."""
+    edges = np.array(edges, dtype=np.float64).reshape(-1, 5) if np.size(edges) else np.zeros((0, 5))
+    if not np.all(np.isfinite(edges)):
+        raise ValueError("edges must be finite (drop gated pairs before merging)")
+    return edges
+
+
+def merge_edges(edges: np.ndarray, num_detections: list[int], min_views: int = 2) -> np.ndarray:
+    """Persons from pairwise edges: (E, 5) rows (view_a, det_a, view_b, det_b, cost) -> (P, V).
+
+    Edges are taken by increasing cost (ties by view and detection indices, so the result does not
+    depend on the edge order) and each one merges its two detections' persons unless that would put
+    two detections of one view into a person. Persons seen in >= ``min_views`` views are returned,
+    ordered by their smallest (view, detection); -1 marks a view without a detection.
+    """
+    edges = _as_edges(edges)
+    counts = np.asarray(num_detections, dtype=np.int64)
+    V = len(counts)
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    view_of = np.repeat(np.arange(V), counts)
+    va, da, vb, db = (edges[:, k].astype(np.int64) for k in range(4))
+    bad = (va < 0) | (va >= V) | (vb < 0) | (vb >= V) | (va == vb)
+    if np.any(bad):
+        raise ValueError(f"edge {int(np.argmax(bad))} names a view outside 0..{V - 1} or one view twice")
+    if np.any((da < 0) | (da >= counts[va]) | (db < 0) | (db >= counts[vb])):
+        raise ValueError("an edge names a detection index outside its view")
+    ga, gb = offsets[va] + da, offsets[vb] + db
+    order = np.lexsort((gb, ga, edges[:, 4]))
+    comps = _Components(view_of, V)
+    for e in order:
+        comps.union_if_compatible(int(ga[e]), int(gb[e]))
+    return _components_to_assignment(comps, view_of, offsets, min_views)
+
+
+def _components_to_assignment(comps: _Components, view_of: np.ndarray, offsets: np.ndarray,
+                              min_views: int) -> np.ndarray:
+    """(P, V) rows of the components with >= min_views views, by smallest global index."""
+    V = len(offsets) - 1
+    rows: dict[int, np.ndarray] = {}
+    for g in range(len(view_of)):  # increasing g = increasing (view, det): first seen = smallest
+        row = rows.setdefault(comps.find(g), np.full(V, -1, dtype=np.int64))
+        v = view_of[g]
+        if row[v] >= 0:
+            raise AssertionError("merger produced two detections of one view in a person")
+        row[v] = g - offsets[v]
+    kept = [row for row in rows.values() if np.sum(row >= 0) >= min_views]
+    return np.stack(kept) if kept else np.zeros((0, V), dtype=np.int64)
