@@ -17,18 +17,18 @@ from omegaconf import DictConfig
 
 from data.poses_io import atomic_write_text, write_poses3d
 from evaluation.pose3d import Pose3DEvaluator
-from evaluation.sequence_eval import evaluate_sequence, format_report
+from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
 from reconstruction.pipeline import MultiViewPipeline
 
 PROTOCOL = ("absolute MPJPE (mm, no root alignment) over all frames; each GT person matched one-to-one "
             "to a prediction by Hungarian on mean joint distance (unmatched beyond {max_dist_m} m); "
             "PCP alpha={alpha} on the 10 Shelf parts of Shelf-14 built from COCO-23, unmatched GT "
-            "persons count all parts wrong")
+            "persons count all parts wrong; matching precision/recall over pairs of detections placed "
+            "in one person, against ground-truth identities")
 
 
-@hydra.main(config_path="configs", config_name="eval", version_base="1.3")
-def main(cfg: DictConfig) -> dict:
-    """Run one evaluation and return its metrics (for Hydra sweeps)."""
+def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
+    """Evaluate the configured dataset, matcher and reconstruction; write outputs into out_dir."""
     t0 = time.perf_counter()
     sequence = instantiate(cfg.dataset, _convert_="all")
     t_data = time.perf_counter() - t0
@@ -36,17 +36,22 @@ def main(cfg: DictConfig) -> dict:
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
     report.timings = {"dataset": t_data, **report.timings}
 
-    out_dir = Path(HydraConfig.get().runtime.output_dir)
     frames = ((r.frame, r.poses3d, r.assignment) for r in report.results)
     write_poses3d(out_dir / cfg.output, frames, sequence.rig.names)
     atomic_write_text(out_dir / cfg.metrics_file, json.dumps(
-        {"metrics": report.metrics, "skipped": dict(report.skipped), "timings_s": report.timings}, indent=2))
-
+        {"metrics": report.metrics, "skipped": dict(report.skipped), "unmatched": dict(report.unmatched),
+         "timings_s": report.timings}, indent=2))
     print(f"\n{sequence.meta.get('description', 'dataset')}: {len(sequence.frames)} frames, "
           f"{len(sequence.rig)} cameras")
     print(format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation)))
-    print(f"\nWrote {out_dir / cfg.output}")
-    return report.metrics
+    print(f"\nWrote {out_dir / cfg.output} and {cfg.metrics_file}")
+    return report
+
+
+@hydra.main(config_path="configs", config_name="eval", version_base="1.3")
+def main(cfg: DictConfig) -> dict:
+    """Hydra entry point; returns the metrics (for sweeps)."""
+    return run(cfg, Path(HydraConfig.get().runtime.output_dir)).metrics
 
 
 if __name__ == "__main__":

@@ -25,8 +25,9 @@ class ViewDetections:
     occluded: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        n = len(self.keypoints)
-        self.keypoints = np.asarray(self.keypoints, dtype=np.float64).reshape(n, -1, 3)
+        keypoints = np.asarray(self.keypoints, dtype=np.float64)
+        n = len(keypoints)
+        self.keypoints = keypoints.reshape(n, keypoints.shape[1] if keypoints.ndim == 3 else -1, 3)
         self.bboxes = np.asarray(self.bboxes, dtype=np.float64).reshape(n, 4)
         self.scores = np.asarray(self.scores, dtype=np.float64).reshape(n)
         self.person_ids = np.asarray(self.person_ids, dtype=np.int64).reshape(n)

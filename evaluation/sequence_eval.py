@@ -5,10 +5,12 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 
+import numpy as np
 from tqdm import tqdm
 
 from data.keypoints import JOINT_GROUPS
 from data.multiview import Sequence
+from evaluation.correspondence import CorrespondenceCounts, correspondence_counts
 from evaluation.pcp import PART_NAMES
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.report import format_table
@@ -17,31 +19,40 @@ from reconstruction.pipeline import FrameResult, MultiViewPipeline
 
 @dataclass
 class SequenceReport:
-    """Per-frame results, metrics (empty without ground truth), skipped frames by reason, seconds by stage."""
+    """Per-frame results, metrics (empty without ground truth), skipped frames by reason, seconds by stage,
+    and detections the matcher left out of every person, by reason (matchers that count them)."""
 
     results: list[FrameResult]
     metrics: dict[str, float]
     skipped: Counter
     timings: dict[str, float] = field(default_factory=dict)
+    unmatched: Counter = field(default_factory=Counter)
 
 
 def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator: Pose3DEvaluator,
                       progress: bool = True) -> SequenceReport:
     """Reconstruct every frame, score it against ground truth where there is some."""
-    results, skipped = [], Counter()
+    results, skipped, pairs = [], Counter(), CorrespondenceCounts()
+    has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
     t_eval = 0.0
     for frame in tqdm(sequence.frames, desc="frames", unit="frame", disable=not progress):
         result = pipeline(frame)
         results.append(result)
         if len(result.poses3d) == 0:
             skipped["no person matched in two or more views"] += 1
+        t0 = time.perf_counter()
         if frame.gt_poses is not None:
-            t0 = time.perf_counter()
             evaluator.update(result.poses3d, frame.gt_poses)
-            t_eval += time.perf_counter() - t0
+        if has_ids:
+            pairs = pairs + correspondence_counts(result.assignment, [v.person_ids for v in frame.views])
+        t_eval += time.perf_counter() - t0
     has_gt = any(f.gt_poses is not None for f in sequence.frames)
+    metrics = evaluator.summary() if has_gt else {}
+    if has_ids:
+        metrics.update({f"matching_{k}": v for k, v in pairs.as_dict().items()})
+    unmatched = Counter(getattr(pipeline.matcher, "unmatched_reasons", {}))
     timings = dict(pipeline.timings, evaluation=t_eval)
-    return SequenceReport(results, evaluator.summary() if has_gt else {}, skipped, timings)
+    return SequenceReport(results, metrics, skipped, timings, unmatched)
 
 
 def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str:
@@ -54,12 +65,25 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
                       ["MPJPE all 23 joints (mm)", m["mpjpe_mm"]], ["MPJPE body 17 joints (mm)", m["mpjpe_body_mm"]],
                       ["PCP average (%)", m["pcp_average"]], ["GT persons recalled (%)", m["recall"]],
                       ["predictions matched to GT (%)", m["precision"]],
-                      ["GT persons / predictions", f"{m['num_gt']} / {m['num_pred']}"]]), "",
+                      ["GT persons / predictions", f"{m['num_gt']} / {m['num_pred']}"],
+                      *_matching_rows(m)]), "",
                   format_table(["MPJPE (mm)", *JOINT_GROUPS], [["", *(m[f"mpjpe_{g}_mm"] for g in JOINT_GROUPS)]]),
                   "", format_table(["PCP (%)", *PART_NAMES], [["", *(m[f"pcp_{p}"] for p in PART_NAMES)]]), ""]
+    if report.unmatched:
+        lines.append("Detections left unmatched by the matcher: "
+                     + ", ".join(f"{n} {why}" for why, n in sorted(report.unmatched.items())))
     skipped = sum(report.skipped.values())
     lines.append(f"Frames: {num_frames} evaluated, {skipped} skipped"
                  + "".join(f"; {n} {why}" for why, n in report.skipped.items()))
     per_frame = [[stage, 1000.0 * sec / max(num_frames, 1), sec] for stage, sec in report.timings.items()]
     lines += ["", format_table(["stage", "ms / frame", "total s"], per_frame, floatfmt=".2f")]
     return "\n".join(lines)
+
+
+def _matching_rows(m: dict[str, float]) -> list[list[object]]:
+    """Report rows of the correspondence metrics, when ground-truth identities were known."""
+    if "matching_precision" not in m:
+        return []
+    return [["matching precision, pairs (%)", 100.0 * m["matching_precision"]],
+            ["matching recall, pairs (%)", 100.0 * m["matching_recall"]],
+            ["GT persons matched pure and complete (%)", 100.0 * m["matching_recovered_share"]]]

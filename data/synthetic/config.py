@@ -1,0 +1,163 @@
+"""The options of the synthetic crowd generator (flat keys of ``configs/dataset/synthetic.yaml``)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class SyntheticConfig:
+    """Every option of :func:`data.synthetic.generate_sequence`, with its default.
+
+    Scene
+      seed: seed of the numpy Generator; the same seed gives identical arrays.
+      num_frames: frames to generate (ignored when ``positions`` is given: one frame per entry).
+      num_persons: persons in the scene (ignored when ``positions`` is given).
+      density: persons per m^2; the default square area has side sqrt(num_persons / density),
+        centred at the origin (0.3 -> 10 persons in a 5.8 x 5.8 m square). Ignored when ``area`` is set.
+      min_spacing_m: least distance between two persons' ground points, kept while walking too.
+      walking_fraction: share of persons that walk; the others stand still.
+      walk_speed_mps: (low, high) range of the walking speeds, drawn uniformly per walker.
+      fps: frame rate; a walker moves speed / fps metres between frames.
+      area: optional [xmin, xmax, ymin, ymax] (m) of the region the persons stay in; overrides
+        ``density``. Set it for a real rig, whose cameras look at their own region.
+      positions: optional ground positions per frame, a list of (N_f, 2) arrays or nested lists
+        (m); row i is person i in every frame and a NaN row is a person absent from that frame.
+        Persons are placed there instead of sampled (walking and heading follow their motion).
+    Cameras
+      rig: "ring" for :func:`data.synthetic.rigs.ring_rig`, else a calibration file or folder path.
+      rig_format: format of that calibration (see reconstruction.calibration.load_rig); "auto" detects.
+      num_cameras, camera_radius_m, camera_height_m: the ring: cameras on a circle of this radius
+        around the area centre, at this height, looking at the centre at ``look_at_height_m``.
+        camera_radius_m = None (default) puts the ring 4 m outside the area's corners (half
+        diagonal + 4 m: 8.1 m for the default 10 persons at 0.3 per m^2).
+      image_size: (width, height) in pixels; focal_px: focal length in pixels (no distortion).
+    Observations
+      noise_px: pixel noise SD at ``noise_ref_depth_m``; it grows linearly with depth (0 = exact).
+      noise_ref_depth_m: depth (m) at which the pixel noise SD equals ``noise_px``.
+      occlusion: mark joints hidden behind another person's body (capsule model).
+      occluded_drop_prob: probability that a hidden joint is missing (score 0) from a detection.
+      occluded_noise_scale: factor on the pixel noise SD of hidden joints.
+      miss_rate: probability that a person is missed entirely in one view.
+      fp_rate: mean number of false-positive detections per view per frame (Poisson).
+      min_joints_in_view: a person with fewer valid joints in a view is not detected there.
+    """
+
+    seed: int = 0
+    num_frames: int = 20
+    num_persons: int = 10
+    density: float = 0.3
+    min_spacing_m: float = 0.6
+    walking_fraction: float = 0.5
+    walk_speed_mps: tuple[float, float] = (1.2, 1.5)
+    fps: float = 5.0
+    area: tuple[float, float, float, float] | None = None
+    positions: list | None = None
+    rig: str = "ring"
+    rig_format: str = "auto"
+    num_cameras: int = 5
+    camera_radius_m: float | None = None
+    camera_height_m: float = 2.5
+    look_at_height_m: float = 1.0
+    image_size: tuple[int, int] = (1280, 720)
+    focal_px: float = 1000.0
+    noise_px: float = 2.0
+    noise_ref_depth_m: float = 5.0
+    occlusion: bool = True
+    occluded_drop_prob: float = 0.3
+    occluded_noise_scale: float = 3.0
+    miss_rate: float = 0.0
+    fp_rate: float = 0.0
+    min_joints_in_view: int = 5
+
+    def __post_init__(self) -> None:
+        # Hydra hands over ListConfig / str values; normalise them to plain Python types.
+        self.seed = int(self.seed)
+        self.num_frames = int(self.num_frames)
+        self.num_persons = int(self.num_persons)
+        self.num_cameras = int(self.num_cameras)
+        self.min_joints_in_view = int(self.min_joints_in_view)
+        if self.camera_radius_m is not None:
+            self.camera_radius_m = float(self.camera_radius_m)
+        for key in ("density", "min_spacing_m", "walking_fraction", "fps",
+                    "camera_height_m", "look_at_height_m", "focal_px", "noise_px", "noise_ref_depth_m",
+                    "occluded_drop_prob", "occluded_noise_scale", "miss_rate", "fp_rate"):
+            setattr(self, key, float(getattr(self, key)))
+        self.occlusion = bool(self.occlusion)
+        self.rig = str(self.rig)
+        self.rig_format = str(self.rig_format)
+        self.walk_speed_mps = _floats(self.walk_speed_mps, 2, "walk_speed_mps")
+        self.image_size = tuple(int(v) for v in _floats(self.image_size, 2, "image_size"))
+        if self.area is not None:
+            self.area = _floats(self.area, 4, "area")
+        if self.positions is not None:
+            self.positions = [_positions_frame(p, f) for f, p in enumerate(self.positions)]
+        self._validate()
+
+    def _validate(self) -> None:
+        """Raise ValueError naming the first option that is out of range."""
+        checks = [
+            ("num_frames", self.num_frames >= 1, "must be >= 1"),
+            ("num_persons", self.num_persons >= 0, "must be >= 0"),
+            ("density", self.density > 0, "must be > 0 persons per m^2"),
+            ("min_spacing_m", self.min_spacing_m >= 0, "must be >= 0"),
+            ("fps", self.fps > 0, "must be > 0"),
+            ("walk_speed_mps", 0 <= self.walk_speed_mps[0] <= self.walk_speed_mps[1], "must be [low, high], 0 <= low <= high"),
+            ("num_cameras", self.num_cameras >= 1, "must be >= 1"),
+            ("camera_radius_m", self.camera_radius_m is None or self.camera_radius_m > 0, "must be > 0 or null"),
+            ("image_size", min(self.image_size) > 0, "must be positive (width, height)"),
+            ("focal_px", self.focal_px > 0, "must be > 0"),
+            ("noise_px", self.noise_px >= 0, "must be >= 0"),
+            ("noise_ref_depth_m", self.noise_ref_depth_m > 0, "must be > 0"),
+            ("occluded_noise_scale", self.occluded_noise_scale >= 0, "must be >= 0"),
+            ("fp_rate", self.fp_rate >= 0, "must be >= 0"),
+            ("min_joints_in_view", self.min_joints_in_view >= 1, "must be >= 1"),
+            ("positions", self.positions is None or len(self.positions) >= 1, "must hold at least one frame"),
+        ]
+        for key in ("walking_fraction", "occluded_drop_prob", "miss_rate"):
+            value = getattr(self, key)
+            checks.append((key, 0.0 <= value <= 1.0, "must be a probability in [0, 1]"))
+        if self.area is not None:
+            xmin, xmax, ymin, ymax = self.area
+            checks.append(("area", xmin < xmax and ymin < ymax, "must be [xmin, xmax, ymin, ymax] with min < max"))
+        for key, ok, what in checks:
+            if not ok:
+                raise ValueError(f"synthetic dataset option {key}={getattr(self, key)!r} {what}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The options as plain Python types (lists, not tuples or arrays), e.g. for Sequence.meta."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, tuple):
+                value = list(value)
+            elif f.name == "positions" and value is not None:
+                value = [p.tolist() for p in value]
+            out[f.name] = value
+        return out
+
+
+def _floats(value: Any, n: int, key: str) -> tuple[float, ...]:
+    """A tuple of n finite floats, or a ValueError naming the option."""
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"synthetic dataset option {key}={value!r} must be a list of {n} numbers") from None
+    if len(out) != n or not all(math.isfinite(v) for v in out):
+        raise ValueError(f"synthetic dataset option {key}={value!r} must be a list of {n} finite numbers")
+    return out
+
+
+def _positions_frame(value: Any, frame: int) -> np.ndarray:
+    """One frame of the positions hook as a new (N, 2) float array (NaN rows allowed)."""
+    arr = np.array(value, dtype=np.float64)
+    if arr.size == 0:
+        return np.zeros((0, 2))
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f"synthetic dataset option positions[{frame}] has shape {arr.shape}, expected (N, 2)")
+    if np.any(np.isinf(arr)):
+        raise ValueError(f"synthetic dataset option positions[{frame}] has an infinite value")
+    return arr
