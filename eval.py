@@ -12,12 +12,14 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from data.poses_io import atomic_write_text, write_poses3d
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
+from reconstruction.calibration import CalibrationError
 from reconstruction.pipeline import MultiViewPipeline
 
 PROTOCOL = ("absolute MPJPE (mm, no root alignment) over all frames; each GT person matched one-to-one "
@@ -50,8 +52,14 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
 
 @hydra.main(config_path="configs", config_name="eval", version_base="1.3")
 def main(cfg: DictConfig) -> dict:
-    """Hydra entry point; returns the metrics (for sweeps)."""
-    return run(cfg, Path(HydraConfig.get().runtime.output_dir)).metrics
+    """Hydra entry point; returns the metrics (for sweeps). Bad input files stop with one message."""
+    try:
+        return run(cfg, Path(HydraConfig.get().runtime.output_dir)).metrics
+    except (CalibrationError, InstantiationException) as err:
+        cause = err.__cause__ if isinstance(err, InstantiationException) else err
+        if isinstance(cause, (CalibrationError, FileNotFoundError)):
+            raise SystemExit(f"error: {cause}") from None
+        raise
 
 
 if __name__ == "__main__":

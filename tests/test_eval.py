@@ -44,3 +44,14 @@ def test_multirun_sweep_over_matchers(tmp_path):
     runs = sorted(tmp_path.glob("*/metrics.json"))
     assert len(runs) == 2
     assert all(json.loads(r.read_text())["metrics"]["num_gt"] > 0 for r in runs)
+
+
+def test_bad_calibration_stops_with_one_message_naming_file_camera_and_key(tmp_path):
+    bad = tmp_path / "cams.json"
+    eye = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    bad.write_text(json.dumps({"left": {"K": eye, "dist": [0] * 5, "R": eye, "t": [0, 1, 0], "size": [640, 480]}})
+                   .replace('"t": [0, 1, 0]', '"t": [0, NaN, 0]'))
+    cmd = [sys.executable, "eval.py", f"dataset.rig={bad}", "progress=false", f"hydra.run.dir={tmp_path / 'run'}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
+    assert proc.returncode != 0
+    assert proc.stderr.strip() == f"error: {bad}: camera 'left': key 't' has a non-finite value"
