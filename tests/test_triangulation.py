@@ -2,22 +2,13 @@ import cv2
 import numpy as np
 import pytest
 
-from reconstruction.camera import Camera, Rig
+from data.synthetic.rigs import ring_rig
+from reconstruction.camera import Rig
 from reconstruction.triangulation import reprojection_error, triangulate_dlt
 
 
 def ring(num: int, radius: float = 6.0, height: float = 2.5) -> Rig:
-    cams = []
-    K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
-    for i in range(num):
-        a = 2 * np.pi * i / num
-        c = np.array([radius * np.cos(a), radius * np.sin(a), height])
-        z = -c / np.linalg.norm(c)
-        x = np.cross(z, [0, 0, 1.0]); x /= np.linalg.norm(x)
-        y = np.cross(z, x)
-        R = np.stack([x, y, z])
-        cams.append(Camera(str(i), K, np.zeros(5), R, -R @ c, (1280, 720)))
-    return Rig(tuple(cams))
+    return ring_rig(num, radius, height, look_at=(0.0, 0.0, 1.0))
 
 
 def observe(rig: Rig, X: np.ndarray) -> np.ndarray:
