@@ -3,7 +3,10 @@
 view v or -1. Each matcher is a small callable class configured from ``configs/matching/*.yaml``.
 """
 from reconstruction.matching.assignment import assignment_from_labels, views_per_person
+from reconstruction.matching.epipolar import EpipolarMatcher
 from reconstruction.matching.feet import FeetMatcher
 from reconstruction.matching.oracle import OracleMatcher
+from reconstruction.matching.ransac import RansacMatcher
 
-__all__ = ["FeetMatcher", "OracleMatcher", "assignment_from_labels", "views_per_person"]
+__all__ = ["EpipolarMatcher", "FeetMatcher", "OracleMatcher", "RansacMatcher", "assignment_from_labels",
+           "views_per_person"]
