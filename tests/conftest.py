@@ -9,13 +9,18 @@ import pytest
 SHARED_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 
 
-@pytest.fixture(scope="session")
-def shared_data() -> Path:
-    """The real sample data beside the repository; a hard failure under CI when it is missing."""
-    root = SHARED_DATA.resolve()
+def require_data_dir(root: Path) -> Path:
+    """The resolved folder; a missing one fails the test under CI (``CI`` set) and skips it elsewhere."""
+    root = root.resolve()
     if not root.is_dir():
         message = f"real sample data not found at {root} (expected ../shared/data beside the repo)"
         if os.environ.get("CI"):
             pytest.fail(message)
         pytest.skip(message)
     return root
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """The real sample data beside the repository (../shared/data)."""
+    return require_data_dir(SHARED_DATA)
