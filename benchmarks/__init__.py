@@ -1,0 +1,1 @@
+"""Longer measurements that print markdown tables; run each as a module from the repository root."""

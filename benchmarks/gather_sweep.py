@@ -1,0 +1,121 @@
+"""One markdown table of a Hydra multirun: ``python -m benchmarks.gather_sweep DIR [--out T.md] [--metrics a,b]``.
+
+Run from the repository root. Every ``<sweep dir>/*/metrics.json`` (written by eval.py) is one row; the
+columns are the overrides that differ between runs (from ``<run>/.hydra/overrides.yaml``), then the chosen
+metrics. A metric is a key of metrics.json's "metrics", or ``<stage>_ms``: the stage's time from
+"timings_s" per frame (frames = ``dataset.num_frames`` of ``<run>/.hydra/config.yaml``) in milliseconds.
+A run lacking a metric shows "-".
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+from omegaconf import OmegaConf
+
+from data.poses_io import atomic_write_text
+from evaluation.report import format_table
+
+# name -> (column header, factor, format); fractions are shown as percentages
+METRIC_COLUMNS = {
+    "matching_precision": ("matching precision (%)", 100.0, ".1f"),
+    "matching_recall": ("matching recall (%)", 100.0, ".1f"),
+    "matching_recovered_share": ("persons recovered (%)", 100.0, ".1f"),
+    "mpjpe_mm": ("MPJPE (mm)", 1.0, ".1f"),
+    "pcp_average": ("PCP (%)", 1.0, ".1f"),
+}
+DEFAULT_METRICS = [*METRIC_COLUMNS, "matching_ms"]
+
+
+@dataclass
+class Run:
+    """One run directory of a sweep: its overrides, metrics, stage timings and frame count."""
+    name: str
+    overrides: dict[str, str]
+    metrics: dict[str, float]
+    timings_s: dict[str, float] = field(default_factory=dict)
+    num_frames: int | None = None
+
+
+def parse_overrides(lines: Sequence[str]) -> dict[str, str]:
+    """``key=value`` override strings as {key: value}, without the ``+``/``++``/``~`` prefixes."""
+    pairs = (line.partition("=") for line in lines)
+    return {key.lstrip("+~"): value for key, _, value in pairs}
+
+
+def load_run(run_dir: Path) -> Run:
+    """Read a run directory written by eval.py."""
+    doc = json.loads((run_dir / "metrics.json").read_text())
+    hydra_dir = run_dir / ".hydra"
+    overrides_file, config_file = hydra_dir / "overrides.yaml", hydra_dir / "config.yaml"
+    lines = OmegaConf.to_container(OmegaConf.load(overrides_file)) if overrides_file.exists() else []
+    overrides = parse_overrides(lines)
+    config = OmegaConf.load(config_file) if config_file.exists() else OmegaConf.create()
+    frames = OmegaConf.select(config, "dataset.num_frames")
+    return Run(run_dir.name, overrides, doc.get("metrics", {}), doc.get("timings_s", {}), frames)
+
+
+def swept_keys(runs: Sequence[Run]) -> list[str]:
+    """The override keys whose value is not the same in every run, in order of first appearance."""
+    keys = list(dict.fromkeys(k for run in runs for k in run.overrides))
+    return [k for k in keys if len({run.overrides.get(k, "") for run in runs}) > 1]
+
+
+def _sort_value(value: str) -> tuple[int, float, str]:
+    """Numbers before text, numbers by value."""
+    try:
+        return (0, float(value), "")
+    except ValueError:
+        return (1, 0.0, value)
+
+
+def metric_cell(run: Run, name: str) -> str:
+    """The formatted value of one metric of a run; "-" when the run lacks it."""
+    if name.endswith("_ms") and name[:-3] in run.timings_s:
+        if not run.num_frames:
+            return "-"
+        return f"{1000.0 * run.timings_s[name[:-3]] / run.num_frames:.2f}"
+    if name not in run.metrics:
+        return "-"
+    _, factor, fmt = METRIC_COLUMNS.get(name, (name, 1.0, ".4g"))
+    return f"{factor * run.metrics[name]:{fmt}}"
+
+
+def metric_header(name: str) -> str:
+    """The column header of a metric."""
+    if name in METRIC_COLUMNS:
+        return METRIC_COLUMNS[name][0]
+    return f"{name[:-3]} ms/frame" if name.endswith("_ms") else name
+
+
+def sweep_table(sweep_dir: Path, metrics: Sequence[str] = DEFAULT_METRICS) -> tuple[list[str], list[list[str]]]:
+    """Headers and rows (one per run, sorted by the swept keys) of a sweep directory."""
+    runs = [load_run(p.parent) for p in sorted(Path(sweep_dir).glob("*/metrics.json"))]
+    if not runs:
+        raise SystemExit(f"error: no */metrics.json under {sweep_dir}")
+    keys = swept_keys(runs)
+    runs.sort(key=lambda r: ([_sort_value(r.overrides.get(k, "")) for k in keys], r.name))
+    rows = [[r.overrides.get(k, "") for k in keys] + [metric_cell(r, m) for m in metrics] for r in runs]
+    return keys + [metric_header(m) for m in metrics], rows
+
+
+def main(argv: Sequence[str] | None = None) -> str:
+    """Print (and with --out write) the table of a sweep directory; return it."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("sweep_dir", type=Path, help="a Hydra multirun folder (hydra.sweep.dir)")
+    parser.add_argument("--out", type=Path, help="also write the table to this markdown file")
+    parser.add_argument("--metrics", default=",".join(DEFAULT_METRICS),
+                        help="comma-separated metrics.json keys or <stage>_ms (default: %(default)s)")
+    args = parser.parse_args(argv)
+    table = format_table(*sweep_table(args.sweep_dir, [m for m in args.metrics.split(",") if m]))
+    print(table)
+    if args.out:
+        atomic_write_text(args.out, table + "\n")
+    return table
+
+
+if __name__ == "__main__":
+    main()
