@@ -387,3 +387,19 @@ def test_rig_from_a_calibration_file(tmp_path):
     assert all(len(v) == 6 for fr in seq.frames for v in fr.views)
     xy = np.concatenate([fr.gt_poses[:, [11, 12], :2].mean(axis=1) for fr in seq.frames])
     assert np.all((xy[:, 0] >= -1) & (xy[:, 0] <= 3) & (xy[:, 1] >= 0) & (xy[:, 1] <= 4))
+
+
+def test_noise_depth_exponent_zero_gives_the_same_pixel_noise_at_every_depth():
+    seq = generate_sequence(SyntheticConfig(noise_px=3.0, noise_depth_exponent=0.0, occlusion=False,
+                                            num_persons=20, density=0.5, num_frames=4))
+    near, far = [], []
+    for fr in seq.frames:
+        gt = {int(i): p[:, :3] for i, p in zip(fr.gt_ids, fr.gt_poses)}
+        for cam, view in zip(seq.rig, fr.views):
+            for kp, pid in zip(view.keypoints, view.person_ids):
+                valid = kp[:, 2] > 0
+                err = (kp[:, :2] - cam.project(gt[int(pid)]))[valid]
+                depth = cam.depth(gt[int(pid)])[valid]
+                near.append(err[depth < np.median(depth)]); far.append(err[depth >= np.median(depth)])
+    assert np.std(np.concatenate(near)) == pytest.approx(3.0, rel=0.08)
+    assert np.std(np.concatenate(far)) == pytest.approx(3.0, rel=0.08)

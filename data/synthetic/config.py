@@ -36,8 +36,11 @@ class SyntheticConfig:
         diagonal + 4 m: 8.1 m for the default 10 persons at 0.3 per m^2).
       image_size: (width, height) in pixels; focal_px: focal length in pixels (no distortion).
     Observations
-      noise_px: pixel noise SD at ``noise_ref_depth_m``; it grows linearly with depth (0 = exact).
+      noise_px: pixel noise SD at ``noise_ref_depth_m``; it grows with depth (0 = exact).
       noise_ref_depth_m: depth (m) at which the pixel noise SD equals ``noise_px``.
+      noise_depth_exponent: SD = noise_px * (depth / noise_ref_depth_m) ** exponent: 1 (default)
+        grows linearly with depth, 0 is the same pixel noise at every depth, -1 shrinks with the
+        person's apparent size (closer to how a 2D detector's error scales).
       occlusion: mark joints hidden behind another person's body (capsule model).
       occluded_drop_prob: probability that a hidden joint is missing (score 0) from a detection.
       occluded_noise_scale: factor on the pixel noise SD of hidden joints.
@@ -66,6 +69,7 @@ class SyntheticConfig:
     focal_px: float = 1000.0
     noise_px: float = 2.0
     noise_ref_depth_m: float = 5.0
+    noise_depth_exponent: float = 1.0
     occlusion: bool = True
     occluded_drop_prob: float = 0.3
     occluded_noise_scale: float = 3.0
@@ -84,6 +88,7 @@ class SyntheticConfig:
             self.camera_radius_m = float(self.camera_radius_m)
         for key in ("density", "min_spacing_m", "walking_fraction", "fps",
                     "camera_height_m", "look_at_height_m", "focal_px", "noise_px", "noise_ref_depth_m",
+                    "noise_depth_exponent",
                     "occluded_drop_prob", "occluded_noise_scale", "miss_rate", "fp_rate"):
             setattr(self, key, float(getattr(self, key)))
         self.occlusion = bool(self.occlusion)

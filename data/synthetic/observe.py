@@ -38,7 +38,8 @@ def observe_view(camera: Camera, poses: np.ndarray, person_ids: np.ndarray, cfg:
     hidden = occluded_joints(camera.center, poses) if cfg.occlusion and num else np.zeros((num, NUM_JOINTS), bool)
     hidden &= in_view
 
-    sigma = cfg.noise_px * np.maximum(camera.depth(poses), 0.0) / cfg.noise_ref_depth_m
+    depth = np.maximum(camera.depth(poses), 1e-6)
+    sigma = cfg.noise_px * (depth / cfg.noise_ref_depth_m) ** cfg.noise_depth_exponent
     sigma = np.where(hidden, sigma * cfg.occluded_noise_scale, sigma)
     noise = rng.normal(size=(num, NUM_JOINTS, 2)) * sigma[..., None]
     dropped = hidden & (rng.random((num, NUM_JOINTS)) < cfg.occluded_drop_prob)
