@@ -186,7 +186,7 @@ def test_feet_features_lowest_rule_mean_rule_and_ankle_fallback():
     mean = feet_features(kp, cam, "mean")
     np.testing.assert_allclose(mean.left[0], cam.image_to_ground(np.array([px[j] for j in (17, 18, 19)])).mean(0))
     ankles = single_detection(cam, {15: px[15], 16: px[16]})
-    fb = feet_features(ankles, cam)
+    fb = feet_features(ankles, cam, ankle_height_m=0.0)   # ankles projected onto z = 0, as the paper does
     np.testing.assert_allclose(fb.left[0], cam.image_to_ground(np.array(px[15])))
     assert fb.has_stride[0]
     no_fallback = feet_features(ankles, cam, ankle_fallback=False)
@@ -219,7 +219,7 @@ def test_image_space_matches_like_ground_space_and_uses_the_pair_homography():
     ground = FeetMatcher()(views, rig)
     image = FeetMatcher(space="image", k3=25.0, gate=60.0, unknown_stride_cost=10.0)(views, rig)
     assert matched_id_sets(ground, views) == matched_id_sets(image, views)
-    f1 = feet_features(views[1].keypoints, rig[1])
+    f1 = feet_features(views[1].keypoints, rig[1], "lowest")   # one foot pixel per foot, to map by H
     in0 = to_image(f1, rig[0])
     H = pair_homography(rig[0], rig[1])
     lowest_right = 20 + np.argmax(views[1].keypoints[0, 20:23, 1])

@@ -31,7 +31,7 @@ def test_three_view_conflict_is_resolved_in_favour_of_the_cheaper_edges():
     rig = ring_rig(3)
     views = [feet_only(rig[0], [(0.0, 0.0), (0.38, 0.0)], [0, 1]), feet_only(rig[1], [(0.05, 0.0)], [2]),
              feet_only(rig[2], [(0.2, 0.0)], [3])]
-    matcher = FeetMatcher()
+    matcher = FeetMatcher(location_metric="euclidean")   # costs in metres (the default is in standard deviations)
     feats = matcher.features(views, rig)
     np.testing.assert_allclose(matcher.pair_cost(feats[0], feats[1], rig[0]), [[0.05], [0.33]], atol=1e-9)
     np.testing.assert_allclose(matcher.pair_cost(feats[0], feats[2], rig[0]), [[0.2], [0.18]], atol=1e-9)

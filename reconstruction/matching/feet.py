@@ -3,7 +3,9 @@
 Each detection becomes a pair of feet on the ground plane z = 0: location p = midpoint of the two
 feet and stride v = right - left. Every view pair is scored with the edge cost of Eq. 4, solved as a
 gated linear assignment (Jonker-Volgenant, via scipy) and the accepted edges of all pairs are merged
-into persons, cheaper edges first, never two detections of one view in a person.
+into persons, cheaper edges first, never two detections of one view in a person. The location term
+is either the paper's Euclidean distance (metres) or, by default, a Mahalanobis distance (standard
+deviations) under each point's propagated pixel noise (see :mod:`.feet_uncertainty`).
 """
 from __future__ import annotations
 
@@ -16,10 +18,13 @@ import numpy as np
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
 from reconstruction.camera import Camera, Rig
+from reconstruction.matching.feet_uncertainty import (joint_sigmas, joints_on_planes, location_covariance,
+                                                      mahalanobis_distances, mean_covariance)
 from reconstruction.matching.merge import merge_edges, pair_edges, solve_pair
 
 FOOT_RULES = ("lowest", "mean")
 SPACES = ("ground", "image")
+METRICS = ("euclidean", "mahalanobis")
 NO_FOOT_JOINTS = "no_foot_joints"          # no foot joint (nor ankle, with the fallback) above min_score
 FEET_ABOVE_HORIZON = "feet_above_horizon"  # scored foot joints exist, but none meets the ground in front
 NO_COUNTERPART = "no_counterpart"          # has feet, but ended in no person of >= min_views views
@@ -29,7 +34,8 @@ _FOOT_COLUMNS = (*LEFT_FOOT, *RIGHT_FOOT, LEFT_ANKLE, RIGHT_ANKLE)  # gathered o
 @dataclass(frozen=True)
 class FeetFeatures:
     """Feet of N detections: left, right, p, v (N, 2); has_left, has_right, has_p, has_stride (N,);
-    reason (N,) str, "" where the detection has a location. Missing points are 0, never NaN."""
+    reason (N,) str, "" where the detection has a location; cov (N, 2, 2) covariance of p, or None
+    where no pixel noise was propagated. Missing points are 0, never NaN."""
 
     left: np.ndarray
     right: np.ndarray
@@ -40,16 +46,17 @@ class FeetFeatures:
     has_p: np.ndarray
     has_stride: np.ndarray
     reason: np.ndarray
+    cov: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.p)
 
 
 def features_from_feet(left: np.ndarray, right: np.ndarray, has_left: np.ndarray,
-                       has_right: np.ndarray, reason: np.ndarray | None = None) -> FeetFeatures:
-    """Location and stride from two feet: (N, 2), (N, 2), (N,), (N,) [, reason (N,)] -> FeetFeatures.
-
-    With one foot only, p is that foot and the stride is unknown.
+                       has_right: np.ndarray, reason: np.ndarray | None = None,
+                       cov_left: np.ndarray | None = None, cov_right: np.ndarray | None = None) -> FeetFeatures:
+    """Location and stride from two feet: (N, 2), (N, 2), (N,), (N,) [, reason (N,), covariances
+    (N, 2, 2) x2] -> FeetFeatures. With one foot only, p is that foot and the stride is unknown.
     """
     has_left = np.asarray(has_left, dtype=bool)
     has_right = np.asarray(has_right, dtype=bool)
@@ -61,27 +68,35 @@ def features_from_feet(left: np.ndarray, right: np.ndarray, has_left: np.ndarray
     has_p = has_left | has_right
     if reason is None:
         reason = np.where(has_p, "", NO_FOOT_JOINTS)
-    return FeetFeatures(left, right, has_left, has_right, p, v, has_p, both, np.asarray(reason, dtype=str))
+    cov = None if cov_left is None or cov_right is None else \
+        location_covariance(cov_left, cov_right, has_left, has_right)
+    return FeetFeatures(left, right, has_left, has_right, p, v, has_p, both, np.asarray(reason, dtype=str), cov)
 
 
-def _select_foot(ground: np.ndarray, y: np.ndarray, valid: np.ndarray, rule: str) -> tuple[np.ndarray, np.ndarray]:
-    """One foot point per detection: ground (N, K, 2), image y (N, K), valid (N, K) -> (N, 2), ok (N,)."""
+def _select_foot(ground: np.ndarray, cov: np.ndarray, y: np.ndarray, valid: np.ndarray,
+                 rule: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One foot point per detection: ground (N, K, 2), cov (N, K, 2, 2), image y (N, K), valid (N, K)
+    -> point (N, 2), its covariance (N, 2, 2), ok (N,)."""
     ok = valid.any(axis=1)
     if rule == "lowest":
         pick = np.argmax(np.where(valid, y, -np.inf), axis=1)
-        return ground[np.arange(len(ground)), pick], ok
+        rows = np.arange(len(ground))
+        return ground[rows, pick], cov[rows, pick], ok
     total = np.where(valid[..., None], ground, 0.0).sum(axis=1)
-    return total / np.maximum(valid.sum(axis=1), 1)[:, None], ok
+    return total / np.maximum(valid.sum(axis=1), 1)[:, None], mean_covariance(cov, valid), ok
 
 
-def feet_features(keypoints: np.ndarray, camera: Camera, rule: str = "lowest", min_score: float = 0.2,
-                  ankle_fallback: bool = True) -> FeetFeatures:
+def feet_features(keypoints: np.ndarray, camera: Camera, rule: str = "mean", min_score: float = 0.2,
+                  ankle_fallback: bool = True, pixel_sigma: float | None = None, ankle_height_m: float = 0.07,
+                  foot_joint_height_m: float = 0.0, sigma_score_power: float = 0.0) -> FeetFeatures:
     """Ground-plane feet (m) of N detections: keypoints (N, 23, 3) distorted pixels + score -> FeetFeatures.
 
     A foot is its joints (big toe, small toe, heel) with score > min_score: the one lowest in the
     image (largest y of the detected pixels) for rule "lowest", the mean of their ground points for
-    "mean"; without any, the ankle if ``ankle_fallback``. Joints whose ground point lies behind the
-    camera (above the horizon) are unusable.
+    "mean"; without any, the ankle if ``ankle_fallback``. A joint's ray is cut with the horizontal
+    plane at its height (``foot_joint_height_m``, ``ankle_height_m``), and the (X, Y) kept. Joints
+    whose point lies behind the camera (above the horizon) are unusable. With ``pixel_sigma`` (px),
+    the covariance of p under that isotropic pixel noise (times score^-sigma_score_power) is propagated too.
     """
     if rule not in FOOT_RULES:
         raise ValueError(f"foot rule must be one of {FOOT_RULES}, got {rule!r}")
@@ -92,26 +107,30 @@ def feet_features(keypoints: np.ndarray, camera: Camera, rule: str = "lowest", m
     score = kp[:, _FOOT_COLUMNS, 2]
     finite = np.isfinite(uv).all(axis=-1) & np.isfinite(score)
     uv = np.where(finite[..., None], uv, 0.0)
-    ground = camera.image_to_ground(uv)
+    heights = np.array([foot_joint_height_m] * 6 + [ankle_height_m] * 2, dtype=np.float64)
+    sigma = None if pixel_sigma is None else joint_sigmas(score, pixel_sigma, sigma_score_power)
+    ground, depth, cov = joints_on_planes(camera, uv, heights, sigma)
     ground_ok = np.isfinite(ground).all(axis=-1)
     ground = np.where(ground_ok[..., None], ground, 0.0)
-    in_front = ground_ok & (camera.depth(np.concatenate([ground, np.zeros_like(ground[..., :1])], -1)) > 0)
+    cov = np.zeros(ground.shape + (2,)) if cov is None else np.where(ground_ok[..., None, None], cov, 0.0)
     scored = finite & (score > min_score)
-    usable = scored & in_front
+    usable = scored & ground_ok & (depth > 0)
     feet = []
     for side in (0, 1):
         cols = slice(3 * side, 3 * side + 3)
-        point, ok = _select_foot(ground[:, cols], uv[:, cols, 1], usable[:, cols], rule)
+        point, point_cov, ok = _select_foot(ground[:, cols], cov[:, cols], uv[:, cols, 1], usable[:, cols], rule)
         if ankle_fallback:
             ankle = 6 + side
             use_ankle = ~ok & usable[:, ankle]
             point = np.where(use_ankle[:, None], ground[:, ankle], point)
+            point_cov = np.where(use_ankle[:, None, None], cov[:, ankle], point_cov)
             ok = ok | use_ankle
-        feet.append((point, ok))
+        feet.append((point, point_cov, ok))
     considered = scored if ankle_fallback else scored[:, :6]
-    reason = np.where(feet[0][1] | feet[1][1], "",
+    reason = np.where(feet[0][2] | feet[1][2], "",
                       np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))
-    return features_from_feet(feet[0][0], feet[1][0], feet[0][1], feet[1][1], reason)
+    covs = (feet[0][1], feet[1][1]) if pixel_sigma is not None else (None, None)
+    return features_from_feet(feet[0][0], feet[1][0], feet[0][2], feet[1][2], reason, *covs)
 
 
 def pair_homography(camera_l: Camera, camera_m: Camera) -> np.ndarray:
@@ -134,14 +153,23 @@ def to_image(features: FeetFeatures, camera: Camera) -> FeetFeatures:
 
 
 def edge_costs(fa: FeetFeatures, fb: FeetFeatures, k1: float = 1.0, k2: float = 0.5, k3: float = 0.25,
-               unknown_stride_cost: float = 0.1) -> np.ndarray:
+               unknown_stride_cost: float = 0.1, metric: str = "euclidean",
+               floor_m: float = 0.05) -> np.ndarray:
     """Eq. 4 between two views' feet in one space: (Na,), (Nb,) -> cost (Na, Nb), +inf without a location.
 
     c = k1 |p_a - p_b| + k2 | |v_a| - |v_b| | + k3 |v_a x v_b| / (|v_a| |v_b|). Where either stride is
     unknown (one foot only) the two stride terms are replaced by ``unknown_stride_cost``; a zero-length
-    stride has no direction, so its direction term is 0.
+    stride has no direction, so its direction term is 0. With metric "mahalanobis" |p_a - p_b| is
+    measured in standard deviations of (S_a + S_b + floor_m^2 I), S the features' ``cov``.
     """
-    location = np.linalg.norm(fa.p[:, None] - fb.p[None], axis=-1)
+    if metric not in METRICS:
+        raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
+    if metric == "euclidean":
+        location = np.linalg.norm(fa.p[:, None] - fb.p[None], axis=-1)
+    elif fa.cov is None or fb.cov is None:
+        raise ValueError("the mahalanobis metric needs features with a covariance (give pixel_sigma)")
+    else:
+        location = mahalanobis_distances(fa.p, fb.p, fa.cov, fb.cov, floor_m)
     len_a = np.linalg.norm(fa.v, axis=-1)
     len_b = np.linalg.norm(fb.v, axis=-1)
     cross = fa.v[:, None, 0] * fb.v[None, :, 1] - fa.v[:, None, 1] * fb.v[None, :, 0]
@@ -153,33 +181,50 @@ def edge_costs(fa: FeetFeatures, fb: FeetFeatures, k1: float = 1.0, k2: float = 
     return np.where(fa.has_p[:, None] & fb.has_p[None], cost, np.inf)
 
 
+def metric_defaults(metric: str) -> tuple[float, float, float, float]:
+    """Default (k2, k3, gate, unknown_stride_cost) of a ground-space location metric."""
+    if metric == "mahalanobis":   # location in standard deviations; stride terms off (mostly noise)
+        return 0.0, 0.0, 3.0, 0.0
+    return 0.5, 0.25, 0.6, 0.1    # metres: the paper's Eq. 4
+
+
 class FeetMatcher:
     """Feet assignment across views: ``matcher(views, rig) -> (P, V)`` detection index per view or -1.
 
-    Defaults are for space="ground" (metres). space="image" is the paper's literal variant: for each
-    pair l < m, both views' feet are compared in undistorted pixels of view l, so ``gate`` and
-    ``unknown_stride_cost`` must then be given in pixels (and k3 scaled to pixels). Counts of
-    detections left out of every person, by reason, are kept in ``last_unmatched_reasons`` (last frame)
-    and ``unmatched_reasons`` (all frames since construction).
+    Defaults are for space="ground": location_metric "mahalanobis" compares feet midpoints in standard
+    deviations of their propagated pixel noise (``pixel_sigma`` px, floor ``ground_sigma_floor`` m),
+    so ``gate`` is in standard deviations; "euclidean" is the paper's distance in metres. k2, k3, gate
+    and unknown_stride_cost left None take the metric's defaults (:func:`metric_defaults`).
+    space="image" is the paper's literal variant (Euclidean only): for each pair l < m, both views'
+    feet are compared in undistorted pixels of view l, so ``gate`` and ``unknown_stride_cost`` must
+    then be given in pixels (and k3 scaled to pixels). Counts of detections left out of every person,
+    by reason, are kept in ``last_unmatched_reasons`` (last frame) and ``unmatched_reasons`` (all frames).
     """
 
-    def __init__(self, k1: float = 1.0, k2: float = 0.5, k3: float = 0.25, gate: float | None = None,
-                 space: str = "ground", foot_rule: str = "lowest", min_score: float = 0.2,
-                 ankle_fallback: bool = True, min_views: int = 2,
-                 unknown_stride_cost: float | None = None) -> None:
-        if space not in SPACES:
-            raise ValueError(f"space must be one of {SPACES}, got {space!r}")
-        if foot_rule not in FOOT_RULES:
-            raise ValueError(f"foot_rule must be one of {FOOT_RULES}, got {foot_rule!r}")
-        if space == "image" and (gate is None or unknown_stride_cost is None):
-            raise ValueError("space='image' costs are in pixels: give gate and unknown_stride_cost in pixels")
-        if min(k1, k2, k3) < 0 or int(min_views) < 1:
-            raise ValueError("k1, k2, k3 must be >= 0 and min_views >= 1")
+    def __init__(self, k1: float = 1.0, k2: float | None = None, k3: float | None = None,
+                 gate: float | None = None, space: str = "ground", foot_rule: str = "mean",
+                 min_score: float = 0.2, ankle_fallback: bool = True, min_views: int = 2,
+                 unknown_stride_cost: float | None = None, location_metric: str | None = None,
+                 pixel_sigma: float = 3.0, ground_sigma_floor: float = 0.1, ankle_height_m: float = 0.07,
+                 foot_joint_height_m: float = 0.0, sigma_score_power: float = 0.0) -> None:
+        metric = location_metric or ("euclidean" if space == "image" else "mahalanobis")
+        if space not in SPACES or foot_rule not in FOOT_RULES or metric not in METRICS:
+            raise ValueError(f"need space in {SPACES}, foot_rule in {FOOT_RULES}, location_metric in "
+                             f"{METRICS}; got {space!r}, {foot_rule!r}, {metric!r}")
+        if space == "image" and (gate is None or unknown_stride_cost is None or metric != "euclidean"):
+            raise ValueError("space='image' costs are Euclidean pixels: give gate and unknown_stride_cost in pixels")
+        d_k2, d_k3, d_gate, d_unknown = metric_defaults(metric)
+        k2, k3 = (d_k2 if k2 is None else k2), (d_k3 if k3 is None else k3)
+        if min(k1, k2, k3) < 0 or int(min_views) < 1 or pixel_sigma <= 0 or ground_sigma_floor <= 0:
+            raise ValueError("k1, k2, k3 must be >= 0, min_views >= 1, pixel_sigma and ground_sigma_floor > 0")
         self.k1, self.k2, self.k3 = float(k1), float(k2), float(k3)
-        self.gate = 0.6 if gate is None else float(gate)
-        self.unknown_stride_cost = 0.1 if unknown_stride_cost is None else float(unknown_stride_cost)
-        self.space, self.foot_rule = space, foot_rule
+        self.gate = d_gate if gate is None else float(gate)
+        self.unknown_stride_cost = d_unknown if unknown_stride_cost is None else float(unknown_stride_cost)
+        self.space, self.foot_rule, self.location_metric = space, foot_rule, metric
         self.min_score, self.ankle_fallback, self.min_views = float(min_score), bool(ankle_fallback), int(min_views)
+        self.pixel_sigma, self.ground_sigma_floor = float(pixel_sigma), float(ground_sigma_floor)
+        self.ankle_height_m, self.foot_joint_height_m = float(ankle_height_m), float(foot_joint_height_m)
+        self.sigma_score_power = float(sigma_score_power)
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()
 
@@ -187,14 +232,17 @@ class FeetMatcher:
         """Ground-plane feet of every view: V views -> V FeetFeatures."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
-        return [feet_features(v.keypoints, cam, self.foot_rule, self.min_score, self.ankle_fallback)
+        sigma = self.pixel_sigma if self.location_metric == "mahalanobis" else None
+        return [feet_features(v.keypoints, cam, self.foot_rule, self.min_score, self.ankle_fallback, sigma,
+                              self.ankle_height_m, self.foot_joint_height_m, self.sigma_score_power)
                 for v, cam in zip(views, rig)]
 
     def pair_cost(self, fa: FeetFeatures, fb: FeetFeatures, camera_a: Camera) -> np.ndarray:
         """Edge costs of a view pair (a < b) in the configured space: (Na,), (Nb,) -> (Na, Nb)."""
         if self.space == "image":
             fa, fb = to_image(fa, camera_a), to_image(fb, camera_a)
-        return edge_costs(fa, fb, self.k1, self.k2, self.k3, self.unknown_stride_cost)
+        return edge_costs(fa, fb, self.k1, self.k2, self.k3, self.unknown_stride_cost, self.location_metric,
+                          self.ground_sigma_floor)
 
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""

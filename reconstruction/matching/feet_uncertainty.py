@@ -1,0 +1,108 @@
+"""Uncertainty of the feet matcher's ground points, and its Mahalanobis location cost.
+
+A foot joint seen at pixel uv meets the horizontal plane z = h at the point the homography of that
+plane gives (``K [r1 r2 h r3 + t]`` maps plane (X, Y) to undistorted pixels). An isotropic image
+noise ``sigma_px^2 I`` becomes the 2x2 ground covariance ``sigma_px^2 J J^T``, J the Jacobian of
+the pixel -> plane mapping at that point: tiny for a near camera, growing with the square of the
+distance for a far, low one. ``sigma_px`` should describe the 2D detector's keypoint error (in
+pixels of the original, distorted image); the Jacobian of the undistortion is included by central
+differences, so the covariance holds in distorted pixels. The location cost between two views is
+the distance in standard deviations ``sqrt(dp^T (S_a + S_b + s0^2 I)^-1 dp)``, s0 a floor in metres
+for what the model leaves out (foot size, joints above the ground, calibration).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from reconstruction.camera import Camera, apply_homography
+
+_DIFF_STEP_PX = 0.5  # central-difference step of the undistortion Jacobian
+
+
+def plane_to_image_homography(camera: Camera, height: float = 0.0) -> np.ndarray:
+    """Homography from (X, Y) on the plane z = height to undistorted pixels: (3, 3)."""
+    H = camera.K @ np.column_stack([camera.R[:, 0], camera.R[:, 1], height * camera.R[:, 2] + camera.t])
+    return H / H[2, 2]
+
+
+def image_to_plane_homography(camera: Camera, height: float = 0.0) -> np.ndarray:
+    """Homography from undistorted pixels to (X, Y) on the plane z = height: (3, 3)."""
+    H = np.linalg.inv(plane_to_image_homography(camera, height))
+    return H / H[2, 2]
+
+
+def homography_jacobian(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Jacobian d(H uv)/d(uv) of a homography at points: (3, 3), (..., 2) -> (..., 2, 2)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    w = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1) @ np.asarray(H).T
+    x = w[..., :2] / w[..., 2:3]
+    J = H[:2, :2] - x[..., :, None] * H[2, :2]  # (..., 2, 2): (H_top - x h3^T) / w
+    return J / w[..., 2, None, None]
+
+
+def undistortion_jacobian(camera: Camera, uv: np.ndarray) -> np.ndarray:
+    """Jacobian of distorted -> undistorted pixels by central differences: (..., 2) -> (..., 2, 2)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    eye = np.broadcast_to(np.eye(2), uv.shape[:-1] + (2, 2))
+    if not camera.has_distortion or uv.size == 0:
+        return eye.copy()
+    cols = [(camera.undistort_points(uv + _DIFF_STEP_PX * e) - camera.undistort_points(uv - _DIFF_STEP_PX * e))
+            / (2 * _DIFF_STEP_PX) for e in np.eye(2)]
+    return np.stack(cols, axis=-1)
+
+
+def joints_on_planes(camera: Camera, uv: np.ndarray, heights: np.ndarray,
+                     sigma_px: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Distorted pixels (N, K, 2) of joints at heights (K,) m -> plane (X, Y) (N, K, 2), depth (N, K)
+    of that 3D point in the camera, and the (X, Y) covariance (N, K, 2, 2) if sigma_px (scalar or
+    (N, K) px) is given."""
+    uv = np.asarray(uv, dtype=np.float64)
+    heights = np.broadcast_to(np.asarray(heights, dtype=np.float64), uv.shape[1:2])
+    und = camera.undistort_points(uv)
+    xy = np.zeros(uv.shape)
+    J = np.zeros(uv.shape + (2,))
+    for h in np.unique(heights):
+        cols = heights == h
+        H = image_to_plane_homography(camera, float(h))
+        xy[:, cols] = apply_homography(H, und[:, cols])
+        J[:, cols] = homography_jacobian(H, und[:, cols])
+    point = np.concatenate([xy, np.broadcast_to(heights[None, :, None], uv.shape[:2] + (1,))], axis=-1)
+    depth = camera.depth(point)
+    if sigma_px is None:
+        return xy, depth, None
+    J = J @ undistortion_jacobian(camera, uv)
+    var = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64) ** 2, uv.shape[:2])
+    return xy, depth, var[..., None, None] * (J @ np.swapaxes(J, -1, -2))
+
+
+def joint_sigmas(score: np.ndarray, sigma_px: float, score_power: float = 0.0) -> np.ndarray:
+    """Pixel SD per joint, sigma_px * score^-power (power 0: the same for all): (N, K) -> (N, K)."""
+    score = np.clip(np.asarray(score, dtype=np.float64), 0.05, 1.0)
+    return float(sigma_px) * score ** -float(score_power)
+
+
+def location_covariance(cov_left: np.ndarray, cov_right: np.ndarray, has_left: np.ndarray,
+                        has_right: np.ndarray) -> np.ndarray:
+    """Covariance of p = mean of the present feet (independent): (N, 2, 2) x2, (N,) x2 -> (N, 2, 2)."""
+    both = (np.asarray(has_left) & np.asarray(has_right))[:, None, None]
+    cl = np.where(np.asarray(has_left)[:, None, None], cov_left, 0.0)
+    cr = np.where(np.asarray(has_right)[:, None, None], cov_right, 0.0)
+    return np.where(both, (cl + cr) / 4, cl + cr)
+
+
+def mean_covariance(cov: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Covariance of the mean of the valid points (independent): (N, K, 2, 2), (N, K) -> (N, 2, 2)."""
+    n = np.maximum(np.asarray(valid).sum(axis=1), 1)
+    return np.where(valid[..., None, None], cov, 0.0).sum(axis=1) / (n ** 2)[:, None, None]
+
+
+def mahalanobis_distances(pa: np.ndarray, pb: np.ndarray, cov_a: np.ndarray, cov_b: np.ndarray,
+                          floor_m: float = 0.05) -> np.ndarray:
+    """sqrt(dp^T (S_a + S_b + floor^2 I)^-1 dp) for all pairs: (Na, 2), (Nb, 2), (Na, 2, 2), (Nb, 2, 2)
+    -> (Na, Nb) distances in standard deviations."""
+    d = np.asarray(pa, dtype=np.float64)[:, None] - np.asarray(pb, dtype=np.float64)[None]
+    S = np.asarray(cov_a)[:, None] + np.asarray(cov_b)[None] + float(floor_m) ** 2 * np.eye(2)
+    a, b, c = S[..., 0, 0], 0.5 * (S[..., 0, 1] + S[..., 1, 0]), S[..., 1, 1]
+    det = a * c - b * b
+    quad = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / det
+    return np.sqrt(np.maximum(quad, 0.0))
