@@ -100,9 +100,13 @@ def mahalanobis_distances(pa: np.ndarray, pb: np.ndarray, cov_a: np.ndarray, cov
                           floor_m: float = 0.05) -> np.ndarray:
     """sqrt(dp^T (S_a + S_b + floor^2 I)^-1 dp) for all pairs: (Na, 2), (Nb, 2), (Na, 2, 2), (Nb, 2, 2)
     -> (Na, Nb) distances in standard deviations."""
-    d = np.asarray(pa, dtype=np.float64)[:, None] - np.asarray(pb, dtype=np.float64)[None]
-    S = np.asarray(cov_a)[:, None] + np.asarray(cov_b)[None] + float(floor_m) ** 2 * np.eye(2)
-    a, b, c = S[..., 0, 0], 0.5 * (S[..., 0, 1] + S[..., 1, 0]), S[..., 1, 1]
-    det = a * c - b * b
-    quad = (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / det
+    pa, pb = np.asarray(pa, dtype=np.float64), np.asarray(pb, dtype=np.float64)
+    cov_a, cov_b = np.asarray(cov_a, dtype=np.float64), np.asarray(cov_b, dtype=np.float64)
+    dx, dy = pa[:, None, 0] - pb[None, :, 0], pa[:, None, 1] - pb[None, :, 1]
+    # the entries of S = S_a + S_b + floor^2 I, pair by pair, without (Na, Nb, 2, 2) temporaries
+    floor2 = float(floor_m) ** 2
+    a = cov_a[:, None, 0, 0] + cov_b[None, :, 0, 0] + floor2
+    c = cov_a[:, None, 1, 1] + cov_b[None, :, 1, 1] + floor2
+    b = 0.5 * (cov_a[:, None, 0, 1] + cov_a[:, None, 1, 0] + cov_b[None, :, 0, 1] + cov_b[None, :, 1, 0])
+    quad = (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
     return np.sqrt(np.maximum(quad, 0.0))

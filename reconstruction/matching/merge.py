@@ -50,23 +50,25 @@ class _Components:
     """Union-find over global detection indices that tracks the set of views of each component."""
 
     def __init__(self, view_of: np.ndarray, num_views: int) -> None:
-        self.parent = np.arange(len(view_of))
-        self.views = np.zeros((len(view_of), num_views), dtype=bool)
-        self.views[np.arange(len(view_of)), view_of] = True
+        # Plain lists and integer bit masks of views: this loop runs once per edge, and numpy
+        # scalar operations would dominate the matching time in crowds.
+        self.parent = list(range(len(view_of)))
+        self.views = [1 << int(v) for v in view_of]
 
     def find(self, i: int) -> int:
         """Root of i, with path halving."""
-        while self.parent[i] != i:
-            self.parent[i] = self.parent[self.parent[i]]
-            i = self.parent[i]
-        return int(i)
+        parent = self.parent
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
 
     def union_if_compatible(self, i: int, j: int) -> bool:
         """Merge the components of i and j unless they share a view; whether they are now one."""
         a, b = self.find(i), self.find(j)
         if a == b:
             return True
-        if np.any(self.views[a] & self.views[b]):
+        if self.views[a] & self.views[b]:
             return False
         self.parent[b] = a
         self.views[a] |= self.views[b]
@@ -103,8 +105,8 @@ def merge_edges(edges: np.ndarray, num_detections: list[int], min_views: int = 2
     ga, gb = offsets[va] + da, offsets[vb] + db
     order = np.lexsort((gb, ga, edges[:, 4]))
     comps = _Components(view_of, V)
-    for e in order:
-        comps.union_if_compatible(int(ga[e]), int(gb[e]))
+    for i, j in zip(ga[order].tolist(), gb[order].tolist()):
+        comps.union_if_compatible(i, j)
     return _components_to_assignment(comps, view_of, offsets, min_views)
 
 
@@ -113,9 +115,8 @@ def _components_to_assignment(comps: _Components, view_of: np.ndarray, offsets: 
     """(P, V) rows of the components with >= min_views views, by smallest global index."""
     V = len(offsets) - 1
     rows: dict[int, np.ndarray] = {}
-    for g in range(len(view_of)):  # increasing g = increasing (view, det): first seen = smallest
+    for g, v in enumerate(view_of.tolist()):  # increasing g = increasing (view, det): first seen = smallest
         row = rows.setdefault(comps.find(g), np.full(V, -1, dtype=np.int64))
-        v = view_of[g]
         if row[v] >= 0:
             raise AssertionError("merger produced two detections of one view in a person")
         row[v] = g - offsets[v]
