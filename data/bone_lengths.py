@@ -1,0 +1,145 @@
+"""Reference bone lengths of the MAP bone prior (paper Eq. 7), and their estimation from 3D ground truth.
+
+Source of the default table: the anthropometric segment proportions of Drillis & Contini (1966), as
+reproduced in D. A. Winter, "Biomechanics and Motor Control of Human Movement" (fig. 4.1), for an adult
+of 1.70 m: the same source and the same numbers as the mean body of the synthetic generator
+(``data.synthetic.body.mean_body()``). The lengths below are the joint-to-joint distances of that mean
+body (they do not depend on the pose: every bone of ``keypoints.BONES`` is rigid in the model), rounded
+to 0.1 mm; ``tests/test_map_reconstruction.py`` checks that the two stay equal.
+
+Standard deviations: the relative spread of an adult mixed-sex population, stature SD 0.09 m / 1.70 m
+= 5.3 % combined with 2 % per-segment proportion variation (sqrt(5.3^2 + 2^2) = 5.7 %, the synthetic
+generator's model as well), plus an absolute 1 cm in quadrature for the uncertainty of where a
+keypoint sits on the body (annotators and detectors place "eye", "ear", "hip" differently by about a
+centimetre). The floor keeps the short face and foot bones (5-9 cm) from getting a millimetre-tight
+prior that the 2D keypoints cannot honour. Real keypoint conventions differ from anatomical joint
+centres (e.g. COCO hips sit wider and higher); re-estimate the table from a dataset's ground truth
+with ``benchmarks/fit_bone_lengths.py`` and point the ``bone_table`` config key at the JSON it writes.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from data.keypoints import BONES, NUM_JOINTS
+
+REFERENCE_STATURE_M = 1.70
+RELATIVE_SD = 0.057
+ABSOLUTE_SD_M = 0.010
+
+# Mean bone length (m) of the 1.70 m mean body, in the order of keypoints.BONES.
+_MEAN_M: Mapping[str, float] = {
+    "shoulders": 0.3740, "hips": 0.1870,
+    "left_torso": 0.4984, "right_torso": 0.4984,
+    "left_upper_arm": 0.3162, "right_upper_arm": 0.3162,
+    "left_forearm": 0.2482, "right_forearm": 0.2482,
+    "left_thigh": 0.4165, "right_thigh": 0.4165,
+    "left_shin": 0.4182, "right_shin": 0.4182,
+    "left_nose_eye": 0.0556, "right_nose_eye": 0.0556,
+    "left_eye_ear": 0.0900, "right_eye_ear": 0.0900,
+    "left_ankle_heel": 0.0788, "right_ankle_heel": 0.0788,
+    "left_ankle_big_toe": 0.2233, "right_ankle_big_toe": 0.2233,
+    "left_toes": 0.0802, "right_toes": 0.0802,
+    "left_heel_big_toe": 0.2556, "right_heel_big_toe": 0.2556,
+}
+
+# The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up,
+# lowest sole point at z = 0, COCO-23 order, rounded to 1 mm. Used to initialise unseen joints.
+_MEAN_POSE_M = (
+    (0.111, 0.000, 1.559), (0.085, 0.032, 1.597), (0.085, -0.032, 1.597),       # nose, eyes
+    (0.009, 0.072, 1.571), (0.009, -0.072, 1.571),                              # ears
+    (0.000, 0.187, 1.389), (0.000, -0.187, 1.389),                              # shoulders
+    (0.000, 0.231, 1.076), (0.000, -0.231, 1.076),                              # elbows
+    (0.052, 0.265, 0.836), (0.052, -0.265, 0.836),                              # wrists
+    (0.000, 0.093, 0.900), (0.000, -0.093, 0.900),                              # hips
+    (0.000, 0.109, 0.484), (0.000, -0.109, 0.484),                              # knees
+    (-0.022, 0.124, 0.066), (-0.022, -0.124, 0.066),                            # ankles
+    (0.191, 0.129, 0.000), (0.142, 0.192, 0.000), (-0.064, 0.120, 0.000),       # left toes, heel
+    (0.191, -0.129, 0.000), (0.142, -0.192, 0.000), (-0.064, -0.120, 0.000),    # right toes, heel
+)
+
+
+def _frozen(values: Any, dtype: Any = np.float64) -> np.ndarray:
+    """A read-only array copy."""
+    out = np.array(values, dtype=dtype)
+    out.flags.writeable = False
+    return out
+
+
+BONE_NAMES: tuple[str, ...] = tuple(BONES)
+BONE_PAIRS = _frozen([BONES[n] for n in BONE_NAMES], np.int64)                         # (L, 2)
+BONE_MEAN = _frozen([_MEAN_M[n] for n in BONE_NAMES])                                  # (L,)
+BONE_STD = _frozen(np.sqrt((RELATIVE_SD * BONE_MEAN) ** 2 + ABSOLUTE_SD_M ** 2))        # (L,)
+MEAN_POSE = _frozen(_MEAN_POSE_M)                                                      # (J, 3)
+
+
+def bone_lengths(poses: np.ndarray) -> np.ndarray:
+    """Length of every bone of every pose (m): (..., J, >=3) -> (..., L)."""
+    poses = np.asarray(poses, dtype=np.float64)
+    return np.linalg.norm(poses[..., BONE_PAIRS[:, 0], :3] - poses[..., BONE_PAIRS[:, 1], :3], axis=-1)
+
+
+def estimate_bone_table(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean, SD (ddof 1) and sample count of every bone over valid joints: (N, J, 4) -> (L,), (L,), (L,).
+
+    A bone counts in a pose when both its joints have validity > 0 and finite coordinates. Bones with
+    no sample get NaN mean and SD; bones with one sample get SD NaN.
+    """
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
+    ok = (poses[..., 3] > 0) & np.all(np.isfinite(poses[..., :3]), axis=-1)
+    both = ok[:, BONE_PAIRS[:, 0]] & ok[:, BONE_PAIRS[:, 1]]
+    lengths = np.where(both, bone_lengths(np.where(ok[..., None], poses, 0.0)), 0.0)
+    count = both.sum(axis=0)
+    mean = np.where(count > 0, lengths.sum(axis=0) / np.maximum(count, 1), np.nan)
+    sq = np.where(both, (lengths - mean) ** 2, 0.0).sum(axis=0)
+    std = np.where(count > 1, np.sqrt(sq / np.maximum(count - 1, 1)), np.nan)
+    return mean, std, count
+
+
+def bone_table_dict(mean: np.ndarray, std: np.ndarray, count: np.ndarray | None = None,
+                    source: str = "") -> dict:
+    """The JSON document of a bone table, bones without a finite mean and SD left out: (L,) x 3 -> dict."""
+    bones = {}
+    for i, name in enumerate(BONE_NAMES):
+        if np.isfinite(mean[i]) and np.isfinite(std[i]) and std[i] > 0:
+            entry = {"mean": round(float(mean[i]), 5), "std": round(float(std[i]), 5)}
+            if count is not None:
+                entry["count"] = int(count[i])
+            bones[name] = entry
+    return {"source": source, "units": "m", "bones": bones}
+
+
+def resolve_bone_table(table: str | Path | Mapping | None) -> tuple[np.ndarray, np.ndarray]:
+    """The reference (mean (L,), std (L,)) from None (defaults), a JSON path or a {"bones": ...} mapping.
+
+    Bones the table does not name keep their default; an unknown bone name, a non-positive or
+    non-finite value is a ValueError naming the table and the bone.
+    """
+    mean, std = BONE_MEAN.copy(), BONE_STD.copy()
+    if table is None:
+        return mean, std
+    where = "bone table"
+    if isinstance(table, (str, Path)):
+        where = f"bone table {table}"
+        try:
+            table = json.loads(Path(table).read_text())
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{where}: cannot read it ({exc})") from None
+    bones = table.get("bones", table) if isinstance(table, Mapping) else None
+    if not isinstance(bones, Mapping):
+        raise ValueError(f"{where}: expected a mapping 'bones' of name -> {{mean, std}}")
+    for name, entry in bones.items():
+        if name not in BONE_NAMES:
+            raise ValueError(f"{where}: unknown bone {name!r} (known: {', '.join(BONE_NAMES)})")
+        i = BONE_NAMES.index(name)
+        try:
+            m, s = float(entry["mean"]), float(entry["std"])
+        except (TypeError, KeyError, ValueError):
+            raise ValueError(f"{where}: bone {name!r} needs numeric 'mean' and 'std'") from None
+        if not (np.isfinite(m) and np.isfinite(s) and m > 0 and s > 0):
+            raise ValueError(f"{where}: bone {name!r} has mean {m} and std {s}; both must be finite and > 0")
+        mean[i], std[i] = m, s
+    return mean, std

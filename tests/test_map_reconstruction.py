@@ -1,0 +1,300 @@
+"""MLE / MAP reconstruction (paper Sec. 3.3): bone table, residuals and Jacobians, the batched solver, stages."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from data.bone_lengths import (BONE_MEAN, BONE_NAMES, BONE_PAIRS, BONE_STD, MEAN_POSE, bone_lengths,
+                               estimate_bone_table, resolve_bone_table)
+from data.synthetic import SyntheticConfig, generate_sequence
+from data.synthetic.body import mean_body, pose_joints
+from data.synthetic.observe import bbox_from_keypoints
+from data.synthetic.rigs import ring_rig
+from reconstruction import map_estimation as me
+from reconstruction.lm_solver import levenberg_marquardt
+from reconstruction.map_solver import (MAPReconstruction, MLEMAPReconstruction, MLEReconstruction,
+                                       bone_components, solve_poses)
+from reconstruction.matching import OracleMatcher
+from reconstruction.pipeline import gather_views
+from reconstruction.pose_init import initial_poses
+from reconstruction.reconstructors import VanillaTriangulation
+from reconstruction.triangulation import triangulate_dlt
+
+STAGES = {"vanilla": VanillaTriangulation, "mle": MLEReconstruction, "map": MAPReconstruction,
+          "mle_map": MLEMAPReconstruction}
+
+
+def _rig(num: int = 5):
+    return ring_rig(num, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
+
+
+def _persons(num: int = 3, walking: bool = True) -> np.ndarray:
+    """Mean-body persons (identical bone lengths) at different places, headings and gait phases: (P, 23, 3)."""
+    spots = [(-1.5, 0.5, 0.3), (1.0, -1.0, 2.0), (0.3, 1.5, -1.2), (-0.5, -1.8, 4.0)]
+    return np.stack([pose_joints(mean_body(), x, y, t, 0.17 * i, walking and i % 2 == 0)
+                     for i, (x, y, t) in enumerate(spots[:num])])
+
+
+def _observe(rig, X: np.ndarray, noise_px: float = 0.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Detections of world persons in every view: (P, J, 3) -> poses2d (V, P, J, 3), bboxes (V, P, 4)."""
+    rng = np.random.default_rng(seed)
+    uv = rig.project(X) + rng.normal(0.0, noise_px, (len(rig),) + X.shape[:2] + (2,))
+    poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
+    boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
+    return poses2d, boxes
+
+
+def _table(lengths: np.ndarray) -> dict:
+    return {"bones": {n: {"mean": float(m), "std": float(s)} for n, m, s in zip(BONE_NAMES, lengths, BONE_STD)}}
+
+
+# --- bone table -----------------------------------------------------------------------------------
+def test_default_table_is_the_synthetic_mean_body_and_covers_every_bone():
+    standing = pose_joints(mean_body(), 0.0, 0.0, 0.0)
+    assert len(BONE_NAMES) == len(BONE_PAIRS) == len(BONE_MEAN) == len(BONE_STD) == 24
+    np.testing.assert_allclose(BONE_MEAN, bone_lengths(standing), atol=1e-4)
+    np.testing.assert_allclose(bone_lengths(MEAN_POSE), BONE_MEAN, atol=2e-3)
+    assert np.all(BONE_STD > 0.01) and np.all(BONE_STD < 0.2 * BONE_MEAN + 0.011)
+    with pytest.raises(ValueError):
+        BONE_MEAN[0] = 1.0                                   # read-only constants
+
+
+def test_estimate_bone_table_uses_valid_joints_only():
+    X = np.concatenate([_persons(4), np.ones((4, 23, 1))], axis=-1)
+    X[1, 9, :3] = 100.0
+    X[1, 9, 3] = 0.0                                         # invalid wrist: its bone is skipped
+    mean, std, count = estimate_bone_table(X)
+    np.testing.assert_allclose(mean, bone_lengths(_persons(1))[0], atol=1e-9)
+    assert count[BONE_NAMES.index("left_forearm")] == 3 and count[0] == 4
+    assert np.all(std < 1e-9)
+    mean, std, count = estimate_bone_table(X[:1, :, :] * np.array([1, 1, 1, 0]))
+    assert np.all(np.isnan(mean)) and np.all(count == 0)
+
+
+def test_bone_table_json_round_trip_keeps_defaults_and_rejects_bad_entries(tmp_path):
+    path = tmp_path / "bones.json"
+    path.write_text(json.dumps({"bones": {"hips": {"mean": 0.22, "std": 0.02}}}))
+    mean, std = resolve_bone_table(path)
+    i = BONE_NAMES.index("hips")
+    assert mean[i] == 0.22 and std[i] == 0.02
+    np.testing.assert_array_equal(np.delete(mean, i), np.delete(BONE_MEAN, i))
+    with pytest.raises(ValueError, match="unknown bone 'tail'"):
+        resolve_bone_table({"bones": {"tail": {"mean": 0.3, "std": 0.1}}})
+    with pytest.raises(ValueError, match="'hips'"):
+        resolve_bone_table({"bones": {"hips": {"mean": -1, "std": 0.1}}})
+
+
+def test_fit_bone_lengths_on_shelf_writes_a_loadable_table(shared_data, tmp_path, capsys):
+    from benchmarks.fit_bone_lengths import main
+    out = tmp_path / "shelf.json"
+    main(["--shelf", str(shared_data / "shelf/4d_association/gt.txt"), "--output", str(out)])
+    assert "left_thigh" in capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert len(doc["bones"]) == 12 and "left_toes" not in doc["bones"]       # Shelf-14 has no feet or face
+    mean, _ = resolve_bone_table(out)
+    assert 0.3 < mean[BONE_NAMES.index("left_thigh")] < 0.5
+
+
+# --- residuals and Jacobians ----------------------------------------------------------------------
+def _random_problem(P: int = 2, seed: int = 0, robust: str = "none", prior: float = 1.0) -> tuple:
+    rng = np.random.default_rng(seed)
+    rig = _rig(4)
+    X = _persons(P) + rng.normal(0, 0.03, (P, 23, 3))
+    uv = rig.project(X) + rng.normal(0, 3.0, (4, P, 23, 2))
+    inv_sigma = rng.uniform(0.1, 0.5, (4, P, 23)) * (rng.random((4, P, 23)) > 0.25)
+    problem = me.PoseProblem(rig.projection_matrices(), uv, inv_sigma, BONE_PAIRS, BONE_MEAN, prior / BONE_STD,
+                             X + rng.normal(0, 0.01, X.shape), 1e-3, robust, 1.0)
+    return problem, X + rng.normal(0, 0.02, X.shape)
+
+
+def test_analytic_jacobian_equals_finite_differences():
+    problem, X = _random_problem()
+    for p in range(len(X)):
+        one = problem.take(np.array([p]))
+        jac = me.numeric_jacobian(X[p:p + 1], one)
+        r = me.residual_vector(X[p:p + 1], one)[0]
+        f, H, g = me.normal_equations(X[p:p + 1], one, "gauss_newton")
+        np.testing.assert_allclose(H[0], jac.T @ jac, atol=1e-6 * np.abs(H).max())
+        np.testing.assert_allclose(g[0], jac.T @ r, atol=1e-6 * np.abs(g).max())
+        np.testing.assert_allclose(f[0], 0.5 * r @ r, rtol=1e-12)
+
+
+@pytest.mark.parametrize("robust", ["none", "huber", "cauchy"])
+def test_gradient_and_exact_prior_hessian_match_finite_differences(robust):
+    problem, X = _random_problem(1, seed=3, robust=robust)
+    f, H_safe, g, H_exact = me.linearize(X, problem)
+    x0, h = X.reshape(-1), 1e-6
+    cost = lambda x: me.cost(x.reshape(X.shape), problem)[0]
+    num_g = np.array([(cost(x0 + h * e) - cost(x0 - h * e)) / (2 * h) for e in np.eye(69)])
+    np.testing.assert_allclose(g[0], num_g, atol=1e-6 * np.abs(g).max())
+    np.testing.assert_allclose(f, me.cost(X, problem), rtol=1e-12)
+    assert np.linalg.eigvalsh(H_safe[0]).min() > -1e-9
+    prior_only = me.PoseProblem(problem.proj, problem.uv, 0 * problem.inv_sigma, BONE_PAIRS, BONE_MEAN,
+                                1 / BONE_STD, problem.anchor, 0.0)
+    grad = lambda x: me.linearize(x.reshape(X.shape), prior_only)[2][0]
+    num_H = np.stack([(grad(x0 + 1e-5 * e) - grad(x0 - 1e-5 * e)) / 2e-5 for e in np.eye(69)])
+    exact = me.linearize(X, prior_only)[3][0]
+    np.testing.assert_allclose(exact, num_H, atol=1e-4 * np.abs(exact).max())
+
+
+# --- the batched solver ---------------------------------------------------------------------------
+def test_levenberg_marquardt_solves_a_batch_of_rosenbrock_problems():
+    a = np.array([1.0, 2.0, -0.5])
+
+    def residuals(x, idx):
+        return np.stack([10 * (x[:, 1] - x[:, 0] ** 2), a[idx] - x[:, 0]], axis=1)
+
+    def linearize(x, idx):
+        r = residuals(x, idx)
+        jac = np.zeros((len(x), 2, 2))
+        jac[:, 0, 0], jac[:, 0, 1], jac[:, 1, 0] = -20 * x[:, 0], 10.0, -1.0
+        return 0.5 * (r ** 2).sum(1), jac.transpose(0, 2, 1) @ jac, np.einsum("bri,br->bi", jac, r)
+
+    result = levenberg_marquardt(np.array([[-1.2, 1.0]] * 3), linearize,
+                                 lambda x, idx: 0.5 * (residuals(x, idx) ** 2).sum(1), max_iterations=200,
+                                 xtol=1e-12, ftol=0.0)
+    np.testing.assert_allclose(result.x, np.stack([a, a ** 2], axis=1), atol=1e-8)
+
+
+def _scipy_optimum(problem: me.PoseProblem, X0: np.ndarray, loss: str = "linear") -> np.ndarray:
+    out = []
+    for p in range(len(X0)):
+        one = problem.take(np.array([p]))
+        fun = lambda x: me.residual_vector(x.reshape(1, -1, 3), one)[0]
+        res = least_squares(fun, X0[p].ravel(), method="trf", jac="2-point", loss=loss,
+                            f_scale=problem.robust_scale, ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=2000)
+        out.append(res.x.reshape(-1, 3))
+    return np.stack(out)
+
+
+@pytest.mark.parametrize("prior,robust", [(1.0, "none"), (0.0, "none"), (0.0, "huber")])
+def test_batched_solver_reaches_the_scipy_trf_optimum(prior, robust):
+    """Same residual function, per-person scipy TRF with a numerical Jacobian, both tightly converged.
+
+    Without the prior a joint seen in one view has its depth fixed only by the 1e-3 anchor, a cost
+    change of ~1e-12 per mm, below scipy's tolerances; there only the costs are compared.
+    """
+    rig, X = _rig(5), _persons(3)
+    poses2d, boxes = _observe(rig, X, noise_px=4.0, seed=7)
+    rng = np.random.default_rng(7)
+    single = rng.random(X.shape[:2]) < 0.15                        # ~15 % of the joints in one view only
+    keep = rng.integers(0, 5, X.shape[:2])
+    poses2d[..., 2] *= np.where(single[None], np.arange(5)[:, None, None] == keep[None], 1.0)
+    poses2d[rng.random(poses2d.shape[:-1]) < 0.1] = 0.0           # and a few more missing 2D joints
+    stage = MAPReconstruction(prior_weight=prior, robust=robust, robust_scale=1.0)
+    und, proj = rig.undistort(poses2d), rig.projection_matrices()
+    X0, placed = initial_poses(triangulate_dlt(und, proj), und, proj)
+    assert placed.all()
+    problem = stage.problem(und, boxes, proj, X0, prior > 0)
+    ours, _ = solve_poses(problem, X0, max_iterations=300, xtol=1e-12, ftol=0.0)
+    theirs = _scipy_optimum(problem, X0, "linear" if robust == "none" else robust)
+    np.testing.assert_array_less(me.cost(ours, problem), me.cost(theirs, problem) * (1 + 1e-9) + 1e-9)
+    determined = (poses2d[..., 2] > 0).sum(axis=0) >= (1 if prior > 0 else 2)
+    assert determined.sum() > 50 and (~determined).sum() >= (0 if prior > 0 else 5)
+    np.testing.assert_allclose(ours[determined], theirs[determined], atol=1e-4)
+
+
+def test_bone_graph_splits_into_face_and_body():
+    comps = bone_components(23, BONE_PAIRS)
+    assert sorted(len(c) for c in comps) == [5, 18]
+
+
+# --- stages -----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", list(STAGES))
+def test_noise_free_input_is_reconstructed_exactly(name):
+    """Every stage returns the truth on exact detections.
+
+    For MAP the truth is the optimum only when the reference bone lengths are the person's own (all
+    likelihood and prior residuals are then zero); with any other table the optimum trades pixels for
+    bone lengths and moves off the truth (see the next test). All test persons share the mean body.
+    """
+    rig, X = _rig(), _persons(3)
+    poses2d, boxes = _observe(rig, X)
+    kwargs = {"bone_table": _table(bone_lengths(X[0]))} if "map" in name else {}
+    out = STAGES[name](**kwargs)(poses2d, boxes, rig)
+    assert out.shape == (3, 23, 4)
+    np.testing.assert_allclose(out[..., :3], X, atol=1e-6)
+    np.testing.assert_allclose(out[..., 3], 0.9)
+
+
+def test_map_with_a_wrong_reference_is_biased_but_a_weak_prior_is_not():
+    rig, X = _rig(), _persons(3)
+    poses2d, boxes = _observe(rig, X)
+    table = _table(bone_lengths(X[0]) * 1.1)                      # everyone 10 % taller than the table
+    biased = MAPReconstruction(bone_table=table)(poses2d, boxes, rig)
+    weak = MAPReconstruction(bone_table=table, prior_weight=1e-4)(poses2d, boxes, rig)
+    err = np.linalg.norm(biased[..., :3] - X, axis=-1)
+    assert 1e-4 < err.mean() < 0.02
+    np.testing.assert_allclose(weak[..., :3], X, atol=1e-5)
+
+
+def test_map_moves_bone_lengths_towards_the_reference():
+    rig, X = _rig(), _persons(4)
+    poses2d, boxes = _observe(rig, X, noise_px=6.0, seed=3)
+    ref = bone_lengths(X[0])
+    table = _table(ref)
+    mle = MLEReconstruction()(poses2d, boxes, rig)
+    mapped = MAPReconstruction(bone_table=table)(poses2d, boxes, rig)
+    dev = lambda out: np.mean(np.abs(bone_lengths(out) - ref))
+    assert dev(mapped) < 0.7 * dev(mle)
+    assert np.linalg.norm(mapped[..., :3] - X, axis=-1).mean() < np.linalg.norm(mle[..., :3] - X, axis=-1).mean()
+
+
+def test_joints_seen_in_one_view_or_none_get_a_position_near_the_truth():
+    rig, X = _rig(), _persons(2, walking=False)
+    poses2d, boxes = _observe(rig, X, noise_px=1.0, seed=5)
+    poses2d[1:, 0, 9] = 0.0          # person 0's left wrist: only view 0
+    poses2d[:, 0, 7] = 0.0           # person 0's left elbow: no view
+    poses2d[:, 1, 18] = 0.0          # person 1's left small toe: no view
+    vanilla = VanillaTriangulation()(poses2d, boxes, rig)
+    assert vanilla[0, 9, 3] == 0 and vanilla[0, 7, 3] == 0
+    for stage in (MAPReconstruction(), MLEMAPReconstruction()):
+        out = stage(poses2d, boxes, rig)
+        assert np.all(np.isfinite(out))
+        err = np.linalg.norm(out[..., :3] - X, axis=-1)
+        assert err[0, 9] < 0.10 and err[0, 7] < 0.10 and err[1, 18] < 0.10
+        np.testing.assert_allclose(out[0, 9, 3], 0.5 * 0.9)
+        assert out[0, 7, 3] == pytest.approx(0.1) and out[1, 18, 3] == pytest.approx(0.1)
+    mle = MLEReconstruction()(poses2d, boxes, rig)
+    assert mle[0, 9, 3] == 0 and mle[0, 7, 3] == 0 and np.all(mle[0, 7, :3] == 0)
+
+
+def test_stages_take_no_person_and_do_not_touch_their_input():
+    rig = _rig()
+    assert MLEMAPReconstruction()(np.zeros((5, 0, 23, 3)), np.zeros((5, 0, 4)), rig).shape == (0, 23, 4)
+    poses2d, boxes = _observe(rig, _persons(2), noise_px=3.0)
+    before = poses2d.copy(), boxes.copy()
+    MLEMAPReconstruction(robust="cauchy")(poses2d, boxes, rig)
+    np.testing.assert_array_equal(poses2d, before[0])
+    np.testing.assert_array_equal(boxes, before[1])
+    with pytest.raises(ValueError, match="robust"):
+        MAPReconstruction(robust="l1")
+
+
+def test_configs_instantiate_the_stages():
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+    for name, cls in (("mle", MLEReconstruction), ("map", MAPReconstruction), ("mle_map", MLEMAPReconstruction)):
+        stage = instantiate(OmegaConf.load(f"configs/reconstruction/{name}.yaml"))
+        assert type(stage) is cls
+
+
+def test_mle_map_beats_vanilla_on_a_noisy_synthetic_crowd():
+    seq = generate_sequence(SyntheticConfig(noise_px=5, num_frames=3, seed=0))
+    errors = {"vanilla": [], "mle_map": []}
+    stages = {"vanilla": VanillaTriangulation(), "mle_map": MLEMAPReconstruction()}
+    for frame in seq.frames:
+        assignment = OracleMatcher()(frame.views, seq.rig)
+        poses2d, boxes = gather_views(frame.views, assignment)
+        ids = [frame.views[v].person_ids[assignment[p, v]] for p, v in
+               zip(range(len(assignment)), np.argmax(assignment >= 0, axis=1))]
+        gt = frame.gt_poses[[list(frame.gt_ids).index(i) for i in ids]]
+        outs = {k: s(poses2d, boxes, seq.rig) for k, s in stages.items()}
+        both = (outs["vanilla"][..., 3] > 0) & (outs["mle_map"][..., 3] > 0)
+        for k, out in outs.items():
+            errors[k].append(np.linalg.norm(out[..., :3] - gt[..., :3], axis=-1)[both])
+    vanilla, ours = (np.mean(np.concatenate(errors[k])) for k in ("vanilla", "mle_map"))
+    assert ours < 0.85 * vanilla, (vanilla, ours)
