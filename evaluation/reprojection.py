@@ -1,0 +1,44 @@
+"""Reprojection error of reconstructed 3D joints (the statistics of the paper's Table 3).
+
+Every reconstructed joint (confidence > 0) is projected into every view where its 2D joint has
+score > 0 and compared, in undistorted pixels, with either the 2D detection (what the solver fits)
+or, where ground truth is known, the noise-free projection of the ground-truth 3D joint.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from data.multiview import ViewDetections
+from reconstruction.camera import Rig
+from reconstruction.pipeline import gather_views
+from reconstruction.triangulation import reprojection_error
+
+
+def reprojection_stats(errors: np.ndarray) -> dict[str, float]:
+    """Mean, min, max, variance (population) and count of the finite errors: (...) px -> dict."""
+    err = np.asarray(errors, dtype=np.float64).ravel()
+    err = err[np.isfinite(err)]
+    if err.size == 0:
+        nan = float("nan")
+        return {"mean": nan, "min": nan, "max": nan, "var": nan, "count": 0}
+    return {"mean": float(err.mean()), "min": float(err.min()), "max": float(err.max()),
+            "var": float(err.var()), "count": int(err.size)}
+
+
+def frame_reprojection_errors(poses3d: np.ndarray, assignment: np.ndarray, views: list[ViewDetections],
+                              rig: Rig, gt_points3d: np.ndarray | None = None) -> np.ndarray:
+    """Pixel errors of one frame: (P, J, 4), (P, V), V views [, GT (P, J, 3|4) per person] -> (V, P, J).
+
+    Against the 2D detections, or with gt_points3d against the undistorted projections of the
+    ground-truth joints of each reconstructed person. NaN where the 2D joint has score 0 or the 3D
+    joint has confidence 0.
+    """
+    poses2d, _ = gather_views(views, assignment)
+    und = rig.undistort(poses2d)
+    proj = rig.projection_matrices()
+    if gt_points3d is not None:
+        gt = np.asarray(gt_points3d, dtype=np.float64)[..., :3]
+        homog = np.concatenate([gt, np.ones(gt.shape[:-1] + (1,))], axis=-1)
+        hom = np.einsum("vab,pjb->vpja", proj, homog)
+        und = np.concatenate([hom[..., :2] / hom[..., 2:3], und[..., 2:3]], axis=-1)
+    return reprojection_error(poses3d, und, proj)
