@@ -13,19 +13,16 @@ cheaper edges first, exactly like the feet matcher. The shared pieces of the joi
 from __future__ import annotations
 
 from collections import Counter
-from itertools import combinations
-from typing import Callable
 
 import numpy as np
 
 from data.multiview import ViewDetections
 from reconstruction.camera import Camera, Rig
-from reconstruction.matching.merge import merge_edges, pair_edges, solve_pair
+from reconstruction.matching.merge import match_pairs
 
 TOO_FEW_JOINTS = "too_few_joints"  # fewer than min_common_joints joints with score >= min_score
 NO_COUNTERPART = "no_counterpart"  # enough joints, but ended in no person of >= min_views views
 
-PairCost = Callable[[int, int], np.ndarray]
 
 
 def undistorted_joints(view: ViewDetections, camera: Camera, min_score: float) -> tuple[np.ndarray, np.ndarray]:
@@ -86,19 +83,6 @@ def epipolar_affinity(uv_a: np.ndarray, ok_a: np.ndarray, uv_b: np.ndarray, ok_b
     count = common.sum(axis=-1)
     total = np.where(common, dist, 0.0).sum(axis=-1)
     return np.where(count >= min_common_joints, total / np.maximum(count, 1), np.inf)
-
-
-def match_pairs(pair_cost: PairCost, num_detections: list[int], gate: float, min_views: int) -> np.ndarray:
-    """Gated assignment of every view pair (a < b), then the cheapest-first merge: -> (P, V).
-
-    ``pair_cost(a, b)`` returns the (N_a, N_b) cost of the view pair, +inf where not allowed.
-    """
-    edges = [np.zeros((0, 5))]
-    for a, b in combinations(range(len(num_detections)), 2):
-        cost = pair_cost(a, b)
-        rows, cols = solve_pair(cost, gate)
-        edges.append(pair_edges(a, b, rows, cols, cost))
-    return merge_edges(np.concatenate(edges), num_detections, min_views)
 
 
 def unmatched_counts(usable: list[np.ndarray], assignment: np.ndarray) -> Counter[str]:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
-from itertools import combinations
 
 import numpy as np
 
@@ -20,7 +19,7 @@ from data.multiview import ViewDetections
 from reconstruction.camera import Camera, Rig
 from reconstruction.matching.feet_uncertainty import (joint_sigmas, joints_on_planes, location_covariance,
                                                       mahalanobis_distances, mean_covariance)
-from reconstruction.matching.merge import merge_edges, pair_edges, solve_pair
+from reconstruction.matching.merge import match_pairs
 
 FOOT_RULES = ("lowest", "mean")
 SPACES = ("ground", "image")
@@ -247,12 +246,8 @@ class FeetMatcher:
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
         feats = self.features(views, rig)
-        edges = [np.zeros((0, 5))]
-        for a, b in combinations(range(len(views)), 2):
-            cost = self.pair_cost(feats[a], feats[b], rig[a])
-            rows, cols = solve_pair(cost, self.gate)
-            edges.append(pair_edges(a, b, rows, cols, cost))
-        assignment = merge_edges(np.concatenate(edges), [len(v) for v in views], self.min_views)
+        assignment = match_pairs(lambda a, b: self.pair_cost(feats[a], feats[b], rig[a]),
+                                 [len(v) for v in views], self.gate, self.min_views)
         reasons = Counter(str(r) for f in feats for r in f.reason if r)
         unplaced = sum(int(f.has_p.sum()) for f in feats) - int(np.sum(assignment >= 0))
         if unplaced:

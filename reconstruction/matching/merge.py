@@ -7,8 +7,13 @@ with :func:`merge_edges`, which resolves cross-view conflicts giving priority to
 """
 from __future__ import annotations
 
+from itertools import combinations
+from typing import Callable
+
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+
+PairCost = Callable[[int, int], np.ndarray]  # (view a, view b) -> (N_a, N_b) edge costs
 
 EDGE_COLUMNS = ("view_a", "det_a", "view_b", "det_b", "cost")
 
@@ -122,3 +127,16 @@ def _components_to_assignment(comps: _Components, view_of: np.ndarray, offsets: 
         row[v] = g - offsets[v]
     kept = [row for row in rows.values() if np.sum(row >= 0) >= min_views]
     return np.stack(kept) if kept else np.zeros((0, V), dtype=np.int64)
+
+
+def match_pairs(pair_cost: PairCost, num_detections: list[int], gate: float, min_views: int) -> np.ndarray:
+    """Gated assignment of every view pair (a < b), then the cheapest-first merge: -> (P, V).
+
+    ``pair_cost(a, b)`` returns the (N_a, N_b) cost of the view pair, +inf where not allowed.
+    """
+    edges = [np.zeros((0, 5))]
+    for a, b in combinations(range(len(num_detections)), 2):
+        cost = pair_cost(a, b)
+        rows, cols = solve_pair(cost, gate)
+        edges.append(pair_edges(a, b, rows, cols, cost))
+    return merge_edges(np.concatenate(edges), num_detections, min_views)
