@@ -2,11 +2,10 @@
 ``matcher(views, rig) -> assignment`` with assignment (P, V) int, the detection index of person p in
 view v or -1. Each matcher is a small callable class configured from ``configs/matching/*.yaml``.
 """
-from reconstruction.matching.assignment import assignment_from_labels, views_per_person
+from reconstruction.matching.assignment import assignment_from_labels
 from reconstruction.matching.epipolar import EpipolarMatcher
 from reconstruction.matching.feet import FeetMatcher
 from reconstruction.matching.oracle import OracleMatcher
 from reconstruction.matching.ransac import RansacMatcher
 
-__all__ = ["EpipolarMatcher", "FeetMatcher", "OracleMatcher", "RansacMatcher", "assignment_from_labels",
-           "views_per_person"]
+__all__ = ["EpipolarMatcher", "FeetMatcher", "OracleMatcher", "RansacMatcher", "assignment_from_labels"]

@@ -24,7 +24,3 @@ def assignment_from_labels(labels: list[np.ndarray], min_views: int = 2) -> np.n
     rows = [people[k] for k in sorted(people) if np.sum(people[k] >= 0) >= min_views]
     return np.stack(rows) if rows else np.zeros((0, V), dtype=np.int64)
 
-
-def views_per_person(assignment: np.ndarray) -> np.ndarray:
-    """Number of views each person is seen in: (P, V) -> (P,)."""
-    return np.sum(np.asarray(assignment) >= 0, axis=1)
