@@ -36,13 +36,14 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     t_data = time.perf_counter() - t0
     pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction))
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
-    report.timings = {"dataset": t_data, **report.timings}
+    stage_s = sequence.meta.get("stage_seconds", {})  # e.g. 2D grouping done while loading
+    report.timings = {"dataset": t_data - sum(stage_s.values()), **stage_s, **report.timings}
 
     frames = ((r.frame, r.poses3d, r.assignment) for r in report.results)
     write_poses3d(out_dir / cfg.output, frames, sequence.rig.names)
     atomic_write_text(out_dir / cfg.metrics_file, json.dumps(
-        {"metrics": report.metrics, "skipped": dict(report.skipped), "unmatched": dict(report.unmatched),
-         "timings_s": report.timings}, indent=2))
+        {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped),
+         "unmatched": dict(report.unmatched), "timings_s": report.timings}, indent=2))
     print(f"\n{sequence.meta.get('description', 'dataset')}: {len(sequence.frames)} frames, "
           f"{len(sequence.rig)} cameras")
     print(format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation)))

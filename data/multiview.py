@@ -58,8 +58,10 @@ class Frame:
 
 @dataclass
 class Sequence:
-    """A rig and its frames, with a free-form description of where they came from."""
+    """A rig and its frames, a free-form description of where they came from, and the benchmark
+    protocols to score them with beside the generic metrics (evaluation/protocols.py)."""
 
     rig: Rig
     frames: list[Frame]
     meta: dict = field(default_factory=dict)
+    protocols: list = field(default_factory=list)

@@ -20,13 +20,16 @@ from reconstruction.pipeline import FrameResult, MultiViewPipeline
 @dataclass
 class SequenceReport:
     """Per-frame results, metrics (empty without ground truth), skipped frames by reason, seconds by stage,
-    and detections the matcher left out of every person, by reason (matchers that count them)."""
+    detections the matcher left out of every person, by reason (matchers that count them), and the
+    summaries and console reports of the sequence's benchmark protocols."""
 
     results: list[FrameResult]
     metrics: dict[str, float]
     skipped: Counter
     timings: dict[str, float] = field(default_factory=dict)
     unmatched: Counter = field(default_factory=Counter)
+    protocols: dict[str, dict] = field(default_factory=dict)
+    protocol_reports: list[str] = field(default_factory=list)
 
 
 def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator: Pose3DEvaluator,
@@ -45,6 +48,8 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
             evaluator.update(result.poses3d, frame.gt_poses)
         if has_ids:
             pairs = pairs + correspondence_counts(result.assignment, [v.person_ids for v in frame.views])
+        for protocol in sequence.protocols:
+            protocol.update(frame, result)
         t_eval += time.perf_counter() - t0
     has_gt = any(f.gt_poses is not None for f in sequence.frames)
     metrics = evaluator.summary() if has_gt else {}
@@ -52,7 +57,9 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
         metrics.update({f"matching_{k}": v for k, v in pairs.as_dict().items()})
     unmatched = Counter(getattr(pipeline.matcher, "unmatched_reasons", {}))
     timings = dict(pipeline.timings, evaluation=t_eval)
-    return SequenceReport(results, metrics, skipped, timings, unmatched)
+    protocols = {p.name: p.summary() for p in sequence.protocols}
+    reports = [p.report() for p in sequence.protocols]
+    return SequenceReport(results, metrics, skipped, timings, unmatched, protocols, reports)
 
 
 def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str:
@@ -69,6 +76,8 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
                       *_matching_rows(m)]), "",
                   format_table(["MPJPE (mm)", *JOINT_GROUPS], [["", *(m[f"mpjpe_{g}_mm"] for g in JOINT_GROUPS)]]),
                   "", format_table(["PCP (%)", *PART_NAMES], [["", *(m[f"pcp_{p}"] for p in PART_NAMES)]]), ""]
+    for text in report.protocol_reports:
+        lines += [text, ""]
     if report.unmatched:
         lines.append("Detections left unmatched by the matcher: "
                      + ", ".join(f"{n} {why}" for why, n in sorted(report.unmatched.items())))
