@@ -1,4 +1,4 @@
-"""Cross-view matching benchmark: feet / epipolar / ransac / oracle on synthetic bodies, as markdown tables.
+"""Cross-view matching benchmark: feet / feet_epipolar / epipolar / ransac / oracle on synthetic bodies, as markdown tables.
 
 Run from the repository root (as a module, so that ``data``, ``reconstruction`` ... import):
 
@@ -41,9 +41,10 @@ from evaluation.correspondence import CorrespondenceCounts, correspondence_count
 from evaluation.report import format_table  # noqa: E402
 from reconstruction.calibration import load_wildtrack, load_wildtrack_positions  # noqa: E402
 from reconstruction.camera import Rig  # noqa: E402
-from reconstruction.matching import EpipolarMatcher, FeetMatcher, OracleMatcher, RansacMatcher  # noqa: E402
+from reconstruction.matching import (EpipolarMatcher, FeetEpipolarMatcher, FeetMatcher, OracleMatcher,  # noqa: E402
+                                     RansacMatcher)
 
-MATCHERS = ("feet", "epipolar", "ransac", "oracle")
+MATCHERS = ("feet", "feet_epipolar", "epipolar", "ransac", "oracle")
 WILDTRACK_AREA = (-3.0, 9.0, -9.0, 27.0)
 SWEEP_AREA = (-4.5, 4.5, -4.5, 4.5)
 TARGET_MS = 20.0
@@ -66,8 +67,8 @@ def parse_kv(text: str) -> dict[str, object]:
 
 def make_matchers(feet_kwargs: dict[str, object]) -> dict[str, Callable]:
     """Fresh matchers with their default settings (feet with feet_kwargs)."""
-    return {"feet": FeetMatcher(**feet_kwargs), "epipolar": EpipolarMatcher(), "ransac": RansacMatcher(),
-            "oracle": OracleMatcher()}
+    return {"feet": FeetMatcher(**feet_kwargs), "feet_epipolar": FeetEpipolarMatcher(), "epipolar": EpipolarMatcher(),
+            "ransac": RansacMatcher(), "oracle": OracleMatcher()}
 
 
 def hide_feet(views: list[ViewDetections], fraction: float, rng: np.random.Generator) -> list[ViewDetections]:

@@ -1,4 +1,4 @@
-"""The two joint-based baselines of the paper's Table 6 (epipolar constraint and RANSAC) on hand-built scenes."""
+"""The joint-based matchers (the epipolar and RANSAC baselines of the paper's Table 6, and feet + epipolar) on hand-built scenes."""
 import inspect
 from pathlib import Path
 
@@ -10,14 +10,15 @@ from omegaconf import OmegaConf
 
 from data.keypoints import FLIP_PAIRS, NUM_JOINTS
 from evaluation.correspondence import correspondence_metrics
-from reconstruction.matching import EpipolarMatcher, RansacMatcher
+from reconstruction.matching import EpipolarMatcher, FeetEpipolarMatcher, RansacMatcher
+from reconstruction.matching.feet import NO_FOOT_JOINTS
 from reconstruction.matching.epipolar import (NO_COUNTERPART, TOO_FEW_JOINTS, epipolar_affinity,
                                               fundamental_matrix, undistorted_joints)
 from tests.test_feet_matching import matched_id_sets, ring_rig, scene
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "matching"
 DIST = (-0.1, 0.02, 0.001, -0.001, 0.0)
-MATCHERS = {"epipolar": EpipolarMatcher, "ransac": RansacMatcher}
+MATCHERS = {"epipolar": EpipolarMatcher, "ransac": RansacMatcher, "feet_epipolar": FeetEpipolarMatcher}
 
 # A standing person facing +x, in metres: (forward, left, up) of the left-side and central joints;
 # the right side mirrors the left (FLIP_PAIRS).
@@ -121,7 +122,8 @@ def test_detection_with_too_few_joints_is_left_out_and_counted(name):
     hidden = {(2, int(views[2].person_ids[1])), (3, int(views[3].person_ids[0]))}
     assert not any(hidden & s for s in found)
     assert frozenset((v, 1) for v in (0, 1, 3)) in found and frozenset((v, 0) for v in (0, 1, 2)) in found
-    assert matcher.last_unmatched_reasons == {TOO_FEW_JOINTS: 2}
+    # feet_epipolar needs feet first: neither detection has a usable foot left
+    assert matcher.last_unmatched_reasons == ({NO_FOOT_JOINTS: 2} if name == "feet_epipolar" else {TOO_FEW_JOINTS: 2})
 
 
 @pytest.mark.parametrize("name", MATCHERS)

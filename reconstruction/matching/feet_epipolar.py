@@ -1,0 +1,84 @@
+"""Feet assignment with epipolar evidence from the other joints (``matching=feet_epipolar``).
+
+The feet cost (:mod:`.feet`, Mahalanobis distance of the feet midpoints on the ground plane, in
+standard deviations) places two detections at the same spot of the floor; the epipolar cost
+(:mod:`.epipolar`, mean symmetric distance of the common joints to each other's epipolar lines, in
+pixels) checks that the rest of the body agrees. In a crowd each alone leaves ambiguities: feet are
+often hidden and their ground position is uncertain by metres along a far camera's line of sight;
+the epipolar line of a joint passes through many people. The edge cost of a detection pair is
+
+    c = sqrt(d_feet^2 + (e / epipolar_sigma_px)^2)
+
+(both terms in standard-deviation units, added in quadrature as independent evidence), solved per view
+pair as a gated Jonker-Volgenant assignment and merged over all pairs cheapest first, exactly like the
+feet matcher. A pair needs a feet location in both detections and at least ``min_common_joints``
+joints confident in both; otherwise it is never matched.
+"""
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+
+from data.multiview import ViewDetections
+from reconstruction.camera import Rig
+from reconstruction.matching.epipolar import (TOO_FEW_JOINTS, epipolar_affinity, fundamental_matrix,
+                                              undistorted_joints)
+from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
+from reconstruction.matching.merge import match_pairs
+
+def combined_cost(feet_cost: np.ndarray, epipolar_px: np.ndarray, epipolar_sigma_px: float) -> np.ndarray:
+    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), +inf where either is."""
+    with np.errstate(invalid="ignore"):
+        cost = np.sqrt(np.square(feet_cost) + np.square(epipolar_px / epipolar_sigma_px))
+    return np.where(np.isfinite(feet_cost) & np.isfinite(epipolar_px), cost, np.inf)
+
+
+class FeetEpipolarMatcher:
+    """Feet + epipolar matching: ``matcher(views, rig) -> (P, V)`` detection index per view or -1.
+
+    ``feet`` holds the FeetMatcher keyword arguments (Mahalanobis location metric; its own gate is
+    not used); ``gate`` applies to the combined cost in standard deviations. Counts of detections left
+    out of every person, by reason, are kept in ``last_unmatched_reasons`` and ``unmatched_reasons``.
+    """
+
+    def __init__(self, epipolar_sigma_px: float = 5.0, gate: float = 5.0, min_score: float = 0.2,
+                 min_common_joints: int = 3, min_views: int = 2, feet: dict | None = None) -> None:
+        feet = {"pixel_sigma": 5.0, **(feet or {})}
+        if feet.get("location_metric", "mahalanobis") != "mahalanobis" or feet.get("space", "ground") != "ground":
+            raise ValueError("feet_epipolar needs the feet cost in standard deviations: "
+                             "location_metric=mahalanobis, space=ground")
+        if not epipolar_sigma_px > 0 or not gate > 0 or int(min_common_joints) < 1 or int(min_views) < 1:
+            raise ValueError("epipolar_sigma_px and gate must be > 0, min_common_joints and min_views >= 1")
+        self.feet = FeetMatcher(min_views=min_views, **feet)
+        self.epipolar_sigma_px, self.gate = float(epipolar_sigma_px), float(gate)
+        self.min_score, self.min_common_joints, self.min_views = float(min_score), int(min_common_joints), int(min_views)
+        self.last_unmatched_reasons: Counter[str] = Counter()
+        self.unmatched_reasons: Counter[str] = Counter()
+
+    def pair_costs(self, views: list[ViewDetections], rig: Rig):
+        """The pair cost function of one frame: V views -> ((a, b) -> (N_a, N_b) combined cost), feet, joints."""
+        feats = self.feet.features(views, rig)
+        joints = [undistorted_joints(v, cam, self.min_score) for v, cam in zip(views, rig)]
+
+        def cost(a: int, b: int) -> np.ndarray:
+            feet = self.feet.pair_cost(feats[a], feats[b], rig[a])
+            epi = epipolar_affinity(*joints[a], *joints[b], fundamental_matrix(rig[a], rig[b]),
+                                    self.min_common_joints)
+            return combined_cost(feet, epi, self.epipolar_sigma_px)
+
+        return cost, feats, joints
+
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
+        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+        cost, feats, joints = self.pair_costs(views, rig)
+        assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views)
+        reasons = Counter(str(r) for f in feats for r in f.reason if r)
+        few = sum(int(np.sum(f.has_p & (ok.sum(axis=1) < self.min_common_joints)))
+                  for f, (_, ok) in zip(feats, joints))
+        usable = sum(int(f.has_p.sum()) for f in feats) - few
+        unplaced = usable - int(np.sum(assignment >= 0))
+        reasons.update({TOO_FEW_JOINTS: few, NO_COUNTERPART: unplaced})
+        self.last_unmatched_reasons = +reasons
+        self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
+        return assignment
