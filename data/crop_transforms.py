@@ -1,0 +1,115 @@
+"""Top-down crop geometry and augmentation: box -> crop, crop affine, horizontal flip.
+
+Pixel convention (used by every function here and by models/heatmap_codec.py): continuous
+coordinates with pixel centres at integers, so pixel ``i`` covers ``[i - 0.5, i + 0.5]`` and an image
+of width ``W`` spans ``[-0.5, W - 0.5]``. This is the convention of ``cv2.warpAffine``
+(``dst(x) = src(M^-1 x)`` on pixel indices) and ``cv2.flip``. Consequences:
+
+- a horizontal flip maps ``x -> W - 1 - x`` (not ``W - x``), so flipping twice is the identity and a
+  flipped image and its flipped keypoints stay registered to the pixel;
+- a crop of extent ``scale`` (pixels of the image) fills the output's full extent ``out_size``: the
+  crop centre goes to ``((w - 1) / 2, (h - 1) / 2)`` and lengths scale by ``w / scale_w``, which is
+  isotropic when the box has the output's aspect ratio (:func:`box_to_center_scale` ensures it).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from data.keypoints import flip_permutation
+
+
+def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.25
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Person box (4,) x, y, w, h -> crop centre (2,) and extent (2,) w, h in image pixels.
+
+    The box is grown along one side to the aspect ratio ``aspect`` = w / h of the network input
+    (never shrunk), then both sides are multiplied by ``padding``.
+    """
+    x, y, w, h = np.asarray(box_xywh, dtype=np.float64).reshape(4)
+    center = np.array([x + w / 2, y + h / 2])
+    if w > aspect * h:
+        h = w / aspect
+    else:
+        w = h * aspect
+    return center, np.array([w, h]) * padding
+
+
+def crop_affine(center: np.ndarray, scale: np.ndarray, rotation_deg: float,
+                out_size: tuple[int, int], inverse: bool = False) -> np.ndarray:
+    """(2, 3) affine from image pixels to crop pixels (or back with ``inverse``).
+
+    center (2,), scale (2,) = crop extent w, h in image pixels, out_size = (w, h) of the crop. A positive
+    ``rotation_deg`` turns the image content counter-clockwise in the crop, as
+    ``cv2.getRotationMatrix2D`` does: ``out = S R (p - center) + ((w - 1) / 2, (h - 1) / 2)`` with
+    ``R = [[cos, sin], [-sin, cos]]`` and ``S = diag(w / scale_w, h / scale_h)``.
+    """
+    center = np.asarray(center, dtype=np.float64).reshape(2)
+    scale = np.asarray(scale, dtype=np.float64).reshape(2)
+    out_w, out_h = out_size
+    theta = np.deg2rad(rotation_deg)
+    c, s = np.cos(theta), np.sin(theta)
+    rot = np.array([[c, s], [-s, c]])
+    stretch = np.array([out_w / scale[0], out_h / scale[1]])
+    out_center = np.array([(out_w - 1) / 2, (out_h - 1) / 2])
+    if inverse:
+        linear = rot.T * (1 / stretch)[None, :]  # R^T S^-1
+        return np.hstack([linear, (center - linear @ out_center)[:, None]])
+    linear = stretch[:, None] * rot  # S R
+    return np.hstack([linear, (out_center - linear @ center)[:, None]])
+
+
+def transform_points(points: np.ndarray, affine: np.ndarray) -> np.ndarray:
+    """Apply a (2, 3) affine to points (..., 2) -> (..., 2)."""
+    points = np.asarray(points, dtype=np.float64)
+    affine = np.asarray(affine, dtype=np.float64)
+    return points @ affine[:, :2].T + affine[:, 2]
+
+
+def flip_points(points: np.ndarray, image_width: int) -> np.ndarray:
+    """Mirror points (..., 2) of an image of width W horizontally: x -> W - 1 - x (crop centres too)."""
+    out = np.array(points, dtype=np.float64)
+    out[..., 0] = image_width - 1 - out[..., 0]
+    return out
+
+
+def flip_keypoints(keypoints: np.ndarray, image_width: int) -> np.ndarray:
+    """Keypoints (N, 23, 3) of EVERY person in a horizontally flipped image -> (N, 23, 3).
+
+    x -> W - 1 - x for labelled joints (v > 0; unlabelled ones keep their coordinates, COCO's 0, 0), and
+    left and right joints swap places (:func:`data.keypoints.flip_permutation`).
+    """
+    keypoints = np.asarray(keypoints, dtype=np.float64)
+    out = keypoints[..., flip_permutation(), :].copy()
+    labelled = out[..., 2] > 0
+    out[..., 0] = np.where(labelled, image_width - 1 - out[..., 0], out[..., 0])
+    return out
+
+
+@dataclass(frozen=True)
+class CropAugmentation:
+    """Random crop augmentation settings (SimpleBaseline/HRNet style).
+
+    scale_factor: std of the scale multiplier around 1, clipped to 1 +- scale_factor.
+    rotation_factor: std of the rotation in degrees, clipped to +- 2 rotation_factor, applied with
+    probability rotation_prob (else 0). flip_prob: probability of a horizontal flip.
+    """
+
+    scale_factor: float = 0.25
+    rotation_factor: float = 30.0
+    rotation_prob: float = 0.6
+    flip_prob: float = 0.5
+
+
+def sample_augmentation(rng: np.random.Generator, settings: CropAugmentation | None = None
+                        ) -> tuple[float, float, bool]:
+    """Draw (scale multiplier, rotation in degrees, flip) for one crop; settings default to CropAugmentation()."""
+    settings = settings or CropAugmentation()
+    sf, rf = settings.scale_factor, settings.rotation_factor
+    scale_mult = float(np.clip(1 + sf * rng.standard_normal(), 1 - sf, 1 + sf))
+    rotation = float(np.clip(rf * rng.standard_normal(), -2 * rf, 2 * rf))
+    if rng.random() >= settings.rotation_prob:
+        rotation = 0.0
+    flip = bool(rng.random() < settings.flip_prob)
+    return scale_mult, rotation, flip

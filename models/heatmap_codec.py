@@ -1,0 +1,161 @@
+"""Multi-modal heatmap targets of the paper's Eq. 1 (``T + mu C``) and their decoding.
+
+Coordinates follow data/crop_transforms.py: pixel centres at integers, an image of width W spans
+[-0.5, W - 0.5]. Crop-input and heatmap pixels share that convention, so a heatmap of width w covers the
+same extent as an input of width W and ``x_hm = (x_in + 0.5) * w / W - 0.5``; a stride-4 heatmap pixel i
+thus sits at the centre of input pixels 4i .. 4i + 3, and a flip x -> W - 1 - x of the input is exactly
+x -> w - 1 - x of the heatmap (flipped targets are mirrored targets, to float precision).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.ndimage import gaussian_filter
+
+from data.crop_transforms import transform_points
+from data.keypoints import NUM_JOINTS
+
+_LOG_EPS = 1e-10
+
+
+class MultiModalHeatmapCodec:
+    """Encode a person's crop into (23, h, w) targets and decode heatmaps back to crop-input pixels.
+
+    input_size and heatmap_size are (w, h); sigma is the Gaussian std in heatmap pixels; mu is the
+    attention factor of the other persons' joints (mu = 0: the plain single-person target).
+    """
+
+    def __init__(self, input_size: tuple[int, int] = (192, 256), heatmap_size: tuple[int, int] = (48, 64),
+                 sigma: float = 2.0, mu: float = 0.5) -> None:
+        self.input_size = (int(input_size[0]), int(input_size[1]))
+        self.heatmap_size = (int(heatmap_size[0]), int(heatmap_size[1]))
+        self.sigma = float(sigma)
+        self.mu = float(mu)
+        self._ratio = np.array(self.heatmap_size, dtype=np.float64) / np.array(self.input_size)
+
+    # --- coordinates -------------------------------------------------------------------------------
+
+    def input_to_heatmap(self, points: np.ndarray) -> np.ndarray:
+        """Crop-input pixels (..., 2) -> heatmap pixels (..., 2)."""
+        return (np.asarray(points, dtype=np.float64) + 0.5) * self._ratio - 0.5
+
+    def heatmap_to_input(self, points: np.ndarray) -> np.ndarray:
+        """Heatmap pixels (..., 2) -> crop-input pixels (..., 2)."""
+        return (np.asarray(points, dtype=np.float64) + 0.5) / self._ratio - 0.5
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """Whether crop-input points (..., 2) lie on the crop, edges included -> (...,) bool."""
+        points = np.asarray(points, dtype=np.float64)
+        size = np.array(self.input_size, dtype=np.float64)
+        return np.all((points >= -0.5) & (points <= size - 0.5), axis=-1)
+
+    # --- encoding ----------------------------------------------------------------------------------
+
+    def gaussians(self, points: np.ndarray) -> np.ndarray:
+        """Unit-peak Gaussians at sub-pixel crop-input points (..., 2) -> (..., h, w) float64."""
+        centres = self.input_to_heatmap(points)
+        w, h = self.heatmap_size
+        xs, ys = np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)
+        gx = np.exp(-(xs - centres[..., 0:1]) ** 2 / (2 * self.sigma ** 2))
+        gy = np.exp(-(ys - centres[..., 1:2]) ** 2 / (2 * self.sigma ** 2))
+        return gy[..., :, None] * gx[..., None, :]
+
+    def encode(self, own: np.ndarray, others: np.ndarray, labelled: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Target (23, h, w) float32 = T + mu C and weight (23,) float32 from crop-input keypoints.
+
+        own (23, 3) and others (M, 23, 3) are x, y, v in crop-input pixels; labelled (23,) marks the joints
+        the dataset annotates at all. A joint is *present* when labelled[j], v > 0 and it lies on the crop
+        (:meth:`inside`). T_j = Gaussian of the own joint j if present, else 0; C_j = element-wise maximum
+        of the present other persons' Gaussians of joint j (overlapping people do not add up), else 0.
+        The sum is not clipped (values lie in [0, 1 + mu]): Eq. 1 regresses the plain sum, the others'
+        peaks (mu <= 1) never exceed the own one, and clipping would flatten the own peak exactly where
+        two people's joints meet, the crowded case the term is for.
+
+        Weight rule: weight_j = 1 when the own joint j is present, or when any other person's joint j is
+        present (an own joint that is unlabelled or off the crop then still teaches mu C, the issue's "a
+        channel stays in the loss when the own joint is unlabelled but other people's are present");
+        weight_j = 0 when labelled[j] is False or no person's joint j is present.
+        """
+        own = np.asarray(own, dtype=np.float64).reshape(NUM_JOINTS, 3)
+        others = np.asarray(others, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
+        labelled = np.asarray(labelled, dtype=bool).reshape(NUM_JOINTS)
+        own_present = labelled & (own[:, 2] > 0) & self.inside(own[:, :2])
+        others_present = labelled & (others[..., 2] > 0) & self.inside(others[..., :2])  # (M, 23)
+        target = self.gaussians(own[:, :2]) * own_present[:, None, None]
+        if len(others) and self.mu != 0:
+            crowd = self.gaussians(others[..., :2]) * others_present[..., None, None]
+            target = target + self.mu * crowd.max(axis=0)
+        weight = own_present | others_present.any(axis=0)
+        return target.astype(np.float32), weight.astype(np.float32)
+
+    def encode_crop(self, keypoints_all: np.ndarray, own_index: int, affine: np.ndarray,
+                    labelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Encode person ``own_index`` of an image: keypoints_all (N, 23, 3) in image pixels, affine (2, 3)
+        image -> crop input (data.crop_transforms.crop_affine) -> target (23, h, w), weight (23,)."""
+        keypoints = np.array(keypoints_all, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
+        keypoints[..., :2] = transform_points(keypoints[..., :2], affine)
+        others = np.delete(keypoints, own_index, axis=0)
+        return self.encode(keypoints[own_index], others, labelled)
+
+    # --- decoding ----------------------------------------------------------------------------------
+
+    def decode(self, heatmaps: np.ndarray | torch.Tensor, modulate: bool = True
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Heatmaps (..., 23, h, w) -> keypoints (..., 23, 2) in crop-input pixels, scores (..., 23).
+
+        The score is the heatmap maximum; the position is the argmax refined by one Newton step on the
+        log heatmap (DARK, Zhang et al. CVPR 2020), exact for a Gaussian peak. The step is skipped where
+        the log is not concave at the argmax and limited to half a pixel; along an axis where the argmax
+        is on the border no step is taken. With ``modulate`` (DARK's modulation against noisy
+        predictions) the log is taken of the heatmap blurred by a Gaussian of std sigma, but only for
+        argmaxes at least 2 sigma from the border: there the zero-padded blur drags the peak inward by up
+        to a pixel, so those keep the step on the raw heatmap.
+        """
+        if isinstance(heatmaps, torch.Tensor):
+            heatmaps = heatmaps.detach().cpu().numpy()
+        heatmaps = np.asarray(heatmaps, dtype=np.float64)
+        lead, (h, w) = heatmaps.shape[:-2], heatmaps.shape[-2:]
+        flat = heatmaps.reshape(-1, h, w)
+        index = flat.reshape(len(flat), -1).argmax(axis=1)
+        px, py = index % w, index // w
+        scores = flat[np.arange(len(flat)), py, px]
+        offsets = _newton_offsets(np.log(np.maximum(flat, _LOG_EPS)), px, py)
+        if modulate:
+            margin = int(np.ceil(2 * self.sigma))
+            far = (px >= margin) & (px < w - margin) & (py >= margin) & (py < h - margin)
+            blurred = _newton_offsets(np.log(np.maximum(_modulate(flat, self.sigma), _LOG_EPS)), px, py)
+            offsets = np.where(far[:, None], blurred, offsets)
+        points = np.stack([px, py], axis=-1) + offsets
+        return self.heatmap_to_input(points).reshape(*lead, 2), scores.reshape(lead)
+
+
+def _modulate(heatmaps: np.ndarray, sigma: float) -> np.ndarray:
+    """Blur heatmaps (K, h, w) with a zero-padded Gaussian of std sigma, keeping each channel's maximum."""
+    blurred = gaussian_filter(heatmaps, sigma=(0, sigma, sigma), mode="constant")
+    peak = heatmaps.max(axis=(1, 2), keepdims=True)
+    return blurred * peak / np.maximum(blurred.max(axis=(1, 2), keepdims=True), _LOG_EPS)
+
+
+def _newton_offsets(log_maps: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Sub-pixel offsets (K, 2) of the maxima of log heatmaps (K, h, w) around integer argmaxes (K,)."""
+    k = np.arange(len(log_maps))
+    h, w = log_maps.shape[1:]
+    xm, xp = np.clip(px - 1, 0, w - 1), np.clip(px + 1, 0, w - 1)
+    ym, yp = np.clip(py - 1, 0, h - 1), np.clip(py + 1, 0, h - 1)
+    centre = log_maps[k, py, px]
+    ok_x, ok_y = (px > 0) & (px < w - 1), (py > 0) & (py < h - 1)
+    # An axis without both neighbours gets a zero gradient and a unit curvature: no step along it.
+    dx = np.where(ok_x, (log_maps[k, py, xp] - log_maps[k, py, xm]) / 2, 0.0)
+    dy = np.where(ok_y, (log_maps[k, yp, px] - log_maps[k, ym, px]) / 2, 0.0)
+    dxx = np.where(ok_x, log_maps[k, py, xp] - 2 * centre + log_maps[k, py, xm], -1.0)
+    dyy = np.where(ok_y, log_maps[k, yp, px] - 2 * centre + log_maps[k, ym, px], -1.0)
+    dxy = np.where(ok_x & ok_y, (log_maps[k, yp, xp] - log_maps[k, yp, xm]
+                                 - log_maps[k, ym, xp] + log_maps[k, ym, xm]) / 4, 0.0)
+    det = dxx * dyy - dxy ** 2
+    concave = (dxx < 0) & (det > 0)
+    safe_det = np.where(concave, det, 1.0)
+    off_x = -(dyy * dx - dxy * dy) / safe_det
+    off_y = -(dxx * dy - dxy * dx) / safe_det
+    offsets = np.stack([off_x, off_y], axis=-1) * concave[:, None]
+    return np.clip(offsets, -0.5, 0.5)
