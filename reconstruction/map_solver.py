@@ -40,7 +40,7 @@ from data.bone_lengths import BONE_PAIRS, resolve_bone_table
 from reconstruction.camera import Rig
 from reconstruction.lm_solver import LMResult, levenberg_marquardt
 from reconstruction.map_estimation import ROBUST_LOSSES, PoseProblem, cost, joint_sigma, linearize
-from reconstruction.pose_init import initial_poses
+from reconstruction.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.triangulation import triangulate_dlt
 
 
@@ -155,7 +155,9 @@ class MAPReconstruction:
             return X, dlt, placed
         und, boxes = poses2d_und[:, idx], np.asarray(bboxes, dtype=np.float64)[:, idx]
         Xp = X[idx]
-        for prior in stages:
+        for k, prior in enumerate(stages):
+            if k > 0:
+                Xp = reinitialise_outliers(Xp, und, proj)
             Xp, _ = solve_poses(self.problem(und, boxes, proj, Xp, prior), Xp, self.max_iterations,
                                 self.xtol, self.ftol)
         X = X.copy()

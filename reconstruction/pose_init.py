@@ -112,3 +112,16 @@ def initial_poses(dlt: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> tup
     body, placed = fit_mean_body(dlt[..., :3], known)
     guess = closest_on_rays(body, poses2d, proj)
     return np.where(known[..., None], dlt[..., :3], guess), placed
+
+
+def reinitialise_outliers(X: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
+    """Reset the gross outliers of a solved pose to the fitted body (as initial_poses does for the DLT):
+    (P, J, 3), (V, P, J, 3) undistorted px + score, (V, 3, 4) -> (P, J, 3).
+
+    Used between the MLE and MAP stages: the MLE keeps a joint seen along nearly parallel rays where
+    its likelihood alone puts it, possibly metres away, and the MAP would start far outside its basin.
+    """
+    seen = np.any(poses2d[..., 2] > 0, axis=0)
+    known = inlier_joints(X, seen, poses2d, proj)
+    body, _ = fit_mean_body(X, known)
+    return np.where(known[..., None], X, closest_on_rays(body, poses2d, proj))

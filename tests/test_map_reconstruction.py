@@ -19,7 +19,7 @@ from reconstruction.map_solver import (MAPReconstruction, MLEMAPReconstruction, 
                                        bone_components, solve_poses)
 from reconstruction.matching import OracleMatcher
 from reconstruction.pipeline import gather_views
-from reconstruction.pose_init import initial_poses
+from reconstruction.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.reconstructors import VanillaTriangulation
 from reconstruction.triangulation import triangulate_dlt
 
@@ -298,3 +298,22 @@ def test_mle_map_beats_vanilla_on_a_noisy_synthetic_crowd():
             errors[k].append(np.linalg.norm(out[..., :3] - gt[..., :3], axis=-1)[both])
     vanilla, ours = (np.mean(np.concatenate(errors[k])) for k in ("vanilla", "mle_map"))
     assert ours < 0.85 * vanilla, (vanilla, ours)
+
+
+def test_outliers_of_a_solved_pose_are_reset_onto_their_ray_near_the_body():
+    rig = _rig()
+    X = _persons(2, walking=False)
+    poses2d, _ = _observe(rig, X)
+    und = rig.undistort(poses2d)
+    proj = rig.projection_matrices()
+    solved = X.copy()
+    wrist = 9
+    solved[0, wrist] += [3.0, -2.0, 0.5]          # an MLE joint that slid metres along nearly parallel rays
+    out = reinitialise_outliers(solved, und, proj)
+    assert np.linalg.norm(out[0, wrist] - X[0, wrist]) < 0.75    # back near the body ...
+    x, y, z = proj[0] @ np.append(out[0, wrist], 1.0)
+    np.testing.assert_allclose([x / z, y / z], und[0, 0, wrist, :2], atol=1e-6)  # ... on its best view's ray
+    keep = np.ones(X.shape[:2], dtype=bool)
+    keep[0, wrist] = False
+    np.testing.assert_array_equal(out[keep], solved[keep])
+    assert solved[0, wrist, 0] == X[0, wrist, 0] + 3.0            # the input is not modified
