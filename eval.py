@@ -19,6 +19,8 @@ from omegaconf import DictConfig
 from data.poses_io import atomic_write_text, write_poses3d
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
+from evaluation.visualize import save_run_pictures
+from data.poses2d_io import Poses2DError
 from reconstruction.calibration import CalibrationError
 from reconstruction.pipeline import MultiViewPipeline
 
@@ -44,6 +46,13 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     atomic_write_text(out_dir / cfg.metrics_file, json.dumps(
         {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped),
          "unmatched": dict(report.unmatched), "timings_s": report.timings}, indent=2))
+    for protocol in sequence.protocols:
+        if hasattr(protocol, "write"):      # e.g. the Shelf-14 predictions that were scored
+            protocol.write(out_dir)
+    if cfg.vis:
+        pictures = save_run_pictures(out_dir / cfg.vis_dir, sequence, report.results, cfg.vis_frame,
+                                     cfg.vis_images, cfg.vis_pattern, pipeline.matcher)
+        print("Pictures: " + ", ".join(str(p) for p in pictures))
     print(f"\n{sequence.meta.get('description', 'dataset')}: {len(sequence.frames)} frames, "
           f"{len(sequence.rig)} cameras")
     print(format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation)))
@@ -56,9 +65,9 @@ def main(cfg: DictConfig) -> dict:
     """Hydra entry point; returns the metrics (for sweeps). Bad input files stop with one message."""
     try:
         return run(cfg, Path(HydraConfig.get().runtime.output_dir)).metrics
-    except (CalibrationError, InstantiationException) as err:
+    except (CalibrationError, Poses2DError, InstantiationException) as err:
         cause = err.__cause__ if isinstance(err, InstantiationException) else err
-        if isinstance(cause, (CalibrationError, FileNotFoundError)):
+        if isinstance(cause, (CalibrationError, Poses2DError, FileNotFoundError)):
             raise SystemExit(f"error: {cause}") from None
         raise
 
