@@ -9,7 +9,8 @@ Ground truth: every body's ``joints19`` (cm, Panoptic world with y down) goes th
 (0.1, VoxelPose's rule: ``joints_vis = confidence > 0.1``); coco19 has no foot joints, so the six
 COCO-23 foot joints are always invalid. ``gt_ids`` are the Panoptic body ids. The first 15 coco19
 joints (real neck and mid-hip included) are kept per frame in ``meta["gt_panoptic15"]`` for the
-Panoptic protocol (:mod:`evaluation.panoptic_protocol`).
+Panoptic protocol (:mod:`evaluation.panoptic_protocol`), which the returned Sequence carries as its
+``PanopticProtocol`` (eval.py prints its tables and writes its summary under "panoptic").
 
 2D input: either a ``poses2d.json`` (DESIGN.md), or 2D poses generated from the ground truth by
 projecting it through the chosen cameras with Gaussian pixel noise and capsule occlusion
@@ -29,6 +30,7 @@ from data.keypoints import FOOT_JOINTS, LEFT_ANKLE, LEFT_FOOT, PANOPTIC19_TO_COC
 from data.multiview import Frame, Sequence, ViewDetections
 from data.synthetic.config import SyntheticConfig
 from data.synthetic.observe import bbox_from_keypoints, observe_view
+from evaluation.panoptic_protocol import PanopticProtocol
 from reconstruction.calibration import load_panoptic, panoptic_world_to_ours
 from reconstruction.camera import Camera, Rig
 
@@ -82,7 +84,7 @@ def load_panoptic_sequence(root: str | Path, sequence: str = "160906_band1", cam
     meta["frames_without_2d"] = sum(f not in views_by_frame for f in ground_truth)
     meta["frames_2d_without_gt"] = sum(f not in all_files for f in views_by_frame)
     meta["description"] = f"CMU Panoptic {sequence}: cameras {', '.join(names)}; {source}"
-    return Sequence(rig, out, meta)
+    return Sequence(rig, out, meta, protocols=[PanopticProtocol(meta["gt_panoptic15"])])
 
 
 def find_pose_files(seq_dir: str | Path) -> dict[int, Path]:

@@ -36,12 +36,18 @@ part groups (the paper's 91.3 is exactly that).
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from data.keypoints import JOINT_INDEX
 from evaluation.association import match_to_ground_truth
 from evaluation.mpjpe import joint_errors
 from evaluation.report import format_table
+
+if TYPE_CHECKING:
+    from data.multiview import Frame
+    from reconstruction.pipeline import FrameResult
 
 PANOPTIC15_NAMES: tuple[str, ...] = (
     "neck", "nose", "mid_hip", "left_shoulder", "left_elbow", "left_wrist", "left_hip", "left_knee",
@@ -275,3 +281,35 @@ def format_panoptic_report(summary: dict[str, float]) -> str:
                   format_table(["average", *PCP_PARTS], [[summary["pcp_average"],
                                                          *(summary[f"pcp_{p}"] for p in PCP_PARTS)]])]
     return "\n".join(lines)
+
+
+class PanopticProtocol:
+    """The Panoptic protocols as a dataset protocol (evaluation/protocols.py) for eval.py.
+
+    ``gt15`` maps a frame index to its stored Panoptic-15 ground truth (G, 15, 4) (the loader's
+    ``meta["gt_panoptic15"]``); frames without an entry are not scored. Each frame's predictions are
+    ``result.poses3d`` (P, 23, 4), scored by the mean confidence of their 15 mapped joints.
+    """
+
+    name = "panoptic"
+
+    def __init__(self, gt15: dict[int, np.ndarray], max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
+        self.gt15 = gt15
+        self.evaluator = PanopticEvaluator(max_dist_m, alpha)
+        self.frames = 0
+
+    def update(self, frame: Frame, result: FrameResult) -> None:
+        """Score one frame: result.poses3d (P, 23, 4) against gt15[frame.index] (G, 15, 4)."""
+        gt = self.gt15.get(frame.index)
+        if gt is None:
+            return
+        self.evaluator.update(result.poses3d, gt)
+        self.frames += 1
+
+    def summary(self) -> dict[str, float]:
+        """PanopticEvaluator.summary() plus the number of frames scored."""
+        return {**self.evaluator.summary(), "frames": self.frames}
+
+    def report(self) -> str:
+        """The console tables of :func:`format_panoptic_report`."""
+        return format_panoptic_report(self.summary())
