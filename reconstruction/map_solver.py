@@ -52,7 +52,7 @@ def bone_components(num_joints: int, bone_pairs: np.ndarray) -> list[np.ndarray]
     return [np.flatnonzero(label == k) for k in np.unique(label)]
 
 
-def solve_poses(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 50, xtol: float = 1e-6,
+def solve_poses(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, xtol: float = 1e-6,
                 ftol: float = 1e-10) -> tuple[np.ndarray, list[LMResult]]:
     """Minimise the problem's cost from X0 (P, J, 3) -> (P, J, 3), one LMResult per independent block.
 
@@ -113,7 +113,7 @@ class MAPReconstruction:
 
     def __init__(self, c: float = 0.02, sigma_min: float = 1.0, prior_weight: float = 1.0,
                  bone_table: str | Path | Mapping | None = None, robust: str = "none", robust_scale: float = 3.0,
-                 anchor_weight: float = 1e-3, max_iterations: int = 50, xtol: float = 1e-6, ftol: float = 1e-10,
+                 anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
                  min_views: int = 2, output_min_views: int = 0, single_view_score: float = 0.5,
                  unseen_score: float = 0.1, mle_first: bool = False) -> None:
         if robust not in ROBUST_LOSSES:
@@ -193,7 +193,7 @@ class MLEReconstruction(MAPReconstruction):
     """DLT, then the maximum-likelihood refinement of Eq. 6 alone (no prior; joints stay independent)."""
 
     def __init__(self, c: float = 0.02, sigma_min: float = 1.0, robust: str = "none", robust_scale: float = 3.0,
-                 anchor_weight: float = 1e-3, max_iterations: int = 50, xtol: float = 1e-6, ftol: float = 1e-10,
+                 anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
                  min_views: int = 2, output_min_views: int = 2, single_view_score: float = 0.5,
                  unseen_score: float = 0.1) -> None:
         super().__init__(c=c, sigma_min=sigma_min, prior_weight=0.0, robust=robust, robust_scale=robust_scale,
