@@ -1,0 +1,311 @@
+"""Training pieces of the top-down SPPE used by train.py: builders from the Hydra config, one training
+epoch, validation with COCO OKS AP, checkpoints that resume exactly, distributed setup.
+
+Exact resumption rests on three things: the sample order is a seeded permutation per epoch
+(data.topdown_dataset.EpochSampler, which can start part-way through an epoch), augmentation is seeded
+per (epoch, sample), and a checkpoint holds the model, optimizer, scheduler, the position (epoch, step in
+epoch, global step) and the torch / numpy / python RNG states.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import random
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+import torch.distributed as dist
+from hydra.utils import instantiate
+from omegaconf import DictConfig
+from torch import nn
+from torch.utils.data import DataLoader, Sampler
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
+
+from data.coco_keypoints import load_keypoint_dataset
+from data.crop_transforms import CropAugmentation, transform_points
+from data.records import ImageRecord
+from data.show_targets import GREEN, RED, tile_grid, tint
+from data.topdown_dataset import TopDownDataset, denormalize_image
+from evaluation.coco_eval import evaluate_keypoints
+from models.heatmap_codec import MultiModalHeatmapCodec
+from models.loss import WeightedHeatmapLoss
+
+log = logging.getLogger(__name__)
+
+HEATMAP_STRIDE = 4  # FastPose's output stride
+AP_SUBSETS = ("all", "body", "foot")
+
+
+@dataclass
+class TrainState:
+    """Where training stands: the epoch in progress (or next), optimizer steps done in it and in all, best AP."""
+
+    epoch: int = 0
+    step_in_epoch: int = 0
+    global_step: int = 0
+    best_ap: float = -1.0
+
+
+@dataclass
+class Validation:
+    """Validation outcome: metrics (loss, AP_* and AR_* per subset), COCO-style predictions, a picture."""
+
+    metrics: dict[str, float]
+    predictions: list[dict]
+    grid: np.ndarray | None
+
+
+# --- setup ------------------------------------------------------------------------------------------
+
+def seed_everything(seed: int) -> None:
+    """Seed python, numpy and torch (all devices)."""
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+def select_device(name: str, local_rank: int = 0) -> torch.device:
+    """'auto' -> cuda:local_rank when CUDA is available, else cpu; anything else as torch.device."""
+    if name == "auto":
+        return torch.device("cuda", local_rank) if torch.cuda.is_available() else torch.device("cpu")
+    return torch.device(name)
+
+
+def setup_distributed(device_name: str) -> tuple[int, int, torch.device]:
+    """(rank, world size, device); initialises the process group when torchrun set WORLD_SIZE > 1."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return 0, 1, select_device(device_name)
+    rank, local_rank = int(os.environ["RANK"]), int(os.environ.get("LOCAL_RANK", "0"))
+    device = select_device(device_name, local_rank)
+    if device.type == "cuda":
+        torch.cuda.set_device(device)
+    dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
+    return rank, world, device
+
+
+# --- builders ---------------------------------------------------------------------------------------
+
+def build_codec(cfg: DictConfig) -> MultiModalHeatmapCodec:
+    """The target codec: input_size and sigma from cfg.data, heatmaps a quarter of the input, mu from cfg.loss."""
+    w, h = (int(v) for v in cfg.data.input_size)
+    if w % 32 or h % 32:
+        raise ValueError(f"data.input_size {[w, h]} must be multiples of 32 (FastPose)")
+    return MultiModalHeatmapCodec((w, h), (w // HEATMAP_STRIDE, h // HEATMAP_STRIDE), cfg.data.sigma, cfg.loss.mu)
+
+
+def build_records(data_cfg: DictConfig, split: str) -> list[ImageRecord]:
+    """The ImageRecords of split 'train' or 'val' of a data config; a missing file names itself."""
+    part = data_cfg[split]
+    det_file = part.get("det_file") if split == "val" else None
+    for path in (part.ann_file, part.image_dir, det_file):
+        if path is not None and not Path(path).exists():
+            raise FileNotFoundError(f"data.{split}: {path} does not exist (configs/data/ says how to get it)")
+    # evaluation on detector boxes keeps every image (detections where nobody is annotated are false
+    # positives, as in COCO's protocol); on ground-truth boxes images without a labelled person add nothing
+    min_keypoints = data_cfg.min_keypoints if split == "train" else int(not data_cfg.use_det_boxes)
+    return load_keypoint_dataset(data_cfg.kind, part.ann_file, part.image_dir, det_file, min_keypoints=min_keypoints)
+
+
+def build_dataset(cfg: DictConfig, codec: MultiModalHeatmapCodec, split: str) -> TopDownDataset:
+    """The TopDownDataset of split 'train' (augmented) or 'val' (plain, det boxes if configured)."""
+    data, train = cfg.data, split == "train"
+    augment = CropAugmentation(**data.augment) if train and data.get("augment") else None
+    return TopDownDataset(build_records(data, split), codec, tuple(data.input_size), augment, train=train,
+                          min_keypoints=data.min_keypoints, use_det_boxes=data.use_det_boxes and not train,
+                          padding=data.padding, seed=cfg.trainer.seed, cache_size=data.cache_images)
+
+
+def build_loader(dataset: TopDownDataset, batch_size: int, num_workers: int, sampler: Sampler,
+                 device: torch.device) -> DataLoader:
+    """A DataLoader over dataset in the sampler's order. Workers are not persistent: each epoch's workers
+    copy the dataset after its set_epoch, so they draw that epoch's augmentation (their image caches last
+    an epoch; with num_workers=0 the main process's cache lasts the run)."""
+    return DataLoader(dataset, batch_size=batch_size, sampler=sampler, num_workers=num_workers,
+                      pin_memory=device.type == "cuda", persistent_workers=False)
+
+
+def build_model(cfg: DictConfig) -> nn.Module:
+    """The network of cfg.model (a _target_ config, e.g. models.fastpose.FastPose)."""
+    return instantiate(cfg.model)
+
+
+def build_loss(cfg: DictConfig) -> WeightedHeatmapLoss:
+    """Eq. 1's body/foot weighted MSE with lambda = cfg.loss.foot_weight (mu is in the codec)."""
+    return WeightedHeatmapLoss(cfg.loss.foot_weight)
+
+
+def build_optimizer(cfg: DictConfig, model: nn.Module) -> torch.optim.Optimizer:
+    """cfg.optimizer (a partial _target_ config) over the model's parameters."""
+    return instantiate(cfg.optimizer, _convert_="all")(params=model.parameters())
+
+
+def build_scheduler(cfg: DictConfig, optimizer: torch.optim.Optimizer) -> Any:
+    """cfg.scheduler (a partial _target_ config, stepped per epoch) on the optimizer."""
+    return instantiate(cfg.scheduler, _convert_="all")(optimizer=optimizer)
+
+
+# --- training ---------------------------------------------------------------------------------------
+
+def train_one_epoch(model: nn.Module, loader: DataLoader, loss_fn: nn.Module, optimizer: torch.optim.Optimizer,
+                    device: torch.device, state: TrainState, max_steps: int | None = None,
+                    writer: SummaryWriter | None = None, log_every: int = 50, progress: bool = False) -> list[float]:
+    """Train over the loader (the rest of state.epoch) until it ends or state.global_step reaches max_steps.
+
+    Advances state.step_in_epoch and state.global_step; logs loss/body/foot and the learning rate to the
+    writer every log_every steps. Returns the loss of each step taken.
+    """
+    model.train()
+    losses: list[float] = []
+    if max_steps is not None and state.global_step >= max_steps:
+        return losses
+    bar = tqdm(loader, desc=f"epoch {state.epoch}", disable=not progress, leave=False)
+    for batch in bar:
+        out = loss_fn(model(batch["image"].to(device, non_blocking=True)),
+                      batch["target"].to(device, non_blocking=True), batch["weight"].to(device, non_blocking=True))
+        optimizer.zero_grad(set_to_none=True)
+        out["loss"].backward()
+        optimizer.step()
+        state.step_in_epoch += 1
+        state.global_step += 1
+        losses.append(float(out["loss"].item()))
+        bar.set_postfix(loss=f"{losses[-1]:.3g}")
+        if writer is not None and state.global_step % log_every == 0:
+            for key, value in out.items():
+                writer.add_scalar(f"train/{key}", float(value.item()), state.global_step)
+            writer.add_scalar("train/lr", optimizer.param_groups[0]["lr"], state.global_step)
+        if max_steps is not None and state.global_step >= max_steps:
+            break
+    return losses
+
+
+# --- validation -------------------------------------------------------------------------------------
+
+def decode_predictions(codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, batch: dict) -> list[dict]:
+    """Heatmaps (B, 23, h, w) of a batch -> B predictions {image_id, keypoints (23, 3) x, y, score in image
+    pixels, score = box score x mean keypoint score, bbox (4,)}; single peak per joint (codec.decode)."""
+    points, scores = codec.decode(heatmaps)
+    affine_inv = batch["affine_inv"].numpy()
+    box_scores = batch["score"].numpy()
+    out = []
+    for i in range(len(points)):
+        xy = transform_points(points[i], affine_inv[i])
+        out.append({"image_id": int(batch["image_id"][i]), "keypoints": np.column_stack([xy, scores[i]]),
+                    "score": float(box_scores[i] * scores[i].mean()), "bbox": batch["box"][i].numpy()})
+    return out
+
+
+def heatmap_grid(images: torch.Tensor, targets: torch.Tensor, heatmaps: torch.Tensor, min_width: int = 192
+                 ) -> np.ndarray:
+    """Crops (N, 3, H, W) with target (N, 23, h, w) and predicted heatmaps overlaid (maximum over channels,
+    target green, prediction red) -> RGB (rows, cols, 3) uint8, one [target | prediction] pair per crop;
+    small crops are enlarged by an integer factor to at least min_width."""
+    tiles = []
+    for image, target, heatmap in zip(images, targets, heatmaps):
+        rgb = denormalize_image(image)
+        factor = max(1, -(-min_width // rgb.shape[1]))
+        rgb = cv2.resize(rgb, None, fx=factor, fy=factor, interpolation=cv2.INTER_NEAREST)
+        tiles.append(tint(rgb, target.amax(0).cpu().numpy(), GREEN))
+        tiles.append(tint(rgb, heatmap.amax(0).clamp(0, 1).cpu().numpy(), RED))
+    return tile_grid(tiles, columns=2)
+
+
+@torch.no_grad()
+def validate(model: nn.Module, loader: DataLoader, codec: MultiModalHeatmapCodec, records: list[ImageRecord],
+             loss_fn: nn.Module, device: torch.device, grid_images: int = 4, progress: bool = False) -> Validation:
+    """Loss and COCO OKS AP/AR (subsets all, body, foot) of the model on a plain (unshuffled) loader."""
+    model.eval()
+    predictions: list[dict] = []
+    total, count, grid = 0.0, 0, None
+    for batch in tqdm(loader, desc="validate", disable=not progress, leave=False):
+        heatmaps = model(batch["image"].to(device, non_blocking=True))
+        target, weight = batch["target"].to(device), batch["weight"].to(device)
+        total += float(loss_fn(heatmaps, target, weight)["loss"].item()) * len(heatmaps)
+        count += len(heatmaps)
+        predictions += decode_predictions(codec, heatmaps, batch)
+        if grid is None and grid_images > 0:
+            n = grid_images
+            grid = heatmap_grid(batch["image"][:n], batch["target"][:n], heatmaps[:n])
+    metrics = {"loss": total / max(count, 1)}
+    for subset in AP_SUBSETS:
+        stats = evaluate_keypoints(records, predictions, subset) if predictions else {"AP": -1.0, "AR": -1.0}
+        metrics[f"AP_{subset}"], metrics[f"AR_{subset}"] = stats["AP"], stats["AR"]
+    return Validation(metrics, predictions, grid)
+
+
+# --- checkpoints ------------------------------------------------------------------------------------
+
+def rng_states() -> dict:
+    """The torch (CPU and CUDA), numpy and python RNG states."""
+    states = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    if torch.cuda.is_available():
+        states["cuda"] = torch.cuda.get_rng_state_all()
+    return states
+
+
+def set_rng_states(states: dict) -> None:
+    """Restore what :func:`rng_states` returned."""
+    torch.set_rng_state(states["torch"])
+    np.random.set_state(states["numpy"])
+    random.setstate(states["python"])
+    if "cuda" in states and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(states["cuda"])
+
+
+def atomic_torch_save(obj: Any, path: str | Path) -> None:
+    """torch.save obj to a temporary file beside path, fsync it, then rename it over path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            torch.save(obj, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_checkpoint(path: str | Path, model: nn.Module, optimizer: torch.optim.Optimizer, scheduler: Any,
+                    state: TrainState, config: dict) -> None:
+    """Write model, optimizer, scheduler, position, RNG states and config to path atomically."""
+    atomic_torch_save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                       "scheduler": scheduler.state_dict(), **asdict(state), "rng": rng_states(),
+                       "config": config}, path)
+
+
+def save_weights(path: str | Path, model: nn.Module, state: TrainState, metrics: dict[str, float],
+                 config: dict) -> None:
+    """Write the model weights with the position, validation metrics and config (no optimizer) atomically."""
+    atomic_torch_save({"model": model.state_dict(), **asdict(state), "metrics": dict(metrics),
+                       "config": config}, path)
+
+
+def load_checkpoint(path: str | Path, model: nn.Module, optimizer: torch.optim.Optimizer | None = None,
+                    scheduler: Any = None, restore_rng: bool = True) -> TrainState:
+    """Load a :func:`save_checkpoint` file into model (and optimizer, scheduler, RNG states) -> its TrainState.
+
+    Tensors are read onto the CPU and copied onto the model's device by load_state_dict. The file is
+    unpickled in full (it holds RNG states), so load only checkpoints you trust.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint")
+    checkpoint = torch.load(path, map_location="cpu", weights_only=False)
+    model.load_state_dict(checkpoint["model"])
+    if optimizer is not None:
+        optimizer.load_state_dict(checkpoint["optimizer"])
+    if scheduler is not None:
+        scheduler.load_state_dict(checkpoint["scheduler"])
+    if restore_rng:
+        set_rng_states(checkpoint["rng"])
+    return TrainState(**{k: checkpoint[k] for k in ("epoch", "step_in_epoch", "global_step", "best_ap")})

@@ -1,0 +1,250 @@
+"""Top-down training: the crop dataset on real images, overfitting, exact resume, the Hydra sweep, the
+validation geometry and the target picture."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from torch.utils.data import DataLoader
+
+import train
+from data.coco_keypoints import load_coco23, load_coco_wholebody, load_keypoint_dataset
+from data.crop_transforms import CropAugmentation, transform_points
+from data.keypoints import FOOT_JOINTS, LEFT_FOOT, RIGHT_FOOT
+from data.show_targets import main as show_targets_main
+from data.show_targets import target_parts
+from data.synthetic_images import ImageOptions, generate_dataset
+from data.topdown_dataset import EpochSampler, TopDownDataset
+from evaluation.coco_eval import evaluate_keypoints
+from models.fastpose import FastPose
+from models.heatmap_codec import MultiModalHeatmapCodec
+from models.loss import WeightedHeatmapLoss
+from models.training import TrainState, decode_predictions, save_checkpoint, train_one_epoch
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = ["model=fastpose_r18", "data.input_size=[64,64]", "data.sigma=1.0", "trainer.batch_size=4",
+        "trainer.val_batch_size=16", "trainer.num_workers=0", "trainer.progress=false", "trainer.grid_images=2",
+        "trainer.threads=1"]
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_thread():
+    """One torch thread: on 2 shared cores two threads of each of several processes thrash."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def synthetic_root(tmp_path_factory) -> Path:
+    """A tiny synthetic dataset: train (3 images) and held-out val (2 images), 320 x 240."""
+    root = tmp_path_factory.mktemp("synthetic")
+    options = ImageOptions(size=(320, 240), persons=(3, 4))
+    generate_dataset(root / "train", 3, seed=0, options=options, progress=False)
+    generate_dataset(root / "val", 2, seed=1, options=options, progress=False)
+    return root
+
+
+@pytest.fixture(scope="module")
+def wholebody(shared_data):
+    """The 4 real COCO-WholeBody sample images' records."""
+    folder = shared_data / "coco_wholebody_sample"
+    return load_coco_wholebody(folder / "test_coco_wholebody.json", folder)
+
+
+def present_joints(codec: MultiModalHeatmapCodec, keypoints: np.ndarray, affine_inv: np.ndarray) -> np.ndarray:
+    """Labelled joints (23,) of keypoints (23, 3) in image pixels that fall on the crop."""
+    affine = np.linalg.inv(np.vstack([affine_inv, [0, 0, 1]]))[:2]
+    return (keypoints[:, 2] > 0) & codec.inside(transform_points(keypoints[:, :2], affine))
+
+
+# --- (d) the dataset on real images -----------------------------------------------------------------
+
+def test_decoded_targets_land_on_the_annotated_keypoints(wholebody):
+    codec = MultiModalHeatmapCodec((192, 256), (48, 64), sigma=2.0, mu=0.5)
+    dataset = TopDownDataset(wholebody, codec, (192, 256), augment=None, train=True)
+    assert len(dataset) == 12                      # persons with >= 1 labelled joint (2 have none)
+    checked = 0
+    for i in range(len(dataset)):
+        sample = dataset[i]
+        record, own = dataset.records[dataset.samples[i][0]], dataset.samples[i][1]
+        assert sample["image"].shape == (3, 256, 192) and sample["image"].dtype == torch.float32
+        assert sample["target"].shape == (23, 64, 48) and sample["weight"].shape == (23,)
+        affine_inv = sample["affine_inv"].numpy()
+        present = present_joints(codec, record.keypoints[own], affine_inv)
+        points, _ = codec.decode(sample["target"])
+        error = np.linalg.norm(transform_points(points, affine_inv) - record.keypoints[own, :, :2], axis=1)
+        heatmap_px = 4 * np.linalg.norm(affine_inv[:, 0])          # one heatmap pixel in image pixels
+        assert np.all(error[present] <= heatmap_px), (i, error[present] / heatmap_px)
+        assert np.all(sample["weight"].numpy()[present] == 1)
+        checked += present.sum()
+    assert checked > 150
+
+
+def test_a_flipped_sample_mirrors_the_image_and_swaps_the_feet(wholebody):
+    codec = MultiModalHeatmapCodec((192, 256), (48, 64), sigma=2.0, mu=0.5)
+    plain = TopDownDataset(wholebody, codec, (192, 256), augment=None)
+    flip_only = CropAugmentation(scale_factor=0, rotation_factor=0, rotation_prob=0, flip_prob=1)
+    flipped = TopDownDataset(wholebody, codec, (192, 256), augment=flip_only)
+    a, b = plain[0], flipped[0]                    # the person with all 6 foot joints
+    assert not a["flipped"] and b["flipped"]
+    assert a["weight"][list(FOOT_JOINTS)].min() == 1
+    mirrored = a["target"].numpy()[..., ::-1]
+    np.testing.assert_allclose(b["target"].numpy()[list(LEFT_FOOT)], mirrored[list(RIGHT_FOOT)], atol=1e-6)
+    np.testing.assert_allclose(b["target"].numpy()[list(RIGHT_FOOT)], mirrored[list(LEFT_FOOT)], atol=1e-6)
+    assert not np.allclose(b["target"].numpy()[list(LEFT_FOOT)], mirrored[list(LEFT_FOOT)], atol=1e-3)
+    # the whole image is flipped: the crop is the mirror image, up to warpAffine's fixed-point rounding
+    assert np.abs(b["image"].numpy() - a["image"].numpy()[..., ::-1]).max() < 0.05
+
+
+def test_evaluation_on_detector_boxes(shared_data):
+    folder = shared_data / "crowdpose_sample"
+    records = load_keypoint_dataset("crowdpose", folder / "test_crowdpose.json", folder,
+                                    det_file=folder / "test_crowdpose_det_AP_40.json")
+    codec = MultiModalHeatmapCodec((64, 64), (16, 16))
+    dets = TopDownDataset(records, codec, (64, 64), train=False, use_det_boxes=True)
+    assert len(dets) == sum(len(r.det_boxes) for r in records) == 6
+    sample = dets[4]
+    record = records[dets.samples[4][0]]
+    assert sample["score"] == pytest.approx(record.det_scores[1]) and sample["image_id"] == record.image_id
+    np.testing.assert_allclose(sample["box"].numpy(), record.det_boxes[1])
+    assert sample["weight"].sum() == 0 and sample["target"].abs().sum() == 0   # no own person is known
+    gt_boxes = TopDownDataset(records, codec, (64, 64), train=False)
+    assert len(gt_boxes) == 4 < sum(len(r) for r in records)                 # not the person without joints
+    assert gt_boxes[0]["score"] == 1.0
+    assert gt_boxes[0]["weight"][:5].sum() == 0                               # CrowdPose has no eyes, ears
+
+
+def test_augmentation_is_seeded_per_epoch_and_sample(wholebody):
+    codec = MultiModalHeatmapCodec((192, 256), (48, 64))
+    dataset = TopDownDataset(wholebody, codec, (192, 256), augment=CropAugmentation(), seed=3)
+    first = [dataset.augmentation(i) for i in range(len(dataset))]
+    assert [dataset.augmentation(i) for i in range(len(dataset))] == first
+    dataset.set_epoch(1)
+    assert [dataset.augmentation(i) for i in range(len(dataset))] != first
+    eval_set = TopDownDataset(wholebody, codec, (192, 256), augment=CropAugmentation(), train=False)
+    assert eval_set.augmentation(0) == (1.0, 0.0, False)
+
+
+def test_epoch_sampler_resumes_and_shards():
+    full = EpochSampler(10, seed=5)
+    full.set_epoch(2)
+    order = list(full)
+    assert sorted(order) == list(range(10))
+    full.set_epoch(2, start=6)
+    assert list(full) == order[6:] and len(full) == 4
+    full.set_epoch(3)
+    assert list(full) != order
+    shards = [EpochSampler(10, seed=5, rank=r, world_size=3) for r in range(3)]
+    for s in shards:
+        s.set_epoch(2)
+    assert {len(s) for s in shards} == {4} and set(sum((list(s) for s in shards), [])) == set(range(10))
+
+
+def test_target_picture_parts_add_up_to_the_target(wholebody, tmp_path):
+    codec = MultiModalHeatmapCodec((192, 256), (48, 64), mu=0.5)
+    dataset = TopDownDataset(wholebody, codec, (192, 256))
+    sample = dataset[8]                            # a skier among others: the crowd term is non-zero
+    own_t, crowd, _ = target_parts(dataset, 8, sample["affine_inv"].numpy())
+    assert crowd.max() > 0.3
+    np.testing.assert_allclose(own_t + crowd, sample["target"].numpy(), atol=1e-6)
+    folder = Path(wholebody[0].file).parent
+    out = tmp_path / "targets.png"
+    show_targets_main(["--ann", str(folder / "test_coco_wholebody.json"), "--images", str(folder), "--out", str(out)])
+    assert out.stat().st_size > 10_000
+
+
+# --- validation geometry ----------------------------------------------------------------------------
+
+def test_decoding_the_targets_as_predictions_scores_near_perfect_ap(wholebody):
+    codec = MultiModalHeatmapCodec((192, 256), (48, 64), sigma=2.0, mu=0.0)
+    dataset = TopDownDataset(wholebody, codec, (192, 256), train=False)
+    batch = next(iter(DataLoader(dataset, batch_size=len(dataset))))
+    predictions = decode_predictions(codec, batch["target"], batch)
+    assert len(predictions) == 12 and predictions[0]["keypoints"].shape == (23, 3)
+    assert evaluate_keypoints(wholebody, predictions, "body")["AP"] > 0.9
+    assert evaluate_keypoints(wholebody, predictions, "foot")["AP"] > 0.9
+
+
+# --- (a) overfitting --------------------------------------------------------------------------------
+
+def test_fastpose18_overfits_four_synthetic_crops(synthetic_root):
+    torch.manual_seed(0)
+    records = load_coco23(synthetic_root / "train" / "annotations.json", synthetic_root / "train" / "images")
+    codec = MultiModalHeatmapCodec((64, 64), (16, 16), sigma=1.0, mu=0.5)
+    dataset = TopDownDataset(records, codec, (64, 64), augment=None)
+    dataset.samples = dataset.samples[:4]
+    loader = DataLoader(dataset, batch_size=4, sampler=EpochSampler(4, shuffle=False))
+    model = FastPose(18)
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    loss_fn, state, losses = WeightedHeatmapLoss(1.5), TrainState(), []
+    for _ in range(100):
+        losses += train_one_epoch(model, loader, loss_fn, optimizer, torch.device("cpu"), state)
+    assert state.global_step == 100 and len(losses) == 100
+    assert losses[-1] <= losses[0] / 10, (losses[0], losses[-1])
+
+
+# --- (b) exact resume -------------------------------------------------------------------------------
+
+def run_training(root: Path, run_dir: Path, *overrides: str) -> dict:
+    """train.run with the tiny config and these overrides, into run_dir."""
+    with initialize_config_dir(config_dir=str(REPO / "configs"), version_base="1.3"):
+        cfg = compose("train", overrides=[*TINY, f"data.root={root}", *overrides])
+    return train.run(cfg, run_dir)
+
+
+def test_resume_reproduces_the_uninterrupted_losses(synthetic_root, tmp_path):
+    straight = run_training(synthetic_root, tmp_path / "straight", "trainer.epochs=2")
+    steps_per_epoch = straight["state"].global_step // 2
+    assert steps_per_epoch >= 2 and len(straight["losses"]) == 2 * steps_per_epoch
+    assert set(straight["metrics"]) >= {"AP_all", "AP_body", "AP_foot", "loss"}
+
+    run_training(synthetic_root, tmp_path / "first", "trainer.epochs=1")             # stops after epoch 0
+    resumed = run_training(synthetic_root, tmp_path / "second", "trainer.epochs=2",
+                           f"resume={tmp_path / 'first' / 'checkpoints' / 'last.ckpt'}")
+    assert sorted(resumed["losses"]) == list(range(steps_per_epoch + 1, 2 * steps_per_epoch + 1))
+    for step, loss in resumed["losses"].items():
+        assert loss == pytest.approx(straight["losses"][step], rel=1e-6), step
+
+    run_training(synthetic_root, tmp_path / "cut", "trainer.epochs=2", "trainer.max_steps=1")  # mid-epoch
+    rest = run_training(synthetic_root, tmp_path / "rest", "trainer.epochs=2",
+                        f"resume={tmp_path / 'cut' / 'checkpoints' / 'last.ckpt'}")
+    assert sorted(rest["losses"]) == list(range(2, 2 * steps_per_epoch + 1))
+    for step, loss in rest["losses"].items():
+        assert loss == pytest.approx(straight["losses"][step], rel=1e-6), step
+
+
+def test_a_failed_checkpoint_write_keeps_the_previous_file(tmp_path):
+    model = torch.nn.Linear(2, 2)
+    optimizer = torch.optim.Adam(model.parameters())
+    scheduler = torch.optim.lr_scheduler.MultiStepLR(optimizer, [1])
+    path = tmp_path / "last.ckpt"
+    save_checkpoint(path, model, optimizer, scheduler, TrainState(epoch=1), {"ok": 1})
+    before = path.read_bytes()
+    with pytest.raises(Exception):
+        save_checkpoint(path, model, optimizer, scheduler, TrainState(epoch=2), {"bad": lambda: 0})
+    assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["last.ckpt"]
+
+
+# --- (c) the Hydra sweep ----------------------------------------------------------------------------
+
+def test_mu_lambda_multirun_writes_checkpoints_and_tensorboard(synthetic_root, tmp_path):
+    sweep = tmp_path / "sweep"
+    cmd = [sys.executable, "train.py", "-m", "+experiment=mu_lambda_ablation", "loss.mu=0,0.5",
+           "loss.foot_weight=1.5", "trainer.max_steps=2", f"data.root={synthetic_root}", "data.input_size=[64,64]",
+           "trainer.batch_size=4", "trainer.val_batch_size=16", "trainer.progress=false", "trainer.threads=1",
+           f"hydra.sweep.dir={sweep}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    for mu in ("0", "0.5"):
+        run_dir = sweep / f"loss.foot_weight=1.5,loss.mu={mu}"          # named by the swept settings only
+        assert list(run_dir.glob("events.out.tfevents.*")), sorted(p.name for p in sweep.iterdir())
+        checkpoint = torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+        assert checkpoint["global_step"] == 2 and checkpoint["config"]["loss"]["mu"] == float(mu)
+        assert checkpoint["config"]["model"]["depth"] == 18 and (run_dir / "val_predictions.json").is_file()
