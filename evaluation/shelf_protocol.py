@@ -13,19 +13,30 @@ the mean of the PCPs of Actors 1-3 (Actor 4 is reported, never averaged).
 Ground-truth ids are those of gt.txt and actorsGT.mat, 0..3; the papers' "Actor k" is id k - 1,
 and summaries are keyed by k. Missing predicted joints are NaN: a part with a NaN end is wrong, and
 the selection distance averages the joints present (VoxelPose's predictions never miss joints).
+On a subset of frames, the headline averages those of Actors 1-3 annotated in it.
+
+:class:`ShelfProtocol` is the dataset protocol (evaluation/protocols.py) that data/shelf_dataset.py
+attaches to the Shelf sequence: our COCO-23 poses beside 4D Association's stored output, same code.
 """
 from __future__ import annotations
 
 import argparse
+import json
 from collections import defaultdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.io
 
-from data.keypoints import coco23_to_shelf14, with_mid_hip
+from data.keypoints import SHELF14_NAMES, coco23_to_shelf14, with_mid_hip
+from data.poses_io import atomic_write_text
 from data.shelf import load_4dassoc_skeletons
 from evaluation.pcp import PART_JOINTS, PART_NAMES, correct_parts, pcp_by_part
+
+if TYPE_CHECKING:
+    from data.multiview import Frame
+    from reconstruction.pipeline import FrameResult
 
 SHELF_TEST_FRAMES = range(300, 601)
 AVERAGED_ACTOR_IDS = (0, 1, 2)
@@ -150,15 +161,22 @@ class ShelfEvaluator:
     def summary(self) -> dict:
         """Per-actor per-part PCP (%) for both protocols, the mean over Actors 1-3 and MPJPE (mm)."""
         actors = sorted(set(self._rows["strict"]) | set(self.averaged_ids))
+        ids = self._averaged_present()
         out: dict = {"protocol": self._protocol()}
         for name, rows in self._rows.items():
             per_actor = {a + 1: _actor_pcp(rows.get(a, [])) for a in actors}
-            out[name] = {"actors": per_actor, "average": _mean_over(per_actor, self.averaged_ids)}
+            out[name] = {"actors": per_actor, "average": _mean_over(per_actor, ids)}
         errors = {a + 1: 1000.0 * float(np.mean(self._errors[a])) if a in self._errors else float("nan")
                   for a in actors}
-        averaged = [errors[a + 1] for a in self.averaged_ids]
+        averaged = [errors[a + 1] for a in ids]
         out["mpjpe_mm"] = {"actors": errors, "average": float(np.mean(averaged)) if averaged else float("nan")}
         return out
+
+    def _averaged_present(self) -> tuple[int, ...]:
+        """The averaged GT ids annotated in at least one scored frame (all of them on frames 300..600);
+        all averaged ids when none is, so that the mean is NaN rather than over nobody."""
+        present = tuple(a for a in self.averaged_ids if self._rows["strict"].get(a))
+        return present or self.averaged_ids
 
     def _protocol(self) -> dict:
         """The settings and frame range behind a summary."""
@@ -166,7 +184,7 @@ class ShelfEvaluator:
         return {"alpha": self.alpha, "frames": len(frames),
                 "first_frame": frames[0] if frames else None, "last_frame": frames[-1] if frames else None,
                 "standard_frames": frames == list(SHELF_TEST_FRAMES),
-                "averaged_actors": [a + 1 for a in self.averaged_ids],
+                "averaged_actors": [a + 1 for a in self._averaged_present()],
                 "selection": SELECTION_NOTE, **PROTOCOL_NOTES}
 
 
@@ -209,9 +227,11 @@ def _row(protocol: str, label: str, frames: int | None, pcp: dict[str, float], m
     return f"{protocol:9}{label:10}{count:>7}{cells}{pcp['average']:10.2f}{mpjpe:10.1f}"
 
 
-def score_4dassoc_output(skel_path: str | Path, gt_path: str | Path, first_frame: int = 300) -> dict:
+def score_4dassoc_output(skel_path: str | Path, gt_path: str | Path, first_frame: int = 300,
+                         frames: list[int] | None = None, alpha: float = 0.5) -> dict:
     """Score 4D Association's stored skel.txt (SKEL19) against gt.txt: files -> ShelfEvaluator.summary().
 
+    frames: the Shelf frame numbers to score (file frame i is first_frame + i); None = all of them.
     Skeletons with no valid joint (4D Association stores inactive tracks as zeros) are not predictions.
     Measured on the shipped files: 96.27 over Actors 1-3 (strict = lenient: a prediction always exists);
     4D Association's own evaluator (one-to-one Hungarian on the 15-joint distance sum) scores the same.
@@ -220,13 +240,104 @@ def score_4dassoc_output(skel_path: str | Path, gt_path: str | Path, first_frame
     gts = load_4dassoc_skeletons(gt_path)
     if len(skels) != len(gts):
         raise ValueError(f"{skel_path}: {len(skels)} frames but {gt_path} has {len(gts)}")
-    evaluator = ShelfEvaluator()
-    for i, (persons, gt) in enumerate(zip(skels, gts)):
-        poses = [p for p in persons.values() if (p[:, 3] > 0).any()]
+    positions = range(len(gts)) if frames is None else [f - first_frame for f in frames]
+    evaluator = ShelfEvaluator(alpha)
+    for i in positions:
+        if not 0 <= i < len(gts):
+            raise ValueError(f"{skel_path}: frame {first_frame + i} is outside the file's {first_frame}.."
+                             f"{first_frame + len(gts) - 1}")
+        poses = [p for p in skels[i].values() if (p[:, 3] > 0).any()]
         if any(p.shape[0] != 19 for p in poses):
             raise ValueError(f"{skel_path}: frame {i} is not a 19-joint SKEL19 skeleton")
-        evaluator.update(first_frame + i, skel19_to_shelf15(np.array(poses).reshape(-1, 19, 4)), gt)
+        evaluator.update(first_frame + i, skel19_to_shelf15(np.array(poses).reshape(-1, 19, 4)), gts[i])
     return evaluator.summary()
+
+
+class ShelfProtocol:
+    """The Shelf protocol as a dataset protocol (evaluation/protocols.py): ours beside 4D Association.
+
+    Holds the ground truth {Shelf frame: {actor id: (15, 4)}} and the path of 4D Association's stored
+    output; update() scores our COCO-23 poses of a frame, summary() adds the baseline scored by the same
+    code over the same frames, write(out_dir) saves the Shelf-15 predictions that were scored.
+    """
+
+    name = "shelf"
+    predictions_file = "shelf_predictions.json"
+
+    def __init__(self, gt: dict[int, dict[int, np.ndarray]], gt_path: str | Path | None = None,
+                 baseline_path: str | Path | None = None, first_frame: int = 300, alpha: float = 0.5) -> None:
+        """gt: per Shelf frame {actor id: (15, 4)}; baseline_path: skel.txt (None = no baseline)."""
+        self.gt = gt
+        self.gt_path, self.baseline_path = gt_path, baseline_path
+        self.first_frame, self.alpha = first_frame, alpha
+        self.evaluator = ShelfEvaluator(alpha)
+        self.predictions: dict[int, np.ndarray] = {}
+        self._baseline: tuple[tuple[int, ...], dict] | None = None   # (frames, summary) of the last scoring
+
+    def update(self, frame: Frame, result: FrameResult) -> None:
+        """Score one frame's poses3d (P, 23, 4) against the GT of frame.index."""
+        self.update_shelf15(frame.index, coco23_predictions_to_shelf15(result.poses3d))
+
+    def update_shelf15(self, frame: int, pred: np.ndarray) -> None:
+        """Score Shelf-14 + mid-hip predictions (P, 15, 3), NaN = missing, of one Shelf frame."""
+        if frame not in self.gt:
+            raise ValueError(f"frame {frame} has no Shelf ground truth ({self.gt_path})")
+        self.evaluator.update(frame, pred, self.gt[frame])
+        self.predictions[frame] = np.array(pred, dtype=np.float64).reshape(-1, 15, 3)
+
+    def summary(self) -> dict:
+        """{"ours": ShelfEvaluator summary, "4d_association": the same for skel.txt (when given)}."""
+        out = {"ours": self.evaluator.summary()}
+        if self.baseline_path is not None and self.gt_path is not None and self.predictions:
+            frames = tuple(sorted(self.predictions))
+            if self._baseline is None or self._baseline[0] != frames:
+                self._baseline = frames, score_4dassoc_output(self.baseline_path, self.gt_path, self.first_frame,
+                                                              list(frames), self.alpha)
+            out["4d_association"] = self._baseline[1]
+        return out
+
+    def report(self) -> str:
+        """A protocol header line, our table and 4D Association's, and the headline comparison."""
+        summary = self.summary()
+        proto = summary["ours"]["protocol"]
+        lines = [f"Shelf protocol: frames {proto['first_frame']}-{proto['last_frame']} ({proto['frames']}), "
+                 f"PCP alpha {self.alpha} over 10 parts, headline = mean of actors "
+                 f"{', '.join(map(str, proto['averaged_actors']))}; {SELECTION_NOTE}",
+                 "", format_table(summary["ours"], "ours")]
+        if "4d_association" in summary:
+            lines += ["", format_table(summary["4d_association"], "4D Association stored output, same code")]
+        lines += ["", _headline(summary)]
+        return "\n".join(lines)
+
+    def write(self, out_dir: str | Path) -> Path:
+        """Write the scored Shelf-15 predictions and each actor's chosen one to out_dir/shelf_predictions.json."""
+        frames = []
+        for frame, pred in sorted(self.predictions.items()):
+            chosen = {str(a + 1): select_prediction(pred, np.asarray(g)[:, :3])[0] for a, g in self.gt[frame].items()}
+            frames.append({"frame": frame, "chosen_for_actor": chosen,
+                           "poses": [[_point(p) for p in pose] for pose in pred]})
+        doc = {"joints": [*SHELF14_NAMES, "mid_hip"], "units": "m",
+               "note": "our COCO-23 poses as scored by the Shelf protocol; null = missing joint; "
+                       "chosen_for_actor: the pose each GT actor (1-4) took, -1 none",
+               "frames": frames}
+        path = Path(out_dir) / self.predictions_file
+        atomic_write_text(path, json.dumps(doc))
+        return path
+
+
+def _point(xyz: np.ndarray) -> list[float] | None:
+    """A joint for JSON: [x, y, z] rounded to 0.1 mm, or None when missing."""
+    return [round(float(v), 4) for v in xyz] if np.all(np.isfinite(xyz)) else None
+
+
+def _headline(summary: dict) -> str:
+    """One line: strict and lenient average PCP of ours vs 4D Association."""
+    parts = []
+    for protocol in PROTOCOL_NOTES:
+        ours = summary["ours"][protocol]["average"]["average"]
+        base = summary.get("4d_association", {}).get(protocol, {}).get("average", {}).get("average")
+        parts.append(f"{protocol} {ours:.2f}" + ("" if base is None else f" (4D Association {base:.2f})"))
+    return "Shelf average PCP, actors 1-3: " + "; ".join(parts)
 
 
 def load_actors_gt(mat_path: str | Path, frames: range = SHELF_TEST_FRAMES) -> list[dict[int, np.ndarray]]:
