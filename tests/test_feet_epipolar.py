@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from data.multiview import ViewDetections
 from data.synthetic import SyntheticConfig, generate_sequence
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts
 from reconstruction.matching import FeetEpipolarMatcher, FeetMatcher
@@ -51,3 +52,25 @@ def test_beats_feet_alone_in_a_dense_crowd():
     feet = counts(FeetMatcher(), seq.frames, seq.rig)
     both = counts(FeetEpipolarMatcher(), seq.frames, seq.rig)
     assert both.precision > feet.precision + 0.03 and both.recall > feet.recall + 0.05
+
+
+def test_missing_feet_cost_stands_in_for_the_feet_term():
+    feet = np.array([[np.inf, 1.0]])
+    epi = np.array([[15.0, 15.0]])
+    missing = np.array([[True, False]])
+    np.testing.assert_allclose(combined_cost(feet, epi, 5.0, missing, 4.0), [[5.0, np.hypot(1.0, 3.0)]])
+    assert np.isinf(combined_cost(feet, epi, 5.0, missing, None)[0, 0])
+
+
+def test_people_without_feet_are_matched_by_their_body_unless_feet_are_required():
+    seq = generate_sequence(SyntheticConfig(seed=5, num_frames=1, num_persons=6, num_cameras=4, noise_px=1.0))
+    views = [ViewDetections(v.keypoints.copy(), v.bboxes, v.scores, v.person_ids) for v in seq.frames[0].views]
+    pid = int(views[0].person_ids[0])
+    for v in views:                                   # one person's feet and ankles hidden in every view
+        v.keypoints[v.person_ids == pid, 15:, 2] = 0.0
+    found = FeetEpipolarMatcher()(views, seq.rig)
+    rows = [r for r in found if any(r[v] >= 0 and views[v].person_ids[r[v]] == pid for v in range(len(views)))]
+    assert len(rows) == 1 and np.sum(rows[0] >= 0) >= 2
+    strict = FeetEpipolarMatcher(missing_feet_cost=None)
+    assert not any(r[v] >= 0 and views[v].person_ids[r[v]] == pid for r in strict(views, seq.rig) for v in range(len(views)))
+    assert strict.last_unmatched_reasons["no_foot_joints"] == sum(int(np.sum(v.person_ids == pid)) for v in views)

@@ -11,8 +11,10 @@ the epipolar line of a joint passes through many people. The edge cost of a dete
 
 (both terms in standard-deviation units, added in quadrature as independent evidence), solved per view
 pair as a gated Jonker-Volgenant assignment and merged over all pairs cheapest first, exactly like the
-feet matcher. A pair needs a feet location in both detections and at least ``min_common_joints``
-joints confident in both; otherwise it is never matched.
+feet matcher. A pair needs at least ``min_common_joints`` joints confident in both detections. When
+either detection has no usable foot, ``missing_feet_cost`` (SD) stands in for d_feet, so people whose
+feet are hidden are still matched by the rest of their body, at the price of an average feet term;
+``missing_feet_cost=None`` never matches them.
 """
 from __future__ import annotations
 
@@ -27,8 +29,14 @@ from reconstruction.matching.epipolar import (TOO_FEW_JOINTS, epipolar_affinity,
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import match_pairs
 
-def combined_cost(feet_cost: np.ndarray, epipolar_px: np.ndarray, epipolar_sigma_px: float) -> np.ndarray:
-    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), +inf where either is."""
+def combined_cost(feet_cost: np.ndarray, epipolar_px: np.ndarray, epipolar_sigma_px: float,
+                  missing_feet: np.ndarray | None = None, missing_feet_cost: float | None = None) -> np.ndarray:
+    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), +inf where either is.
+
+    Where ``missing_feet`` (Na, Nb) is True and ``missing_feet_cost`` is given, that cost replaces feet.
+    """
+    if missing_feet is not None and missing_feet_cost is not None:
+        feet_cost = np.where(missing_feet, missing_feet_cost, feet_cost)
     with np.errstate(invalid="ignore"):
         cost = np.sqrt(np.square(feet_cost) + np.square(epipolar_px / epipolar_sigma_px))
     return np.where(np.isfinite(feet_cost) & np.isfinite(epipolar_px), cost, np.inf)
@@ -43,13 +51,17 @@ class FeetEpipolarMatcher:
     """
 
     def __init__(self, epipolar_sigma_px: float = 5.0, gate: float = 5.0, min_score: float = 0.2,
-                 min_common_joints: int = 3, min_views: int = 2, feet: dict | None = None) -> None:
+                 min_common_joints: int = 3, min_views: int = 2, missing_feet_cost: float | None = 2.0,
+                 feet: dict | None = None) -> None:
         feet = {"pixel_sigma": 5.0, **(feet or {})}
         if feet.get("location_metric", "mahalanobis") != "mahalanobis" or feet.get("space", "ground") != "ground":
             raise ValueError("feet_epipolar needs the feet cost in standard deviations: "
                              "location_metric=mahalanobis, space=ground")
         if not epipolar_sigma_px > 0 or not gate > 0 or int(min_common_joints) < 1 or int(min_views) < 1:
             raise ValueError("epipolar_sigma_px and gate must be > 0, min_common_joints and min_views >= 1")
+        if missing_feet_cost is not None and not missing_feet_cost >= 0:
+            raise ValueError(f"missing_feet_cost must be >= 0 or None, got {missing_feet_cost}")
+        self.missing_feet_cost = None if missing_feet_cost is None else float(missing_feet_cost)
         self.feet = FeetMatcher(min_views=min_views, **feet)
         self.epipolar_sigma_px, self.gate = float(epipolar_sigma_px), float(gate)
         self.min_score, self.min_common_joints, self.min_views = float(min_score), int(min_common_joints), int(min_views)
@@ -65,7 +77,8 @@ class FeetEpipolarMatcher:
             feet = self.feet.pair_cost(feats[a], feats[b], rig[a])
             epi = epipolar_affinity(*joints[a], *joints[b], fundamental_matrix(rig[a], rig[b]),
                                     self.min_common_joints)
-            return combined_cost(feet, epi, self.epipolar_sigma_px)
+            missing = ~feats[a].has_p[:, None] | ~feats[b].has_p[None, :]
+            return combined_cost(feet, epi, self.epipolar_sigma_px, missing, self.missing_feet_cost)
 
         return cost, feats, joints
 
@@ -73,12 +86,15 @@ class FeetEpipolarMatcher:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
         cost, feats, joints = self.pair_costs(views, rig)
         assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views)
-        reasons = Counter(str(r) for f in feats for r in f.reason if r)
-        few = sum(int(np.sum(f.has_p & (ok.sum(axis=1) < self.min_common_joints)))
-                  for f, (_, ok) in zip(feats, joints))
-        usable = sum(int(f.has_p.sum()) for f in feats) - few
-        unplaced = usable - int(np.sum(assignment >= 0))
-        reasons.update({TOO_FEW_JOINTS: few, NO_COUNTERPART: unplaced})
+        reasons: Counter[str] = Counter()
+        usable = 0
+        for f, (_, ok) in zip(feats, joints):
+            enough = ok.sum(axis=1) >= self.min_common_joints
+            no_feet = ~f.has_p if self.missing_feet_cost is None else np.zeros(len(f), dtype=bool)
+            reasons.update(str(r) for r in f.reason[no_feet] if r)      # feet required and missing
+            reasons[TOO_FEW_JOINTS] += int(np.sum(~no_feet & ~enough))
+            usable += int(np.sum(~no_feet & enough))
+        reasons[NO_COUNTERPART] = usable - int(np.sum(assignment >= 0))
         self.last_unmatched_reasons = +reasons
         self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
         return assignment
