@@ -62,12 +62,13 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
 
 @hydra.main(config_path="configs", config_name="eval", version_base="1.3")
 def main(cfg: DictConfig) -> dict:
-    """Hydra entry point; returns the metrics (for sweeps). Bad input files stop with one message."""
+    """Hydra entry point; returns the metrics (for sweeps). Bad input files and bad config values stop
+    with one message (a ValueError while building the dataset, matcher or reconstruction is one of them)."""
     try:
         return run(cfg, Path(HydraConfig.get().runtime.output_dir)).metrics
     except (CalibrationError, Poses2DError, InstantiationException) as err:
         cause = err.__cause__ if isinstance(err, InstantiationException) else err
-        if isinstance(cause, (CalibrationError, Poses2DError, FileNotFoundError)):
+        if isinstance(cause, (ValueError, FileNotFoundError)):  # CalibrationError, Poses2DError are ValueErrors
             raise SystemExit(f"error: {cause}") from None
         raise
 

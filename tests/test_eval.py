@@ -63,3 +63,10 @@ def test_bad_calibration_stops_with_one_message_naming_file_camera_and_key(tmp_p
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
     assert proc.returncode != 0
     assert proc.stderr.strip() == f"error: {bad}: camera 'left': key 't' has a non-finite value"
+
+
+def test_a_bad_config_value_stops_with_one_message(tmp_path):
+    cmd = [sys.executable, "eval.py", "matching.foot_rule=bogus", "progress=false", f"hydra.run.dir={tmp_path}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
+    assert proc.returncode != 0
+    assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: ") and "'bogus'" in proc.stderr
