@@ -16,7 +16,8 @@ from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
-from data.poses_io import atomic_write_text, write_poses3d
+from data.atomic_io import atomic_write_text
+from data.poses_io import write_poses3d
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
 from evaluation.visualize import save_run_pictures

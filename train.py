@@ -21,7 +21,7 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 
-from data.poses_io import atomic_write_text
+from data.atomic_io import atomic_write_text
 from data.topdown_dataset import EpochSampler
 from evaluation.coco_eval import write_coco_results
 from models.training import (TrainState, build_codec, build_dataset, build_loader, build_loss, build_model,

@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from data.atomic_io import atomic_write_text
 from data.bone_lengths import BONE_MEAN, BONE_NAMES, BONE_STD, bone_table_dict, estimate_bone_table
 from data.keypoints import PANOPTIC19_TO_COCO23, SHELF14_TO_COCO23, to_coco23
 from data.shelf import load_4dassoc_skeletons
@@ -59,12 +58,8 @@ def table_rows(mean: np.ndarray, std: np.ndarray, count: np.ndarray) -> list[lis
 
 
 def write_json(doc: dict, path: Path) -> None:
-    """Write JSON through a temporary file and a rename (never a half-written table)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(doc, fh, indent=2)
-    os.replace(tmp, path)
+    """Write JSON atomically (never a half-written table)."""
+    atomic_write_text(path, json.dumps(doc, indent=2))
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -35,7 +35,7 @@ from tqdm import tqdm  # noqa: E402
 
 from data.keypoints import FOOT_JOINTS  # noqa: E402
 from data.multiview import ViewDetections  # noqa: E402
-from data.poses_io import atomic_write_text  # noqa: E402
+from data.atomic_io import atomic_write_text  # noqa: E402
 from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts  # noqa: E402
 from evaluation.report import format_table  # noqa: E402

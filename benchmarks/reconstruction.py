@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
 from data.multiview import Frame, Sequence  # noqa: E402
-from data.poses_io import atomic_write_text  # noqa: E402
+from data.atomic_io import atomic_write_text  # noqa: E402
 from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
 from evaluation.pose3d import Pose3DEvaluator  # noqa: E402
 from evaluation.report import format_table  # noqa: E402

@@ -16,7 +16,7 @@ from typing import Any, Callable
 import numpy as np
 
 from data.keypoints import COCO23_NAMES, CROWDPOSE14_TO_COCO23, LIMBS, NUM_BODY_JOINTS, NUM_JOINTS, to_coco23
-from data.poses_io import atomic_write_text
+from data.atomic_io import atomic_write_text
 from data.records import ImageRecord
 
 KINDS = ("coco_wholebody", "coco23", "crowdpose")

@@ -13,7 +13,7 @@ import numpy as np
 
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
-from data.poses_io import atomic_write_text
+from data.atomic_io import atomic_write_text
 
 KEYPOINT_VALUES = NUM_JOINTS * 3  # 69
 WRITE_DECIMALS = 4  # pixels and scores are written rounded to 1e-4

@@ -1,29 +1,14 @@
-"""Reading and writing the pose files users see (DESIGN.md): poses3d.json; atomic writes."""
+"""Reading and writing the pose files users see (DESIGN.md): poses3d.json."""
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Iterable
 
 import numpy as np
 
+from data.atomic_io import atomic_write_text
 from data.keypoints import COCO23_NAMES
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write a file under a temporary name in the same folder, then rename it into place."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def poses3d_document(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera_names: list[str]) -> dict:

@@ -21,7 +21,7 @@ from pycocotools.cocoeval import COCOeval
 
 from data.coco_keypoints import coco23_document
 from data.keypoints import BODY_JOINTS, FOOT_JOINTS, NUM_BODY_JOINTS, NUM_JOINTS, OKS_SIGMAS
-from data.poses_io import atomic_write_text
+from data.atomic_io import atomic_write_text
 from data.records import ImageRecord
 
 SUBSET_JOINTS: dict[str, tuple[int, ...]] = {

@@ -30,7 +30,7 @@ import numpy as np
 import scipy.io
 
 from data.keypoints import SHELF14_NAMES, coco23_to_shelf14, with_mid_hip
-from data.poses_io import atomic_write_text
+from data.atomic_io import atomic_write_text
 from data.shelf import load_4dassoc_skeletons
 from evaluation.pcp import PART_JOINTS, PART_NAMES, correct_parts, pcp_by_part
 

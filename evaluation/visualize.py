@@ -7,14 +7,13 @@ live in :mod:`evaluation.vis_draw` (images) and :mod:`evaluation.vis_plots` (mat
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 from matplotlib.figure import Figure
 
+from data.atomic_io import atomic_write_bytes
 from data.multiview import Frame, Sequence
 from evaluation.vis_draw import draw_reprojections, image_grid, load_view_images, person_colors
 from evaluation.vis_plots import plot_feet_on_ground, plot_scene_3d, plot_top_view
@@ -26,19 +25,9 @@ __all__ = ["draw_reprojections", "plot_scene_3d", "plot_top_view", "plot_feet_on
 
 
 def write_png(path: str | Path, data: bytes) -> Path:
-    """Write encoded PNG bytes under a temporary name in the same folder, then rename into place."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o644)  # mkstemp makes 0600 files; pictures are for sharing
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    """Write encoded PNG bytes atomically (data.atomic_io)."""
+    atomic_write_bytes(path, data)
+    return Path(path)
 
 
 def figure_png(fig: Figure) -> bytes:

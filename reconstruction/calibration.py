@@ -21,7 +21,7 @@ from typing import Any, Mapping, Sequence
 import cv2
 import numpy as np
 
-from data.poses_io import atomic_write_text
+from data.atomic_io import atomic_write_text
 from reconstruction.camera import Camera, Rig
 
 WILDTRACK_CAMERAS = ("CVLab1", "CVLab2", "CVLab3", "CVLab4", "IDIAP1", "IDIAP2", "IDIAP3")
