@@ -18,16 +18,20 @@ never robustified.
 
 The Jacobian of a likelihood residual is dr/dQ = -(w / z) (M_k - uv_k M_3) (M = P[:, :3], z the depth,
 uv the projection), that of a bone residual is -/+ w_l u^T on Q_a / Q_b (u the unit bone direction).
-J^T J and J^T r are assembled block by block (3 x 3 per joint and per bone), never as a dense Jacobian.
+J^T J and J^T r are assembled block by block (3 x 3 per joint and per bone), never as a dense Jacobian;
+the solver's arrays (:class:`PoseBatch`, :class:`Blocks`) keep the persons on their last axis.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 ROBUST_LOSSES = ("none", "huber", "cauchy")
 _EPS_DEPTH = 1e-6  # m; projections of points behind a camera are clamped to this depth
+BLOCK_DIAG = (np.arange(3), np.arange(3))      # diagonal entries of 3x3 blocks stored first: (3, 3, ...) -> (3, ...)
+_SYM6 = np.array([0, 1, 2, 4, 5, 8])           # the distinct entries of a flat symmetric 3x3 matrix ...
+_SYM9 = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # ... and back to all 9
 
 
 @dataclass(frozen=True)
@@ -61,13 +65,6 @@ class PoseProblem:
                        bone_pairs=new[self.bone_pairs[keep]].reshape(-1, 2), bone_ref=self.bone_ref[keep],
                        bone_weight=self.bone_weight[keep])
 
-    def per_joint(self) -> "PoseProblem":
-        """Without bones every joint is its own problem: P persons of J joints -> P*J persons of 1 joint."""
-        V, P, J = self.inv_sigma.shape
-        return replace(self, uv=self.uv.reshape(V, P * J, 1, 2), inv_sigma=self.inv_sigma.reshape(V, P * J, 1),
-                       anchor=self.anchor.reshape(P * J, 1, 3), bone_pairs=np.zeros((0, 2), np.int64),
-                       bone_ref=np.zeros(0), bone_weight=np.zeros(0))
-
 
 def joint_sigma(poses2d: np.ndarray, bboxes: np.ndarray, c: float, sigma_min: float) -> np.ndarray:
     """Pixel SD of every 2D joint, max(sigma_min, c sqrt(w h) / score): (V, P, J, 3), (V, P, 4) -> (V, P, J).
@@ -78,12 +75,15 @@ def joint_sigma(poses2d: np.ndarray, bboxes: np.ndarray, c: float, sigma_min: fl
     poses2d = np.asarray(poses2d, dtype=np.float64)
     bboxes = np.asarray(bboxes, dtype=np.float64)
     score = poses2d[..., 2]
-    seen = (score > 0) & np.all(np.isfinite(poses2d[..., :2]), axis=-1)
+    seen = (score > 0) & np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
     size = np.sqrt(np.clip(bboxes[..., 2], 0, None) * np.clip(bboxes[..., 3], 0, None))
-    lo = np.where(seen[..., None], poses2d[..., :2], np.inf).min(axis=-2)
-    hi = np.where(seen[..., None], poses2d[..., :2], -np.inf).max(axis=-2)
-    extent = np.where(np.any(seen, axis=-1)[..., None], hi - lo, 0.0)
-    size = np.where(size > 0, size, np.sqrt(extent[..., 0] * extent[..., 1]))
+    missing = ~(size > 0)
+    if np.any(missing):
+        pts, ok = poses2d[missing][..., :2], seen[missing][..., None]
+        lo = np.where(ok, pts, np.inf).min(axis=-2)
+        hi = np.where(ok, pts, -np.inf).max(axis=-2)
+        extent = np.where(np.any(ok, axis=-2), hi - lo, 0.0)
+        size[missing] = np.sqrt(extent[..., 0] * extent[..., 1])
     sigma = np.maximum(sigma_min, c * size[..., None] / np.where(seen, score, 1.0))
     return np.where(seen, sigma, np.inf)
 
@@ -134,7 +134,7 @@ def residual_vector(X: np.ndarray, problem: PoseProblem) -> np.ndarray:
     return np.concatenate([lik, _bone_geometry(X, problem)[2], anchor.reshape(len(X), -1)], axis=1)
 
 
-def _robust_scaling(r: np.ndarray, problem: PoseProblem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _robust_scaling(r: np.ndarray, problem: "PoseProblem | SharedTerms") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Robust cost terms, residual scale and Jacobian scale of raw residuals: (...) -> 3 x (...)."""
     C2 = problem.robust_scale ** 2
     rho, d1, d2 = robust_rho(r ** 2 / C2, problem.robust)
@@ -157,62 +157,203 @@ def cost(X: np.ndarray, problem: PoseProblem) -> np.ndarray:
                   + (anchor ** 2).sum(axis=(1, 2)))
 
 
-def _likelihood_blocks(X: np.ndarray, problem: PoseProblem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cost (P,), J^T J blocks (P, J, 3, 3) and J^T r (P, J, 3) of the likelihood terms."""
-    x, y, depth = _project_xy(X, problem.proj)
-    w = problem.inv_sigma
-    seen = w > 0
-    r = [np.where(seen, problem.uv[..., 0] - x, 0.0) * w, np.where(seen, problem.uv[..., 1] - y, 0.0) * w]
-    M = problem.proj[:, :, :3, None, None]                                                   # (V, 3, 3, 1, 1)
-    scale = -w / depth
-    # rows[k][i] = d r_k / d Q_i = -(w / z) (M[k, i] - uv_k M[2, i]), each (V, P, J)
-    rows = [[scale * (M[:, k, i] - proj_k * M[:, 2, i]) for i in range(3)] for k, proj_k in ((0, x), (1, y))]
-    if problem.robust == "none":
-        terms = r[0] ** 2 + r[1] ** 2
+@dataclass(frozen=True)
+class SharedTerms:
+    """What a batch's persons share: view matrices, bones and loss settings (built once per problem)."""
+
+    num_views: int
+    proj_rows: np.ndarray      # (3V, 3) row k of view v's M at k V + v: proj_rows @ X + proj_t = (x, y, z) x V
+    proj_t: np.ndarray         # (3V, 1) the matching translations
+    H_mat: np.ndarray          # (6, 5V) 5 coefficients per view -> the 6 distinct entries of J^T J
+    g_mat: np.ndarray          # (3, 3V) 3 coefficients per view -> J^T r
+    bone_pairs: np.ndarray     # (L, 2)
+    bone_ref: np.ndarray       # (L, 1)
+    bone_weight: np.ndarray    # (L, 1)
+    incidence: np.ndarray      # (J, L) 1 where joint j is an end of bone l
+    signed: np.ndarray         # (J, L) +1 at the first end, -1 at the second
+    anchor_weight: float
+    robust: str
+    robust_scale: float
+
+    @classmethod
+    def of(cls, problem: PoseProblem) -> "SharedTerms":
+        """The shared terms of a problem."""
+        V = len(problem.proj)
+        M, t = problem.proj[:, :, :3], problem.proj[:, :, 3]
+        m0, m1, m2 = M[:, 0], M[:, 1], M[:, 2]
+        outer = lambda a, b: (a[:, :, None] * b[:, None, :]).reshape(V, 9)[:, _SYM6]  # noqa: E731
+        # J^T J of view v = sum of 5 coefficients x [M0 M0^T, M1 M1^T, M0 M2^T + M2 M0^T, M1 M2^T + M2 M1^T, M2 M2^T]
+        # and J^T r = 3 coefficients x the rows M0, M1, M2 (see _likelihood_terms); column k V + v
+        H_mat = np.stack([outer(m0, m0), outer(m1, m1), outer(m0, m2) + outer(m2, m0), outer(m1, m2) + outer(m2, m1),
+                          outer(m2, m2)])                                                   # (5, V, 6)
+        pairs = np.asarray(problem.bone_pairs, dtype=np.int64).reshape(-1, 2)
+        J, L = problem.inv_sigma.shape[2], len(pairs)
+        incidence, signed = np.zeros((J, L)), np.zeros((J, L))
+        incidence[pairs[:, 0], np.arange(L)] = incidence[pairs[:, 1], np.arange(L)] = 1.0
+        signed[pairs[:, 0], np.arange(L)], signed[pairs[:, 1], np.arange(L)] = 1.0, -1.0
+        return cls(V, np.ascontiguousarray(M.transpose(1, 0, 2).reshape(3 * V, 3)),
+                   np.ascontiguousarray(t.T.reshape(3 * V, 1)), np.ascontiguousarray(H_mat.reshape(5 * V, 6).T),
+                   np.ascontiguousarray(M.transpose(2, 1, 0).reshape(3, 3 * V)), pairs,
+                   np.asarray(problem.bone_ref, dtype=np.float64).reshape(L, 1),
+                   np.asarray(problem.bone_weight, dtype=np.float64).reshape(L, 1), incidence, signed,
+                   float(problem.anchor_weight), problem.robust, float(problem.robust_scale))
+
+
+@dataclass(frozen=True)
+class PoseBatch:
+    """A PoseProblem laid out batch-last for the solver: uv (2, V, J, P), w = 1/sigma (V, J, P), anchor (3, J, P).
+
+    Every array of the solver keeps the persons (the batch) on its last axis, so that the arithmetic
+    of the joints and bones of all persons runs on long contiguous rows.
+    """
+
+    uv: np.ndarray
+    w: np.ndarray
+    anchor: np.ndarray
+    shared: SharedTerms
+
+    @classmethod
+    def of(cls, problem: PoseProblem, per_joint: bool = False) -> "PoseBatch":
+        """The batch of a problem; per_joint: every joint its own unit, P*J units of 1 joint (persons first)."""
+        V, P, J = problem.inv_sigma.shape
+        uv, w = np.asarray(problem.uv, dtype=np.float64), np.asarray(problem.inv_sigma, dtype=np.float64)
+        anchor, shared = np.asarray(problem.anchor, dtype=np.float64), SharedTerms.of(problem)
+        if per_joint:
+            return cls(uv.transpose(3, 0, 1, 2).reshape(2, V, 1, P * J), w.reshape(V, 1, P * J),
+                       anchor.reshape(P * J, 3).T.reshape(3, 1, P * J), shared)
+        return cls(np.ascontiguousarray(uv.transpose(3, 0, 2, 1)), np.ascontiguousarray(w.transpose(0, 2, 1)),
+                   np.ascontiguousarray(anchor.transpose(2, 1, 0)), shared)
+
+    def take(self, idx: np.ndarray) -> "PoseBatch":
+        """The batch of a subset of persons: idx (b,) -> PoseBatch with P = b."""
+        return replace(self, uv=self.uv[..., idx], w=self.w[..., idx], anchor=self.anchor[..., idx])
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """Costs and the normal equations of a batch in 3x3 blocks, batch last (see :func:`linear_blocks`)."""
+
+    joint_cost: np.ndarray    # (J, P) likelihood and anchor cost of each joint
+    bone_cost: np.ndarray     # (L, P) prior cost of each bone
+    g: np.ndarray             # (3, J, P) gradient J^T r
+    diag: np.ndarray          # (3, 3, J, P) diagonal blocks of the safe H
+    K: np.ndarray             # (3, 3, L, P) bone blocks of the safe H: +K on both ends' diagonal blocks, -K between
+    K_rest: np.ndarray        # (3, 3, L, P) exact minus safe bone blocks (0 where the prior is locally convex)
+
+    def take(self, idx: np.ndarray) -> "Blocks":
+        """The blocks of a subset of the batch (indices or a mask)."""
+        return Blocks(*(getattr(self, f.name)[..., idx] for f in fields(self)))
+
+
+def _likelihood_terms(X: np.ndarray, batch: PoseBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Likelihood + anchor cost (J, P), J^T J blocks (3, 3, J, P) and J^T r (3, J, P) at X (3, J, P).
+
+    Per view, with s = w / z (times the robust Jacobian scale), p the projection and e = -s r:
+    J^T J = s_x^2 (M0 - p_x M2)(M0 - p_x M2)^T + s_y^2 (M1 - p_y M2)(...)^T and J^T r = e_x M0 + e_y M1 -
+    (e . p) M2, i.e. 5 + 3 coefficients per view against constant matrices: two matrix products for all
+    joints (the 6 distinct entries of the symmetric J^T J, then the 3 of J^T r).
+    """
+    _, J, P = X.shape
+    sh = batch.shared
+    V, n = sh.num_views, J * P
+    hom = (sh.proj_rows @ X.reshape(3, n) + sh.proj_t).reshape(3, V, n)
+    inv_depth = 1.0 / np.maximum(hom[2], _EPS_DEPTH)
+    p = hom[:2] * inv_depth                                                             # (2, V, n)
+    w = batch.w.reshape(V, n)
+    r = (batch.uv.reshape(2, V, n) - p) * w
+    s = w * inv_depth
+    coef_H, coef_g = np.empty((5, V, n)), np.empty((3, V, n))
+    if sh.robust == "none":
+        cost = 0.5 * np.einsum("ij,ij->j", r.reshape(2 * V, n), r.reshape(2 * V, n))
+        a = np.multiply(s, s, out=coef_H[0])
+        coef_H[1] = a
+        ap = np.multiply(p, -a, out=coef_H[2:4])
     else:
-        scaled = [_robust_scaling(rk, problem) for rk in r]
-        terms = scaled[0][0] + scaled[1][0]
-        r = [rk * sc[1] for rk, sc in zip(r, scaled)]
-        rows = [[row * sc[2] for row in rows_k] for rows_k, sc in zip(rows, scaled)]
-    H = np.empty(X.shape[:2] + (3, 3))
-    for i in range(3):
-        for k in range(i, 3):
-            H[..., i, k] = H[..., k, i] = (rows[0][i] * rows[0][k] + rows[1][i] * rows[1][k]).sum(axis=0)
-    g = np.stack([(rows[0][i] * r[0] + rows[1][i] * r[1]).sum(axis=0) for i in range(3)], axis=-1)
-    return 0.5 * terms.sum(axis=(0, 2)), H, g
+        terms, r_scale, j_scale = _robust_scaling(r, sh)
+        cost = 0.5 * terms.sum(axis=(0, 1))
+        s = s * j_scale
+        r = r * r_scale
+        a = np.multiply(s, s, out=coef_H[:2])
+        ap = np.multiply(p, -a, out=coef_H[2:4])
+    coef_H[4] = -(ap[0] * p[0] + ap[1] * p[1])
+    e = np.multiply(r, -s, out=coef_g[:2])
+    coef_g[2] = -(e[0] * p[0] + e[1] * p[1])
+    H = (sh.H_mat @ coef_H.reshape(5 * V, n))[_SYM9].reshape(3, 3, J, P)
+    tau2 = sh.anchor_weight ** 2
+    H[BLOCK_DIAG] += tau2
+    dx = X - batch.anchor
+    return cost.reshape(J, P) + 0.5 * tau2 * np.einsum("kjp,kjp->jp", dx, dx), H, \
+        (sh.g_mat @ coef_g.reshape(3 * V, n)).reshape(3, J, P) + tau2 * dx
 
 
-def _incidence(problem: PoseProblem, J: int) -> np.ndarray:
-    """Joint-bone incidence, 1 where joint j is an end of bone l: -> (J, L)."""
-    L = len(problem.bone_pairs)
-    out = np.zeros((J, L))
-    out[problem.bone_pairs[:, 0], np.arange(L)] = 1.0
-    out[problem.bone_pairs[:, 1], np.arange(L)] = 1.0
-    return out
+def _bone_terms(X: np.ndarray, sh: SharedTerms) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cost (L, P), gradient on the first end (3, L, P), u u^T (3, 3, L, P) and curvature (L, P) of the bones.
+
+    The second-order term of bone l is curv_l (I - u u^T) with curv_l = w_l^2 (1 - b_ref_l / n_l).
+    """
+    d = X[:, sh.bone_pairs[:, 0]] - X[:, sh.bone_pairs[:, 1]]                          # (3, L, P)
+    n = np.sqrt(np.einsum("klp,klp->lp", d, d))
+    safe_n = np.maximum(n, 1e-12)
+    u = d / safe_n
+    degenerate = n <= 1e-12
+    if np.any(degenerate):
+        u[:, degenerate] = np.array([0.0, 0.0, 1.0])[:, None]
+    r = sh.bone_weight * (sh.bone_ref - n)
+    return 0.5 * r * r, (-sh.bone_weight * r) * u, u[:, None] * u[None], \
+        sh.bone_weight ** 2 * (1.0 - sh.bone_ref / safe_n)
 
 
-def _block_index(rows: np.ndarray, cols: np.ndarray, J: int) -> np.ndarray:
+def linear_blocks(X: np.ndarray, batch: PoseBatch) -> Blocks:
+    """Costs and safe / exact normal equations at X (3, J, P) in 3x3 blocks (see :func:`linearize`)."""
+    joint_cost, diag, g = _likelihood_terms(X, batch)
+    sh = batch.shared
+    _, J, P = X.shape
+    L = len(sh.bone_pairs)
+    if L == 0:
+        empty = np.zeros((3, 3, 0, P))
+        return Blocks(joint_cost, np.zeros((0, P)), g, diag, empty, empty)
+    bone_cost, grad, uu, curv = _bone_terms(X, sh)
+    g += sh.signed @ grad
+    # K = w^2 u u^T + max(curv, 0) (I - u u^T), K_rest = min(curv, 0) (I - u u^T)
+    positive, negative = np.maximum(curv, 0.0), np.minimum(curv, 0.0)
+    K = (sh.bone_weight ** 2 - positive) * uu
+    K[BLOCK_DIAG] += positive
+    K_rest = -negative * uu
+    K_rest[BLOCK_DIAG] += negative
+    diag += (sh.incidence @ K.reshape(9, L, P)).reshape(3, 3, J, P)
+    return Blocks(joint_cost, bone_cost, g, diag, K, K_rest)
+
+
+def block_index(rows: np.ndarray, cols: np.ndarray, J: int) -> np.ndarray:
     """Flat positions in a (3J, 3J) matrix of the 3x3 blocks (rows[k], cols[k]): (K,), (K,) -> (K * 9,)."""
     r = 3 * np.asarray(rows)[:, None, None] + np.arange(3)[None, :, None]
     c = 3 * np.asarray(cols)[:, None, None] + np.arange(3)[None, None, :]
     return (r * 3 * J + c).reshape(-1)
 
 
-def _assemble(diag: np.ndarray, K: np.ndarray, problem: PoseProblem, H: np.ndarray | None = None) -> np.ndarray:
-    """Dense H from joint blocks (P, J, 3, 3) and bone blocks K (P, L, 3, 3) as [[K, -K], [-K, K]]: -> (P, 3J, 3J).
-
-    With H given, the blocks are added to a copy of it instead of to zeros.
-    """
-    P, J = diag.shape[:2]
-    a, b = problem.bone_pairs[:, 0], problem.bone_pairs[:, 1]
-    jj = np.arange(J)
-    out = np.zeros((P, 9 * J * J)) if H is None else H.reshape(P, -1).copy()
-    if len(a):
-        diag = diag + np.matmul(_incidence(problem, J), K.reshape(P, -1, 9)).reshape(P, J, 3, 3)
-        off = _block_index(np.concatenate([a, b]), np.concatenate([b, a]), J)
-        out[:, off] -= np.concatenate([K, K], axis=1).reshape(P, -1)
-    out[:, _block_index(jj, jj, J)] += diag.reshape(P, -1)
+def assemble(diag: np.ndarray, K: np.ndarray, bone_pairs: np.ndarray) -> np.ndarray:
+    """Dense H from diagonal blocks (3, 3, J, P) and -K (3, 3, L, P) between the ends of each bone: -> (P, 3J, 3J)."""
+    J, P = diag.shape[2:]
+    out = np.zeros((P, 9 * J * J))
+    out[:, block_index(np.arange(J), np.arange(J), J)] = diag.transpose(3, 2, 0, 1).reshape(P, -1)
+    if len(bone_pairs):
+        a, b = bone_pairs[:, 0], bone_pairs[:, 1]
+        # a joint pair joined by two bones would need a sum here; bone tables have one bone per pair
+        out[:, block_index(np.concatenate([a, b]), np.concatenate([b, a]), J)] = \
+            -np.concatenate([K, K], axis=2).transpose(3, 2, 0, 1).reshape(P, -1)
     return out.reshape(P, 3 * J, 3 * J)
+
+
+def exact_blocks(blocks: Blocks, sh: SharedTerms) -> tuple[np.ndarray, np.ndarray]:
+    """Diagonal blocks (3, 3, J, P) and bone blocks (3, 3, L, P) of the exact H."""
+    _, _, J, P = blocks.diag.shape
+    extra = (sh.incidence @ blocks.K_rest.reshape(9, -1, P)).reshape(3, 3, J, P)
+    return blocks.diag + extra, blocks.K + blocks.K_rest
+
+
+def batch_last(X: np.ndarray) -> np.ndarray:
+    """Joints (P, J, 3) in the solver's layout (3, J, P)."""
+    return np.ascontiguousarray(np.asarray(X, dtype=np.float64).transpose(2, 1, 0))
 
 
 def linearize(X: np.ndarray, problem: PoseProblem
@@ -226,30 +367,14 @@ def linearize(X: np.ndarray, problem: PoseProblem
     It is negative for a bone shorter than its reference (the prior is not convex), so the safe H
     keeps only the positive terms and stays positive semi-definite.
     """
-    f, diag, g = _likelihood_blocks(X, problem)
-    tau2 = problem.anchor_weight ** 2
-    diag = diag + tau2 * np.eye(3)
-    g = g + tau2 * (X - problem.anchor)
-    f = f + 0.5 * tau2 * ((X - problem.anchor) ** 2).sum(axis=(1, 2))
+    batch = PoseBatch.of(problem)
+    blocks = linear_blocks(batch_last(X), batch)
     P, J, _ = X.shape
-    if len(problem.bone_pairs) == 0:
-        return f, _assemble(diag, np.zeros((P, 0, 3, 3)), problem), g.reshape(P, 3 * J), None
-    n, u, r = _bone_geometry(X, problem)
-    f = f + 0.5 * (r ** 2).sum(axis=1)
-    signed = _incidence(problem, J)
-    signed[problem.bone_pairs[:, 1], np.arange(len(problem.bone_pairs))] = -1.0
-    grad = -problem.bone_weight[:, None] * u * r[..., None]                                  # dcost/dQ_a
-    g = g + np.matmul(signed, grad)
-    uu = u[..., :, None] * u[..., None, :]
-    w2 = problem.bone_weight ** 2
-    curv = w2 * (1.0 - problem.bone_ref / np.maximum(n, 1e-12))                              # (P, L)
-    perp = np.eye(3) - uu
-    K_safe = w2[:, None, None] * uu + np.maximum(curv, 0.0)[..., None, None] * perp
-    H_safe = _assemble(diag, K_safe, problem)
-    if np.all(curv >= 0):
-        return f, H_safe, g.reshape(P, 3 * J), H_safe
-    K_rest = np.minimum(curv, 0.0)[..., None, None] * perp
-    return f, H_safe, g.reshape(P, 3 * J), _assemble(np.zeros_like(diag), K_rest, problem, H_safe)
+    f = blocks.joint_cost.sum(axis=0) + blocks.bone_cost.sum(axis=0)
+    pairs = batch.shared.bone_pairs
+    H_safe = assemble(blocks.diag, blocks.K, pairs)
+    H_exact = assemble(*exact_blocks(blocks, batch.shared), pairs) if len(pairs) else None
+    return f, H_safe, blocks.g.transpose(2, 1, 0).reshape(P, 3 * J), H_exact
 
 
 def normal_equations(X: np.ndarray, problem: PoseProblem, model: str = "gauss_newton"
@@ -266,11 +391,16 @@ def normal_equations(X: np.ndarray, problem: PoseProblem, model: str = "gauss_ne
 
 def _gauss_newton_H(X: np.ndarray, problem: PoseProblem) -> np.ndarray:
     """J^T J of all terms (no second-order bone term): (P, J, 3) -> (P, 3J, 3J)."""
-    _, diag, _ = _likelihood_blocks(X, problem)
-    diag = diag + problem.anchor_weight ** 2 * np.eye(3)
-    _, u, _ = _bone_geometry(X, problem)
-    K = (problem.bone_weight ** 2)[:, None, None] * u[..., :, None] * u[..., None, :]
-    return _assemble(diag, K, problem)
+    batch = PoseBatch.of(problem)
+    sh = batch.shared
+    Xs = batch_last(X)
+    _, diag, _ = _likelihood_terms(Xs, batch)
+    _, J, P = Xs.shape
+    if len(sh.bone_pairs) == 0:
+        return assemble(diag, np.zeros((3, 3, 0, P)), sh.bone_pairs)
+    K = sh.bone_weight ** 2 * _bone_terms(Xs, sh)[2]
+    diag = diag + (sh.incidence @ K.reshape(9, -1, P)).reshape(3, 3, J, P)
+    return assemble(diag, K, sh.bone_pairs)
 
 
 def numeric_jacobian(X: np.ndarray, problem: PoseProblem, step: float = 1e-6) -> np.ndarray:

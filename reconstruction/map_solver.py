@@ -7,10 +7,12 @@ All persons of a frame are solved at once by the batched Levenberg-Marquardt of
 initialised by the vanilla triangulation (DLT) and a fitted mean body for the joints it cannot
 triangulate (:mod:`reconstruction.pose_init`). The cost separates over persons and over the connected
 components of the bone graph, so the MLE is solved as P*J independent 3-variable problems and the MAP
-as P problems per component (COCO-23: the 5 face joints and the 18 body and foot joints). The MAP uses
-the exact Hessian of the bone prior once a person is near its optimum (see
-:func:`reconstruction.map_estimation.linearize`); the solution is the same least-squares optimum as
-scipy's trust-region least_squares on the same residuals (tests/test_map_reconstruction.py).
+as P problems per component (COCO-23: the 5 face joints and the 18 body and foot joints), each with
+its own damping, step acceptance and stopping test, all stepped together in one loop (a person's face
+and body share the linear solve of an iteration, nothing else). The MAP uses the exact Hessian of the
+bone prior once a person is near its optimum (see :func:`reconstruction.map_estimation.linearize`);
+the solution is the same least-squares optimum as scipy's trust-region least_squares on the same
+residuals (tests/test_map_reconstruction.py).
 
 Sigma of a 2D joint: max(sigma_min, c sqrt(box_w box_h) / score) pixels. A top-down detector localises
 joints to a fraction of the person's size (the box is resized to a fixed network input, so one
@@ -28,7 +30,8 @@ score), as the DLT does. A person without a single usable triangulated joint is 
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -38,61 +41,194 @@ from scipy.sparse.csgraph import connected_components
 
 from data.bone_lengths import BONE_PAIRS, resolve_bone_table
 from reconstruction.camera import Rig
-from reconstruction.lm_solver import LMResult, levenberg_marquardt
-from reconstruction.map_estimation import ROBUST_LOSSES, PoseProblem, cost, joint_sigma, linearize
+from reconstruction.block_solver import EliminationPlan, elimination_plan, solve_blocks, solve_dense
+from reconstruction.lm_solver import LMResult, minimize
+from reconstruction.map_estimation import (BLOCK_DIAG, ROBUST_LOSSES, Blocks, PoseBatch, PoseProblem, joint_sigma,
+                                          linear_blocks)
 from reconstruction.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.triangulation import triangulate_dlt
+
+DENSE_MAX_UNITS = 16  # from this many persons the block elimination beats one dense LAPACK solve per person
 
 
 def bone_components(num_joints: int, bone_pairs: np.ndarray) -> list[np.ndarray]:
     """Joint sets connected by bones (singletons included), each sorted: J, (L, 2) -> list of (j,) arrays."""
     pairs = np.asarray(bone_pairs, dtype=np.int64).reshape(-1, 2)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(num_joints, num_joints))
+    return [c.copy() for c in _components(int(num_joints), tuple(map(tuple, pairs.tolist())))]
+
+
+@lru_cache(maxsize=32)
+def _components(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> tuple[np.ndarray, ...]:
+    """bone_components of a hashable bone list (the graph of a bone table never changes: computed once)."""
+    pairs_arr = np.array(pairs, dtype=np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(pairs_arr)), (pairs_arr[:, 0], pairs_arr[:, 1])), shape=(num_joints, num_joints))
     _, label = connected_components(graph, directed=False)
-    return [np.flatnonzero(label == k) for k in np.unique(label)]
+    return tuple(np.flatnonzero(label == k) for k in np.unique(label))
+
+
+@dataclass(frozen=True)
+class GraphLayout:
+    """The solver's view of a bone graph: joints reordered so that every component is contiguous."""
+
+    order: np.ndarray         # (J,) original joint at each solver position (components by first joint)
+    starts: np.ndarray        # (C,) first solver position of each component
+    ranges: list              # [(first, end)] solver positions of each component
+    pairs: np.ndarray         # (L, 2) bones in solver positions, in the input order
+    joint_comp: np.ndarray    # (J,) component of each solver position
+    var_comp: np.ndarray      # (3J,) component of each variable
+    bone_comp: np.ndarray     # (L,) component of each bone
+    has_bones: np.ndarray     # (C,) bool
+    bone_onehot: np.ndarray   # (L, C)
+    plan: EliminationPlan
+
+
+@lru_cache(maxsize=32)
+def graph_layout(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> GraphLayout:
+    """Layout of the bone graph of J joints with bones (a, b): computed once per graph."""
+    comps = _components(num_joints, pairs)
+    order = np.concatenate(comps)
+    position = np.argsort(order)
+    sizes = np.array([len(c) for c in comps])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    joint_comp = np.repeat(np.arange(len(comps)), sizes)
+    solver_pairs = position[np.array(pairs, dtype=np.int64).reshape(-1, 2)]
+    bone_comp = joint_comp[solver_pairs[:, 0]]
+    onehot = np.zeros((len(bone_comp), len(comps)))
+    onehot[np.arange(len(bone_comp)), bone_comp] = 1.0
+    return GraphLayout(order, starts, [(int(s), int(s + n)) for s, n in zip(starts, sizes)], solver_pairs, joint_comp,
+                       np.repeat(joint_comp, 3), bone_comp, np.bincount(bone_comp, minlength=len(comps)) > 0, onehot,
+                       elimination_plan(num_joints, tuple(map(tuple, solver_pairs.tolist()))))
+
+
+@dataclass
+class _PoseLin:
+    """A linearisation of the active persons: cost per component (b, C), g (b, 3J) and the blocks (batch last)."""
+
+    cost: np.ndarray
+    g: np.ndarray
+    blocks: Blocks
+
+
+class PoseModel:
+    """The :class:`reconstruction.lm_solver.Model` of a PoseBatch: one unit per person, one problem per component.
+
+    Trial points are fully linearised (the cost is most of the work and most steps are accepted).
+    Systems of fewer than DENSE_MAX_UNITS persons are solved densely, larger batches by block elimination.
+    """
+
+    def __init__(self, batch: PoseBatch, layout: GraphLayout) -> None:
+        self.batch, self.layout = batch, layout
+        self.starts = 3 * layout.starts
+        self.has_exact = layout.has_bones
+        self._idx: np.ndarray | None = None
+        self._sub = batch
+
+    def _take_batch(self, idx: np.ndarray) -> PoseBatch:
+        """The batch of the units idx, cached for the solver's current active set."""
+        if idx is not self._idx:
+            full = len(idx) == self.batch.w.shape[-1] and (len(idx) == 0 or idx[-1] == len(idx) - 1)
+            self._idx, self._sub = idx, self.batch if full else self.batch.take(idx)
+        return self._sub
+
+    def linearize(self, x: np.ndarray, idx: np.ndarray) -> _PoseLin:
+        """Blocks and component costs of the persons idx at x (b, 3J)."""
+        b = len(x)
+        blocks = linear_blocks(x.reshape(b, -1, 3).transpose(2, 1, 0), self._take_batch(idx))
+        cost = np.add.reduceat(blocks.joint_cost, self.layout.starts, axis=0)
+        if len(blocks.bone_cost):
+            cost += self.layout.bone_onehot.T @ blocks.bone_cost
+        return _PoseLin(cost.T, blocks.g.transpose(2, 1, 0).reshape(b, -1), blocks)
+
+    trial = linearize
+
+    def accept(self, lin: _PoseLin, trial: _PoseLin, x: np.ndarray, idx: np.ndarray, ok: np.ndarray) -> _PoseLin:
+        """The trial's blocks for the accepted components, the old ones elsewhere."""
+        if ok.all():
+            return trial
+        joint, bone = ok.T[self.layout.joint_comp], ok.T[self.layout.bone_comp]                # (J, b), (L, b)
+        old, new = lin.blocks, trial.blocks
+        blocks = Blocks(np.where(joint, new.joint_cost, old.joint_cost), np.where(bone, new.bone_cost, old.bone_cost),
+                        np.where(joint, new.g, old.g), np.where(joint, new.diag, old.diag),
+                        np.where(bone, new.K, old.K), np.where(bone, new.K_rest, old.K_rest))
+        return _PoseLin(np.where(ok, trial.cost, lin.cost), np.where(ok[:, self.layout.var_comp], trial.g, lin.g),
+                        blocks)
+
+    def take(self, lin: _PoseLin, keep: np.ndarray) -> _PoseLin:
+        """The persons where keep (bool mask or indices)."""
+        return _PoseLin(lin.cost[keep], lin.g[keep], lin.blocks.take(keep))
+
+    def max_diagonal(self, lin: _PoseLin) -> np.ndarray:
+        """max diag(H) per component, (b, C)."""
+        d = lin.blocks.diag[BLOCK_DIAG].max(axis=0)                                               # (J, b)
+        return np.maximum.reduceat(d, self.layout.starts, axis=0).T
+
+    def step(self, lin: _PoseLin, mu: np.ndarray, exact: np.ndarray, run: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Damped steps (b, 3J) and whether each problem used the exact model (b, C)."""
+        h, pd = self._solve(lin.blocks, mu, exact, run)
+        fail = exact & ~pd
+        if fail.any():                                  # exact model not positive definite: the safe one
+            rows = np.flatnonzero(fail.any(axis=1))
+            exact = exact & ~fail
+            h_rows, pd_rows = self._solve(lin.blocks.take(rows), mu[rows], exact[rows], fail[rows])
+            redo = fail[rows][:, self.layout.joint_comp].T                                    # (J, r)
+            h[:, :, rows] = np.where(redo, h_rows, h[:, :, rows])
+            pd[rows] = np.where(fail[rows], pd_rows, pd[rows])
+        h = h.transpose(2, 1, 0).reshape(len(mu), -1)
+        h[(run & ~pd)[:, self.layout.var_comp]] = np.nan
+        return h, exact
+
+    def _solve(self, blocks: Blocks, mu: np.ndarray, exact: np.ndarray, run: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """(M + mu I) h = -g per problem -> h (3, J, b) (0 where not run), positive definite (b, C)."""
+        lay = self.layout
+        diag, K = blocks.diag, blocks.K
+        if exact.any():
+            K_rest = np.where(exact.T[lay.bone_comp], blocks.K_rest, 0.0)
+            diag = diag + (self.batch.shared.incidence @ K_rest.reshape(9, len(lay.pairs), -1)).reshape(diag.shape)
+            K = K + K_rest
+        damping = mu.T[lay.joint_comp]
+        if len(mu) < DENSE_MAX_UNITS and len(lay.pairs):
+            return solve_dense(diag, -K, lay.pairs, -blocks.g, lay.ranges, run, damping)
+        h, pd = solve_blocks(lay.plan, diag, -K, -blocks.g, damping, check=bool(exact.any()))
+        h[:, ~run.T[lay.joint_comp]] = 0.0
+        return h, np.logical_and.reduceat(pd, lay.starts, axis=0).T
 
 
 def solve_poses(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, xtol: float = 1e-6,
                 ftol: float = 1e-10) -> tuple[np.ndarray, list[LMResult]]:
-    """Minimise the problem's cost from X0 (P, J, 3) -> (P, J, 3), one LMResult per independent block.
+    """Minimise the problem's cost from X0 (P, J, 3) -> (P, J, 3) and the LMResult (problems per person and component).
 
     The cost separates over persons and over the connected components of the bone graph (COCO-23:
-    the face, the body with the feet); each component is a batch of P problems of 3j variables, and
-    joints without a bone are P*j problems of 3 variables. Same optimum, smaller linear systems.
+    the face, the body with the feet); each (person, component) is its own Levenberg-Marquardt
+    problem, all stepped together, and without any bone every joint is its own problem (P*J units
+    of 3 variables). Same optimum as one problem per person, smaller linear systems.
     """
     X0 = np.asarray(X0, dtype=np.float64)
     P, J, _ = X0.shape
+    if P == 0:
+        return X0.copy(), []
     on = problem.bone_weight > 0
-    problem = replace(problem, bone_pairs=problem.bone_pairs[on].reshape(-1, 2), bone_ref=problem.bone_ref[on],
-                      bone_weight=problem.bone_weight[on])
-    comps = bone_components(J, problem.bone_pairs)
-    singles = np.concatenate([c for c in comps if len(c) == 1] or [np.zeros(0, np.int64)])
-    X, results = X0.copy(), []
-    for joints in [c for c in comps if len(c) > 1] + ([singles] if len(singles) else []):
-        sub = problem.joints(joints)
-        if len(sub.bone_pairs) == 0:
-            sub = sub.per_joint()
-        n = sub.inv_sigma.shape[2]
-        x0 = X0[:, joints].reshape(-1, 3 * n)
-
-        def lin(x: np.ndarray, idx: np.ndarray, sub: PoseProblem = sub, n: int = n) -> tuple:
-            """Normal equations of the problems idx at x (b, 3n)."""
-            return linearize(x.reshape(len(x), n, 3), sub.take(idx))
-
-        def cst(x: np.ndarray, idx: np.ndarray, sub: PoseProblem = sub, n: int = n) -> np.ndarray:
-            """Costs (b,) of the problems idx at x (b, 3n)."""
-            return cost(x.reshape(len(x), n, 3), sub.take(idx))
-
-        result = levenberg_marquardt(x0, lin, cst, max_iterations, xtol, ftol)
-        X[:, joints] = result.x.reshape(P, len(joints), 3)
-        results.append(result)
-    return X, results
+    pairs = problem.bone_pairs[on].reshape(-1, 2)
+    problem = replace(problem, bone_pairs=pairs, bone_ref=problem.bone_ref[on], bone_weight=problem.bone_weight[on])
+    if len(pairs) == 0:
+        model = PoseModel(PoseBatch.of(problem, per_joint=True), graph_layout(1, ()))
+        result = minimize(X0.reshape(P * J, 3), model, max_iterations, xtol, ftol)
+        return result.x.reshape(P, J, 3), [result]
+    layout = graph_layout(J, tuple(map(tuple, pairs.tolist())))
+    ordered = np.array_equal(layout.order, np.arange(J))
+    if not ordered:
+        problem = problem.joints(layout.order)
+    result = minimize(X0[:, layout.order].reshape(P, 3 * J), PoseModel(PoseBatch.of(problem), layout),
+                      max_iterations, xtol, ftol)
+    X = result.x.reshape(P, J, 3)
+    return (X if ordered else X[:, np.argsort(layout.order)]), [result]
 
 
 def output_confidence(dlt_conf: np.ndarray, poses2d: np.ndarray, placed: np.ndarray, output_min_views: int,
                       single_view_score: float, unseen_score: float) -> np.ndarray:
     """Confidence of each reconstructed joint (see the module docstring): (P, J), (V, P, J, 3), (P,) -> (P, J)."""
-    score = np.where(np.all(np.isfinite(poses2d[..., :2]), axis=-1), np.clip(poses2d[..., 2], 0, None), 0.0)
+    finite = np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
+    score = np.where(finite, np.clip(poses2d[..., 2], 0, None), 0.0)
     views = (score > 0).sum(axis=0)
     mean_score = score.sum(axis=0) / np.maximum(views, 1)
     conf = np.where(dlt_conf > 0, dlt_conf,
@@ -139,11 +275,19 @@ class MAPReconstruction:
     def problem(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
                 prior: bool) -> PoseProblem:
         """The least-squares problem of undistorted poses: (V, P, J, 3), (V, P, 4), (V, 3, 4), (P, J, 3) -> PoseProblem."""
+        return self._problem(*self._observations(poses2d_und, bboxes), proj, anchor, prior)
+
+    def _observations(self, poses2d_und: np.ndarray, bboxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (V, P, J, 2) (0 where unseen) and 1 / sigma (V, P, J) (0 where unseen) of undistorted poses."""
         sigma = joint_sigma(poses2d_und, bboxes, self.c, self.sigma_min)
-        inv_sigma = np.where(np.isfinite(sigma), 1.0 / sigma, 0.0)
+        return np.nan_to_num(poses2d_und[..., :2]), np.where(np.isfinite(sigma), 1.0 / sigma, 0.0)
+
+    def _problem(self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
+                 prior: bool) -> PoseProblem:
+        """The problem of observations (see _observations) anchored at (P, J, 3), with or without the prior."""
         weight = self.prior_weight / self.bone_std if prior else np.zeros(len(BONE_PAIRS))
-        return PoseProblem(proj, np.nan_to_num(poses2d_und[..., :2]), inv_sigma, BONE_PAIRS, self.bone_mean,
-                           weight, anchor, self.anchor_weight, self.robust, self.robust_scale)
+        return PoseProblem(proj, uv, inv_sigma, BONE_PAIRS, self.bone_mean, weight, anchor, self.anchor_weight,
+                           self.robust, self.robust_scale)
 
     def solve(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray,
               stages: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -153,12 +297,13 @@ class MAPReconstruction:
         idx = np.flatnonzero(placed)
         if len(idx) == 0:
             return X, dlt, placed
-        und, boxes = poses2d_und[:, idx], np.asarray(bboxes, dtype=np.float64)[:, idx]
+        und = poses2d_und[:, idx]
+        uv, inv_sigma = self._observations(und, np.asarray(bboxes, dtype=np.float64)[:, idx])
         Xp = X[idx]
         for k, prior in enumerate(stages):
             if k > 0:
                 Xp = reinitialise_outliers(Xp, und, proj)
-            Xp, _ = solve_poses(self.problem(und, boxes, proj, Xp, prior), Xp, self.max_iterations,
+            Xp, _ = solve_poses(self._problem(uv, inv_sigma, proj, Xp, prior), Xp, self.max_iterations,
                                 self.xtol, self.ftol)
         X = X.copy()
         X[idx] = Xp

@@ -27,14 +27,21 @@ _MIN_RAY_DEPTH_M = 0.1
 
 def _kabsch(src: np.ndarray, dst: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotations src -> dst of centred masked points, and whether each is well-posed: (P, J, 3) x 2, (P, J) -> (P, 3, 3), (P,)."""
-    cov = np.einsum("pj,pja,pjb->pab", mask.astype(float), src, dst)
+    cov = np.matmul((src * mask[..., None]).transpose(0, 2, 1), dst)
     U, S, Vt = np.linalg.svd(cov)
-    det = np.sign(np.linalg.det(np.einsum("pba,pcb->pac", Vt, U)))
-    D = np.zeros_like(cov)
-    D[:, 0, 0], D[:, 1, 1], D[:, 2, 2] = 1.0, 1.0, np.where(det == 0, 1.0, det)
-    R = np.einsum("pba,pbc,pdc->pad", Vt, D, U)
+    det = np.sign(_det3(np.matmul(U, Vt)))
+    D = np.ones((len(cov), 3))
+    D[:, 2] = np.where(det == 0, 1.0, det)
+    R = np.matmul(Vt.transpose(0, 2, 1) * D[:, None, :], U.transpose(0, 2, 1))          # V D U^T
     ok = (mask.sum(axis=1) >= FULL_FIT_MIN_JOINTS) & (S[:, 1] > 1e-3 * np.maximum(S[:, 0], 1e-12))
     return R, ok
+
+
+def _det3(M: np.ndarray) -> np.ndarray:
+    """Determinants of 3x3 matrices: (..., 3, 3) -> (...)."""
+    return (M[..., 0, 0] * (M[..., 1, 1] * M[..., 2, 2] - M[..., 1, 2] * M[..., 2, 1])
+            - M[..., 0, 1] * (M[..., 1, 0] * M[..., 2, 2] - M[..., 1, 2] * M[..., 2, 0])
+            + M[..., 0, 2] * (M[..., 1, 0] * M[..., 2, 1] - M[..., 1, 1] * M[..., 2, 0]))
 
 
 def _yaw(src: np.ndarray, dst: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -59,9 +66,10 @@ def fit_mean_body(points: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np
     c_dst = (np.where(known[..., None], points, 0.0)).sum(axis=1) / np.maximum(count, 1)[:, None]
     src = template - c_src[:, None]
     dst = np.where(known[..., None], points - c_dst[:, None], 0.0)
-    R_full, full_ok = _kabsch(src, dst, known)
-    R = np.where(full_ok[:, None, None], R_full, _yaw(src, dst, known))
-    return np.einsum("pab,pjb->pja", R, src) + c_dst[:, None], count > 0
+    R, full_ok = _kabsch(src, dst, known)
+    if not full_ok.all():
+        R = np.where(full_ok[:, None, None], R, _yaw(src, dst, known))
+    return np.matmul(src, R.transpose(0, 2, 1)) + c_dst[:, None], count > 0
 
 
 def closest_on_rays(guess: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
@@ -71,35 +79,51 @@ def closest_on_rays(guess: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) ->
     """
     M, p4 = proj[:, :, :3], proj[:, :, 3]
     Minv = np.linalg.inv(M)
-    centre = -np.einsum("vab,vb->va", Minv, p4)                                   # (V, 3)
-    score = np.where(np.all(np.isfinite(poses2d[..., :2]), axis=-1), poses2d[..., 2], 0.0)
+    centre = -np.matmul(Minv, p4[..., None])[..., 0]                              # (V, 3)
+    score = np.where(np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1]), poses2d[..., 2], 0.0)
     best = np.argmax(score, axis=0)                                               # (P, J)
     seen = np.take_along_axis(score, best[None], axis=0)[0] > 0
     uv = np.take_along_axis(np.where(score[..., None] > 0, poses2d[..., :2], 0.0), best[None, ..., None], 0)[0]
     homog = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
-    d = np.einsum("pjab,pjb->pja", Minv[best], homog)
+    d = np.matmul(Minv[best], homog[..., None])[..., 0]
     c = centre[best]
-    t = np.einsum("pja,pja->pj", guess - c, d) / np.einsum("pja,pja->pj", d, d)
+    t = _dot3(guess - c, d) / _dot3(d, d)
     # keep the point in front of the camera (depth along the ray direction, d has unit third image row)
     t = np.maximum(t, _MIN_RAY_DEPTH_M)
     return np.where(seen[..., None], c + t[..., None] * d, guess)
 
 
+def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of 3-vectors: (..., 3) x 2 -> (...)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def _in_front(points: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
     """Whether each point has positive depth in every view that sees it: (P, J, 3), (V, P, J, 3), (V, 3, 4) -> (P, J)."""
-    depth = np.einsum("vb,pjb->vpj", proj[:, 2, :3], points) + proj[:, None, None, 2, 3]
+    depth = np.matmul(proj[:, None, 2, :3], points.reshape(-1, 3).T).reshape((len(proj),) + points.shape[:2]) \
+        + proj[:, None, None, 2, 3]
     return np.all((depth > 0) | ~(poses2d[..., 2] > 0), axis=0)
+
+
+def _masked_median(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per-person median over the masked joints, 0 without any: (P, J, 3), (P, J) -> (P, 3) (np.nanmedian, sorted)."""
+    ranked = np.sort(np.where(mask[..., None], values, np.inf), axis=1)          # masked joints first
+    count = mask.sum(axis=1)[:, None, None]
+    lo = np.take_along_axis(ranked, np.maximum(count - 1, 0) // 2, axis=1)[:, 0]
+    hi = np.take_along_axis(ranked, count // 2 - (count == 0), axis=1)[:, 0]
+    return np.where(count[:, 0] > 0, 0.5 * (lo + hi), 0.0)
 
 
 def inlier_joints(points: np.ndarray, known: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
     """Known joints that are not gross outliers (see the module docstring): (P, J, 3), (P, J), ... -> (P, J)."""
     ok = known & _in_front(points, poses2d, proj)
     template = MEAN_POSE[: points.shape[1]]
-    masked = np.where(ok[..., None], points - template, np.nan)
-    offset = np.nan_to_num(np.nanmedian(np.where(np.any(ok, axis=1)[:, None, None], masked, 0.0), axis=1))
-    ok &= np.linalg.norm(points - template - offset[:, None], axis=-1) <= GROSS_OUTLIER_M
+    offset = _masked_median(points - template, ok)
+    far = points - template - offset[:, None]
+    ok &= np.sqrt(_dot3(far, far)) <= GROSS_OUTLIER_M
     body, _ = fit_mean_body(points, ok)
-    return ok & (np.linalg.norm(points - body, axis=-1) <= OUTLIER_M)
+    off = points - body
+    return ok & (np.sqrt(_dot3(off, off)) <= OUTLIER_M)
 
 
 def initial_poses(dlt: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -3,6 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from reconstruction.block_solver import inverse_3x3
+
+RQI_MIN_POINTS = 256    # from this many points the vectorised Rayleigh quotient iteration beats LAPACK eigh
+RQI_ITERATIONS = 3
+RQI_TOLERANCE = 1e-10   # accepted eigenvector error bound (sine of the angle); the rest goes to eigh
+
 
 def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -> np.ndarray:
     """Score-weighted DLT of every joint of every person at once: (V, P, J, 3) -> (P, J, 4).
@@ -19,21 +25,17 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
     if proj.shape != (V, 3, 4):
         raise ValueError(f"proj has shape {proj.shape}, expected ({V}, 3, 4) for {V} views")
     xy, score = poses2d[..., :2], np.clip(poses2d[..., 2], 0.0, None)
-    score = np.where(np.all(np.isfinite(xy), axis=-1), score, 0.0)
+    score = np.where(np.isfinite(xy[..., 0]) & np.isfinite(xy[..., 1]), score, 0.0)
     xy = np.where(score[..., None] > 0, xy, 0.0)
-
-    # rows[v, p, j, r, :] = xy_r * P[v, 2] - P[v, r] for r in (x, y)
-    rows = xy[..., :, None] * proj[:, None, None, 2:3, :] - proj[:, None, None, :2, :]
-    norms = np.linalg.norm(rows, axis=-1, keepdims=True)
-    rows = rows / np.where(norms > 0, norms, 1.0) * score[..., None, None]
-    A = rows.transpose(1, 2, 0, 3, 4).reshape(P * J, 2 * V, 4)
 
     seen = (score > 0).sum(axis=0).reshape(P * J)
     out = np.zeros((P * J, 4))
     solve = seen >= min_views
     if np.any(solve):
-        _, _, vt = np.linalg.svd(A[solve])
-        X = vt[:, -1, :]
+        # the right singular vector of the smallest singular value of the stacked rows A is the
+        # eigenvector of the smallest eigenvalue of A^T A (a 4x4 eigh is ~3x cheaper than the SVD)
+        A_tA = _normal_matrices(xy.reshape(V, P * J, 2)[:, solve], score.reshape(V, P * J)[:, solve], proj)
+        X = smallest_eigenvectors(A_tA)
         w = X[:, 3:4]
         ok = np.abs(w[:, 0]) > 1e-12
         pts = np.where(ok[:, None], X[:, :3] / np.where(ok, w[:, 0], 1.0)[:, None], 0.0)
@@ -41,6 +43,72 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
         out[solve, :3] = pts
         out[solve, 3] = np.where(ok, conf, 0.0)
     return out.reshape(P, J, 4)
+
+
+def _normal_matrices(xy: np.ndarray, score: np.ndarray, proj: np.ndarray) -> np.ndarray:
+    """A^T A of the normalised, score-weighted DLT rows of n points: (V, n, 2), (V, n), (V, 3, 4) -> (n, 4, 4).
+
+    Row r (x or y) of view v is a = (u_r P_3 - P_r) s / |u_r P_3 - P_r|; a a^T = u_r^2 P_3 P_3^T -
+    u_r (P_3 P_r^T + P_r P_3^T) + P_r P_r^T, so A^T A is 5 coefficients per view against constant
+    matrices: one matrix product for all points.
+    """
+    V, n, _ = xy.shape
+    u = np.moveaxis(xy, -1, 0)                                                          # (2, V, n)
+    P3, Pr = proj[:, 2], proj[:, :2].transpose(1, 0, 2)                                 # (V, 4), (2, V, 4)
+    norm2 = u * u * (P3 * P3).sum(-1)[:, None] - 2.0 * u * (Pr * P3).sum(-1)[..., None] \
+        + (Pr * Pr).sum(-1)[..., None]
+    weight = score * score / np.where(norm2 > 0, norm2, 1.0)
+    wu = weight * u
+    coef = np.concatenate([weight, -wu, (wu * u).sum(axis=0, keepdims=True)])            # (5, V, n)
+    outer = lambda a, b: (a[..., :, None] * b[..., None, :]).reshape(V, 16)  # noqa: E731
+    mats = np.stack([outer(Pr[0], Pr[0]), outer(Pr[1], Pr[1]), outer(P3, Pr[0]) + outer(Pr[0], P3),
+                     outer(P3, Pr[1]) + outer(Pr[1], P3), outer(P3, P3)])                  # (5, V, 16)
+    return (coef.reshape(5 * V, n).T @ mats.reshape(5 * V, 16)).reshape(n, 4, 4)
+
+
+def smallest_eigenvectors(N: np.ndarray) -> np.ndarray:
+    """Unit eigenvectors of the smallest eigenvalues of symmetric PSD 4x4 matrices: (n, 4, 4) -> (n, 4).
+
+    LAPACK eigh costs ~2 us per matrix; for many matrices a vectorised Rayleigh quotient iteration
+    runs first and eigh only redoes the matrices it cannot certify (see :func:`_rayleigh_quotient`).
+    """
+    if len(N) < RQI_MIN_POINTS:
+        return np.linalg.eigh(N)[1][..., 0]
+    v, ok = _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE)
+    if not ok.all():
+        v[~ok] = np.linalg.eigh(N[~ok])[1][..., 0]
+    return v
+
+
+def _rayleigh_quotient(N: np.ndarray, iterations: int, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rayleigh quotient iteration for the smallest eigenpair of (n, 4, 4) matrices -> v (n, 4), certified (n,).
+
+    With N = [[B, c], [c^T, d]], each step solves (N - rho I) z = v by the Schur complement of the 3x3
+    block B - rho I, from v_0 = [-B^-1 c, 1] (the inhomogeneous least-squares point). Certificate: by
+    Cauchy interlacing lambda_2(N) >= lambda_min(B) >= 1 / tr(B^-1), so with rho = v^T N v below that
+    bound and residual |N v - rho v| <= tol (1 / tr(B^-1) - rho), v is the smallest eigenvector to
+    within an angle of tol (Davis-Kahan).
+    """
+    Nt = N.transpose(1, 2, 0)                                                            # (4, 4, n)
+    B, c, d = Nt[:3, :3], Nt[:3, 3], Nt[3, 3]
+    B_inv, pd = inverse_3x3(B)
+    v = np.concatenate([-np.einsum("ijn,jn->in", B_inv, c), np.ones((1, len(N)))])
+    v /= np.sqrt((v * v).sum(axis=0))
+    eye = np.eye(3)[..., None]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for _ in range(iterations):
+            rho = np.einsum("in,ijn,jn->n", v, Nt, v)
+            C_inv, _ = inverse_3x3(B - rho * eye, check=False)
+            Cc, Cv = np.einsum("ijn,jn->in", C_inv, c), np.einsum("ijn,jn->in", C_inv, v[:3])
+            z_w = (v[3] - (c * Cv).sum(axis=0)) / (d - rho - (c * Cc).sum(axis=0))
+            z = np.concatenate([Cv - Cc * z_w, z_w[None]])
+            z /= np.sqrt((z * z).sum(axis=0)) * np.where(z[3] < 0, -1.0, 1.0)
+            v = np.where(np.isfinite(z).all(axis=0), z, v)
+        Nv = np.einsum("ijn,jn->in", Nt, v)
+        rho = (v * Nv).sum(axis=0)
+        gap = 1.0 / (B_inv[0, 0] + B_inv[1, 1] + B_inv[2, 2]) - rho
+        ok = pd & (gap > 0) & (np.sqrt(((Nv - rho * v) ** 2).sum(axis=0)) <= tol * gap)
+    return v.T, ok
 
 
 def reprojection_error(points3d: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
