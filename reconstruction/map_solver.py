@@ -42,12 +42,14 @@ from scipy.sparse.csgraph import connected_components
 from data.bone_lengths import BONE_PAIRS, resolve_bone_table
 from reconstruction.camera import Rig
 from reconstruction.block_solver import EliminationPlan, elimination_plan, solve_blocks, solve_dense
+from reconstruction.compiled_solver import solve_poses_compiled
 from reconstruction.lm_solver import LMResult, minimize
 from reconstruction.map_estimation import (BLOCK_DIAG, ROBUST_LOSSES, Blocks, PoseBatch, PoseProblem, joint_sigma,
                                           linear_blocks)
 from reconstruction.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.triangulation import triangulate_dlt
 
+SOLVERS = ("compiled", "numpy")
 DENSE_MAX_UNITS = 16  # from this many persons the block elimination beats one dense LAPACK solve per person
 
 
@@ -243,15 +245,18 @@ class MAPReconstruction:
     residual, 0 = plain MLE); bone_table (None = data/bone_lengths.py defaults, a JSON path or a
     {"bones": {name: {mean, std}}} mapping); robust ("none", "huber", "cauchy") and robust_scale (in
     sigma units) on the likelihood; anchor_weight (Tikhonov tau, 1/m); max_iterations, xtol (m),
-    ftol (relative) of the solver; min_views (DLT); output_min_views, single_view_score, unseen_score
-    (output confidence).
+    ftol (relative) of the solver; solver ("compiled": numba kernels, reconstruction/compiled_solver.py;
+    "numpy": the batched numpy solver, same optimum, kept as the reference); min_views (DLT);
+    output_min_views, single_view_score, unseen_score (output confidence).
     """
 
     def __init__(self, c: float = 0.02, sigma_min: float = 1.0, prior_weight: float = 1.0,
                  bone_table: str | Path | Mapping | None = None, robust: str = "none", robust_scale: float = 3.0,
                  anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
                  min_views: int = 2, output_min_views: int = 0, single_view_score: float = 0.5,
-                 unseen_score: float = 0.1, mle_first: bool = False) -> None:
+                 unseen_score: float = 0.1, mle_first: bool = False, solver: str = "compiled") -> None:
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         if robust not in ROBUST_LOSSES:
             raise ValueError(f"robust must be one of {ROBUST_LOSSES}, got {robust!r}")
         for key, value in (("robust_scale", robust_scale), ("max_iterations", max_iterations)):
@@ -271,6 +276,7 @@ class MAPReconstruction:
         self.min_views, self.output_min_views = int(min_views), int(output_min_views)
         self.single_view_score, self.unseen_score = float(single_view_score), float(unseen_score)
         self.mle_first = bool(mle_first)
+        self.solver = solver
 
     def problem(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
                 prior: bool) -> PoseProblem:
@@ -303,8 +309,8 @@ class MAPReconstruction:
         for k, prior in enumerate(stages):
             if k > 0:
                 Xp = reinitialise_outliers(Xp, und, proj)
-            Xp, _ = solve_poses(self._problem(uv, inv_sigma, proj, Xp, prior), Xp, self.max_iterations,
-                                self.xtol, self.ftol)
+            solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
+            Xp, _ = solve_fn(self._problem(uv, inv_sigma, proj, Xp, prior), Xp, self.max_iterations, self.xtol, self.ftol)
         X = X.copy()
         X[idx] = Xp
         return X, dlt, placed
@@ -340,11 +346,11 @@ class MLEReconstruction(MAPReconstruction):
     def __init__(self, c: float = 0.02, sigma_min: float = 1.0, robust: str = "none", robust_scale: float = 3.0,
                  anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
                  min_views: int = 2, output_min_views: int = 2, single_view_score: float = 0.5,
-                 unseen_score: float = 0.1) -> None:
+                 unseen_score: float = 0.1, solver: str = "compiled") -> None:
         super().__init__(c=c, sigma_min=sigma_min, prior_weight=0.0, robust=robust, robust_scale=robust_scale,
                          anchor_weight=anchor_weight, max_iterations=max_iterations, xtol=xtol, ftol=ftol,
                          min_views=min_views, output_min_views=output_min_views,
-                         single_view_score=single_view_score, unseen_score=unseen_score)
+                         single_view_score=single_view_score, unseen_score=unseen_score, solver=solver)
 
     def stages(self) -> tuple[bool, ...]:
         """One solve without the prior."""

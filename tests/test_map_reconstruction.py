@@ -16,7 +16,9 @@ from data.synthetic.observe import bbox_from_keypoints
 from data.synthetic.rigs import ring_rig
 from reconstruction import map_estimation as me
 from reconstruction import map_solver
+from reconstruction import pose_kernels
 from reconstruction.block_solver import _assemble, elimination_plan, inverse_3x3, solve_blocks, solve_dense
+from reconstruction.compiled_solver import solve_poses_compiled, solver_plan
 from reconstruction.lm_solver import levenberg_marquardt
 from reconstruction.map_solver import (MAPReconstruction, MLEMAPReconstruction, MLEReconstruction,
                                        bone_components, solve_poses)
@@ -174,15 +176,17 @@ def _scipy_optimum(problem: me.PoseProblem, X0: np.ndarray, loss: str = "linear"
 
 
 @pytest.mark.parametrize("prior,robust,linear,bones", [
-    (1.0, "none", "dense", "all"), (1.0, "none", "blocks", "all"), (0.0, "none", "dense", "all"),
-    (0.0, "huber", "dense", "all"), (0.0, "huber", "blocks", "all"), (1.0, "none", "dense", "arms"),
-    (1.0, "none", "blocks", "arms")])
+    (1.0, "none", "dense", "all"), (1.0, "none", "blocks", "all"), (1.0, "none", "compiled", "all"),
+    (0.0, "none", "dense", "all"), (0.0, "none", "compiled", "all"), (0.0, "huber", "dense", "all"),
+    (0.0, "huber", "blocks", "all"), (0.0, "huber", "compiled", "all"), (1.0, "none", "dense", "arms"),
+    (1.0, "none", "blocks", "arms"), (1.0, "none", "compiled", "arms")])
 def test_batched_solver_reaches_the_scipy_trf_optimum(prior, robust, linear, bones, monkeypatch):
     """Same residual function, per-person scipy TRF with a numerical Jacobian, both tightly converged.
 
     Without the prior a joint seen in one view has its depth fixed only by the 1e-3 anchor, a cost
     change of ~1e-12 per mm, below scipy's tolerances; there only the costs are compared. linear:
-    the damped systems solved densely (LAPACK) or by the block elimination of many-person batches.
+    the numpy solver's damped systems solved densely (LAPACK) or by the block elimination of
+    many-person batches, or the compiled solver (numba, block Cholesky).
     bones "arms": only the arm and left-foot bones (components interleaved with bone-free joints).
     """
     monkeypatch.setattr(map_solver, "DENSE_MAX_UNITS", 100 if linear == "dense" else 0)
@@ -204,12 +208,53 @@ def test_batched_solver_reaches_the_scipy_trf_optimum(prior, robust, linear, bon
                                             "left_ankle_heel", "left_ankle_big_toe", "left_toes", "left_heel_big_toe"])
         problem = replace(problem, bone_weight=problem.bone_weight * on)
         boned = np.isin(np.arange(23), BONE_PAIRS[on])
-    ours, _ = solve_poses(problem, X0, max_iterations=300, xtol=1e-12, ftol=0.0)
+    solve = solve_poses_compiled if linear == "compiled" else solve_poses
+    ours, _ = solve(problem, X0, max_iterations=300, xtol=1e-12, ftol=0.0)
     theirs = _scipy_optimum(problem, X0, "linear" if robust == "none" else robust)
     np.testing.assert_array_less(me.cost(ours, problem), me.cost(theirs, problem) * (1 + 1e-9) + 1e-9)
     determined = (poses2d[..., 2] > 0).sum(axis=0) >= np.where(boned & (prior > 0), 1, 2)
     assert determined.sum() > 50 and (~determined).sum() >= (0 if prior > 0 else 5)
     np.testing.assert_allclose(ours[determined], theirs[determined], atol=1e-4)
+
+
+def test_compiled_and_numpy_solvers_agree_on_a_noisy_crowd():
+    """Same problems, damping and stopping rules: the same iterates up to rounding, with the default tolerances."""
+    seq = generate_sequence(SyntheticConfig(seed=3, num_frames=1, num_persons=25, density=0.5, num_cameras=6,
+                                            noise_px=5.0))
+    frame = seq.frames[0]
+    poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig))
+    outs = [MLEMAPReconstruction(solver=s, robust="huber")(poses2d, boxes, seq.rig) for s in ("compiled", "numpy")]
+    np.testing.assert_allclose(outs[0], outs[1], atol=1e-6)
+    with pytest.raises(ValueError, match="solver"):
+        MAPReconstruction(solver="fortran")
+
+
+@pytest.mark.parametrize("graph", ["coco", "cycles"])
+def test_compiled_block_cholesky_matches_numpy_and_detects_indefinite_systems(graph):
+    edges = np.asarray(BONE_PAIRS if graph == "coco" else [[0, 1], [1, 2], [2, 3], [3, 0], [0, 2], [4, 5], [5, 6],
+                                                            [6, 4], [7, 8], [8, 9], [9, 7], [1, 3]])
+    J = 23 if graph == "coco" else 11
+    diag, off, rhs, damping, A = _block_system(edges, J, 9, seed=2, shift=6.0)
+    plan = solver_plan(J, tuple(map(tuple, edges.tolist())))
+    definite = np.linalg.eigvalsh(A).min(axis=1) > 0
+    assert 0 < definite.sum() < 9
+    pos = plan.pos_joint
+    for b in range(9):
+        D = (diag[:, :, pos, b] + damping[pos, b] * np.eye(3)[..., None]).transpose(2, 0, 1).copy()
+        K = -off[..., b].transpose(2, 0, 1).copy()              # solve_component puts -K off the diagonal
+        g = -rhs[:, pos, b].T.copy()
+        h = np.zeros((J, 3))
+        B = np.empty((plan.slot.max() + 1, 3, 3))
+        ok = all(pose_kernels.solve_component(
+            int(plan.comp_start[c]), int(plan.comp_start[c + 1]), D, K, np.zeros_like(K), g, 0.0, False,
+            plan.comp_bones[plan.comp_bones_ptr[c]:plan.comp_bones_ptr[c + 1]], plan.bone_pa, plan.bone_pb,
+            plan.bone_slot, plan.slot, plan.comp_slots[plan.comp_slots_ptr[c]:plan.comp_slots_ptr[c + 1]],
+            plan.later_ptr, plan.later_idx, B, h) for c in range(len(plan.comp_start) - 1))
+        assert ok == definite[b]
+        if ok:
+            x = np.zeros((J, 3))
+            x[pos] = h
+            np.testing.assert_allclose(x.ravel(), np.linalg.solve(A[b], rhs[:, :, b].T.ravel()), atol=1e-10)
 
 
 def test_bone_graph_splits_into_face_and_body():
