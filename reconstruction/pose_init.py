@@ -12,10 +12,13 @@ to the point of that view's ray (the best-scored view's) closest to the body gue
 consistent with its observation. The rotation is a full 3D Kabsch fit when at least
 ``FULL_FIT_MIN_JOINTS`` non-collinear joints are known, else a rotation about the vertical z axis only
 (DESIGN.md: world z up; people in a crowd stand upright), else none.
+
+The per-person work runs in compiled (numba) loops: a frame of a few persons costs microseconds.
 """
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from data.bone_lengths import MEAN_POSE
 
@@ -25,117 +28,180 @@ OUTLIER_M = 0.75        # from the fitted body: beyond a walking stride or a rai
 _MIN_RAY_DEPTH_M = 0.1
 
 
-def _kabsch(src: np.ndarray, dst: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotations src -> dst of centred masked points, and whether each is well-posed: (P, J, 3) x 2, (P, J) -> (P, 3, 3), (P,)."""
-    cov = np.matmul((src * mask[..., None]).transpose(0, 2, 1), dst)
-    U, S, Vt = np.linalg.svd(cov)
-    det = np.sign(_det3(np.matmul(U, Vt)))
-    D = np.ones((len(cov), 3))
-    D[:, 2] = np.where(det == 0, 1.0, det)
-    R = np.matmul(Vt.transpose(0, 2, 1) * D[:, None, :], U.transpose(0, 2, 1))          # V D U^T
-    ok = (mask.sum(axis=1) >= FULL_FIT_MIN_JOINTS) & (S[:, 1] > 1e-3 * np.maximum(S[:, 0], 1e-12))
-    return R, ok
+@njit(cache=True)
+def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray) -> bool:
+    """The template aligned to the known joints of one person (rotation + translation) into out (J, 3): placed."""
+    J = len(points)
+    count = 0
+    c_src, c_dst = np.zeros(3), np.zeros(3)
+    for j in range(J):
+        if known[j]:
+            count += 1
+            for i in range(3):
+                c_src[i] += template[j, i]
+                c_dst[i] += points[j, i]
+    c_src /= max(count, 1)
+    c_dst /= max(count, 1)
+    cov = np.zeros((3, 3))
+    cross, dot = 0.0, 0.0
+    for j in range(J):
+        if known[j]:
+            s0, s1, s2 = template[j, 0] - c_src[0], template[j, 1] - c_src[1], template[j, 2] - c_src[2]
+            d0, d1, d2 = points[j, 0] - c_dst[0], points[j, 1] - c_dst[1], points[j, 2] - c_dst[2]
+            cov[0, 0] += s0 * d0
+            cov[0, 1] += s0 * d1
+            cov[0, 2] += s0 * d2
+            cov[1, 0] += s1 * d0
+            cov[1, 1] += s1 * d1
+            cov[1, 2] += s1 * d2
+            cov[2, 0] += s2 * d0
+            cov[2, 1] += s2 * d1
+            cov[2, 2] += s2 * d2
+            cross += s0 * d1 - s1 * d0
+            dot += s0 * d0 + s1 * d1
+    R = np.eye(3)
+    full = False
+    if count >= FULL_FIT_MIN_JOINTS:
+        U, S, Vt = np.linalg.svd(cov)
+        full = S[1] > 1e-3 * max(S[0], 1e-12)
+    if full:                                                                # Kabsch: R = V diag(1, 1, det) U^T
+        det = np.sign(np.linalg.det(U @ Vt))
+        V = Vt.T.copy()
+        V[:, 2] *= det if det != 0.0 else 1.0
+        R = V @ U.T
+    else:                                                                   # rotation about z only
+        angle = np.arctan2(cross, dot)
+        R[0, 0], R[0, 1], R[1, 0], R[1, 1] = np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle)
+    for j in range(J):
+        s0, s1, s2 = template[j, 0] - c_src[0], template[j, 1] - c_src[1], template[j, 2] - c_src[2]
+        for i in range(3):
+            out[j, i] = R[i, 0] * s0 + R[i, 1] * s1 + R[i, 2] * s2 + c_dst[i]
+    return count > 0
 
 
-def _det3(M: np.ndarray) -> np.ndarray:
-    """Determinants of 3x3 matrices: (..., 3, 3) -> (...)."""
-    return (M[..., 0, 0] * (M[..., 1, 1] * M[..., 2, 2] - M[..., 1, 2] * M[..., 2, 1])
-            - M[..., 0, 1] * (M[..., 1, 0] * M[..., 2, 2] - M[..., 1, 2] * M[..., 2, 0])
-            + M[..., 0, 2] * (M[..., 1, 0] * M[..., 2, 1] - M[..., 1, 1] * M[..., 2, 0]))
+@njit(cache=True)
+def _fit_bodies(points: np.ndarray, known: np.ndarray, template: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """_fit_one of every person: (P, J, 3), (P, J) -> bodies (P, J, 3), placed (P,)."""
+    P = len(points)
+    out, placed = np.empty(points.shape), np.zeros(P, dtype=np.bool_)
+    for p in range(P):
+        placed[p] = _fit_one(points[p], known[p], template, out[p])
+    return out, placed
 
 
-def _yaw(src: np.ndarray, dst: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Rotations about z aligning centred masked points in the ground plane: (P, J, 3) x 2, (P, J) -> (P, 3, 3)."""
-    m = mask.astype(float)
-    cross = np.sum(m * (src[..., 0] * dst[..., 1] - src[..., 1] * dst[..., 0]), axis=1)
-    dot = np.sum(m * (src[..., 0] * dst[..., 0] + src[..., 1] * dst[..., 1]), axis=1)
-    angle = np.arctan2(cross, dot)
-    c, s = np.cos(angle), np.sin(angle)
-    R = np.zeros((len(angle), 3, 3))
-    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
-    return R
+@njit(cache=True)
+def _masked_median(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Median over the masked rows of each column, 0 without any: (J, 3), (J,) -> (3,)."""
+    out = np.zeros(3)
+    n = mask.sum()
+    if n:
+        column = np.empty(n)
+        for i in range(3):
+            k = 0
+            for j in range(len(mask)):
+                if mask[j]:
+                    column[k] = values[j, i]
+                    k += 1
+            out[i] = np.median(column)
+    return out
+
+
+@njit(cache=True)
+def _distance(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """|a - b - c| of 3-vectors."""
+    d0, d1, d2 = a[0] - b[0] - c[0], a[1] - b[1] - c[1], a[2] - b[2] - c[2]
+    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@njit(cache=True)
+def _inliers(points: np.ndarray, known: np.ndarray, score: np.ndarray, proj: np.ndarray,
+             template: np.ndarray) -> np.ndarray:
+    """Known joints that are not gross outliers (module docstring): (P, J, 3), (P, J), (V, P, J), (V, 3, 4) -> (P, J)."""
+    P, J = known.shape
+    ok = known.copy()
+    zero = np.zeros(3)
+    for p in range(P):
+        for j in range(J):
+            X = points[p, j]
+            for v in range(len(proj)):
+                depth = proj[v, 2, 0] * X[0] + proj[v, 2, 1] * X[1] + proj[v, 2, 2] * X[2] + proj[v, 2, 3]
+                if score[v, p, j] > 0 and not depth > 0:
+                    ok[p, j] = False
+        offset = _masked_median(points[p] - template, ok[p])
+        for j in range(J):
+            if _distance(points[p, j], template[j], offset) > GROSS_OUTLIER_M:
+                ok[p, j] = False
+    bodies, _ = _fit_bodies(points, ok, template)
+    for p in range(P):
+        for j in range(J):
+            if _distance(points[p, j], bodies[p, j], zero) > OUTLIER_M:
+                ok[p, j] = False
+    return ok
+
+
+@njit(cache=True)
+def _onto_rays(guess: np.ndarray, xy: np.ndarray, score: np.ndarray, Minv: np.ndarray,
+               centre: np.ndarray) -> np.ndarray:
+    """Point of the best-scored view's ray closest to each guess (P, J, 3); unseen joints keep theirs."""
+    out = guess.copy()
+    P, J = guess.shape[:2]
+    for p in range(P):
+        for j in range(J):
+            best = np.argmax(score[:, p, j])
+            if not score[best, p, j] > 0:
+                continue
+            u, w = xy[best, p, j, 0], xy[best, p, j, 1]
+            M, c, g = Minv[best], centre[best], guess[p, j]
+            d0 = M[0, 0] * u + M[0, 1] * w + M[0, 2]
+            d1 = M[1, 0] * u + M[1, 1] * w + M[1, 2]
+            d2 = M[2, 0] * u + M[2, 1] * w + M[2, 2]
+            t = ((g[0] - c[0]) * d0 + (g[1] - c[1]) * d1 + (g[2] - c[2]) * d2) / (d0 * d0 + d1 * d1 + d2 * d2)
+            t = max(t, _MIN_RAY_DEPTH_M)                                       # in front of the camera
+            out[p, j, 0], out[p, j, 1], out[p, j, 2] = c[0] + t * d0, c[1] + t * d1, c[2] + t * d2
+    return out
+
+
+def _views(poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Contiguous pixels (V, P, J, 2), scores (V, P, J) (0 where not finite), M^-1 (V, 3, 3), centres (V, 3)."""
+    poses2d = np.asarray(poses2d, dtype=np.float64)
+    score = np.where(np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1]), poses2d[..., 2], 0.0)
+    Minv = np.linalg.inv(proj[:, :, :3])
+    centre = -np.matmul(Minv, proj[:, :, 3:])[..., 0]
+    return np.ascontiguousarray(poses2d[..., :2]), np.ascontiguousarray(score), Minv, centre
+
+
+def inlier_joints(points: np.ndarray, known: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
+    """Known joints that are not gross outliers (see the module docstring): (P, J, 3), (P, J), (V, P, J, 3), (V, 3, 4) -> (P, J)."""
+    _, score, _, _ = _views(poses2d, proj)
+    return _inliers(np.ascontiguousarray(points, dtype=np.float64), np.asarray(known, dtype=bool), score,
+                    np.asarray(proj, dtype=np.float64), MEAN_POSE[: points.shape[1]])
 
 
 def fit_mean_body(points: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The mean body aligned to each person's known joints: (P, J, 3), (P, J) bool -> (P, J, 3), placed (P,)."""
-    P, J, _ = points.shape
-    template = np.broadcast_to(MEAN_POSE[:J], (P, J, 3))
-    count = known.sum(axis=1)
-    m = known[..., None].astype(float)
-    c_src = (template * m).sum(axis=1) / np.maximum(count, 1)[:, None]
-    c_dst = (np.where(known[..., None], points, 0.0)).sum(axis=1) / np.maximum(count, 1)[:, None]
-    src = template - c_src[:, None]
-    dst = np.where(known[..., None], points - c_dst[:, None], 0.0)
-    R, full_ok = _kabsch(src, dst, known)
-    if not full_ok.all():
-        R = np.where(full_ok[:, None, None], R, _yaw(src, dst, known))
-    return np.matmul(src, R.transpose(0, 2, 1)) + c_dst[:, None], count > 0
+    return _fit_bodies(np.ascontiguousarray(points, dtype=np.float64), np.asarray(known, dtype=bool),
+                       MEAN_POSE[: points.shape[1]])
 
 
-def closest_on_rays(guess: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """Point of the best-scored view's ray closest to each guess: (P, J, 3), (V, P, J, 3), (V, 3, 4) -> (P, J, 3).
-
-    poses2d are undistorted pixels + score; joints seen in no view keep their guess.
-    """
-    M, p4 = proj[:, :, :3], proj[:, :, 3]
-    Minv = np.linalg.inv(M)
-    centre = -np.matmul(Minv, p4[..., None])[..., 0]                              # (V, 3)
-    score = np.where(np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1]), poses2d[..., 2], 0.0)
-    best = np.argmax(score, axis=0)                                               # (P, J)
-    seen = np.take_along_axis(score, best[None], axis=0)[0] > 0
-    uv = np.take_along_axis(np.where(score[..., None] > 0, poses2d[..., :2], 0.0), best[None, ..., None], 0)[0]
-    homog = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
-    d = np.matmul(Minv[best], homog[..., None])[..., 0]
-    c = centre[best]
-    t = _dot3(guess - c, d) / _dot3(d, d)
-    # keep the point in front of the camera (depth along the ray direction, d has unit third image row)
-    t = np.maximum(t, _MIN_RAY_DEPTH_M)
-    return np.where(seen[..., None], c + t[..., None] * d, guess)
-
-
-def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Dot products of 3-vectors: (..., 3) x 2 -> (...)."""
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
-
-
-def _in_front(points: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """Whether each point has positive depth in every view that sees it: (P, J, 3), (V, P, J, 3), (V, 3, 4) -> (P, J)."""
-    depth = np.matmul(proj[:, None, 2, :3], points.reshape(-1, 3).T).reshape((len(proj),) + points.shape[:2]) \
-        + proj[:, None, None, 2, 3]
-    return np.all((depth > 0) | ~(poses2d[..., 2] > 0), axis=0)
-
-
-def _masked_median(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Per-person median over the masked joints, 0 without any: (P, J, 3), (P, J) -> (P, 3) (np.nanmedian, sorted)."""
-    ranked = np.sort(np.where(mask[..., None], values, np.inf), axis=1)          # masked joints first
-    count = mask.sum(axis=1)[:, None, None]
-    lo = np.take_along_axis(ranked, np.maximum(count - 1, 0) // 2, axis=1)[:, 0]
-    hi = np.take_along_axis(ranked, count // 2 - (count == 0), axis=1)[:, 0]
-    return np.where(count[:, 0] > 0, 0.5 * (lo + hi), 0.0)
-
-
-def inlier_joints(points: np.ndarray, known: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """Known joints that are not gross outliers (see the module docstring): (P, J, 3), (P, J), ... -> (P, J)."""
-    ok = known & _in_front(points, poses2d, proj)
+def _start(points: np.ndarray, known: np.ndarray, poses2d: np.ndarray, proj: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Inliers of points kept, every other joint from the fitted body moved onto its ray -> (P, J, 3), placed (P,)."""
+    xy, score, Minv, centre = _views(poses2d, proj)
+    points = np.ascontiguousarray(points, dtype=np.float64)
     template = MEAN_POSE[: points.shape[1]]
-    offset = _masked_median(points - template, ok)
-    far = points - template - offset[:, None]
-    ok &= np.sqrt(_dot3(far, far)) <= GROSS_OUTLIER_M
-    body, _ = fit_mean_body(points, ok)
-    off = points - body
-    return ok & (np.sqrt(_dot3(off, off)) <= OUTLIER_M)
+    inl = _inliers(points, np.asarray(known, dtype=bool), score, np.asarray(proj, dtype=np.float64), template)
+    body, placed = _fit_bodies(points, inl, template)
+    return np.where(inl[..., None], points, _onto_rays(body, xy, score, Minv, centre)), placed
 
 
 def initial_poses(dlt: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Start poses from the DLT and the fitted mean body: (P, J, 4), (V, P, J, 3), (V, 3, 4) -> (P, J, 3), placed (P,).
 
-    placed is False for a person without any usable triangulated joint (nothing to anchor the body to).
+    poses2d are undistorted pixels + score. placed is False for a person without any usable
+    triangulated joint (nothing to anchor the body to).
     """
     dlt = np.asarray(dlt, dtype=np.float64)
-    known = inlier_joints(dlt[..., :3], dlt[..., 3] > 0, poses2d, proj)
-    body, placed = fit_mean_body(dlt[..., :3], known)
-    guess = closest_on_rays(body, poses2d, proj)
-    return np.where(known[..., None], dlt[..., :3], guess), placed
+    return _start(dlt[..., :3], dlt[..., 3] > 0, poses2d, proj)
 
 
 def reinitialise_outliers(X: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
@@ -145,7 +211,4 @@ def reinitialise_outliers(X: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) 
     Used between the MLE and MAP stages: the MLE keeps a joint seen along nearly parallel rays where
     its likelihood alone puts it, possibly metres away, and the MAP would start far outside its basin.
     """
-    seen = np.any(poses2d[..., 2] > 0, axis=0)
-    known = inlier_joints(X, seen, poses2d, proj)
-    body, _ = fit_mean_body(X, known)
-    return np.where(known[..., None], X, closest_on_rays(body, poses2d, proj))
+    return _start(X, np.any(np.asarray(poses2d)[..., 2] > 0, axis=0), poses2d, proj)[0]

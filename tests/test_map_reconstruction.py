@@ -441,3 +441,25 @@ def test_outliers_of_a_solved_pose_are_reset_onto_their_ray_near_the_body():
     keep[0, wrist] = False
     np.testing.assert_array_equal(out[keep], solved[keep])
     assert solved[0, wrist, 0] == X[0, wrist, 0] + 3.0            # the input is not modified
+
+
+def test_mean_body_fit_is_the_scipy_kabsch_rotation_and_falls_back_to_yaw():
+    from scipy.spatial.transform import Rotation
+    from reconstruction.pose_init import fit_mean_body
+    rng = np.random.default_rng(5)
+    mean = np.array(MEAN_POSE)                                        # a writable copy for scipy
+    R_true = Rotation.from_euler("zyx", [40, 8, -5], degrees=True)
+    pts = R_true.apply(mean) + [1.0, -2.0, 0.1] + rng.normal(0, 0.02, MEAN_POSE.shape)
+    known = rng.random(23) < 0.7
+    body, placed = fit_mean_body(pts[None], known[None])
+    src, dst = mean[known] - mean[known].mean(0), pts[known] - pts[known].mean(0)
+    R_ref, _ = Rotation.align_vectors(dst, src)
+    np.testing.assert_allclose(body[0], R_ref.apply(mean - mean[known].mean(0)) + pts[known].mean(0),
+                               atol=1e-9)
+    assert placed[0]
+    few = np.zeros(23, dtype=bool)
+    few[[15, 16]] = True                                              # two ankles: a rotation about z only
+    body, placed = fit_mean_body(pts[None], few[None])
+    assert placed[0] and np.allclose(body[0, 15:17, 2] - MEAN_POSE[15:17, 2], body[0, 15, 2] - MEAN_POSE[15, 2])
+    _, placed = fit_mean_body(pts[None], np.zeros((1, 23), dtype=bool))
+    assert not placed[0]
