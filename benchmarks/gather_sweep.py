@@ -1,6 +1,7 @@
-"""One markdown table of a Hydra multirun: ``python -m benchmarks.gather_sweep DIR [--out T.md] [--metrics a,b]``.
+"""One markdown table of Hydra multiruns: ``python -m benchmarks.gather_sweep DIR [DIR ...] [--out T.md] [--metrics a,b]``.
 
-Run from the repository root. Every ``<sweep dir>/*/metrics.json`` (written by eval.py) is one row; the
+Run from the repository root. Every ``<sweep dir>/*/metrics.json`` (written by eval.py) is one row, of
+one or several sweep directories (e.g. a stage sweep and a prior-weight sweep in one table); the
 columns are the overrides that differ between runs (from ``<run>/.hydra/overrides.yaml``), then the chosen
 metrics. A metric is a key of metrics.json's "metrics", or ``<stage>_ms``: the stage's time from
 "timings_s" per frame (frames = ``dataset.num_frames`` of ``<run>/.hydra/config.yaml``) in milliseconds.
@@ -26,8 +27,13 @@ METRIC_COLUMNS = {
     "matching_recovered_share": ("persons recovered (%)", 100.0, ".1f"),
     "mpjpe_mm": ("MPJPE (mm)", 1.0, ".1f"),
     "pcp_average": ("PCP (%)", 1.0, ".1f"),
+    "reprojection_mean_px": ("reproj. mean (px)", 1.0, ".2f"),
+    "reprojection_min_px": ("reproj. min (px)", 1.0, ".3f"),
+    "reprojection_max_px": ("reproj. max (px)", 1.0, ".1f"),
+    "reprojection_var_px2": ("reproj. var (px^2)", 1.0, ".1f"),
 }
-DEFAULT_METRICS = [*METRIC_COLUMNS, "matching_ms"]
+DEFAULT_METRICS = ["matching_precision", "matching_recall", "matching_recovered_share", "mpjpe_mm", "pcp_average",
+                   "matching_ms"]
 
 
 @dataclass
@@ -91,11 +97,13 @@ def metric_header(name: str) -> str:
     return f"{name[:-3]} ms/frame" if name.endswith("_ms") else name
 
 
-def sweep_table(sweep_dir: Path, metrics: Sequence[str] = DEFAULT_METRICS) -> tuple[list[str], list[list[str]]]:
-    """Headers and rows (one per run, sorted by the swept keys) of a sweep directory."""
-    runs = [load_run(p.parent) for p in sorted(Path(sweep_dir).glob("*/metrics.json"))]
+def sweep_table(sweep_dirs: Path | Sequence[Path], metrics: Sequence[str] = DEFAULT_METRICS
+                ) -> tuple[list[str], list[list[str]]]:
+    """Headers and rows (one per run, sorted by the swept keys) of one or several sweep directories."""
+    dirs = [Path(sweep_dirs)] if isinstance(sweep_dirs, (str, Path)) else [Path(d) for d in sweep_dirs]
+    runs = [load_run(p.parent) for d in dirs for p in sorted(d.glob("*/metrics.json"))]
     if not runs:
-        raise SystemExit(f"error: no */metrics.json under {sweep_dir}")
+        raise SystemExit(f"error: no */metrics.json under {', '.join(map(str, dirs))}")
     keys = swept_keys(runs)
     runs.sort(key=lambda r: ([_sort_value(r.overrides.get(k, "")) for k in keys], r.name))
     rows = [[r.overrides.get(k, "") for k in keys] + [metric_cell(r, m) for m in metrics] for r in runs]
@@ -105,7 +113,7 @@ def sweep_table(sweep_dir: Path, metrics: Sequence[str] = DEFAULT_METRICS) -> tu
 def main(argv: Sequence[str] | None = None) -> str:
     """Print (and with --out write) the table of a sweep directory; return it."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("sweep_dir", type=Path, help="a Hydra multirun folder (hydra.sweep.dir)")
+    parser.add_argument("sweep_dir", type=Path, nargs="+", help="Hydra multirun folders (hydra.sweep.dir)")
     parser.add_argument("--out", type=Path, help="also write the table to this markdown file")
     parser.add_argument("--metrics", default=",".join(DEFAULT_METRICS),
                         help="comma-separated metrics.json keys or <stage>_ms (default: %(default)s)")

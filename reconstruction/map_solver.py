@@ -39,7 +39,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from data.bone_lengths import BONE_PAIRS, resolve_bone_table
+from data.bone_lengths import BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from reconstruction.camera import Rig
 from reconstruction.block_solver import EliminationPlan, elimination_plan, solve_blocks, solve_dense
 from reconstruction.compiled_solver import solve_poses_compiled
@@ -238,6 +238,25 @@ def output_confidence(dlt_conf: np.ndarray, poses2d: np.ndarray, placed: np.ndar
     return np.where((views >= output_min_views) & placed[:, None], conf, 0.0)
 
 
+@lru_cache(maxsize=1)
+def warm_up() -> None:
+    """Compile the numba kernels (or load them from numba's on-disk cache) once per process, on a tiny problem.
+
+    Called when a stage is built, so that the first frame's time is the solve's, not the compiler's.
+    """
+    J = len(MEAN_POSE)
+    M = np.hstack([np.eye(3), [[0.0], [0.0], [5.0]]])
+    proj = np.stack([M, M @ np.diag([1.0, -1.0, -1.0, 1.0])])               # two views facing each other
+    hom = np.einsum("vab,jb->vja", proj, np.hstack([MEAN_POSE, np.ones((J, 1))]))[:, None]
+    poses2d = np.concatenate([hom[..., :2] / hom[..., 2:], np.ones(hom.shape[:-1] + (1,))], axis=-1)
+    X, _ = initial_poses(triangulate_dlt(poses2d, proj), poses2d, proj)
+    X = reinitialise_outliers(X, poses2d, proj)
+    for weight in (np.zeros(len(BONE_PAIRS)), np.ones(len(BONE_PAIRS))):
+        for robust in ROBUST_LOSSES:
+            solve_poses_compiled(PoseProblem(proj, poses2d[..., :2], poses2d[..., 2], BONE_PAIRS, BONE_MEAN, weight,
+                                             X, robust=robust), X, max_iterations=2)
+
+
 class MAPReconstruction:
     """DLT initialisation, then the MAP of Eq. 6 likelihood x Eq. 7 bone prior (mle_first: an MLE step first).
 
@@ -277,6 +296,7 @@ class MAPReconstruction:
         self.single_view_score, self.unseen_score = float(single_view_score), float(unseen_score)
         self.mle_first = bool(mle_first)
         self.solver = solver
+        warm_up()
 
     def problem(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
                 prior: bool) -> PoseProblem:

@@ -25,12 +25,20 @@ def test_noise_free_synthetic_scene_is_reconstructed_below_a_millimetre(tmp_path
     m = report.metrics
     assert m["mpjpe_mm"] < 1.0 and m["pcp_average"] == 100.0 and m["recall"] == 100.0
     assert m["matching_precision"] == 1.0
+    assert m["reprojection_max_px"] < 1e-6 and m["reprojection_var_px2"] < 1e-12  # exact 2D, exact 3D
     poses = read_poses3d(tmp_path / "poses3d.json")
     assert sorted(poses) == list(range(5)) and all(p.shape[1:] == (23, 4) for p in poses.values())
     saved = json.loads((tmp_path / "metrics.json").read_text())["metrics"]
     assert np.isclose(saved["mpjpe_mm"], m["mpjpe_mm"])
     out = capsys.readouterr().out
     assert "MPJPE all 23 joints (mm)" in out and "Protocol: absolute MPJPE" in out and "ms / frame" in out
+
+
+def test_reprojection_statistics_grow_with_the_2d_noise(tmp_path):
+    """The paper's Table 3 statistics against the detections: about the 2D noise, ordered by it."""
+    means = [run_eval(tmp_path, [f"dataset.noise_px={n}", "dataset.num_frames=2", "matching=oracle"])
+             .metrics["reprojection_mean_px"] for n in (1, 4)]
+    assert 0.3 < means[0] < means[1] < 40.0
 
 
 def test_default_pipeline_on_noise_free_input_has_only_the_bone_prior_bias(tmp_path):

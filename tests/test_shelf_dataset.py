@@ -139,7 +139,7 @@ def test_eval_on_ten_frames_with_feet_matching_prints_the_shelf_table(shelf_root
     ours = report.protocols["shelf"]["ours"]
     assert ours["protocol"]["frames"] == 10 and ours["strict"]["average"]["average"] > 80.0
     assert report.protocols["shelf"]["4d_association"]["protocol"]["frames"] == 10
-    assert report.metrics == {} and set(report.timings) >= {"grouping", "matching", "reconstruction"}
+    assert "mpjpe_mm" not in report.metrics and set(report.timings) >= {"grouping", "matching", "reconstruction"}
     out = capsys.readouterr().out
     assert "Shelf protocol: frames 300-309 (10)" in out and "4D Association stored output, same code" in out
     assert "| grouping" in out and "ms / frame" in out
