@@ -1,4 +1,4 @@
-"""Cross-view matching benchmark: feet / feet_epipolar / epipolar / ransac / oracle on synthetic bodies, as markdown tables.
+"""Cross-view matching benchmark: feet / feet_distinct / feet_epipolar / epipolar / ransac / oracle on synthetic bodies, as markdown tables.
 
 Run from the repository root (as a module, so that ``data``, ``reconstruction`` ... import):
 
@@ -44,7 +44,8 @@ from reconstruction.camera import Rig  # noqa: E402
 from reconstruction.matching import (EpipolarMatcher, FeetEpipolarMatcher, FeetMatcher, OracleMatcher,  # noqa: E402
                                      RansacMatcher)
 
-MATCHERS = ("feet", "feet_epipolar", "epipolar", "ransac", "oracle")
+MATCHERS = ("feet", "feet_distinct", "feet_epipolar", "epipolar", "ransac", "oracle")
+FEET_DISTINCT = {"pixel_sigma": 5.0, "margin": 4.0}  # the keys of configs/matching/feet_distinct.yaml
 WILDTRACK_AREA = (-3.0, 9.0, -9.0, 27.0)
 SWEEP_AREA = (-4.5, 4.5, -4.5, 4.5)
 TARGET_MS = 20.0
@@ -66,8 +67,9 @@ def parse_kv(text: str) -> dict[str, object]:
 
 
 def make_matchers(feet_kwargs: dict[str, object]) -> dict[str, Callable]:
-    """Fresh matchers with their default settings (feet with feet_kwargs)."""
-    return {"feet": FeetMatcher(**feet_kwargs), "feet_epipolar": FeetEpipolarMatcher(), "epipolar": EpipolarMatcher(),
+    """Fresh matchers with their default settings (feet and feet_distinct with feet_kwargs on top)."""
+    return {"feet": FeetMatcher(**feet_kwargs), "feet_distinct": FeetMatcher(**{**FEET_DISTINCT, **feet_kwargs}),
+            "feet_epipolar": FeetEpipolarMatcher(), "epipolar": EpipolarMatcher(),
             "ransac": RansacMatcher(), "oracle": OracleMatcher()}
 
 
@@ -195,7 +197,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--skip-ransac-above", type=int, default=40, help="density sweep: no ransac above this many people")
     p.add_argument("--all", action="store_true", help="run ransac everywhere")
-    p.add_argument("--feet-args", default="", help="FeetMatcher keyword arguments, e.g. k1=1,gate=0.8,foot_rule=mean")
+    p.add_argument("--feet-args", default="", help="FeetMatcher keyword arguments of the feet and feet_distinct rows, e.g. k1=1,gate=0.8")
     p.add_argument("--noise-depth-exponent", type=float, default=1.0,
                    help="2D noise SD = px * (depth / 5 m) ** this (data.synthetic); 0 = same pixels at every depth")
     p.add_argument("--sections", default="abc", help="which sections to run, e.g. 'a' or 'bc'")

@@ -198,6 +198,9 @@ class FeetMatcher:
     feet are compared in undistorted pixels of view l, so ``gate`` and ``unknown_stride_cost`` must
     then be given in pixels (and k3 scaled to pixels). Counts of detections left out of every person,
     by reason, are kept in ``last_unmatched_reasons`` (last frame) and ``unmatched_reasons`` (all frames).
+    ``margin`` > 0 (in the cost's units) keeps only the distinct pairs of each view pair: every
+    swap of partners or free partner (:func:`~reconstruction.matching.merge.swap_regret`) must cost
+    at least that much more; 0 keeps every gated pair, as the paper does.
     """
 
     def __init__(self, k1: float = 1.0, k2: float | None = None, k3: float | None = None,
@@ -205,7 +208,7 @@ class FeetMatcher:
                  min_score: float = 0.2, ankle_fallback: bool = True, min_views: int = 2,
                  unknown_stride_cost: float | None = None, location_metric: str | None = None,
                  pixel_sigma: float = 3.0, ground_sigma_floor: float = 0.1, ankle_height_m: float = 0.07,
-                 foot_joint_height_m: float = 0.0, sigma_score_power: float = 0.0) -> None:
+                 foot_joint_height_m: float = 0.0, sigma_score_power: float = 0.0, margin: float = 0.0) -> None:
         metric = location_metric or ("euclidean" if space == "image" else "mahalanobis")
         if space not in SPACES or foot_rule not in FOOT_RULES or metric not in METRICS:
             raise ValueError(f"need space in {SPACES}, foot_rule in {FOOT_RULES}, location_metric in "
@@ -214,8 +217,8 @@ class FeetMatcher:
             raise ValueError("space='image' costs are Euclidean pixels: give gate and unknown_stride_cost in pixels")
         d_k2, d_k3, d_gate, d_unknown = metric_defaults(metric)
         k2, k3 = (d_k2 if k2 is None else k2), (d_k3 if k3 is None else k3)
-        if min(k1, k2, k3) < 0 or int(min_views) < 1 or pixel_sigma <= 0 or ground_sigma_floor <= 0:
-            raise ValueError("k1, k2, k3 must be >= 0, min_views >= 1, pixel_sigma and ground_sigma_floor > 0")
+        if min(k1, k2, k3, margin) < 0 or int(min_views) < 1 or pixel_sigma <= 0 or ground_sigma_floor <= 0:
+            raise ValueError("k1, k2, k3, margin must be >= 0, min_views >= 1, pixel_sigma and ground_sigma_floor > 0")
         self.k1, self.k2, self.k3 = float(k1), float(k2), float(k3)
         self.gate = d_gate if gate is None else float(gate)
         self.unknown_stride_cost = d_unknown if unknown_stride_cost is None else float(unknown_stride_cost)
@@ -223,7 +226,7 @@ class FeetMatcher:
         self.min_score, self.ankle_fallback, self.min_views = float(min_score), bool(ankle_fallback), int(min_views)
         self.pixel_sigma, self.ground_sigma_floor = float(pixel_sigma), float(ground_sigma_floor)
         self.ankle_height_m, self.foot_joint_height_m = float(ankle_height_m), float(foot_joint_height_m)
-        self.sigma_score_power = float(sigma_score_power)
+        self.sigma_score_power, self.margin = float(sigma_score_power), float(margin)
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()
 
@@ -247,7 +250,7 @@ class FeetMatcher:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
         feats = self.features(views, rig)
         assignment = match_pairs(lambda a, b: self.pair_cost(feats[a], feats[b], rig[a]),
-                                 [len(v) for v in views], self.gate, self.min_views)
+                                 [len(v) for v in views], self.gate, self.min_views, self.margin)
         reasons = Counter(str(r) for f in feats for r in f.reason if r)
         unplaced = sum(int(f.has_p.sum()) for f in feats) - int(np.sum(assignment >= 0))
         if unplaced:

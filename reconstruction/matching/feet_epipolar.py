@@ -48,24 +48,27 @@ class FeetEpipolarMatcher:
     """Feet + epipolar matching: ``matcher(views, rig) -> (P, V)`` detection index per view or -1.
 
     ``feet`` holds the FeetMatcher keyword arguments (Mahalanobis location metric; its own gate is
-    not used); ``gate`` applies to the combined cost in standard deviations. Counts of detections left
+    not used); ``gate`` applies to the combined cost in standard deviations and ``margin`` (SD, 0 =
+    off) keeps only distinct pairs, as in :class:`FeetMatcher`. Counts of detections left
     out of every person, by reason, are kept in ``last_unmatched_reasons`` and ``unmatched_reasons``.
     """
 
     def __init__(self, epipolar_sigma_px: float = 5.0, gate: float = 5.0, min_score: float = 0.2,
                  min_common_joints: int = 3, min_views: int = 2, missing_feet_cost: float | None = None,
-                 feet: dict | None = None) -> None:
+                 feet: dict | None = None, margin: float = 0.0) -> None:
         feet = {"pixel_sigma": 5.0, **(feet or {})}
         if feet.get("location_metric", "mahalanobis") != "mahalanobis" or feet.get("space", "ground") != "ground":
             raise ValueError("feet_epipolar needs the feet cost in standard deviations: "
                              "location_metric=mahalanobis, space=ground")
         if not epipolar_sigma_px > 0 or not gate > 0 or int(min_common_joints) < 1 or int(min_views) < 1:
             raise ValueError("epipolar_sigma_px and gate must be > 0, min_common_joints and min_views >= 1")
+        if not margin >= 0:
+            raise ValueError(f"margin must be >= 0, got {margin}")
         if missing_feet_cost is not None and not missing_feet_cost >= 0:
             raise ValueError(f"missing_feet_cost must be >= 0 or None, got {missing_feet_cost}")
         self.missing_feet_cost = None if missing_feet_cost is None else float(missing_feet_cost)
         self.feet = FeetMatcher(min_views=min_views, **feet)
-        self.epipolar_sigma_px, self.gate = float(epipolar_sigma_px), float(gate)
+        self.epipolar_sigma_px, self.gate, self.margin = float(epipolar_sigma_px), float(gate), float(margin)
         self.min_score, self.min_common_joints, self.min_views = float(min_score), int(min_common_joints), int(min_views)
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()
@@ -87,7 +90,7 @@ class FeetEpipolarMatcher:
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
         cost, feats, joints = self.pair_costs(views, rig)
-        assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views)
+        assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views, self.margin)
         reasons: Counter[str] = Counter()
         usable = 0
         for f, (_, ok) in zip(feats, joints):

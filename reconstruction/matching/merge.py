@@ -18,14 +18,15 @@ PairCost = Callable[[int, int], np.ndarray]  # (view a, view b) -> (N_a, N_b) ed
 EDGE_COLUMNS = ("view_a", "det_a", "view_b", "det_b", "cost")
 
 
-def solve_pair(cost: np.ndarray, gate: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+def solve_pair(cost: np.ndarray, gate: float = np.inf, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Gated rectangular assignment: cost (Na, Nb) -> rows (K,), cols (K,) of the accepted pairs.
 
     Pairs with a non-finite cost or a cost above ``gate`` are never accepted. They get a large finite
     cost M > min(Na, Nb) * (largest allowed cost), so ``linear_sum_assignment`` (a Jonker-Volgenant
     shortest augmenting path solver) first maximises the number of allowed pairs and then minimises
     their total cost, as the equality constraints of the paper's Eq. 5 ask; the gated pairs it still
-    has to use are dropped afterwards.
+    has to use are dropped afterwards. With ``margin`` > 0, an accepted pair is kept only if it is
+    distinct: every alternative of :func:`swap_regret` costs at least ``margin`` more.
     """
     cost = np.asarray(cost, dtype=np.float64)
     if cost.ndim != 2:
@@ -38,7 +39,38 @@ def solve_pair(cost: np.ndarray, gate: float = np.inf) -> tuple[np.ndarray, np.n
     big = (min(cost.shape) + 1) * largest + 1.0
     rows, cols = linear_sum_assignment(np.where(allowed, cost, big))
     keep = allowed[rows, cols]
-    return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+    rows, cols = rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+    if margin > 0:
+        distinct = swap_regret(cost, rows, cols) >= margin
+        rows, cols = rows[distinct], cols[distinct]
+    return rows, cols
+
+
+def swap_regret(cost: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Least extra cost of re-matching each accepted pair: cost (Na, Nb), rows (K,), cols (K,) -> (K,).
+
+    For the accepted pair (i, j) the alternatives are: swapping partners with another accepted pair
+    (i', j'), i.e. (i, j') + (i', j) instead of (i, j) + (i', j'); or i taking a column j'' that no
+    accepted pair uses (j then unmatched), or j a free row i''. Gated pairs count as alternatives
+    with their cost (a competitor just above the gate is still a competitor); non-finite ones never
+    do. +inf where no alternative exists.
+    """
+    cost = np.where(np.isfinite(cost), np.asarray(cost, dtype=np.float64), np.inf)
+    rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
+    if len(rows) == 0:
+        return np.zeros(0)
+    sub = cost[np.ix_(rows, cols)]                    # (K, K): sub[k, l] = cost(rows[k], cols[l])
+    own = np.diag(sub).copy()
+    swap = sub + sub.T - own[:, None] - own[None, :]
+    np.fill_diagonal(swap, np.inf)
+    regret = swap.min(axis=1)
+    free_cols = np.setdiff1d(np.arange(cost.shape[1]), cols)
+    free_rows = np.setdiff1d(np.arange(cost.shape[0]), rows)
+    if len(free_cols):
+        regret = np.minimum(regret, cost[np.ix_(rows, free_cols)].min(axis=1) - own)
+    if len(free_rows):
+        regret = np.minimum(regret, cost[np.ix_(free_rows, cols)].min(axis=0) - own)
+    return regret
 
 
 def pair_edges(view_a: int, view_b: int, rows: np.ndarray, cols: np.ndarray,
@@ -129,14 +161,16 @@ def _components_to_assignment(comps: _Components, view_of: np.ndarray, offsets: 
     return np.stack(kept) if kept else np.zeros((0, V), dtype=np.int64)
 
 
-def match_pairs(pair_cost: PairCost, num_detections: list[int], gate: float, min_views: int) -> np.ndarray:
+def match_pairs(pair_cost: PairCost, num_detections: list[int], gate: float, min_views: int,
+                margin: float = 0.0) -> np.ndarray:
     """Gated assignment of every view pair (a < b), then the cheapest-first merge: -> (P, V).
 
-    ``pair_cost(a, b)`` returns the (N_a, N_b) cost of the view pair, +inf where not allowed.
+    ``pair_cost(a, b)`` returns the (N_a, N_b) cost of the view pair, +inf where not allowed;
+    ``margin`` > 0 keeps only the distinct pairs (:func:`solve_pair`).
     """
     edges = [np.zeros((0, 5))]
     for a, b in combinations(range(len(num_detections)), 2):
         cost = pair_cost(a, b)
-        rows, cols = solve_pair(cost, gate)
+        rows, cols = solve_pair(cost, gate, margin)
         edges.append(pair_edges(a, b, rows, cols, cost))
     return merge_edges(np.concatenate(edges), num_detections, min_views)
