@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -218,6 +219,39 @@ def test_resume_reproduces_the_uninterrupted_losses(synthetic_root, tmp_path):
     assert sorted(rest["losses"]) == list(range(2, 2 * steps_per_epoch + 1))
     for step, loss in rest["losses"].items():
         assert loss == pytest.approx(straight["losses"][step], rel=1e-6), step
+
+
+def kill_after_first_checkpoint(cmd: list[str], checkpoint: Path, timeout_s: float = 120.0) -> None:
+    """Start cmd, wait until checkpoint exists, let it run on a little, then SIGKILL it."""
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + timeout_s
+    try:
+        while not checkpoint.exists():
+            assert proc.poll() is None, proc.stderr.read()[-3000:]
+            assert time.monotonic() < deadline, "no checkpoint in time"
+            time.sleep(0.05)
+        time.sleep(1.0)                            # killed somewhere in a later epoch
+        assert proc.poll() is None, "the run ended before it was killed"
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def test_killed_run_resumes_from_its_last_checkpoint(synthetic_root, tmp_path):
+    run_dir = tmp_path / "killed"
+    checkpoint = run_dir / "checkpoints" / "last.ckpt"
+    cmd = [sys.executable, "train.py", *TINY, f"data.root={synthetic_root}", "trainer.epochs=10000",
+           f"hydra.run.dir={run_dir}"]
+    kill_after_first_checkpoint(cmd, checkpoint)
+    saved = torch.load(checkpoint, map_location="cpu", weights_only=False)   # whole, whenever the kill came
+    epoch, step = saved["epoch"], saved["global_step"]
+    assert epoch >= 1 and saved["step_in_epoch"] == 0 and step > 0
+    straight = run_training(synthetic_root, tmp_path / "straight", f"trainer.epochs={epoch + 1}")
+    resumed = run_training(synthetic_root, tmp_path / "resumed", f"trainer.epochs={epoch + 1}",
+                           f"resume={checkpoint}")
+    assert min(resumed["losses"]) == step + 1 and max(resumed["losses"]) == straight["state"].global_step
+    for s, loss in resumed["losses"].items():
+        assert loss == pytest.approx(straight["losses"][s], rel=1e-6), s
 
 
 def test_a_failed_checkpoint_write_keeps_the_previous_file(tmp_path):
