@@ -254,6 +254,22 @@ def test_killed_run_resumes_from_its_last_checkpoint(synthetic_root, tmp_path):
         assert loss == pytest.approx(straight["losses"][s], rel=1e-6), s
 
 
+def test_tensorboard_logs_losses_lr_ap_and_heatmap_grid(synthetic_root, tmp_path):
+    accumulator = pytest.importorskip("tensorboard.backend.event_processing.event_accumulator")
+    out = run_training(synthetic_root, tmp_path / "tb", "trainer.epochs=1", "trainer.log_every=1")
+    events = accumulator.EventAccumulator(str(tmp_path / "tb"), size_guidance={"images": 0, "scalars": 0})
+    events.Reload()
+    scalars = set(events.Tags()["scalars"])
+    expected = {"train/loss", "train/body", "train/foot", "train/lr", "val/loss"} | {
+        f"val/{m}_{s}" for m in ("AP", "AR") for s in ("all", "body", "foot")}
+    assert expected <= scalars, expected - scalars
+    assert [e.value for e in events.Scalars("train/loss")] == pytest.approx(list(out["losses"].values()), rel=1e-5)
+    assert events.Scalars("train/lr")[0].value == pytest.approx(1e-3)
+    assert events.Scalars("val/AP_foot")[-1].value == pytest.approx(out["metrics"]["AP_foot"])
+    (grid,) = events.Images("val/heatmaps")
+    assert grid.width == 2 * (192 + 4) and grid.height == 2 * (192 + 4)  # 2 crops x [target | prediction]
+
+
 def test_a_failed_checkpoint_write_keeps_the_previous_file(tmp_path):
     model = torch.nn.Linear(2, 2)
     optimizer = torch.optim.Adam(model.parameters())
