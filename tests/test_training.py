@@ -282,6 +282,24 @@ def test_a_failed_checkpoint_write_keeps_the_previous_file(tmp_path):
     assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["last.ckpt"]
 
 
+# --- DistributedDataParallel ----------------------------------------------------------------------
+
+def test_torchrun_two_processes_shard_the_epoch(synthetic_root, tmp_path):
+    run_dir = tmp_path / "ddp"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2", "train.py",
+           *TINY, f"data.root={synthetic_root}", "trainer.epochs=2", "trainer.device=cpu", f"hydra.run.dir={run_dir}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    single = TopDownDataset(load_coco23(synthetic_root / "train" / "annotations.json",
+                                        synthetic_root / "train" / "images"), MultiModalHeatmapCodec((64, 64), (16, 16)),
+                            (64, 64))
+    per_rank = -(-len(single) // 2)                                     # DistributedSampler-style shards
+    checkpoint = torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+    assert checkpoint["epoch"] == 2 and checkpoint["global_step"] == 2 * -(-per_rank // 4)
+    assert checkpoint["global_step"] < 2 * -(-len(single) // 4)         # fewer steps than one process takes
+    assert list(run_dir.glob("events.out.tfevents.*")) and (run_dir / "metrics.json").is_file()
+
+
 # --- (c) the Hydra sweep ----------------------------------------------------------------------------
 
 def test_mu_lambda_multirun_writes_checkpoints_and_tensorboard(synthetic_root, tmp_path):
