@@ -1,4 +1,5 @@
-"""Evaluate the multi-view pipeline: ``python eval.py [dataset=synthetic] [matching=oracle] ...``.
+"""Evaluate the multi-view pipeline: ``python eval.py [dataset=synthetic] [matching=oracle] ...``,
+or a 2D checkpoint of train.py: ``python eval.py checkpoint=<.ckpt/.pth> [pose2d.ann_file=...]``.
 
 Builds the dataset's sequence, matches persons across views, reconstructs them in 3D, prints the
 metrics with their protocol and the time of each stage, and writes poses3d.json and metrics.json into
@@ -61,12 +62,30 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     return report
 
 
+def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
+    """Evaluate the 2D checkpoint cfg.checkpoint (evaluation/pose2d_eval.py), print and return its metrics;
+    a missing or bad file stops with one line."""
+    from evaluation.pose2d_eval import evaluate_checkpoint  # torch only for this mode
+
+    try:
+        metrics = evaluate_checkpoint(cfg, out_dir)
+    except (FileNotFoundError, ValueError) as err:
+        raise SystemExit(f"error: {err}") from None
+    print(f"{cfg.checkpoint} ({cfg.pose2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person area")
+    print("\n".join(f"  {k:8s} {v:.4f}" for k, v in metrics.items()))
+    print(f"\nWrote {out_dir / cfg.pose2d.output}, {cfg.pose2d.results_file} and {cfg.metrics_file}")
+    return metrics
+
+
 @hydra.main(config_path="configs", config_name="eval", version_base="1.3")
 def main(cfg: DictConfig) -> dict:
     """Hydra entry point; returns the metrics (for sweeps). Bad input files and bad config values stop
     with one message (a ValueError while building the dataset, matcher or reconstruction is one of them)."""
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    if cfg.checkpoint:
+        return run_pose2d(cfg, out_dir)
     try:
-        return run(cfg, Path(HydraConfig.get().runtime.output_dir)).metrics
+        return run(cfg, out_dir).metrics
     except (CalibrationError, Poses2DError, InstantiationException) as err:
         cause = err.__cause__ if isinstance(err, InstantiationException) else err
         if isinstance(cause, (ValueError, FileNotFoundError)):  # CalibrationError, Poses2DError are ValueErrors

@@ -36,7 +36,9 @@ def test_round_trip_within_half_a_heatmap_pixel(modulate):
     targets = np.stack([codec.encode(p, np.zeros((0, 23, 3)), LABELLED)[0] for p in people])
     keypoints, scores = codec.decode(torch.from_numpy(targets), modulate=modulate)
     assert keypoints.shape == (6, 23, 2) and scores.shape == (6, 23)
-    error = np.abs(keypoints - np.stack(people)[..., :2]) * RATIO  # in heatmap pixels
+    # Euclidean distance in heatmap pixels: the integer argmax alone is up to 0.71 px off, so this fails
+    # without the sub-pixel step (border joints, where no step is possible, stay within 0.5 px)
+    error = np.linalg.norm((keypoints - np.stack(people)[..., :2]) * RATIO, axis=-1)
     assert error.max() <= 0.5
     assert scores.min() > 0.88  # the peak's value, at most half a pixel off the centre
 
@@ -50,17 +52,18 @@ def test_newton_step_is_exact_for_interior_gaussians():
     np.testing.assert_allclose(keypoints * RATIO, own[:, :2] * RATIO, atol=1e-3)
 
 
-def test_mu_zero_is_the_single_person_target_and_mu_adds_max_of_others():
+@pytest.mark.parametrize("mu", [0.25, 0.5, 1.0])
+def test_mu_zero_is_the_single_person_target_and_mu_adds_max_of_others(mu):
     rng = np.random.default_rng(2)
     own, others = person(rng), np.stack([person(rng), person(rng), person(rng)])
     plain = MultiModalHeatmapCodec(mu=0.0)
     single, _ = plain.encode(own, np.zeros((0, 23, 3)), LABELLED)
     with_others, _ = plain.encode(own, others, LABELLED)
     np.testing.assert_array_equal(with_others, single)
-    multi, _ = MultiModalHeatmapCodec(mu=0.5).encode(own, others, LABELLED)
+    multi, _ = MultiModalHeatmapCodec(mu=mu).encode(own, others, LABELLED)
     each = np.stack([plain.encode(o, np.zeros((0, 23, 3)), LABELLED)[0] for o in others])
-    np.testing.assert_allclose(multi - single, 0.5 * each.max(axis=0), atol=1e-6)
-    assert multi.max() <= 1.5 + 1e-6
+    np.testing.assert_allclose(multi - single, mu * each.max(axis=0), atol=1e-6)
+    assert multi.max() <= 1 + mu + 1e-6
 
 
 def test_others_combine_by_maximum_not_sum():

@@ -10,7 +10,7 @@ from data.keypoints import NUM_JOINTS
 from models.fastpose import FastPose
 from models.resnet import ResNet, load_pretrained
 
-_COUNTS = {18: (2, 2, 2, 2), 50: (3, 4, 6, 3)}
+_COUNTS = {18: (2, 2, 2, 2), 50: (3, 4, 6, 3), 101: (3, 4, 23, 3)}
 Checkpoint = tuple[Path, dict[str, torch.Tensor]]
 
 
@@ -86,7 +86,7 @@ def test_trunk_output_channels_and_stride() -> None:
             assert trunk(torch.zeros(2, 3, 64, 96)).shape == (2, channels, 2, 3)
 
 
-@pytest.mark.parametrize("depth", [18, 50])
+@pytest.mark.parametrize("depth", [18, 50, 101])
 def test_state_dict_names_and_shapes_match_torchvision(depth: int) -> None:
     expected = {k: s for k, s in torchvision_resnet_shapes(depth).items() if not k.startswith("fc.")}
     got = {k: tuple(v.shape) for k, v in ResNet(depth).state_dict().items()}
@@ -176,3 +176,16 @@ def test_gradient_reaches_first_conv() -> None:
     grad = net.preact.conv1.weight.grad
     assert grad is not None and grad.abs().sum() > 0
     assert net.preact.layer1[0].se.fc[0].weight.grad.abs().sum() > 0
+
+
+@pytest.mark.parametrize("name, depth", [("fastpose_r18", 18), ("fastpose_r50", 50), ("fastpose_r101", 101)])
+def test_model_configs_build_their_depth(name: str, depth: int) -> None:
+    from hydra import compose, initialize_config_dir
+    from hydra.utils import instantiate
+
+    configs = Path(__file__).resolve().parents[1] / "configs"
+    with initialize_config_dir(config_dir=str(configs), version_base="1.3"):
+        cfg = compose("train", overrides=[f"model={name}", "model.se=true"])
+    net = instantiate(cfg.model)
+    assert isinstance(net, FastPose) and net.preact.depth == depth and net.num_joints == NUM_JOINTS
+    assert hasattr(net.preact.layer1[0], "se")

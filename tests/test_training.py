@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -220,6 +221,55 @@ def test_resume_reproduces_the_uninterrupted_losses(synthetic_root, tmp_path):
         assert loss == pytest.approx(straight["losses"][step], rel=1e-6), step
 
 
+def kill_after_first_checkpoint(cmd: list[str], checkpoint: Path, timeout_s: float = 120.0) -> None:
+    """Start cmd, wait until checkpoint exists, let it run on a little, then SIGKILL it."""
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + timeout_s
+    try:
+        while not checkpoint.exists():
+            assert proc.poll() is None, proc.stderr.read()[-3000:]
+            assert time.monotonic() < deadline, "no checkpoint in time"
+            time.sleep(0.05)
+        time.sleep(1.0)                            # killed somewhere in a later epoch
+        assert proc.poll() is None, "the run ended before it was killed"
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def test_killed_run_resumes_from_its_last_checkpoint(synthetic_root, tmp_path):
+    run_dir = tmp_path / "killed"
+    checkpoint = run_dir / "checkpoints" / "last.ckpt"
+    cmd = [sys.executable, "train.py", *TINY, f"data.root={synthetic_root}", "trainer.epochs=10000",
+           f"hydra.run.dir={run_dir}"]
+    kill_after_first_checkpoint(cmd, checkpoint)
+    saved = torch.load(checkpoint, map_location="cpu", weights_only=False)   # whole, whenever the kill came
+    epoch, step = saved["epoch"], saved["global_step"]
+    assert epoch >= 1 and saved["step_in_epoch"] == 0 and step > 0
+    straight = run_training(synthetic_root, tmp_path / "straight", f"trainer.epochs={epoch + 1}")
+    resumed = run_training(synthetic_root, tmp_path / "resumed", f"trainer.epochs={epoch + 1}",
+                           f"resume={checkpoint}")
+    assert min(resumed["losses"]) == step + 1 and max(resumed["losses"]) == straight["state"].global_step
+    for s, loss in resumed["losses"].items():
+        assert loss == pytest.approx(straight["losses"][s], rel=1e-6), s
+
+
+def test_tensorboard_logs_losses_lr_ap_and_heatmap_grid(synthetic_root, tmp_path):
+    accumulator = pytest.importorskip("tensorboard.backend.event_processing.event_accumulator")
+    out = run_training(synthetic_root, tmp_path / "tb", "trainer.epochs=1", "trainer.log_every=1")
+    events = accumulator.EventAccumulator(str(tmp_path / "tb"), size_guidance={"images": 0, "scalars": 0})
+    events.Reload()
+    scalars = set(events.Tags()["scalars"])
+    expected = {"train/loss", "train/body", "train/foot", "train/lr", "val/loss"} | {
+        f"val/{m}_{s}" for m in ("AP", "AR") for s in ("all", "body", "foot")}
+    assert expected <= scalars, expected - scalars
+    assert [e.value for e in events.Scalars("train/loss")] == pytest.approx(list(out["losses"].values()), rel=1e-5)
+    assert events.Scalars("train/lr")[0].value == pytest.approx(1e-3)
+    assert events.Scalars("val/AP_foot")[-1].value == pytest.approx(out["metrics"]["AP_foot"])
+    (grid,) = events.Images("val/heatmaps")
+    assert grid.width == 2 * (192 + 4) and grid.height == 2 * (192 + 4)  # 2 crops x [target | prediction]
+
+
 def test_a_failed_checkpoint_write_keeps_the_previous_file(tmp_path):
     model = torch.nn.Linear(2, 2)
     optimizer = torch.optim.Adam(model.parameters())
@@ -230,6 +280,24 @@ def test_a_failed_checkpoint_write_keeps_the_previous_file(tmp_path):
     with pytest.raises(Exception):
         save_checkpoint(path, model, optimizer, scheduler, TrainState(epoch=2), {"bad": lambda: 0})
     assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["last.ckpt"]
+
+
+# --- DistributedDataParallel ----------------------------------------------------------------------
+
+def test_torchrun_two_processes_shard_the_epoch(synthetic_root, tmp_path):
+    run_dir = tmp_path / "ddp"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2", "train.py",
+           *TINY, f"data.root={synthetic_root}", "trainer.epochs=2", "trainer.device=cpu", f"hydra.run.dir={run_dir}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    single = TopDownDataset(load_coco23(synthetic_root / "train" / "annotations.json",
+                                        synthetic_root / "train" / "images"), MultiModalHeatmapCodec((64, 64), (16, 16)),
+                            (64, 64))
+    per_rank = -(-len(single) // 2)                                     # DistributedSampler-style shards
+    checkpoint = torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+    assert checkpoint["epoch"] == 2 and checkpoint["global_step"] == 2 * -(-per_rank // 4)
+    assert checkpoint["global_step"] < 2 * -(-len(single) // 4)         # fewer steps than one process takes
+    assert list(run_dir.glob("events.out.tfevents.*")) and (run_dir / "metrics.json").is_file()
 
 
 # --- (c) the Hydra sweep ----------------------------------------------------------------------------
