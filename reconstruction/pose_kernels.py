@@ -53,17 +53,11 @@ def _add_outer(A: np.ndarray, s: float, a0: float, a1: float, a2: float) -> None
     A[2, 1] = A[1, 2]
 
 
-@njit(cache=True)
-def linearize(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarray, proj: np.ndarray, uv: np.ndarray,
-              w: np.ndarray, anchor: np.ndarray, tau2: float, robust: int, C2: float, bones: np.ndarray,
-              bone_pa: np.ndarray, bone_pb: np.ndarray, ref: np.ndarray, bw: np.ndarray, D: np.ndarray,
-              g: np.ndarray, K: np.ndarray, Kr: np.ndarray) -> float:
-    """Cost, gradient g (J, 3), safe diagonal blocks D (J, 3, 3) and bone blocks K, Kr (L, 3, 3) of positions s:e.
-
-    x (J, 3) holds the joints at solver positions; person p of uv (V, P, J, 2), w (V, P, J) (1/sigma,
-    0 unseen), anchor (P, J, 3) in original joint order. bones: the component's bone indices. K is the
-    safe (positive semi-definite) bone block, Kr = exact - safe (see map_estimation.linear_blocks).
-    """
+@njit(cache=True, inline="always")
+def _likelihood_terms(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarray, proj: np.ndarray,
+                      uv: np.ndarray, w: np.ndarray, anchor: np.ndarray, tau2: float, robust: int, C2: float,
+                      D: np.ndarray, g: np.ndarray) -> float:
+    """Likelihood + anchor cost of positions s:e; writes their blocks D (J, 3, 3) and gradients g (J, 3)."""
     V = proj.shape[0]
     cost = 0.0
     for k in range(s, e):
@@ -104,6 +98,14 @@ def linearize(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarray, proj
         Dk[0, 0] += tau2
         Dk[1, 1] += tau2
         Dk[2, 2] += tau2
+    return cost
+
+
+@njit(cache=True, inline="always")
+def _bone_terms(x: np.ndarray, bones: np.ndarray, bone_pa: np.ndarray, bone_pb: np.ndarray, ref: np.ndarray,
+                bw: np.ndarray, D: np.ndarray, g: np.ndarray, K: np.ndarray, Kr: np.ndarray) -> float:
+    """Prior cost of the bones; adds their gradients to g and safe blocks K to D, writes K and Kr (L, 3, 3)."""
+    cost = 0.0
     for l in bones:
         a, b = bone_pa[l], bone_pb[l]
         d0, d1, d2 = x[a, 0] - x[b, 0], x[a, 1] - x[b, 1], x[a, 2] - x[b, 2]
@@ -122,6 +124,7 @@ def linearize(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarray, proj
         g[b, 0] -= gr * u0
         g[b, 1] -= gr * u1
         g[b, 2] -= gr * u2
+        # K = w^2 u u^T + max(curv, 0) (I - u u^T), Kr = min(curv, 0) (I - u u^T), curv = w^2 (1 - ref / n)
         curv = wl * wl * (1.0 - ref[l] / max(n, 1e-12))
         pos, neg = max(curv, 0.0), min(curv, 0.0)
         Kl, Krl = K[l], Kr[l]
@@ -137,6 +140,21 @@ def linearize(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarray, proj
                 D[a, i, m] += Kl[i, m]
                 D[b, i, m] += Kl[i, m]
     return cost
+
+
+@njit(cache=True)
+def linearize(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarray, proj: np.ndarray, uv: np.ndarray,
+              w: np.ndarray, anchor: np.ndarray, tau2: float, robust: int, C2: float, bones: np.ndarray,
+              bone_pa: np.ndarray, bone_pb: np.ndarray, ref: np.ndarray, bw: np.ndarray, D: np.ndarray,
+              g: np.ndarray, K: np.ndarray, Kr: np.ndarray) -> float:
+    """Cost, gradient g (J, 3), safe diagonal blocks D (J, 3, 3) and bone blocks K, Kr (L, 3, 3) of positions s:e.
+
+    x (J, 3) holds the joints at solver positions; person p of uv (V, P, J, 2), w (V, P, J) (1/sigma,
+    0 unseen), anchor (P, J, 3) in original joint order. bones: the component's bone indices. K is the
+    safe (positive semi-definite) bone block, Kr = exact - safe (see map_estimation.linear_blocks).
+    """
+    cost = _likelihood_terms(x, s, e, p, pos_joint, proj, uv, w, anchor, tau2, robust, C2, D, g)
+    return cost + _bone_terms(x, bones, bone_pa, bone_pb, ref, bw, D, g, K, Kr)
 
 
 @njit(cache=True)
@@ -177,15 +195,11 @@ def _upper_solve(L: np.ndarray, y: np.ndarray) -> None:
     y[0] = (y[0] - L[1, 0] * y[1] - L[2, 0] * y[2]) / L[0, 0]
 
 
-@njit(cache=True)
-def solve_component(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray, g: np.ndarray, mu: float,
-                    exact: bool, bones: np.ndarray, bone_pa: np.ndarray, bone_pb: np.ndarray, bone_slot: np.ndarray,
-                    slot: np.ndarray, slots: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray,
-                    B: np.ndarray, h: np.ndarray) -> bool:
-    """(M + mu I) h = -g on positions s:e by block Cholesky (M exact or safe) -> h (J, 3); False if not PD.
-
-    slots: the block storage indices of this component (zeroed first); B (n_blocks, 3, 3) scratch.
-    """
+@njit(cache=True, inline="always")
+def _assemble(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray, mu: float, exact: bool,
+              bones: np.ndarray, bone_pa: np.ndarray, bone_pb: np.ndarray, bone_slot: np.ndarray, slot: np.ndarray,
+              slots: np.ndarray, B: np.ndarray) -> None:
+    """Blocks of M + mu I of positions s:e into B (n_blocks, 3, 3): M safe, or exact (+ Kr on the bones)."""
     for q in slots:
         B[q, :, :] = 0.0
     for k in range(s, e):
@@ -194,16 +208,21 @@ def solve_component(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray
         for i in range(3):
             Bk[i, i] += mu
     for l in bones:
-        Bl = B[bone_slot[l]]
+        Bl, Ba, Bb = B[bone_slot[l]], B[slot[bone_pa[l], bone_pa[l]]], B[slot[bone_pb[l], bone_pb[l]]]
         for i in range(3):
             for m in range(3):
-                Bl[i, m] -= K[l, i, m] + (Kr[l, i, m] if exact else 0.0)
-        if exact:
-            for i in range(3):
-                for m in range(3):
-                    B[slot[bone_pa[l], bone_pa[l]], i, m] += Kr[l, i, m]
-                    B[slot[bone_pb[l], bone_pb[l]], i, m] += Kr[l, i, m]
-    for k in range(s, e):                               # right-looking block Cholesky
+                Bl[i, m] -= K[l, i, m]
+                if exact:
+                    Bl[i, m] -= Kr[l, i, m]
+                    Ba[i, m] += Kr[l, i, m]
+                    Bb[i, m] += Kr[l, i, m]
+
+
+@njit(cache=True, inline="always")
+def _factorize(s: int, e: int, slot: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray,
+               B: np.ndarray) -> bool:
+    """Right-looking block Cholesky of positions s:e in place (B holds L); False if not positive definite."""
+    for k in range(s, e):
         Lkk = B[slot[k, k]]
         if not _cholesky3(Lkk):
             return False
@@ -220,6 +239,13 @@ def solve_component(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray
                 for r in range(3):
                     for c in range(3):
                         T[r, c] -= Li[r, 0] * Lj[c, 0] + Li[r, 1] * Lj[c, 1] + Li[r, 2] * Lj[c, 2]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _substitute(s: int, e: int, g: np.ndarray, slot: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray,
+                B: np.ndarray, h: np.ndarray) -> None:
+    """h (J, 3) = -(L L^T)^-1 g on positions s:e, L the factor in B."""
     for k in range(s, e):
         h[k, 0], h[k, 1], h[k, 2] = -g[k, 0], -g[k, 1], -g[k, 2]
     for k in range(s, e):                               # L y = -g
@@ -236,7 +262,43 @@ def solve_component(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray
             for c in range(3):
                 h[k, c] -= Li[0, c] * h[i, 0] + Li[1, c] * h[i, 1] + Li[2, c] * h[i, 2]
         _upper_solve(B[slot[k, k]], h[k])
+
+
+@njit(cache=True)
+def solve_component(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray, g: np.ndarray, mu: float,
+                    exact: bool, bones: np.ndarray, bone_pa: np.ndarray, bone_pb: np.ndarray, bone_slot: np.ndarray,
+                    slot: np.ndarray, slots: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray,
+                    B: np.ndarray, h: np.ndarray) -> bool:
+    """(M + mu I) h = -g on positions s:e by block Cholesky (M exact or safe) -> h (J, 3); False if not PD.
+
+    D (J, 3, 3), K and Kr (L, 3, 3) from :func:`linearize`; slots: the block storage indices of this
+    component; B (n_blocks, 3, 3) scratch.
+    """
+    _assemble(s, e, D, K, Kr, mu, exact, bones, bone_pa, bone_pb, bone_slot, slot, slots, B)
+    if not _factorize(s, e, slot, later_ptr, later_idx, B):
+        return False
+    _substitute(s, e, g, slot, later_ptr, later_idx, B, h)
     return True
+
+
+@njit(cache=True, inline="always")
+def _abs_max(a: np.ndarray, s: int, e: int) -> float:
+    """max |a[s:e]| of a (J, 3) array."""
+    out = 0.0
+    for k in range(s, e):
+        for i in range(3):
+            out = max(out, abs(a[k, i]))
+    return out
+
+
+@njit(cache=True, inline="always")
+def _max_diagonal(D: np.ndarray, s: int, e: int) -> float:
+    """max diag of the blocks D[s:e] (J, 3, 3)."""
+    out = 0.0
+    for k in range(s, e):
+        for i in range(3):
+            out = max(out, D[k, i, i])
+    return out
 
 
 @njit(cache=True)
@@ -267,13 +329,9 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
             slots = comp_slots[comp_slots_ptr[c]:comp_slots_ptr[c + 1]]
             f = linearize(x, s, e, p, pos_joint, proj, uv, w, anchor, tau2, robust, C2, bones, bone_pa, bone_pb,
                           ref, bw, D, g, K, Kr)
-            scale, g_max = 0.0, 0.0
-            for k in range(s, e):
-                for i in range(3):
-                    scale = max(scale, D[k, i, i])
-                    g_max = max(g_max, abs(g[k, i]))
+            scale = _max_diagonal(D, s, e)
             scale = scale if scale > 0.0 else 1.0
-            status = CONVERGED_GRADIENT if g_max <= gtol else RUNNING
+            status = CONVERGED_GRADIENT if _abs_max(g, s, e) <= gtol else RUNNING
             mu, nu, exact, it = tau * scale, 2.0, False, 0
             has_exact = len(bones) > 0
             while status == RUNNING and it < max_iterations:
@@ -287,15 +345,12 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
                 if not ok and not solve_component(s, e, D, K, Kr, g, mu, False, bones, bone_pa, bone_pb, bone_slot,
                                                   slot, slots, later_ptr, later_idx, B, h):
                     h[s:e] = np.nan
-                predicted, h_max = 0.0, 0.0
+                predicted = 0.0
                 for k in range(s, e):
                     for i in range(3):
-                        predicted += h[k, i] * (mu * h[k, i] - g[k, i])
-                        h_max = max(h_max, abs(h[k, i]))
+                        predicted += 0.5 * h[k, i] * (mu * h[k, i] - g[k, i])
                         x_new[k, i] = x[k, i] + h[k, i]
-                predicted *= 0.5
-                if np.isnan(predicted):                 # a NaN step (singular system): never accepted
-                    h_max = np.nan
+                h_max = _abs_max(h, s, e) if not np.isnan(predicted) else np.nan   # NaN step: never accepted
                 f_t = linearize(x_new, s, e, p, pos_joint, proj, uv, w, anchor, tau2, robust, C2, bones, bone_pa,
                                 bone_pb, ref, bw, D_t, g_t, K_t, Kr_t)
                 actual = f - f_t
@@ -309,15 +364,11 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
                     exact = rho >= SWITCH_RHO and has_exact
                     x[s:e] = x_new[s:e]
                     D, D_t, g, g_t, K, K_t, Kr, Kr_t = D_t, D, g_t, g, K_t, K, Kr_t, Kr
-                    g_max = 0.0
-                    for k in range(s, e):
-                        for i in range(3):
-                            g_max = max(g_max, abs(g[k, i]))
                     if h_max <= xtol:
                         status = CONVERGED_STEP
                     elif actual <= ftol * max(f, 0.0):
                         status = CONVERGED_COST
-                    elif g_max <= gtol:
+                    elif _abs_max(g, s, e) <= gtol:
                         status = CONVERGED_GRADIENT
                     f = f_t
                 elif not used:
