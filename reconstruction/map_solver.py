@@ -2,14 +2,15 @@
 
 ``stage(poses2d (V, P, J, 3) distorted px + score, bboxes (V, P, 4) x y w h, rig) -> (P, J, 4)``.
 
-All persons of a frame are solved at once by the batched Levenberg-Marquardt of
-:mod:`reconstruction.lm_solver` with the analytic normal equations of :mod:`reconstruction.map_estimation`,
-initialised by the vanilla triangulation (DLT) and a fitted mean body for the joints it cannot
+All persons of a frame are solved by Levenberg-Marquardt with analytic normal equations, either in
+compiled loops (``solver="compiled"``, the default: :mod:`reconstruction.compiled_solver`) or by the
+batched numpy solver of :mod:`reconstruction.lm_solver` with :mod:`reconstruction.map_estimation`
+(``solver="numpy"``, the reference; same iterates), initialised by the vanilla triangulation (DLT) and a fitted mean body for the joints it cannot
 triangulate (:mod:`reconstruction.pose_init`). The cost separates over persons and over the connected
 components of the bone graph, so the MLE is solved as P*J independent 3-variable problems and the MAP
 as P problems per component (COCO-23: the 5 face joints and the 18 body and foot joints), each with
-its own damping, step acceptance and stopping test, all stepped together in one loop (a person's face
-and body share the linear solve of an iteration, nothing else). The MAP uses the exact Hessian of the
+its own damping, step acceptance and stopping test (the numpy solver steps them all together in one
+loop; a person's face and body share its linear solve of an iteration, nothing else). The MAP uses the exact Hessian of the
 bone prior once a person is near its optimum (see :func:`reconstruction.map_estimation.linearize`);
 the solution is the same least-squares optimum as scipy's trust-region least_squares on the same
 residuals (tests/test_map_reconstruction.py).
