@@ -49,3 +49,17 @@ def test_reconstruction_ablation_sweep_runs_every_stage(tmp_path):
     cmd = [sys.executable, "-m", "benchmarks.gather_sweep", str(sweep), "--metrics", "mpjpe_mm,pcp_average"]
     table = subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=REPO, timeout=60).stdout
     assert table.splitlines()[0].split("|")[1].strip() == "reconstruction" and table.count("\n") == 6
+
+
+def test_benchmark_left_right_swap_swaps_the_chosen_detections_only():
+    from benchmarks.reconstruction import swap_left_right
+    from data.keypoints import JOINT_INDEX
+    rng = np.random.default_rng(0)
+    poses2d = rng.normal(size=(3, 4, 23, 3))
+    before = poses2d.copy()
+    assert np.array_equal(swap_left_right(poses2d, 0.0, rng), poses2d)
+    swapped = swap_left_right(poses2d, 1.0, rng)
+    left, right = JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]
+    np.testing.assert_array_equal(swapped[..., left, :], poses2d[..., right, :])
+    np.testing.assert_array_equal(swapped[..., 0, :], poses2d[..., 0, :])           # the nose stays
+    np.testing.assert_array_equal(poses2d, before)
