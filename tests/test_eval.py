@@ -78,3 +78,11 @@ def test_a_bad_config_value_stops_with_one_message(tmp_path):
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
     assert proc.returncode != 0
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: ") and "'bogus'" in proc.stderr
+
+
+def test_shelf_selects_feet_epipolar_matching_unless_the_command_line_names_one():
+    with initialize_config_dir(config_dir=CONFIGS, version_base="1.3"):
+        chosen = {tuple(o): compose(config_name="eval", overrides=o).matching._target_.rsplit(".", 1)[1]
+                  for o in ([], ["dataset=shelf"], ["dataset=shelf", "matching=feet"], ["+experiment=shelf"])}
+    assert chosen == {(): "FeetMatcher", ("dataset=shelf",): "FeetEpipolarMatcher",
+                      ("dataset=shelf", "matching=feet"): "FeetMatcher", ("+experiment=shelf",): "FeetEpipolarMatcher"}
