@@ -1,8 +1,8 @@
-"""One markdown table of Hydra multiruns: ``python -m benchmarks.gather_sweep DIR [DIR ...] [--out T.md] [--metrics a,b]``.
+"""One markdown table of Hydra multiruns: ``python -m benchmarks.gather_sweep DIR [DIR ...] [--out T.md]``.
 
 Run from the repository root. Every ``<sweep dir>/*/metrics.json`` (written by eval.py) is one row, of
 one or several sweep directories (e.g. a stage sweep and a prior-weight sweep in one table); the
-columns are the overrides that differ between runs (from ``<run>/.hydra/overrides.yaml``), then the chosen
+columns are the overrides that differ between runs (from ``<run>/.hydra/overrides.yaml``), then ``--metrics``
 metrics. A metric is a key of metrics.json's "metrics", or ``<stage>_ms``: the stage's time from
 "timings_s" per frame (frames = ``dataset.num_frames`` of ``<run>/.hydra/config.yaml``) in milliseconds.
 A run lacking a metric shows "-".

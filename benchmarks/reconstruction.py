@@ -200,8 +200,9 @@ def mpjpe_mm(pred: np.ndarray, gt: np.ndarray) -> float:
 
 def time_setting(stage: MAPReconstruction, persons: int, views: int, args: argparse.Namespace) -> dict:
     """Median ms per frame of ours and of per-person scipy, and both MPJPEs, on one crowd / rig size."""
-    seq = generate_sequence(SyntheticConfig(seed=args.seed + persons + 1000 * (views != 7), num_frames=args.timing_frames,
-                                            num_persons=persons, density=0.5, num_cameras=views, noise_px=5.0))
+    seed = args.seed + persons + 1000 * (views != 7)
+    seq = generate_sequence(SyntheticConfig(seed=seed, num_frames=args.timing_frames, num_persons=persons, density=0.5,
+                                            num_cameras=views, noise_px=5.0))
     ours_ms, scipy_ms, e_ours, e_scipy, subset = [], [], [], [], persons
     for frame in seq.frames:
         assignment = OracleMatcher()(frame.views, seq.rig)

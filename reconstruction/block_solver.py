@@ -13,6 +13,20 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.linalg import lapack
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+
+@lru_cache(maxsize=32)
+def graph_components(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> tuple[np.ndarray, ...]:
+    """Joint sets connected by the edges (a, b), singletons included: J, E pairs -> (j,) sorted arrays.
+
+    Ordered by first joint; cached (the graph of a bone table never changes).
+    """
+    pairs_arr = np.array(pairs, dtype=np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(pairs_arr)), (pairs_arr[:, 0], pairs_arr[:, 1])), shape=(num_joints, num_joints))
+    _, label = connected_components(graph, directed=False)
+    return tuple(np.flatnonzero(label == k) for k in np.unique(label))
 
 
 def spd_solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:

@@ -13,6 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from reconstruction.block_solver import graph_components
 from reconstruction.lm_solver import LMResult
 from reconstruction.map_estimation import PoseProblem
 from reconstruction import pose_kernels
@@ -62,18 +63,7 @@ def solver_plan(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> SolverPl
     for a, b in pairs:
         adj[a].add(b)
         adj[b].add(a)
-    seen, comps = set(), []
-    for j in range(num_joints):                                          # components by first joint
-        if j in seen:
-            continue
-        stack, comp = [j], set()
-        while stack:
-            k = stack.pop()
-            if k not in comp:
-                comp.add(k)
-                stack.extend(adj[k] - comp)
-        seen |= comp
-        comps.append(sorted(comp))
+    comps = [c.tolist() for c in graph_components(num_joints, pairs)]
     pos_joint, comp_start, filled = [], [0], []
     for comp in comps:
         order, later = _min_degree_order(comp, adj)

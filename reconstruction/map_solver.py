@@ -5,14 +5,15 @@
 All persons of a frame are solved by Levenberg-Marquardt with analytic normal equations, either in
 compiled loops (``solver="compiled"``, the default: :mod:`reconstruction.compiled_solver`) or by the
 batched numpy solver of :mod:`reconstruction.lm_solver` with :mod:`reconstruction.map_estimation`
-(``solver="numpy"``, the reference; same iterates), initialised by the vanilla triangulation (DLT) and a fitted mean body for the joints it cannot
-triangulate (:mod:`reconstruction.pose_init`). The cost separates over persons and over the connected
-components of the bone graph, so the MLE is solved as P*J independent 3-variable problems and the MAP
-as P problems per component (COCO-23: the 5 face joints and the 18 body and foot joints), each with
-its own damping, step acceptance and stopping test (the numpy solver steps them all together in one
-loop; a person's face and body share its linear solve of an iteration, nothing else). The MAP uses the exact Hessian of the
-bone prior once a person is near its optimum (see :func:`reconstruction.map_estimation.linearize`);
-the solution is the same least-squares optimum as scipy's trust-region least_squares on the same
+(``solver="numpy"``, the reference; same iterates), initialised by the vanilla triangulation (DLT)
+and a fitted mean body for the joints it cannot triangulate (:mod:`reconstruction.pose_init`). The
+cost separates over persons and over the connected components of the bone graph, so the MLE is
+solved as P*J independent 3-variable problems and the MAP as P problems per component (COCO-23: the
+5 face joints and the 18 body and foot joints), each with its own damping, step acceptance and
+stopping test (the numpy solver steps them all together in one loop; a person's face and body share
+its linear solve of an iteration, nothing else). The MAP uses the exact Hessian of the bone prior
+once a person is near its optimum (see :func:`reconstruction.map_estimation.linearize`); the
+solution is the same least-squares optimum as scipy's trust-region least_squares on the same
 residuals (tests/test_map_reconstruction.py).
 
 Sigma of a 2D joint: max(sigma_min, c sqrt(box_w box_h) / score) pixels. A top-down detector localises
@@ -37,12 +38,11 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from data.bone_lengths import BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from reconstruction.camera import Rig
-from reconstruction.block_solver import EliminationPlan, elimination_plan, solve_blocks, solve_dense
+from reconstruction.block_solver import (EliminationPlan, elimination_plan, graph_components, solve_blocks,
+                                         solve_dense)
 from reconstruction.compiled_solver import solve_poses_compiled
 from reconstruction.lm_solver import LMResult, minimize
 from reconstruction.map_estimation import (BLOCK_DIAG, ROBUST_LOSSES, Blocks, PoseBatch, PoseProblem, joint_sigma,
@@ -57,16 +57,7 @@ DENSE_MAX_UNITS = 16  # from this many persons the block elimination beats one d
 def bone_components(num_joints: int, bone_pairs: np.ndarray) -> list[np.ndarray]:
     """Joint sets connected by bones (singletons included), each sorted: J, (L, 2) -> list of (j,) arrays."""
     pairs = np.asarray(bone_pairs, dtype=np.int64).reshape(-1, 2)
-    return [c.copy() for c in _components(int(num_joints), tuple(map(tuple, pairs.tolist())))]
-
-
-@lru_cache(maxsize=32)
-def _components(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> tuple[np.ndarray, ...]:
-    """bone_components of a hashable bone list (the graph of a bone table never changes: computed once)."""
-    pairs_arr = np.array(pairs, dtype=np.int64).reshape(-1, 2)
-    graph = coo_matrix((np.ones(len(pairs_arr)), (pairs_arr[:, 0], pairs_arr[:, 1])), shape=(num_joints, num_joints))
-    _, label = connected_components(graph, directed=False)
-    return tuple(np.flatnonzero(label == k) for k in np.unique(label))
+    return [c.copy() for c in graph_components(int(num_joints), tuple(map(tuple, pairs.tolist())))]
 
 
 @dataclass(frozen=True)
@@ -88,7 +79,7 @@ class GraphLayout:
 @lru_cache(maxsize=32)
 def graph_layout(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> GraphLayout:
     """Layout of the bone graph of J joints with bones (a, b): computed once per graph."""
-    comps = _components(num_joints, pairs)
+    comps = graph_components(num_joints, pairs)
     order = np.concatenate(comps)
     position = np.argsort(order)
     sizes = np.array([len(c) for c in comps])
@@ -327,11 +318,12 @@ class MAPReconstruction:
         und = poses2d_und[:, idx]
         uv, inv_sigma = self._observations(und, np.asarray(bboxes, dtype=np.float64)[:, idx])
         Xp = X[idx]
+        solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
         for k, prior in enumerate(stages):
             if k > 0:
                 Xp = reinitialise_outliers(Xp, und, proj)
-            solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
-            Xp, _ = solve_fn(self._problem(uv, inv_sigma, proj, Xp, prior), Xp, self.max_iterations, self.xtol, self.ftol)
+            Xp, _ = solve_fn(self._problem(uv, inv_sigma, proj, Xp, prior), Xp, self.max_iterations, self.xtol,
+                             self.ftol)
         X = X.copy()
         X[idx] = Xp
         return X, dlt, placed

@@ -116,7 +116,7 @@ def _distance(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
 @njit(cache=True)
 def _inliers(points: np.ndarray, known: np.ndarray, score: np.ndarray, proj: np.ndarray,
              template: np.ndarray) -> np.ndarray:
-    """Known joints that are not gross outliers (module docstring): (P, J, 3), (P, J), (V, P, J), (V, 3, 4) -> (P, J)."""
+    """Known joints that are not gross outliers: (P, J, 3), (P, J), scores (V, P, J), (V, 3, 4) -> (P, J)."""
     P, J = known.shape
     ok = known.copy()
     zero = np.zeros(3)
@@ -168,13 +168,6 @@ def _views(poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarra
     Minv = np.linalg.inv(proj[:, :, :3])
     centre = -np.matmul(Minv, proj[:, :, 3:])[..., 0]
     return np.ascontiguousarray(poses2d[..., :2]), np.ascontiguousarray(score), Minv, centre
-
-
-def inlier_joints(points: np.ndarray, known: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """Known joints that are not gross outliers (see the module docstring): (P, J, 3), (P, J), (V, P, J, 3), (V, 3, 4) -> (P, J)."""
-    _, score, _, _ = _views(poses2d, proj)
-    return _inliers(np.ascontiguousarray(points, dtype=np.float64), np.asarray(known, dtype=bool), score,
-                    np.asarray(proj, dtype=np.float64), MEAN_POSE[: points.shape[1]])
 
 
 def fit_mean_body(points: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
