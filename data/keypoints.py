@@ -136,6 +136,17 @@ def coco23_to_shelf14(pose: np.ndarray) -> np.ndarray:
     return out
 
 
+# COCO-23 joints each Shelf-14 + mid-hip joint is built from (coco23_to_shelf14, with_mid_hip).
+SHELF15_SOURCES: tuple[tuple[int, ...], ...] = (
+    *((int(j),) for j in COCO23_TO_SHELF14_LIMBS), (0, 3, 4, 5, 6), (0, 3, 4, 5, 6), (11, 12))
+
+
+def shelf15_validity(valid23: np.ndarray) -> np.ndarray:
+    """Which Shelf-14 + mid-hip joints rest on valid COCO-23 joints only: (..., 23) bool -> (..., 15) bool."""
+    valid23 = np.asarray(valid23, dtype=bool)
+    return np.stack([valid23[..., list(src)].all(axis=-1) for src in SHELF15_SOURCES], axis=-1)
+
+
 def with_mid_hip(shelf14: np.ndarray) -> np.ndarray:
     """Append the mid-hip (mean of the two hips) as joint 14: (..., 14, 3) -> (..., 15, 3)."""
     shelf14 = np.asarray(shelf14)

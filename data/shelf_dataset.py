@@ -21,6 +21,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from data.keypoints import FOOT_JOINTS
 from data.fourd_detections import FrameCandidates, load_4dassoc_detections
 from data.multiview import Frame, Sequence, ViewDetections
 from data.paf_grouping import group_people, grouped_to_view_detections
@@ -35,12 +36,14 @@ def load_shelf(root: str | Path = "../shared/data/shelf", detections: str = "4d_
                baseline: str | None = "4d_association/skel.txt", first_frame: int = 300,
                frames: str | list[int] | None = None, min_paf: float = 0.05, min_joints: int = 8,
                min_mean_score: float = 0.4, bbox_margin: float = 0.1, poses2d: str | None = None,
-               alpha: float = 0.5) -> Sequence:
+               alpha: float = 0.5, drop_feet: bool = False) -> Sequence:
     """The Shelf rig (5 views) and one Frame per chosen frame with V ViewDetections (N, 23, 3), gt_poses None.
 
     Paths are relative to ``root`` unless absolute. ``frames``: None = all frames of gt.txt; a
     "start:stop[:step]" string = positions in the file (``"0:50"`` = Shelf frames 300..349); a list =
     Shelf frame numbers. ``min_paf``, ``min_joints``, ``min_mean_score`` go to group_people;
+    ``drop_feet``: the 6 foot keypoints of every detection are removed (score 0, ankles kept), as a
+    COCO-17 detector would give them;
     ``bbox_margin`` grows the boxes around the joints. ``poses2d``: grouped COCO-23 input instead of the
     detection files (no grouping). ``baseline``: None = no 4D Association comparison. ``alpha``: PCP.
     """
@@ -61,6 +64,9 @@ def load_shelf(root: str | Path = "../shared/data/shelf", detections: str = "4d_
         views = _read_poses2d(poses2d, rig)
         meta["poses2d_frames_not_selected"] = len(set(views) - set(numbers))
         source = f"grouped 2D poses from {poses2d}"
+    if drop_feet:
+        views = {n: [without_feet(v) for v in vs] for n, vs in views.items()}
+        source += "; the 6 foot keypoints removed (dataset.drop_feet)"
     out = [Frame(n, views.get(n) or [ViewDetections.empty() for _ in rig.names]) for n in numbers]
     detected = sum(len(v) for f in out for v in f.views)
     meta["description"] = (f"Shelf frames {numbers[0]}-{numbers[-1]} ({len(numbers)}), cameras "
@@ -68,6 +74,13 @@ def load_shelf(root: str | Path = "../shared/data/shelf", detections: str = "4d_
     protocol = ShelfProtocol({n: gts[n - first_frame] for n in numbers}, gt_path,
                              None if baseline is None else _under(root, baseline), first_frame, alpha)
     return Sequence(rig, out, meta, protocols=[protocol])
+
+
+def without_feet(view: ViewDetections) -> ViewDetections:
+    """A copy of the detections with the 6 COCO-23 foot joints missing (x, y, score 0): (N, 23, 3)."""
+    keypoints = view.keypoints.copy()
+    keypoints[:, FOOT_JOINTS] = 0.0
+    return ViewDetections(keypoints, view.bboxes, view.scores, view.person_ids, view.occluded)
 
 
 def _under(root: Path, path: str | Path) -> Path:

@@ -25,12 +25,20 @@ def correct_parts(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.nd
     return err <= alpha * length
 
 
-def pcp_by_part(correct: np.ndarray) -> dict[str, float]:
-    """PCP (%) of each named part and the average: (K, 10) bool -> {part: %, 'average': %}."""
+def pcp_by_part(correct: np.ndarray, valid: np.ndarray | None = None) -> dict[str, float]:
+    """PCP (%) of each named part and the average over the ``valid`` parts (default all): (K, 10) bool
+    [, (K, 10) bool] -> {part: %, 'average': %}."""
     correct = np.asarray(correct, dtype=bool).reshape(-1, len(PART_JOINTS))
+    valid = np.ones_like(correct) if valid is None else np.asarray(valid, dtype=bool).reshape(correct.shape)
     out = {}
     for i, name in enumerate(PART_NAMES):
-        cols = correct[:, PART_GROUP == i]
-        out[name] = 100.0 * float(cols.mean()) if cols.size else float("nan")
-    out["average"] = 100.0 * float(correct.mean()) if correct.size else float("nan")
+        cols, use = correct[:, PART_GROUP == i], valid[:, PART_GROUP == i]
+        out[name] = 100.0 * float(cols[use].mean()) if use.any() else float("nan")
+    out["average"] = 100.0 * float(correct[valid].mean()) if valid.any() else float("nan")
     return out
+
+
+def part_validity(valid15: np.ndarray) -> np.ndarray:
+    """A part is scored when both its Shelf-14 + mid-hip ends are valid: (K, 15) bool -> (K, 10) bool."""
+    valid15 = np.asarray(valid15, dtype=bool)
+    return valid15[:, PART_JOINTS[:, 0]] & valid15[:, PART_JOINTS[:, 1]]

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from data.keypoints import BODY_JOINTS, JOINT_GROUPS, coco23_to_shelf14, with_mid_hip
+from data.keypoints import BODY_JOINTS, JOINT_GROUPS, coco23_to_shelf14, shelf15_validity, with_mid_hip
 from evaluation.association import match_to_ground_truth
 from evaluation.mpjpe import joint_errors
-from evaluation.pcp import PART_JOINTS, correct_parts, pcp_by_part
+from evaluation.pcp import PART_JOINTS, correct_parts, part_validity, pcp_by_part
 
 
 class Pose3DEvaluator:
@@ -15,8 +15,9 @@ class Pose3DEvaluator:
     Protocol: every ground-truth person is paired one-to-one with a prediction by Hungarian
     matching on the mean joint distance (pairs farther than ``max_dist_m`` are unmatched); MPJPE is
     absolute (no root alignment) over matched pairs and joints valid in both; PCP uses the 10
-    Shelf parts on Shelf-14 built from COCO-23 (:func:`coco23_to_shelf14`), alpha = ``alpha``, and
-    counts every part of an unmatched ground-truth person as wrong.
+    Shelf parts on Shelf-14 built from COCO-23 (:func:`coco23_to_shelf14`), alpha = ``alpha``, over the
+    parts whose ground-truth ends rest on valid joints only (Panoptic leaves some joints unannotated),
+    and counts every part of an unmatched ground-truth person as wrong.
     """
 
     def __init__(self, max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
@@ -24,6 +25,7 @@ class Pose3DEvaluator:
         self.alpha = alpha
         self.errors: list[np.ndarray] = []
         self.parts: list[np.ndarray] = []
+        self.parts_valid: list[np.ndarray] = []
         self.num_gt = 0
         self.num_pred = 0
         self.num_matched = 0
@@ -41,6 +43,7 @@ class Pose3DEvaluator:
             g15 = with_mid_hip(coco23_to_shelf14(gt[pairs[:, 1], :, :3]))
             parts[pairs[:, 1]] = correct_parts(p15, g15, self.alpha)
         self.parts.append(parts)
+        self.parts_valid.append(part_validity(shelf15_validity(np.asarray(gt)[..., 3] > 0)))
 
     def summary(self) -> dict[str, float]:
         """Metrics: mpjpe_mm (23 joints), mpjpe_body_mm (17), mpjpe_<group>_mm, pcp_<part>, counts."""
@@ -49,7 +52,8 @@ class Pose3DEvaluator:
         for name, cols in JOINT_GROUPS.items():
             out[f"mpjpe_{name}_mm"] = _mean_mm(err, cols)
         parts = np.concatenate(self.parts) if self.parts else np.zeros((0, len(PART_JOINTS)), bool)
-        out.update({f"pcp_{k}": v for k, v in pcp_by_part(parts).items()})
+        valid = np.concatenate(self.parts_valid) if self.parts_valid else parts.copy()
+        out.update({f"pcp_{k}": v for k, v in pcp_by_part(parts, valid).items()})
         out.update(num_gt=self.num_gt, num_pred=self.num_pred, num_matched=self.num_matched,
                    recall=100.0 * self.num_matched / max(self.num_gt, 1),
                    precision=100.0 * self.num_matched / max(self.num_pred, 1))

@@ -96,15 +96,25 @@ def solver_plan(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> SolverPl
                       slot[np.maximum(pa, pb), np.minimum(pa, pb)], slot, as_int(later_ptr), as_int(later_idx))
 
 
+def person_bones(problem: PoseProblem, on: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each person's reference lengths and weights of the bones switched on: -> (P, L_on), (P, L_on)."""
+    L = len(on)
+    ref = np.broadcast_to(np.asarray(problem.bone_ref, dtype=np.float64), (P, L))[:, on]
+    weight = np.broadcast_to(np.asarray(problem.bone_weight, dtype=np.float64), (P, L))[:, on]
+    return np.ascontiguousarray(ref), np.ascontiguousarray(weight)
+
+
 def solve_poses_compiled(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, xtol: float = 1e-6,
                          ftol: float = 1e-10, gtol: float = 1e-10, tau: float = 1e-3) -> tuple[np.ndarray, LMResult]:
     """Minimise the problem's cost from X0 (P, J, 3) -> (P, J, 3) and the LMResult of the (P, C) problems.
 
-    Bones of weight 0 are dropped (they would only join components). The LMResult's x is (P, 3J).
+    Bones of weight 0 for every person are dropped (they would only join components); bone_ref and
+    bone_weight may be (L,) for all persons or (P, L), one table per person. The LMResult's x is (P, 3J).
     """
     X = np.array(X0, dtype=np.float64)
     P, J, _ = X.shape
-    on = np.asarray(problem.bone_weight) > 0
+    L = len(problem.bone_pairs)
+    on = np.any(np.asarray(problem.bone_weight).reshape(-1, L) > 0, axis=0) if L else np.zeros(0, dtype=bool)
     pairs = np.asarray(problem.bone_pairs, dtype=np.int64).reshape(-1, 2)[on]
     plan = solver_plan(J, tuple(map(tuple, pairs.tolist())))
     C = len(plan.comp_start) - 1
@@ -116,7 +126,7 @@ def solve_poses_compiled(problem: PoseProblem, X0: np.ndarray, max_iterations: i
             np.ascontiguousarray(problem.inv_sigma, dtype=np.float64),
             np.ascontiguousarray(problem.anchor, dtype=np.float64), float(problem.anchor_weight) ** 2,
             pose_kernels.ROBUST_CODES[problem.robust], float(problem.robust_scale) ** 2,
-            np.asarray(problem.bone_ref, dtype=np.float64)[on], np.asarray(problem.bone_weight, dtype=np.float64)[on],
+            *person_bones(problem, on, P),
             plan.pos_joint, plan.comp_start, plan.comp_bones_ptr, plan.comp_bones, plan.comp_slots_ptr,
             plan.comp_slots, plan.bone_pa, plan.bone_pb, plan.bone_slot, plan.slot, plan.later_ptr, plan.later_idx,
             int(max_iterations), float(xtol), float(ftol), float(gtol), float(tau), cost, iterations, status)

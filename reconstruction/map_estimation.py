@@ -42,8 +42,8 @@ class PoseProblem:
     uv: np.ndarray            # (V, P, J, 2) observed undistorted pixels (anything where unseen)
     inv_sigma: np.ndarray     # (V, P, J) 1 / sigma (1/px), 0 where the joint is not seen
     bone_pairs: np.ndarray    # (L, 2) joint indices of each bone; L may be 0
-    bone_ref: np.ndarray      # (L,) reference lengths (m)
-    bone_weight: np.ndarray   # (L,) prior_weight / sigma_l (1/m); 0 switches a bone off
+    bone_ref: np.ndarray      # (L,) reference lengths (m), or (P, L): one table per person
+    bone_weight: np.ndarray   # (L,) or (P, L) prior_weight / sigma_l (1/m); 0 switches a bone off
     anchor: np.ndarray        # (P, J, 3) Tikhonov anchor (m)
     anchor_weight: float = 1e-3
     robust: str = "none"
@@ -53,7 +53,14 @@ class PoseProblem:
         """The problem of a subset of persons: idx (b,) sorted -> PoseProblem with P = b."""
         if len(idx) == self.inv_sigma.shape[1] and (len(idx) == 0 or idx[-1] == len(idx) - 1):
             return self
-        return replace(self, uv=self.uv[:, idx], inv_sigma=self.inv_sigma[:, idx], anchor=self.anchor[idx])
+        per_person = {k: getattr(self, k)[idx] for k in ("bone_ref", "bone_weight") if np.ndim(getattr(self, k)) == 2}
+        return replace(self, uv=self.uv[:, idx], inv_sigma=self.inv_sigma[:, idx], anchor=self.anchor[idx],
+                       **per_person)
+
+    @property
+    def per_person_bones(self) -> bool:
+        """Whether the bone tables are per person ((P, L)) rather than one (L,) for all."""
+        return np.ndim(self.bone_ref) == 2 or np.ndim(self.bone_weight) == 2
 
     def joints(self, idx: np.ndarray) -> "PoseProblem":
         """The problem of a subset of joints, keeping the bones inside it: idx (j,) -> PoseProblem with J = j."""
@@ -66,11 +73,14 @@ class PoseProblem:
                        bone_weight=self.bone_weight[keep])
 
 
-def joint_sigma(poses2d: np.ndarray, bboxes: np.ndarray, c: float, sigma_min: float) -> np.ndarray:
-    """Pixel SD of every 2D joint, max(sigma_min, c sqrt(w h) / score): (V, P, J, 3), (V, P, 4) -> (V, P, J).
+def joint_sigma(poses2d: np.ndarray, bboxes: np.ndarray, c: float, sigma_min: float, sigma_px: float = 0.0,
+                score_power: float = 1.0) -> np.ndarray:
+    """Pixel SD of every 2D joint, max(sigma_min, sqrt(sigma_px^2 + (c sqrt(w h))^2) / score^score_power):
+    (V, P, J, 3), (V, P, 4) -> (V, P, J) (any leading shape).
 
     A box with no area falls back to the box of the person's keypoints in that view; unseen joints
-    (score <= 0) get inf.
+    (score <= 0) get inf. The defaults of the configs are fitted to Shelf's OpenPose errors
+    (benchmarks/fit_sigma_model.py).
     """
     poses2d = np.asarray(poses2d, dtype=np.float64)
     bboxes = np.asarray(bboxes, dtype=np.float64)
@@ -84,7 +94,8 @@ def joint_sigma(poses2d: np.ndarray, bboxes: np.ndarray, c: float, sigma_min: fl
         hi = np.where(ok, pts, -np.inf).max(axis=-2)
         extent = np.where(np.any(ok, axis=-2), hi - lo, 0.0)
         size[missing] = np.sqrt(extent[..., 0] * extent[..., 1])
-    sigma = np.maximum(sigma_min, c * size[..., None] / np.where(seen, score, 1.0))
+    spread = np.hypot(sigma_px, c * size)[..., None]
+    sigma = np.maximum(sigma_min, spread / np.where(seen, score, 1.0) ** score_power)
     return np.where(seen, sigma, np.inf)
 
 

@@ -39,7 +39,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from data.bone_lengths import BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
+from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from reconstruction.camera import Rig
 from reconstruction.block_solver import (EliminationPlan, elimination_plan, graph_components, solve_blocks,
                                          solve_dense)
@@ -47,10 +47,15 @@ from reconstruction.compiled_solver import solve_poses_compiled
 from reconstruction.lm_solver import LMResult, minimize
 from reconstruction.map_estimation import (BLOCK_DIAG, ROBUST_LOSSES, Blocks, PoseBatch, PoseProblem, joint_sigma,
                                           linear_blocks)
+from reconstruction.person_prior import (bone_groups, bone_variances, joint_information, noise_scale,
+                                         person_bone_lengths, proportion_sds)
 from reconstruction.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.triangulation import triangulate_dlt
 
 SOLVERS = ("compiled", "numpy")
+BONE_PRIORS = ("adaptive", "population")   # each person's own bone lengths (person_prior.py) | the table's means
+NOISE_SCALES = ("estimate", "model")       # 2D sigma = model x the person's estimated scale | the model alone
+BONE_GROUPS = bone_groups()
 DENSE_MAX_UNITS = 16  # from this many persons the block elimination beats one dense LAPACK solve per person
 
 
@@ -201,6 +206,12 @@ def solve_poses(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, 
     P, J, _ = X0.shape
     if P == 0:
         return X0.copy(), []
+    if problem.per_person_bones:   # the batched reference solver shares one table: one person at a time
+        L = len(problem.bone_pairs)
+        problem = replace(problem, bone_ref=np.broadcast_to(problem.bone_ref, (P, L)),
+                          bone_weight=np.broadcast_to(problem.bone_weight, (P, L)))
+        parts = [solve_poses(_person_problem(problem, p), X0[p:p + 1], max_iterations, xtol, ftol) for p in range(P)]
+        return np.concatenate([x for x, _ in parts]), [r for _, rs in parts for r in rs]
     on = problem.bone_weight > 0
     pairs = problem.bone_pairs[on].reshape(-1, 2)
     problem = replace(problem, bone_pairs=pairs, bone_ref=problem.bone_ref[on], bone_weight=problem.bone_weight[on])
@@ -216,6 +227,12 @@ def solve_poses(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, 
                       max_iterations, xtol, ftol)
     X = result.x.reshape(P, J, 3)
     return (X if ordered else X[:, np.argsort(layout.order)]), [result]
+
+
+def _person_problem(problem: PoseProblem, p: int) -> PoseProblem:
+    """The problem of person p alone, with its own (L,) bone table."""
+    return replace(problem.take(np.array([p])), bone_ref=np.asarray(problem.bone_ref[p]),
+                   bone_weight=np.asarray(problem.bone_weight[p]))
 
 
 def output_confidence(dlt_conf: np.ndarray, poses2d: np.ndarray, placed: np.ndarray, output_min_views: int,
@@ -261,11 +278,13 @@ class MAPReconstruction:
     output_min_views, single_view_score, unseen_score (output confidence).
     """
 
-    def __init__(self, c: float = 0.02, sigma_min: float = 1.0, prior_weight: float = 1.0,
+    def __init__(self, c: float = 0.016, sigma_min: float = 1.0, prior_weight: float = 1.0,
                  bone_table: str | Path | Mapping | None = None, robust: str = "none", robust_scale: float = 3.0,
                  anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
                  min_views: int = 2, output_min_views: int = 0, single_view_score: float = 0.5,
-                 unseen_score: float = 0.1, mle_first: bool = False, solver: str = "compiled") -> None:
+                 unseen_score: float = 0.1, mle_first: bool = False, solver: str = "compiled",
+                 bone_prior: str = "adaptive", noise_scale: str = "estimate", bone_tie_sd_m: float = 0.03,
+                 min_noise_scale: float = 0.01, sigma_px: float = 5.2, score_power: float = 1.27) -> None:
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         if robust not in ROBUST_LOSSES:
@@ -277,10 +296,21 @@ class MAPReconstruction:
                            ("anchor_weight", anchor_weight)):
             if not value >= 0:
                 raise ValueError(f"{key} must be >= 0, got {value}")
-        if sigma_min == 0 and c == 0:
-            raise ValueError("c and sigma_min cannot both be 0")
+        if sigma_min == 0 and c == 0 and sigma_px == 0:
+            raise ValueError("c, sigma_px and sigma_min cannot all be 0")
+        if bone_prior not in BONE_PRIORS or noise_scale not in NOISE_SCALES:
+            raise ValueError(f"bone_prior must be one of {BONE_PRIORS} and noise_scale one of {NOISE_SCALES}, "
+                             f"got {bone_prior!r}, {noise_scale!r}")
+        if not bone_tie_sd_m > 0 or not min_noise_scale > 0:
+            raise ValueError(f"bone_tie_sd_m and min_noise_scale must be > 0, got {bone_tie_sd_m}, {min_noise_scale}")
+        self.bone_prior, self.noise_scale = bone_prior, noise_scale
+        self.bone_tie_sd_m, self.min_noise_scale = float(bone_tie_sd_m), float(min_noise_scale)
         self.c, self.sigma_min, self.prior_weight = float(c), float(sigma_min), float(prior_weight)
+        if not sigma_px >= 0 or not score_power >= 0:
+            raise ValueError(f"sigma_px and score_power must be >= 0, got {sigma_px}, {score_power}")
+        self.sigma_px, self.score_power = float(sigma_px), float(score_power)
         self.bone_mean, self.bone_std = resolve_bone_table(bone_table)
+        self.proportion_sd = proportion_sds(self.bone_mean, self.bone_std, ABSOLUTE_SD_M)
         self.robust, self.robust_scale = robust, float(robust_scale)
         self.anchor_weight = float(anchor_weight)
         self.max_iterations, self.xtol, self.ftol = int(max_iterations), float(xtol), float(ftol)
@@ -297,7 +327,7 @@ class MAPReconstruction:
 
     def _observations(self, poses2d_und: np.ndarray, bboxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (V, P, J, 2) (0 where unseen) and 1 / sigma (V, P, J) (0 where unseen) of undistorted poses."""
-        sigma = joint_sigma(poses2d_und, bboxes, self.c, self.sigma_min)
+        sigma = joint_sigma(poses2d_und, bboxes, self.c, self.sigma_min, self.sigma_px, self.score_power)
         return np.nan_to_num(poses2d_und[..., :2]), np.where(np.isfinite(sigma), 1.0 / sigma, 0.0)
 
     def _problem(self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
@@ -321,16 +351,39 @@ class MAPReconstruction:
         solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
         for k, prior in enumerate(stages):
             if k > 0:
+                mle = Xp
                 Xp = reinitialise_outliers(Xp, und, proj)
-            Xp, _ = solve_fn(self._problem(uv, inv_sigma, proj, Xp, prior), Xp, self.max_iterations, self.xtol,
-                             self.ftol)
+                if prior:
+                    problem = self._person_problem(uv, inv_sigma, proj, Xp, mle)
+            if k == 0 or not prior:
+                problem = self._problem(uv, inv_sigma, proj, Xp, prior)
+            Xp, _ = solve_fn(problem, Xp, self.max_iterations, self.xtol, self.ftol)
         X = X.copy()
         X[idx] = Xp
         return X, dlt, placed
 
+    def _person_problem(self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
+                        mle: np.ndarray) -> PoseProblem:
+        """The MAP problem after an MLE solve (P, J, 3): each person's noise scale and bone table (person_prior.py)."""
+        scale = (noise_scale(mle, uv, inv_sigma, proj, self.min_noise_scale) if self.noise_scale == "estimate"
+                 else np.ones(len(mle)))
+        inv_sigma = inv_sigma / scale[None, :, None]
+        if self.bone_prior == "population":
+            return self._problem(uv, inv_sigma, proj, anchor, True)
+        info = joint_information(mle, proj, inv_sigma)
+        measured = (inv_sigma > 0).sum(axis=0) >= 2
+        lengths, variances = bone_variances(mle, info, np.ones(len(mle)), BONE_PAIRS, measured)
+        mean, sd = person_bone_lengths(lengths, variances, self.bone_mean, self.proportion_sd, self.bone_tie_sd_m,
+                                       BONE_GROUPS)
+        weight = self.prior_weight / np.sqrt(sd ** 2 + self.bone_tie_sd_m ** 2)
+        return PoseProblem(proj, uv, inv_sigma, BONE_PAIRS, mean, weight, anchor, self.anchor_weight, self.robust,
+                           self.robust_scale)
+
     def stages(self) -> tuple[bool, ...]:
-        """The solves this reconstruction runs after the DLT (True = with the bone prior)."""
-        return (False, True) if self.mle_first else (True,)
+        """The solves this reconstruction runs after the DLT (True = with the bone prior). A person-adaptive
+        prior or an estimated noise scale needs the MLE first."""
+        adaptive = self.bone_prior == "adaptive" or self.noise_scale == "estimate"
+        return (False, True) if self.mle_first or (adaptive and self.prior_weight > 0) else (True,)
 
     def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig) -> np.ndarray:
         """Reconstruct matched persons: (V, P, J, 3), (V, P, 4) -> (P, J, 4)."""
@@ -356,11 +409,13 @@ class MLEMAPReconstruction(MAPReconstruction):
 class MLEReconstruction(MAPReconstruction):
     """DLT, then the maximum-likelihood refinement of Eq. 6 alone (no prior; joints stay independent)."""
 
-    def __init__(self, c: float = 0.02, sigma_min: float = 1.0, robust: str = "none", robust_scale: float = 3.0,
+    def __init__(self, c: float = 0.016, sigma_min: float = 1.0, robust: str = "none", robust_scale: float = 3.0,
                  anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
                  min_views: int = 2, output_min_views: int = 2, single_view_score: float = 0.5,
-                 unseen_score: float = 0.1, solver: str = "compiled") -> None:
-        super().__init__(c=c, sigma_min=sigma_min, prior_weight=0.0, robust=robust, robust_scale=robust_scale,
+                 unseen_score: float = 0.1, solver: str = "compiled", sigma_px: float = 5.2,
+                 score_power: float = 1.27) -> None:
+        super().__init__(c=c, sigma_min=sigma_min, sigma_px=sigma_px, score_power=score_power, prior_weight=0.0,
+                         robust=robust, robust_scale=robust_scale,
                          anchor_weight=anchor_weight, max_iterations=max_iterations, xtol=xtol, ftol=ftol,
                          min_views=min_views, output_min_views=output_min_views,
                          single_view_score=single_view_score, unseen_score=unseen_score, solver=solver)

@@ -310,10 +310,11 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
               gtol: float, tau: float, cost_out: np.ndarray, it_out: np.ndarray, status_out: np.ndarray) -> None:
     """Levenberg-Marquardt of every (person, component) problem; X (P, J, 3) is updated in place (original order).
 
-    cost_out, it_out, status_out (P, C) receive the final cost, iterations and status of each problem.
+    ref, bw (P, L): each person's bone reference lengths and weights. cost_out, it_out, status_out (P, C)
+    receive the final cost, iterations and status of each problem.
     """
     P, J = X.shape[0], X.shape[1]
-    L = len(ref)
+    L = ref.shape[1]
     C = len(comp_start) - 1
     n_blocks = slot.max() + 1
     x, x_new, h = np.empty((J, 3)), np.empty((J, 3)), np.empty((J, 3))
@@ -321,6 +322,7 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
     K, K_t, Kr, Kr_t = np.empty((L, 3, 3)), np.empty((L, 3, 3)), np.empty((L, 3, 3)), np.empty((L, 3, 3))
     B = np.empty((n_blocks, 3, 3))
     for p in range(P):
+        ref_p, bw_p = ref[p], bw[p]
         for k in range(J):
             x[k] = X[p, pos_joint[k]]
         for c in range(C):
@@ -328,7 +330,7 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
             bones = comp_bones[comp_bones_ptr[c]:comp_bones_ptr[c + 1]]
             slots = comp_slots[comp_slots_ptr[c]:comp_slots_ptr[c + 1]]
             f = linearize(x, s, e, p, pos_joint, proj, uv, w, anchor, tau2, robust, C2, bones, bone_pa, bone_pb,
-                          ref, bw, D, g, K, Kr)
+                          ref_p, bw_p, D, g, K, Kr)
             scale = _max_diagonal(D, s, e)
             scale = scale if scale > 0.0 else 1.0
             status = CONVERGED_GRADIENT if _abs_max(g, s, e) <= gtol else RUNNING
@@ -352,7 +354,7 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
                         x_new[k, i] = x[k, i] + h[k, i]
                 h_max = _abs_max(h, s, e) if not np.isnan(predicted) else np.nan   # NaN step: never accepted
                 f_t = linearize(x_new, s, e, p, pos_joint, proj, uv, w, anchor, tau2, robust, C2, bones, bone_pa,
-                                bone_pb, ref, bw, D_t, g_t, K_t, Kr_t)
+                                bone_pb, ref_p, bw_p, D_t, g_t, K_t, Kr_t)
                 actual = f - f_t
                 rho = actual / predicted if predicted != 0.0 else np.nan
                 accept = predicted > 0.0 and rho > 0.0 and np.isfinite(f_t + h_max)

@@ -4,9 +4,10 @@ view v or -1. Each matcher is a small callable class configured from ``configs/m
 """
 from reconstruction.matching.assignment import assignment_from_labels
 from reconstruction.matching.epipolar import EpipolarMatcher
+from reconstruction.matching.evidence import EvidenceMatcher
 from reconstruction.matching.feet import FeetMatcher
 from reconstruction.matching.feet_epipolar import FeetEpipolarMatcher
 from reconstruction.matching.oracle import OracleMatcher
 from reconstruction.matching.ransac import RansacMatcher
 
-__all__ = ["EpipolarMatcher", "FeetEpipolarMatcher", "FeetMatcher", "OracleMatcher", "RansacMatcher", "assignment_from_labels"]
+__all__ = ["EpipolarMatcher", "EvidenceMatcher", "FeetEpipolarMatcher", "FeetMatcher", "OracleMatcher", "RansacMatcher", "assignment_from_labels"]

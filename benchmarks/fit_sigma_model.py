@@ -1,0 +1,120 @@
+"""Fit the 2D sigma model of the matcher and the MAP to the real errors of Shelf's OpenPose detections.
+
+    python -m benchmarks.fit_sigma_model [--root ../shared/data/shelf] [--frames 0:301]
+
+The Shelf 2D ground truth is the projection of ``tum/actorsGT.mat`` through the Shelf cameras. Every
+PAF-grouped OpenPose detection (data/shelf_dataset.py) is paired with the actor whose projected joints
+lie closest (median distance over the 12 limb joints, below ``--max-px``); the pixel error of each of
+its 12 limb joints (the Shelf-14 joints that are COCO keypoints; the two head joints are not) is kept
+with the joint's score and the box size sqrt(w h). The model is
+
+    sigma = max(sigma_min, sqrt(sigma_px^2 + (c sqrt(w h))^2) / score ** k)   (px, per coordinate)
+
+(a part in image pixels, as a bottom-up detector's, and a part that grows with the person, as a
+top-down detector's, both less certain at a lower score)
+and a 2D error of SD sigma per coordinate has median sigma * sqrt(2 ln 2) (Rayleigh). c and k are fitted
+robustly (sigma_px, c, k), by least squares of log sigma on the median error of each (score, size) bin, so that left /
+right swaps and grouping mistakes (a few percent of the joints, errors of 50+ px) do not inflate it.
+The script prints the binned table, the fit, and the model of configs/matching/evidence.yaml and
+configs/reconstruction/mle_map.yaml beside it.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from data.keypoints import COCO23_TO_SHELF14_LIMBS
+from data.shelf_dataset import load_shelf
+from evaluation.report import format_table
+from evaluation.shelf_protocol import load_actors_gt
+
+RAYLEIGH_MEDIAN = float(np.sqrt(2 * np.log(2)))
+SCORE_BINS = (0.2, 0.4, 0.55, 0.7, 0.8, 0.9, 1.01)
+SIZE_BINS = (0.0, 150.0, 250.0, 350.0, 1e9)
+MIN_BIN = 30
+
+
+def joint_errors(root: Path, frames: str | None, max_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel errors, scores and box sizes of every matched detection's scored limb joints: 3 x (K,)."""
+    seq = load_shelf(root, frames=frames, baseline=None)
+    first = seq.meta["first_frame"]
+    gt = load_actors_gt(root / "tum" / "actorsGT.mat", range(first, first + 301))
+    errors, scores, sizes = [], [], []
+    for frame in seq.frames:
+        actors = gt[frame.index - first]
+        for camera, view in zip(seq.rig, frame.views):
+            if not len(view) or not actors:
+                continue
+            truth = np.stack([camera.project(pose[:12, :3]) for pose in actors.values()])      # (A, 12, 2)
+            kp = view.keypoints[:, COCO23_TO_SHELF14_LIMBS]                                    # (N, 12, 3)
+            seen = kp[..., 2] > 0
+            dist = np.linalg.norm(kp[:, None, :, :2] - truth[None], axis=-1)                   # (N, A, 12)
+            median = np.array([[np.median(d[s]) if s.any() else np.inf for d in row] for row, s in zip(dist, seen)])
+            for n in range(len(view)):
+                a = int(np.argmin(median[n]))
+                if median[n, a] > max_px:
+                    continue
+                ok = seen[n]
+                errors.append(dist[n, a, ok])
+                scores.append(kp[n, ok, 2])
+                sizes.append(np.full(int(ok.sum()), np.sqrt(view.bboxes[n, 2] * view.bboxes[n, 3])))
+    return np.concatenate(errors), np.concatenate(scores), np.concatenate(sizes)
+
+
+def binned_sigmas(errors: np.ndarray, scores: np.ndarray, sizes: np.ndarray) -> list[tuple[float, float, float, int]]:
+    """(mean score, mean size, sigma = median error / Rayleigh median, count) of every bin with enough joints."""
+    out = []
+    for s0, s1 in zip(SCORE_BINS[:-1], SCORE_BINS[1:]):
+        for b0, b1 in zip(SIZE_BINS[:-1], SIZE_BINS[1:]):
+            hit = (scores >= s0) & (scores < s1) & (sizes >= b0) & (sizes < b1)
+            if hit.sum() >= MIN_BIN:
+                out.append((float(scores[hit].mean()), float(sizes[hit].mean()),
+                            float(np.median(errors[hit])) / RAYLEIGH_MEDIAN, int(hit.sum())))
+    return out
+
+
+def model_sigma(score: np.ndarray, size: np.ndarray, sigma_px: float, c: float, k: float,
+                sigma_min: float) -> np.ndarray:
+    """The sigma model at scores and box sizes: (K,), (K,) -> (K,) px."""
+    return np.maximum(sigma_min, np.hypot(sigma_px, c * size) / score ** k)
+
+
+def fit(bins: list[tuple[float, float, float, int]], sigma_min: float) -> tuple[float, float, float]:
+    """sigma_px, c and k of the model, least squares of log sigma weighted by sqrt(count)."""
+    score, size, sigma, count = (np.array(v) for v in zip(*bins))
+
+    def residual(theta: np.ndarray) -> np.ndarray:
+        model = model_sigma(score, size, np.exp(theta[0]), np.exp(theta[1]), theta[2], sigma_min)
+        return np.sqrt(count) * (np.log(model) - np.log(sigma))
+
+    result = least_squares(residual, x0=np.array([np.log(5.0), np.log(0.01), 1.0]))
+    return float(np.exp(result.x[0])), float(np.exp(result.x[1])), float(result.x[2])
+
+
+def main(argv: list[str] | None = None) -> tuple[float, float, float]:
+    """Print the binned errors and the fitted (sigma_px, c, k)."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--root", default="../shared/data/shelf", type=Path)
+    parser.add_argument("--frames", default=None, help='"start:stop[:step]" positions (default: all 301)')
+    parser.add_argument("--max-px", type=float, default=40.0, help="largest median joint distance of a match")
+    parser.add_argument("--sigma-min", type=float, default=1.0)
+    args = parser.parse_args(argv)
+    errors, scores, sizes = joint_errors(args.root, args.frames, args.max_px)
+    bins = binned_sigmas(errors, scores, sizes)
+    sigma_px, c, k = fit(bins, args.sigma_min)
+    rows = [[f"{s:.2f}", f"{b:.0f}", n, sig, float(model_sigma(s, b, sigma_px, c, k, args.sigma_min)),
+             max(1.0, 0.02 * b / s)] for s, b, sig, n in bins]
+    print(f"Shelf OpenPose limb joints matched to the projected actorsGT.mat: {len(errors)} joints; "
+          f"median error {np.median(errors):.2f} px, {100 * np.mean(errors > 30):.1f} % beyond 30 px")
+    print(format_table(["score", "box size (px)", "joints", "sigma measured (px)", "fit", "c=0.02, k=1 (before)"],
+                       rows, floatfmt=".2f"))
+    print(f"\nfit: sigma = max({args.sigma_min:g}, sqrt({sigma_px:.2f}^2 + ({c:.4f} sqrt(w h))^2) / score ** {k:.2f}) px"
+          "  (keys sigma_px, c, score_power of configs/matching/evidence.yaml and configs/reconstruction/*.yaml)")
+    return sigma_px, c, k
+
+
+if __name__ == "__main__":
+    main()
