@@ -16,13 +16,14 @@ once a person is near its optimum (see :func:`reconstruction.map_estimation.line
 solution is the same least-squares optimum as scipy's trust-region least_squares on the same
 residuals (tests/test_map_reconstruction.py).
 
-Sigma of a 2D joint: max(sigma_min, c sqrt(box_w box_h) / score) pixels. A top-down detector localises
-joints to a fraction of the person's size (the box is resized to a fixed network input, so one
-heatmap cell is ~box/64; COCO's OKS models the same error as a fraction of object scale), and a lower
-heatmap score means a flatter, less certain peak, hence the 1/score. c = 0.02 gives ~6 px for a
-300 px-tall person at score 1 (about 1.5 heatmap cells at 48 x 64 output), the typical error of
-HRNet-class detectors; sigma_min = 1 px stops near-zero boxes or scores from making a joint infinitely
-certain (the detector's own pixel quantisation). c = 0 gives a constant sigma_min for every joint.
+Sigma of a 2D joint: max(sigma_min, sqrt(sigma_px^2 + (c sqrt(box_w box_h))^2) / score^score_power)
+pixels: a part in image pixels (a bottom-up detector's quantisation and blur), a part that grows
+with the person (a top-down detector localises joints to a fraction of the box it resizes; COCO's
+OKS models the same), both less certain at a lower heatmap score. The defaults (5.2 px, 0.016, 1.27)
+are fitted to the errors of Shelf's real OpenPose detections against the projected ground truth
+(benchmarks/fit_sigma_model.py). With noise_scale="estimate" (the default) the model only sets the
+relative weights: each person's scale is estimated from the MLE residuals (person_prior.py).
+sigma_min stops near-zero boxes or scores from making a joint infinitely certain.
 
 Output confidence: a joint triangulated by the DLT (seen in >= min_views views) keeps the DLT
 confidence (mean score of its views); a joint seen in fewer views but at least one gets
@@ -50,6 +51,7 @@ from reconstruction.map_estimation import (BLOCK_DIAG, ROBUST_LOSSES, Blocks, Po
 from reconstruction.person_prior import (bone_groups, bone_variances, joint_information, noise_scale,
                                          person_bone_lengths, proportion_sds)
 from reconstruction.pose_init import initial_poses, reinitialise_outliers
+from reconstruction.side_swaps import apply_swaps, find_swaps
 from reconstruction.triangulation import triangulate_dlt
 
 SOLVERS = ("compiled", "numpy")
@@ -269,8 +271,12 @@ def warm_up() -> None:
 class MAPReconstruction:
     """DLT initialisation, then the MAP of Eq. 6 likelihood x Eq. 7 bone prior (mle_first: an MLE step first).
 
-    Keys: c, sigma_min (2D joint sigma, see the module docstring); prior_weight (w on every bone
-    residual, 0 = plain MLE); bone_table (None = data/bone_lengths.py defaults, a JSON path or a
+    Keys: c, sigma_min, sigma_px, score_power (2D joint sigma, see the module docstring); noise_scale
+    ("estimate": the sigma model times each person's scale from the MLE residuals, "model": the model
+    alone), min_noise_scale; bone_prior ("adaptive": each person's own bone lengths with the table as
+    their hierarchical prior, reconstruction/person_prior.py, tie bone_tie_sd_m; "population": the
+    table's means, the paper); fix_swaps (undo left / right swaps, reconstruction/side_swaps.py);
+    prior_weight (w on every bone residual, 0 = plain MLE); bone_table (None = data/bone_lengths.py defaults, a JSON path or a
     {"bones": {name: {mean, std}}} mapping); robust ("none", "huber", "cauchy") and robust_scale (in
     sigma units) on the likelihood; anchor_weight (Tikhonov tau, 1/m); max_iterations, xtol (m),
     ftol (relative) of the solver; solver ("compiled": numba kernels, reconstruction/compiled_solver.py;
@@ -284,7 +290,8 @@ class MAPReconstruction:
                  min_views: int = 2, output_min_views: int = 0, single_view_score: float = 0.5,
                  unseen_score: float = 0.1, mle_first: bool = False, solver: str = "compiled",
                  bone_prior: str = "adaptive", noise_scale: str = "estimate", bone_tie_sd_m: float = 0.03,
-                 min_noise_scale: float = 0.01, sigma_px: float = 5.2, score_power: float = 1.27) -> None:
+                 min_noise_scale: float = 0.01, sigma_px: float = 5.2, score_power: float = 1.27,
+                 fix_swaps: bool = True) -> None:
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         if robust not in ROBUST_LOSSES:
@@ -309,6 +316,7 @@ class MAPReconstruction:
         if not sigma_px >= 0 or not score_power >= 0:
             raise ValueError(f"sigma_px and score_power must be >= 0, got {sigma_px}, {score_power}")
         self.sigma_px, self.score_power = float(sigma_px), float(score_power)
+        self.fix_swaps, self.last_swaps = bool(fix_swaps), 0
         self.bone_mean, self.bone_std = resolve_bone_table(bone_table)
         self.proportion_sd = proportion_sds(self.bone_mean, self.bone_std, ABSOLUTE_SD_M)
         self.robust, self.robust_scale = robust, float(robust_scale)
@@ -339,14 +347,20 @@ class MAPReconstruction:
 
     def solve(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray,
               stages: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """DLT, then one solve per stage (True = with the prior): -> X (P, J, 3), DLT (P, J, 4), placed (P,)."""
+        """Swaps undone (fix_swaps), DLT, then one solve per stage (True = with the prior): -> X (P, J, 3),
+        DLT (P, J, 4), placed (P,)."""
+        bboxes = np.asarray(bboxes, dtype=np.float64)
+        if self.fix_swaps:                                      # left / right swaps of the detector, undone
+            swaps = find_swaps(poses2d_und, self._observations(poses2d_und, bboxes)[1], proj)
+            self.last_swaps = len(swaps)
+            poses2d_und = apply_swaps(poses2d_und, swaps) if swaps else poses2d_und
         dlt = triangulate_dlt(poses2d_und, proj, self.min_views)
         X, placed = initial_poses(dlt, poses2d_und, proj)
         idx = np.flatnonzero(placed)
         if len(idx) == 0:
             return X, dlt, placed
         und = poses2d_und[:, idx]
-        uv, inv_sigma = self._observations(und, np.asarray(bboxes, dtype=np.float64)[:, idx])
+        uv, inv_sigma = self._observations(und, bboxes[:, idx])
         Xp = X[idx]
         solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
         for k, prior in enumerate(stages):
@@ -413,9 +427,9 @@ class MLEReconstruction(MAPReconstruction):
                  anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
                  min_views: int = 2, output_min_views: int = 2, single_view_score: float = 0.5,
                  unseen_score: float = 0.1, solver: str = "compiled", sigma_px: float = 5.2,
-                 score_power: float = 1.27) -> None:
+                 score_power: float = 1.27, fix_swaps: bool = True) -> None:
         super().__init__(c=c, sigma_min=sigma_min, sigma_px=sigma_px, score_power=score_power, prior_weight=0.0,
-                         robust=robust, robust_scale=robust_scale,
+                         fix_swaps=fix_swaps, robust=robust, robust_scale=robust_scale,
                          anchor_weight=anchor_weight, max_iterations=max_iterations, xtol=xtol, ftol=ftol,
                          min_views=min_views, output_min_views=output_min_views,
                          single_view_score=single_view_score, unseen_score=unseen_score, solver=solver)

@@ -49,6 +49,13 @@ TOO_LITTLE_EVIDENCE = "too_little_evidence"      # no usable foot and fewer than
 NON_FINITE_KEYPOINTS = "non_finite_keypoints"    # ... and some keypoints were NaN / inf (treated as missing)
 
 
+def calibrated(d2: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
+    """The chi^2 with its body part divided by the squared noise scale: (Na, Nb) x2 -> (Na, Nb). The feet term
+    keeps its own model (its ground floor is foot size and calibration, not pixel noise)."""
+    has_feet = np.isfinite(feet)
+    return np.where(has_feet, feet, 0.0) + (d2 - np.where(has_feet, feet, 0.0)) / scale2
+
+
 def chi2_medians(dof: np.ndarray) -> np.ndarray:
     """Median of chi^2 for each entry's degrees of freedom: int array -> float array."""
     return _CHI2_MEDIANS[np.minimum(dof, len(_CHI2_MEDIANS) - 1)]
@@ -150,8 +157,9 @@ class EvidenceMatcher:
         self.unmatched_reasons: Counter[str] = Counter()
 
     def pair_evidence(self, views: list[ViewDetections], rig: Rig):
-        """The evidence function of one frame: (a, b) -> chi^2 (N_a, N_b), dof (N_a, N_b); chi^2 is inf where the
-        pair fails even the loosest test (noise scale ``max_noise_scale`` when calibrating, else 1)."""
+        """The evidence function of one frame: (a, b) -> chi^2 (N_a, N_b), dof (N_a, N_b), feet term (N_a, N_b)
+        (NaN where either has no feet); chi^2 is inf where the pair fails even the loosest test (noise scale
+        ``max_noise_scale`` when calibrating, else 1)."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         feats = self.feet.features([_finite(v) for v in views], rig)
@@ -161,7 +169,7 @@ class EvidenceMatcher:
         limits = gate_limits(self.reject_rate, J + 2)
         scale2 = self.max_noise_scale ** 2 if self.calibrate else 1.0   # the loosest test any calibration allows
 
-        def evidence(a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        def evidence(a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             fa, fb = feats[a], feats[b]
             d2 = mahalanobis_distances(fa.p, fb.p, fa.cov, fb.cov, self.feet.ground_sigma_floor) ** 2
             d2 = np.where(fa.has_p[:, None] & fb.has_p[None, :], d2, np.nan)
@@ -169,7 +177,7 @@ class EvidenceMatcher:
             dof = np.empty((len(fa), len(fb)), dtype=np.int64)
             pair_chi2(joints[a][0], joints[a][1], joints[b][0], joints[b][1], fundamental_matrix(rig[a], rig[b]),
                       np.ascontiguousarray(d2), limits * scale2, self.min_dof, self.outlier_sd ** 2 * scale2, out, dof)
-            return out, dof
+            return out, dof, d2
 
         return evidence, feats, joints
 
@@ -184,8 +192,8 @@ class EvidenceMatcher:
         limits = gate_limits(self.reject_rate, next((v.keypoints.shape[1] for v in views if len(v)), 23) + 2)
         edges = [np.zeros((0, 5))]
         linked = np.zeros((offsets[-1], offsets[-1]), dtype=bool)
-        for a, b, d2, dof in pairs:
-            d2 = d2 / scale2
+        for a, b, d2, dof, feet in pairs:
+            d2 = calibrated(d2, feet, scale2)
             block = d2 <= limits[dof] * self.link_scale ** 2
             linked[offsets[a]:offsets[a + 1], offsets[b]:offsets[b + 1]] = block
             linked[offsets[b]:offsets[b + 1], offsets[a]:offsets[a + 1]] = block.T
@@ -200,22 +208,28 @@ class EvidenceMatcher:
         self._count_reasons(assignment, usable, joints)
         return assignment
 
-    def noise_scale2(self, pairs: list[tuple[int, int, np.ndarray, np.ndarray]]) -> float:
+    def noise_scale2(self, pairs: list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray]]) -> float:
         """The frame's 2D noise over the model, squared, from the pairs a loose test assigns (median chi^2 per dof).
 
         In each view pair the mutual best partners under the test widened by ``max_noise_scale`` are taken;
-        most of them are true pairs, so the median of D^2 / median(chi^2(dof)) over them estimates the squared scale robustly. Clipped to
-        [1 / max_noise_scale^2, max_noise_scale^2]; 1 with fewer than ``min_calibration_pairs`` pairs.
+        most of them are true pairs, so the median over them of the body term / median(chi^2(body dof))
+        estimates the squared scale robustly. Clipped to [1 / max_noise_scale^2, max_noise_scale^2]; 1 with
+        fewer than ``min_calibration_pairs`` pairs.
         """
         ratios = []
-        for _, _, d2, dof in pairs:
+        for _, _, d2, dof, feet in pairs:
             if not np.isfinite(d2).any():
                 continue
-            cost = np.where(np.isfinite(d2), 0.5 * d2 / self.max_noise_scale ** 2 - self.evidence_per_dof * dof, np.inf)
+            loose = calibrated(d2, feet, self.max_noise_scale ** 2)
+            cost = np.where(np.isfinite(d2), 0.5 * loose - self.evidence_per_dof * dof, np.inf)
             best_b, best_a = np.argmin(cost, axis=1), np.argmin(cost, axis=0)
             rows = np.flatnonzero(best_a[best_b] == np.arange(len(cost)))          # mutual best partners
             rows = rows[np.isfinite(cost[rows, best_b[rows]])]
-            ratios += (d2[rows, best_b[rows]] / chi2_medians(dof[rows, best_b[rows]])).tolist()
+            cols = best_b[rows]
+            has_feet = np.isfinite(feet[rows, cols])
+            body_dof = dof[rows, cols] - 2 * has_feet
+            body = d2[rows, cols] - np.where(has_feet, feet[rows, cols], 0.0)
+            ratios += (body[body_dof > 0] / chi2_medians(body_dof[body_dof > 0])).tolist()
         if len(ratios) < self.min_calibration_pairs:
             return 1.0
         return float(np.clip(np.median(ratios), self.max_noise_scale ** -2, self.max_noise_scale ** 2))

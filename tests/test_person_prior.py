@@ -1,0 +1,127 @@
+"""What the MAP learns per person before its prior: noise scale, own bone lengths; left / right swaps undone."""
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_NAMES, BONE_STD, bone_lengths
+from data.keypoints import shelf15_validity
+from data.synthetic.body import mean_body, pose_joints
+from data.synthetic.observe import bbox_from_keypoints
+from data.synthetic.rigs import ring_rig
+from evaluation.pcp import pcp_by_part
+from evaluation.pose3d import Pose3DEvaluator
+from reconstruction.map_solver import MAPReconstruction, MLEReconstruction
+from reconstruction.person_prior import (PROPORTION_SD, bone_groups, noise_scale, person_bone_lengths,
+                                         proportion_sds)
+from reconstruction.side_swaps import apply_swaps, find_swaps
+
+
+def _scaled_body(scale: float, x: float = 0.0, y: float = 0.0) -> np.ndarray:
+    """The mean body scaled about its feet: (23, 3)."""
+    pose = pose_joints(mean_body(), 0.0, 0.0, 0.4, 0.2, True)
+    return pose * scale + np.array([x, y, 0.0])
+
+
+def _observe(rig, X, noise_px: float, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    uv = rig.project(X) + rng.normal(0.0, noise_px, (len(rig),) + X.shape[:2] + (2,))
+    poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
+    return poses2d, np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
+
+
+def test_bone_groups_pair_left_and_right():
+    groups = bone_groups()
+    for name, g in zip(BONE_NAMES, groups):
+        if name.startswith("left_"):
+            assert groups[BONE_NAMES.index("right_" + name[5:])] == g
+    assert len(set(groups)) == 13
+
+
+def test_proportion_sds_are_what_the_table_leaves_after_stature_and_placement():
+    prop = proportion_sds(BONE_MEAN, BONE_STD, ABSOLUTE_SD_M)
+    np.testing.assert_allclose(prop, np.sqrt(0.057 ** 2 - 0.053 ** 2), rtol=1e-6)
+    assert abs(prop[0] - PROPORTION_SD) < 0.002
+
+
+def test_the_hierarchical_prior_recovers_a_body_15_percent_larger_than_the_table():
+    # noise-free views: the MAP keeps the person's own bones (within 5 mm); the population prior does not
+    rig = ring_rig(5, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
+    X = _scaled_body(1.15)[None]
+    poses2d, boxes = _observe(rig, X, 0.0)
+    own = bone_lengths(X)[0]
+    adaptive = MAPReconstruction()(poses2d, boxes, rig)
+    assert np.max(np.abs(bone_lengths(adaptive[..., :3])[0] - own)) < 0.005
+    # 3 px of noise, the person's lengths estimated from the MLE: closer to their own than the table is
+    noisy, boxes = _observe(rig, X, 3.0, seed=1)
+    mle = MLEReconstruction()(noisy, boxes, rig)[..., :3]
+    lengths = bone_lengths(mle)
+    mean, sd = person_bone_lengths(lengths, np.full_like(lengths, 0.005 ** 2), BONE_MEAN,
+                                   proportion_sds(BONE_MEAN, BONE_STD, ABSOLUTE_SD_M), 0.01, bone_groups())
+    assert np.mean(np.abs(mean[0] - own)) < 0.005 < np.mean(np.abs(BONE_MEAN - own))
+    assert np.all(sd[0] < BONE_STD)
+    paper = MAPReconstruction(bone_prior="population", noise_scale="model")(noisy, boxes, rig)
+    ours = MAPReconstruction()(noisy, boxes, rig)
+    err = lambda out: np.mean(np.abs(bone_lengths(out[..., :3])[0] - own))  # noqa: E731
+    assert err(ours) < err(paper)
+
+
+def test_unmeasured_bones_follow_the_stature_of_the_measured_ones():
+    own = BONE_MEAN * 1.1
+    lengths = own[None].copy()
+    variances = np.full_like(lengths, 1e-6)
+    variances[0, BONE_NAMES.index("left_forearm")] = np.inf          # not measured
+    variances[0, BONE_NAMES.index("right_forearm")] = np.inf
+    mean, _ = person_bone_lengths(lengths, variances, BONE_MEAN, np.full(24, 0.02), 0.01, bone_groups())
+    k = BONE_NAMES.index("left_forearm")
+    assert abs(mean[0, k] - own[k]) < 0.4 * abs(BONE_MEAN[k] - own[k])
+
+
+def test_noise_scale_recovers_the_true_noise_over_the_model():
+    rng = np.random.default_rng(0)
+    rig = ring_rig(5, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
+    X = np.stack([_scaled_body(1.0, -1.0, 0.5), _scaled_body(1.0, 1.0, -0.5)])
+    proj = rig.projection_matrices()
+    for true in (0.5, 2.0):
+        uv = rig.project(X) + rng.normal(0.0, 3.0 * true, (5, 2, 23, 2))
+        poses2d = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
+        mle = MLEReconstruction(c=0.0, sigma_px=3.0, score_power=0.0)(poses2d, np.zeros((5, 2, 4)), rig)[..., :3]
+        s = noise_scale(mle, uv, np.full((5, 2, 23), 1 / 3.0), proj)
+        np.testing.assert_allclose(s, true, rtol=0.25)
+    assert chi2.median(1) < 1
+
+
+def test_a_left_right_swap_in_one_view_is_found_and_undone():
+    rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
+    X = _scaled_body(1.0)[None]
+    poses2d, boxes = _observe(rig, X, 1.0)
+    swapped = apply_swaps(poses2d, [(2, 0, 9, 10)])                  # wrists exchanged in view 2
+    assert not np.shares_memory(swapped, poses2d)
+    fixed = MAPReconstruction()(swapped, boxes, rig)
+    broken = MAPReconstruction(fix_swaps=False)(swapped, boxes, rig)
+    err = lambda out: np.linalg.norm(out[0, [9, 10], :3] - X[0, [9, 10]], axis=-1).max()  # noqa: E731
+    assert err(fixed) < 0.01 < err(broken)
+    proj = rig.projection_matrices()
+    assert find_swaps(swapped, np.ones((4, 1, 23)), proj) == [(2, 0, 9, 10)]
+    assert find_swaps(poses2d, np.ones((4, 1, 23)), proj) == []
+
+
+def test_pcp_counts_only_parts_whose_ground_truth_is_annotated():
+    valid = np.ones((1, 23), dtype=bool)
+    valid[0, 3] = False                                              # an ear: the head joints are unknown
+    v15 = shelf15_validity(valid)
+    assert not v15[0, 12] and not v15[0, 13] and v15[0, :12].all() and v15[0, 14]
+    ev = Pose3DEvaluator()
+    gt = np.concatenate([_scaled_body(1.0), np.ones((23, 1))], axis=1)[None]
+    gt[0, 3] = 0.0
+    pred = gt.copy()
+    pred[0, 3] = [0.1, 0.1, 1.6, 1.0]                                  # an ear placed where the GT has none
+    ev.update(pred, gt)
+    assert ev.summary()["pcp_average"] == 100.0
+    assert np.isnan(pcp_by_part(np.zeros((1, 10), bool), np.zeros((1, 10), bool))["average"])
+
+
+def test_rejects_bad_settings():
+    for bad in ({"bone_prior": "x"}, {"noise_scale": "x"}, {"bone_tie_sd_m": 0.0}, {"min_noise_scale": 0.0},
+                {"sigma_px": -1.0}, {"c": 0.0, "sigma_px": 0.0, "sigma_min": 0.0}):
+        with pytest.raises(ValueError):
+            MAPReconstruction(**bad)
