@@ -9,7 +9,8 @@ Dev sets: Shelf as shipped (real OpenPose BODY_25, feet included) and with the 6
 (``dataset.drop_feet=true``, ankles kept: what a COCO-17 detector gives); Panoptic band1 / band2 of
 ``panoptic_seq`` (20 consecutive frames, 5 HD cameras, 2D projected from the GT with 0 / 2 / 5 px noise,
 no foot joints); Wildtrack (7 real cameras, synthetic bodies at the annotated positions, 5 px); the
-synthetic crowd sweep of 10-400 people on the surveillance rig of ``configs/dataset/crowd.yaml``.
+synthetic crowd sweep of 10-400 people on the surveillance rig of ``configs/dataset/crowd.yaml``; the
+speed setting of the issues, 100 people in 7 ring views (``timing``).
 
 Rows (Hydra overrides of ``configs/eval.yaml``): ``default`` (no override), ``paper`` (the paper's exact
 method: feet-only matching and MLE -> MAP with the population bone table and the fixed 2D sigma model),
@@ -75,6 +76,9 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
                     f"dataset.noise_px={noise}"]
     if "wildtrack" in names:
         sets["Wildtrack 5 px"] = ["dataset=wildtrack", f"dataset.root={data}/wildtrack"]
+    if "timing" in names:
+        sets["ring 100 people x 7 views"] = ["dataset=synthetic", "dataset.num_persons=100", "dataset.num_cameras=7",
+                                             "dataset.density=0.5", "dataset.num_frames=3"]
     if "crowd" in names:
         for n in CROWD_SIZES:
             sets[f"crowd {n} people"] = ["dataset=crowd", f"dataset.num_persons={n}",
@@ -113,11 +117,12 @@ def run_row(sequence, cfg) -> list:
             pct("matching_precision"), pct("matching_recall"), m.get("mpjpe_mm", "-"), m.get("pcp_average", "-"), ms]
 
 
-def main(argv: list[str] | None = None) -> str:
-    """Print (and optionally write) the dev-set table."""
+def main(argv: list[str] | None = None) -> list[list]:
+    """Print (and optionally write) the dev-set table; returns its rows."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--sets", default="shelf,panoptic,wildtrack,crowd")
+    parser.add_argument("--sets", default="shelf,panoptic,wildtrack,crowd,timing")
     parser.add_argument("--rows", default=",".join(ROW_KEYS), help=f"comma list of {', '.join(ROW_KEYS)}")
+    parser.add_argument("--match", default="", help="only the dev sets whose label contains this text")
     parser.add_argument("--crowd-frames", type=int, default=3)
     parser.add_argument("--data", default="../shared/data")
     parser.add_argument("--out", default=None)
@@ -126,7 +131,9 @@ def main(argv: list[str] | None = None) -> str:
     table = []
     t_start = time.perf_counter()
     with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
-        for label, dataset in tqdm(dev_sets(args.sets.split(","), args.data, args.crowd_frames).items(), desc="dev sets"):
+        chosen = {k: v for k, v in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items()
+                  if args.match in k}
+        for label, dataset in tqdm(chosen.items(), desc="dev sets"):
             base = compose(config_name="eval", overrides=dataset)
             sequence = instantiate(base.dataset, _convert_="all")
             for row in rows_wanted:
@@ -140,7 +147,7 @@ def main(argv: list[str] | None = None) -> str:
     print(text)
     if args.out:
         atomic_write_text(Path(args.out), text + "\n")
-    return text
+    return table
 
 
 if __name__ == "__main__":

@@ -350,11 +350,16 @@ class MAPReconstruction:
         """Swaps undone (fix_swaps), DLT, then one solve per stage (True = with the prior): -> X (P, J, 3),
         DLT (P, J, 4), placed (P,)."""
         bboxes = np.asarray(bboxes, dtype=np.float64)
-        if self.fix_swaps:                                      # left / right swaps of the detector, undone
-            swaps = find_swaps(poses2d_und, self._observations(poses2d_und, bboxes)[1], proj)
-            self.last_swaps = len(swaps)
-            poses2d_und = apply_swaps(poses2d_und, swaps) if swaps else poses2d_und
         dlt = triangulate_dlt(poses2d_und, proj, self.min_views)
+        if self.fix_swaps:                                      # left / right swaps of the detector, undone
+            swaps = find_swaps(poses2d_und, self._observations(poses2d_und, bboxes)[1], proj,
+                               dlt if self.min_views == 2 else None)
+            self.last_swaps = len(swaps)
+            if swaps:
+                poses2d_und = apply_swaps(poses2d_und, swaps)
+                redo = sorted({p for _, p, _, _ in swaps})
+                dlt = dlt.copy()
+                dlt[redo] = triangulate_dlt(poses2d_und[:, redo], proj, self.min_views)
         X, placed = initial_poses(dlt, poses2d_und, proj)
         idx = np.flatnonzero(placed)
         if len(idx) == 0:

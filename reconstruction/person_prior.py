@@ -30,6 +30,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from data.bone_lengths import BONE_NAMES
+from reconstruction.block_solver import inverse_3x3
 
 STATURE_SD = 0.053          # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02        # relative SD of one bone group's length given the stature (left = right)
@@ -43,33 +44,42 @@ def _chi2_median(dof: int) -> float:
     return float(chi2.median(dof))
 
 
+def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (V, P, J, 2) and clamped depths (V, P, J) of joints (P, J, 3) in views (V, 3, 4)."""
+    P, J, _ = X.shape
+    hom = (proj[:, :, :3] @ X.reshape(-1, 3).T + proj[:, :, 3:]).reshape(len(proj), 3, P, J)
+    z = np.maximum(hom[:, 2], _EPS_DEPTH)
+    return np.stack([hom[:, 0] / z, hom[:, 1] / z], axis=-1), z
+
+
 def joint_information(X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray) -> np.ndarray:
     """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3)."""
-    M, t = proj[:, :, :3], proj[:, :, 3]
-    hom = np.einsum("vab,pjb->vpja", M, X) + t[:, None, None, :]
-    z = np.maximum(hom[..., 2], _EPS_DEPTH)
-    xy = hom[..., :2] / z[..., None]
-    # d(x, y)/dX = (M_k - xy_k M_2) / z, rows k = 0, 1
-    jac = (M[:, None, None, :2, :] - xy[..., :, None] * M[:, None, None, 2:3, :]) / z[..., None, None]
-    jac = jac * inv_sigma[..., None, None]
-    return np.einsum("vpjka,vpjkb->pjab", jac, jac)
+    xy, z = project(X, proj)
+    M = proj[:, :, :3]
+    info = np.zeros(X.shape[:2] + (3, 3))
+    for k in range(2):       # d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint
+        rows = (M[:, None, None, k, :] - xy[..., k, None] * M[:, None, None, 2, :]) * (inv_sigma / z)[..., None]
+        info += np.sum(rows[..., :, None] * rows[..., None, :], axis=0)
+    return info
 
 
 def noise_scale(X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray,
                 floor: float = 0.01) -> np.ndarray:
     """Each person's 2D noise over the sigma model, robustly from MLE residuals: (P, J, 3), (V, P, J, 2),
     (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views."""
-    hom = np.einsum("vab,pjb->vpja", proj[:, :, :3], X) + proj[:, None, None, :, 3]
-    xy = hom[..., :2] / np.maximum(hom[..., 2:3], _EPS_DEPTH)
+    xy, _ = project(X, proj)
     seen = inv_sigma > 0
     r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma ** 2, 0.0)       # (V, P, J)
     rss, views = r2.sum(axis=0), seen.sum(axis=0)                                     # (P, J)
-    out = np.ones(len(X))
     medians = np.array([_chi2_median(2 * n - 3) if n >= 2 else np.nan for n in range(proj.shape[0] + 1)])
-    for p in range(len(X)):
-        ok = views[p] >= 2
-        if ok.any():
-            out[p] = np.sqrt(np.median(rss[p, ok] / medians[views[p, ok]]))
+    ok = views >= 2
+    ratio = np.sort(np.where(ok, rss / np.where(ok, medians[views], 1.0), np.inf), axis=1)   # valid ones first
+    n = ok.sum(axis=1)
+    rows = np.arange(len(X))
+    a = ratio[rows, np.maximum(n - 1, 0) // 2]
+    b = ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
+    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
+    out = np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0)
     return np.maximum(out, floor)
 
 
@@ -88,13 +98,14 @@ def bone_variances(X: np.ndarray, info: np.ndarray, scale: np.ndarray, pairs: np
     d = X[:, a] - X[:, b]
     n = np.linalg.norm(d, axis=-1)
     u = d / np.maximum(n, 1e-12)[..., None]
-    ok = measured[:, a] & measured[:, b]
-    eye = np.eye(3) * 1e-12
-    cov = np.zeros(info.shape)
-    good = measured
-    cov[good] = np.linalg.inv(info[good] + eye)
-    cov *= (scale ** 2)[:, None, None, None]
-    var = np.einsum("pla,plab,plb->pl", u, cov[:, a] + cov[:, b], u)
+    inv, _ = inverse_3x3(np.moveaxis(np.nan_to_num(info), (-2, -1), (0, 1)), check=False)
+    trace = np.trace(info, axis1=-2, axis2=-1)
+    det = np.linalg.det(info)
+    # a joint is measured only where every direction is: two nearly parallel rays leave its depth free
+    good = measured & (det > 1e-9 * (trace / 3) ** 3) & (trace > 0)
+    cov = np.where(good[..., None, None], np.moveaxis(inv, (0, 1), (-2, -1)), 0.0) * (scale ** 2)[:, None, None, None]
+    ok = good[:, a] & good[:, b]
+    var = np.sum(u[..., :, None] * (cov[:, a] + cov[:, b]) * u[..., None, :], axis=(-2, -1))
     return n, np.where(ok, var, np.inf)
 
 
@@ -126,11 +137,11 @@ def person_bone_lengths(lengths: np.ndarray, variances: np.ndarray, bone_ref: np
     for _ in range(2):                                    # once, then without the outlying bones
         noise = np.where(use, variances, 0.0) + tie_sd ** 2
         w = np.where(use, 1.0 / noise, 0.0)                                                  # (P, L)
-        precision = np.eye(1 + G) + np.einsum("la,pl,lb->pab", A, w, A)
+        precision = np.eye(1 + G) + (A.T[None] * w[:, None, :]) @ A                        # (P, 1 + G, 1 + G)
         cov = np.linalg.inv(precision)
-        theta = np.einsum("pab,lb,pl->pa", cov, A, w * np.where(use, y, 0.0))
+        theta = (cov @ (A.T @ (w * np.where(use, y, 0.0)).T).T[..., None])[..., 0]          # (P, 1 + G)
         mean = bone_ref + theta @ A.T
-        var = np.einsum("la,pab,lb->pl", A, cov, A)
+        var = np.sum((A[None] @ cov) * A[None], axis=-1)                                   # (P, L)
         z = np.abs(np.where(use, lengths, mean) - mean) / np.sqrt(noise + var)
         outlier = use & (z > OUTLIER_SD)
         if not outlier.any():

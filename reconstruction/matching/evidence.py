@@ -111,6 +111,16 @@ def merge_complete(edges: np.ndarray, linked: np.ndarray, num_detections: list[i
     return np.stack(rows) if rows else np.zeros((0, len(counts)), dtype=np.int64)
 
 
+@lru_cache(maxsize=1)
+def warm_up() -> None:
+    """Compile the kernels (or load them from numba's cache) once per process, so a first frame is not timed
+    with the compiler."""
+    uv, var = np.zeros((1, 2, 2)), np.ones((1, 2))
+    out, dof = np.empty((1, 1)), np.empty((1, 1), dtype=np.int64)
+    pair_chi2(uv, var, uv, var, np.eye(3), np.full((1, 1), np.nan), np.full(5, np.inf), 1, 9.0, out, dof)
+    merge_linked(np.zeros(1, np.int64), np.ones(1, np.int64), np.arange(2, dtype=np.int64), np.ones((2, 2), bool))
+
+
 class EvidenceMatcher:
     """Matching by all shared evidence: ``matcher(views, rig) -> (P, V)`` detection index per view or -1.
 
@@ -152,9 +162,18 @@ class EvidenceMatcher:
             raise ValueError(f"need 1 <= link_scale <= max_noise_scale, got {link_scale}")
         self.link_scale = float(link_scale)
         self.last_noise_scale = 1.0
+        self._fundamentals: dict[tuple[int, int, int], tuple[Rig, np.ndarray]] = {}
+        warm_up()
         self.feet = FeetMatcher(min_views=min_views, **{"pixel_sigma": 5.0, **(feet or {})})
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()
+
+    def _fundamental(self, rig: Rig, a: int, b: int) -> np.ndarray:
+        """F of a view pair of the rig, computed once per rig: (3, 3)."""
+        key = (id(rig), a, b)
+        if key not in self._fundamentals:
+            self._fundamentals[key] = (rig, fundamental_matrix(rig[a], rig[b]))   # keeps rig alive: id stays unique
+        return self._fundamentals[key][1]
 
     def pair_evidence(self, views: list[ViewDetections], rig: Rig):
         """The evidence function of one frame: (a, b) -> chi^2 (N_a, N_b), dof (N_a, N_b), feet term (N_a, N_b)
@@ -175,7 +194,7 @@ class EvidenceMatcher:
             d2 = np.where(fa.has_p[:, None] & fb.has_p[None, :], d2, np.nan)
             out = np.empty((len(fa), len(fb)))
             dof = np.empty((len(fa), len(fb)), dtype=np.int64)
-            pair_chi2(joints[a][0], joints[a][1], joints[b][0], joints[b][1], fundamental_matrix(rig[a], rig[b]),
+            pair_chi2(joints[a][0], joints[a][1], joints[b][0], joints[b][1], self._fundamental(rig, a, b),
                       np.ascontiguousarray(d2), limits * scale2, self.min_dof, self.outlier_sd ** 2 * scale2, out, dof)
             return out, dof, d2
 

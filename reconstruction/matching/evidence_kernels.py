@@ -42,6 +42,10 @@ def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.n
             if not np.isnan(feet):
                 dof = 2
                 d2 = feet
+                if d2 > limits[2 + J]:              # the cheap test: no body evidence can save these feet
+                    chi2_out[i, j] = np.inf
+                    dof_out[i, j] = 2
+                    continue
             common = 0
             for k in range(J):
                 if var_a[i, k] > 0.0 and var_b[j, k] > 0.0:
