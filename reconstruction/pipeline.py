@@ -27,7 +27,8 @@ class FrameResult:
 def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Stack the matched detections: V views, (P, V) -> poses2d (V, P, J, 3), bboxes (V, P, 4).
 
-    Views where a person has no detection get score 0 and an all-zero box.
+    Views where a person has no detection get score 0 and an all-zero box; a joint with a non-finite
+    coordinate or score (a detector's NaN) is missing too (x, y, score 0).
     """
     P, V = assignment.shape
     J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
@@ -37,7 +38,8 @@ def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[n
         have = assignment[:, v] >= 0
         poses2d[v, have] = dets.keypoints[assignment[have, v]]
         bboxes[v, have] = dets.bboxes[assignment[have, v]]
-    return poses2d, bboxes
+    poses2d = np.where(np.isfinite(poses2d).all(axis=-1, keepdims=True), poses2d, 0.0)
+    return poses2d, np.nan_to_num(bboxes, nan=0.0, posinf=0.0, neginf=0.0)
 
 
 class MultiViewPipeline:

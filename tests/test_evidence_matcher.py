@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from data.keypoints import FOOT_JOINTS, LEFT_ANKLE, RIGHT_ANKLE
-from data.multiview import ViewDetections
+from data.multiview import Frame, ViewDetections
 from data.synthetic import SyntheticConfig, generate_sequence
 from data.synthetic.rigs import ring_rig
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts
@@ -11,6 +11,8 @@ from reconstruction.matching import EvidenceMatcher
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence import gate_limits, merge_complete
 from reconstruction.matching.evidence_kernels import pair_chi2
+from reconstruction.map_solver import MLEMAPReconstruction
+from reconstruction.pipeline import MultiViewPipeline
 
 FEET_AND_ANKLES = [*FOOT_JOINTS, LEFT_ANKLE, RIGHT_ANKLE]
 
@@ -121,6 +123,16 @@ def test_bad_detections_are_reported_as_unmatched_by_reason_not_a_crash():
     assert reasons["non_finite_keypoints"] == 1 and reasons["too_little_evidence"] == 1
     assert 0 not in assignment[:, 0] and 0 not in assignment[:, 1] and 0 in assignment[:, 2]
     assert _counts(assignment, views).precision == 1.0
+
+
+def test_a_frame_with_nan_keypoints_is_reconstructed_without_them():
+    seq = _scene()
+    views = [ViewDetections(v.keypoints.copy(), v.bboxes, v.scores, v.person_ids) for v in seq.frames[0].views]
+    views[0].keypoints[0] = np.nan
+    views[2].keypoints[0, :5] = np.nan
+    views[1].keypoints[1, 3, 2] = np.inf
+    result = MultiViewPipeline(seq.rig, EvidenceMatcher(), MLEMAPReconstruction())(Frame(0, views))
+    assert len(result.poses3d) == 6 and np.isfinite(result.poses3d).all()
 
 
 def test_rejects_bad_settings():

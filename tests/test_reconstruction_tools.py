@@ -45,10 +45,10 @@ def test_reconstruction_ablation_sweep_runs_every_stage(tmp_path):
     subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=REPO, timeout=60)
     assert time.perf_counter() - t0 < 20
     names = sorted(p.parent.name.rpartition("=")[2] for p in sweep.glob("*/metrics.json"))
-    assert names == ["map", "mle", "mle_map", "vanilla"]
+    assert names == ["map", "mle", "mle_map", "paper", "vanilla"]
     cmd = [sys.executable, "-m", "benchmarks.gather_sweep", str(sweep), "--metrics", "mpjpe_mm,pcp_average"]
     table = subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=REPO, timeout=60).stdout
-    assert table.splitlines()[0].split("|")[1].strip() == "reconstruction" and table.count("\n") == 6
+    assert table.splitlines()[0].split("|")[1].strip() == "reconstruction" and table.count("\n") == 7
 
 
 def test_benchmark_left_right_swap_swaps_the_chosen_detections_only():

@@ -10,6 +10,27 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _popcount(x: np.int64) -> int:
+    """Number of set bits of a non-negative 64-bit integer."""
+    x = x - ((x >> 1) & 0x5555555555555555)
+    x = (x & 0x3333333333333333) + ((x >> 2) & 0x3333333333333333)
+    x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0F
+    return int((x * 0x0101010101010101) >> 56) & 0xFF
+
+
+@njit(cache=True)
+def _masks(var: np.ndarray) -> np.ndarray:
+    """Bit masks of the usable joints (var > 0) of every detection, 62 joints per word: (N, J) -> (N, W) int64."""
+    N, J = var.shape
+    out = np.zeros((N, (J + 61) // 62), dtype=np.int64)
+    for i in range(N):
+        for k in range(J):
+            if var[i, k] > 0.0:
+                out[i, k // 62] |= np.int64(1) << (k % 62)
+    return out
+
+
 @njit(cache=True)
 def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.ndarray, F: np.ndarray,
               feet_d2: np.ndarray, limits: np.ndarray, min_dof: int, cap: float, chi2_out: np.ndarray, dof_out: np.ndarray) -> None:
@@ -34,6 +55,7 @@ def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.n
             x, y = uv_b[j, k, 0], uv_b[j, k, 1]
             for r in range(3):
                 lb[j, k, r] = F[0, r] * x + F[1, r] * y + F[2, r]
+    mask_a, mask_b = _masks(var_a), _masks(var_b)
     for i in range(Na):
         for j in range(Nb):
             feet = feet_d2[i, j]
@@ -47,9 +69,8 @@ def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.n
                     dof_out[i, j] = 2
                     continue
             common = 0
-            for k in range(J):
-                if var_a[i, k] > 0.0 and var_b[j, k] > 0.0:
-                    common += 1
+            for w in range(mask_a.shape[1]):
+                common += _popcount(mask_a[i, w] & mask_b[j, w])
             possible = dof + common
             if possible < min_dof or d2 > limits[possible]:
                 chi2_out[i, j] = np.inf
