@@ -47,6 +47,7 @@ from reconstruction.matching.merge import _as_edges, pair_edges, solve_pair
 
 TOO_LITTLE_EVIDENCE = "too_little_evidence"      # no usable foot and fewer than min_dof usable joints
 NON_FINITE_KEYPOINTS = "non_finite_keypoints"    # ... and some keypoints were NaN / inf (treated as missing)
+CALIBRATION_SAMPLE = 400                         # mutual best pairs enough for the median of the noise calibration
 
 
 def calibrated(d2: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
@@ -232,8 +233,8 @@ class EvidenceMatcher:
 
         In each view pair the mutual best partners under the test widened by ``max_noise_scale`` are taken;
         most of them are true pairs, so the median over them of the body term / median(chi^2(body dof))
-        estimates the squared scale robustly. Clipped to [1 / max_noise_scale^2, max_noise_scale^2]; 1 with
-        fewer than ``min_calibration_pairs`` pairs.
+        estimates the squared scale robustly (view pairs in order until ``CALIBRATION_SAMPLE`` pairs).
+        Clipped to [1 / max_noise_scale^2, max_noise_scale^2]; 1 with fewer than ``min_calibration_pairs``.
         """
         ratios = []
         for _, _, d2, dof, feet in pairs:
@@ -249,6 +250,8 @@ class EvidenceMatcher:
             body_dof = dof[rows, cols] - 2 * has_feet
             body = d2[rows, cols] - np.where(has_feet, feet[rows, cols], 0.0)
             ratios += (body[body_dof > 0] / chi2_medians(body_dof[body_dof > 0])).tolist()
+            if len(ratios) >= CALIBRATION_SAMPLE:             # enough for a median; the rest costs time only
+                break
         if len(ratios) < self.min_calibration_pairs:
             return 1.0
         return float(np.clip(np.median(ratios), self.max_noise_scale ** -2, self.max_noise_scale ** 2))
