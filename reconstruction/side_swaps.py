@@ -33,8 +33,9 @@ def find_swaps(poses2d: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, ful
     """(view, person, left, right) to exchange: poses2d (V, P, J, 3) undistorted px + score, inv_sigma (V, P, J)
     1 / sigma (0 unseen), proj (V, 3, 4); full (P, J, 4): the DLT from all views, if already computed.
 
-    Only the (person, pair) that reproject badly somewhere after a triangulation from all views (a swap
-    always shows there) are triangulated again without each view, so the test costs little per frame.
+    Only the (person, pair) that reproject badly somewhere after a triangulation from all views, and
+    better exchanged there (a swap shows both), are triangulated again without each view, so the test
+    costs little per frame.
     """
     V = len(proj)
     if V < 3 or poses2d.shape[1] == 0:
@@ -45,8 +46,10 @@ def find_swaps(poses2d: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, ful
     xy, _ = project(full[..., :3], proj)
     seen = inv_sigma > 0
     left, right = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-    given, _ = _chi2s(uv, xy, w2, left, right)                                        # (V, P, pairs)
-    bad = ((given > min_chi2) & seen[..., left] & seen[..., right]).any(axis=0)
+    given, exchanged = _chi2s(uv, xy, w2, left, right)                                # (V, P, pairs)
+    # a swap reprojects worse than its exchange even from the DLT it pulls (only the exchange test below
+    # needs the other views alone)
+    bad = ((given > min_chi2) & (exchanged < given) & seen[..., left] & seen[..., right]).any(axis=0)
     bad &= (full[:, left, 3] > 0) & (full[:, right, 3] > 0)                           # (P, pairs)
     persons, which = np.nonzero(bad)
     cand = [(int(p), int(left[k]), int(right[k])) for p, k in zip(persons, which)]
