@@ -276,8 +276,8 @@ class MAPReconstruction:
     alone), min_noise_scale; bone_prior ("adaptive": each person's own bone lengths with the table as
     their hierarchical prior, reconstruction/person_prior.py, tie bone_tie_sd_m; "population": the
     table's means, the paper); fix_swaps (undo left / right swaps, reconstruction/side_swaps.py);
-    prior_weight (w on every bone residual, 0 = plain MLE); bone_table (None = data/bone_lengths.py defaults, a JSON path or a
-    {"bones": {name: {mean, std}}} mapping); robust ("none", "huber", "cauchy") and robust_scale (in
+    prior_weight (w on every bone residual, 0 = plain MLE); bone_table (None = data/bone_lengths.py
+    defaults, a JSON path or a {"bones": {name: {mean, std}}} mapping); robust ("none", "huber", "cauchy") and robust_scale (in
     sigma units) on the likelihood; anchor_weight (Tikhonov tau, 1/m); max_iterations, xtol (m),
     ftol (relative) of the solver; solver ("compiled": numba kernels, reconstruction/compiled_solver.py;
     "numpy": the batched numpy solver, same optimum, kept as the reference); min_views (DLT);
@@ -369,13 +369,12 @@ class MAPReconstruction:
         Xp = X[idx]
         solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
         for k, prior in enumerate(stages):
-            if k > 0:
-                mle = Xp
-                Xp = reinitialise_outliers(Xp, und, proj)
-                if prior:
-                    problem = self._person_problem(uv, inv_sigma, proj, Xp, mle)
-            if k == 0 or not prior:
+            if k == 0:
                 problem = self._problem(uv, inv_sigma, proj, Xp, prior)
+            else:                                   # after the MLE: outliers re-initialised, the person's prior
+                mle, Xp = Xp, reinitialise_outliers(Xp, und, proj)
+                problem = (self._person_problem(uv, inv_sigma, proj, Xp, mle) if prior
+                           else self._problem(uv, inv_sigma, proj, Xp, False))
             Xp, _ = solve_fn(problem, Xp, self.max_iterations, self.xtol, self.ftol)
         X = X.copy()
         X[idx] = Xp
@@ -391,7 +390,7 @@ class MAPReconstruction:
             return self._problem(uv, inv_sigma, proj, anchor, True)
         info = joint_information(mle, proj, inv_sigma)
         measured = (inv_sigma > 0).sum(axis=0) >= 2
-        lengths, variances = bone_variances(mle, info, np.ones(len(mle)), BONE_PAIRS, measured)
+        lengths, variances = bone_variances(mle, info, BONE_PAIRS, measured)
         mean, sd = person_bone_lengths(lengths, variances, self.bone_mean, self.proportion_sd, self.bone_tie_sd_m,
                                        BONE_GROUPS)
         weight = self.prior_weight / np.sqrt(sd ** 2 + self.bone_tie_sd_m ** 2)

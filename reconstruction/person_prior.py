@@ -90,20 +90,22 @@ def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:
     return np.array([order[k] for k in keys], dtype=np.int64)
 
 
-def bone_variances(X: np.ndarray, info: np.ndarray, scale: np.ndarray, pairs: np.ndarray,
-                   measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def bone_variances(X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """Bone lengths (P, L) of X (P, J, 3) and their variances (P, L) from the joints' information (P, J, 3, 3)
-    and noise scales (P,); inf where an end is not ``measured`` (P, J) bool."""
+    (in the units of the actual noise); inf where an end is not ``measured`` (P, J) bool or not fixed in
+    every direction."""
     a, b = pairs[:, 0], pairs[:, 1]
     d = X[:, a] - X[:, b]
     n = np.linalg.norm(d, axis=-1)
     u = d / np.maximum(n, 1e-12)[..., None]
-    inv, _ = inverse_3x3(np.moveaxis(np.nan_to_num(info), (-2, -1), (0, 1)), check=False)
+    info = np.nan_to_num(info)
+    inv, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
     trace = np.trace(info, axis1=-2, axis2=-1)
     det = np.linalg.det(info)
     # a joint is measured only where every direction is: two nearly parallel rays leave its depth free
     good = measured & (det > 1e-9 * (trace / 3) ** 3) & (trace > 0)
-    cov = np.where(good[..., None, None], np.moveaxis(inv, (0, 1), (-2, -1)), 0.0) * (scale ** 2)[:, None, None, None]
+    cov = np.where(good[..., None, None], np.moveaxis(inv, (0, 1), (-2, -1)), 0.0)
     ok = good[:, a] & good[:, b]
     var = np.sum(u[..., :, None] * (cov[:, a] + cov[:, b]) * u[..., None, :], axis=(-2, -1))
     return n, np.where(ok, var, np.inf)
