@@ -47,7 +47,7 @@ from reconstruction.matching.merge import _as_edges, pair_edges, solve_pair
 
 TOO_LITTLE_EVIDENCE = "too_little_evidence"      # no usable foot and fewer than min_dof usable joints
 NON_FINITE_KEYPOINTS = "non_finite_keypoints"    # ... and some keypoints were NaN / inf (treated as missing)
-CALIBRATION_SAMPLE = 400                         # mutual best pairs enough for the median of the noise calibration
+CALIBRATION_SAMPLE = 200                         # mutual best pairs enough for the median of the noise calibration
 
 
 def calibrated(d2: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
@@ -177,9 +177,9 @@ class EvidenceMatcher:
         return self._fundamentals[key][1]
 
     def pair_evidence(self, views: list[ViewDetections], rig: Rig):
-        """The evidence function of one frame: (a, b) -> chi^2 (N_a, N_b), dof (N_a, N_b), feet term (N_a, N_b)
-        (NaN where either has no feet); chi^2 is inf where the pair fails even the loosest test (noise scale
-        ``max_noise_scale`` when calibrating, else 1)."""
+        """The evidence function of one frame: (a, b[, noise2]) -> chi^2 (N_a, N_b), dof (N_a, N_b), feet term
+        (N_a, N_b) (NaN where either has no feet); chi^2 is inf where the pair fails the test with the noise
+        variance times ``noise2`` (default: the loosest any calibration allows, ``max_noise_scale`` ** 2)."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         feats = self.feet.features([_finite(v) for v in views], rig)
@@ -187,16 +187,16 @@ class EvidenceMatcher:
         joints = [joint_variances(v, cam, self.min_score, model) for v, cam in zip(views, rig)]
         J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
         limits = gate_limits(self.reject_rate, J + 2)
-        scale2 = self.max_noise_scale ** 2 if self.calibrate else 1.0   # the loosest test any calibration allows
+        loosest = self.max_noise_scale ** 2 if self.calibrate else 1.0
 
-        def evidence(a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        def evidence(a: int, b: int, noise2: float = loosest) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             fa, fb = feats[a], feats[b]
             d2 = mahalanobis_distances(fa.p, fb.p, fa.cov, fb.cov, self.feet.ground_sigma_floor) ** 2
             d2 = np.where(fa.has_p[:, None] & fb.has_p[None, :], d2, np.nan)
             out = np.empty((len(fa), len(fb)))
             dof = np.empty((len(fa), len(fb)), dtype=np.int64)
             pair_chi2(joints[a][0], joints[a][1], joints[b][0], joints[b][1], self._fundamental(rig, a, b),
-                      np.ascontiguousarray(d2), limits * scale2, self.min_dof, self.outlier_sd ** 2 * scale2, out, dof)
+                      np.ascontiguousarray(d2), limits * noise2, self.min_dof, self.outlier_sd ** 2 * noise2, out, dof)
             return out, dof, d2
 
         return evidence, feats, joints
@@ -205,8 +205,7 @@ class EvidenceMatcher:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
         evidence, feats, joints = self.pair_evidence(views, rig)
         counts = [len(v) for v in views]
-        pairs = [(a, b, *evidence(a, b)) for a, b in combinations(range(len(views)), 2) if counts[a] and counts[b]]
-        scale2 = self.noise_scale2(pairs) if self.calibrate else 1.0
+        pairs, scale2 = self._calibrated_pairs(evidence, counts)
         self.last_noise_scale = float(np.sqrt(scale2))
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         limits = gate_limits(self.reject_rate, next((v.keypoints.shape[1] for v in views if len(v)), 23) + 2)
@@ -228,30 +227,47 @@ class EvidenceMatcher:
         self._count_reasons(assignment, usable, joints)
         return assignment
 
-    def noise_scale2(self, pairs: list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray]]) -> float:
-        """The frame's 2D noise over the model, squared, from the pairs a loose test assigns (median chi^2 per dof).
+    def _calibrated_pairs(self, evidence, counts: list[int]) -> tuple[list[tuple], float]:
+        """The evidence of every view pair (a, b, chi^2, dof, feet) and the squared noise scale of the frame.
 
-        In each view pair the mutual best partners under the test widened by ``max_noise_scale`` are taken;
-        most of them are true pairs, so the median over them of the body term / median(chi^2(body dof))
-        estimates the squared scale robustly (view pairs in order until ``CALIBRATION_SAMPLE`` pairs).
+        View pairs are taken in order under the loosest test until the calibration has its sample
+        (:meth:`noise_scale2`); the others are computed under the widest test still needed, the link test
+        at the calibrated scale, so that their loops stop early.
+        """
+        view_pairs = [(a, b) for a, b in combinations(range(len(counts)), 2) if counts[a] and counts[b]]
+        pairs, ratios = [], []
+        if self.calibrate:
+            for a, b in view_pairs:
+                pairs.append((a, b, *evidence(a, b)))
+                ratios += self.calibration_ratios(*pairs[-1][2:])
+                if len(ratios) >= CALIBRATION_SAMPLE:
+                    break
+        scale2 = self.noise_scale2(ratios) if self.calibrate else 1.0
+        pairs += [(a, b, *evidence(a, b, scale2 * self.link_scale ** 2)) for a, b in view_pairs[len(pairs):]]
+        return pairs, scale2
+
+    def calibration_ratios(self, d2: np.ndarray, dof: np.ndarray, feet: np.ndarray) -> list[float]:
+        """Body chi^2 / median(chi^2(body dof)) of a view pair's mutual best partners under the loosest test."""
+        if not np.isfinite(d2).any():
+            return []
+        loose = calibrated(d2, feet, self.max_noise_scale ** 2)
+        cost = np.where(np.isfinite(d2), 0.5 * loose - self.evidence_per_dof * dof, np.inf)
+        best_b, best_a = np.argmin(cost, axis=1), np.argmin(cost, axis=0)
+        rows = np.flatnonzero(best_a[best_b] == np.arange(len(cost)))                  # mutual best partners
+        rows = rows[np.isfinite(cost[rows, best_b[rows]])]
+        cols = best_b[rows]
+        has_feet = np.isfinite(feet[rows, cols])
+        body_dof = dof[rows, cols] - 2 * has_feet
+        body = d2[rows, cols] - np.where(has_feet, feet[rows, cols], 0.0)
+        return (body[body_dof > 0] / chi2_medians(body_dof[body_dof > 0])).tolist()
+
+    def noise_scale2(self, ratios: list[float]) -> float:
+        """The frame's 2D noise over the model, squared, from :meth:`calibration_ratios` (their median).
+
+        The mutual best partners under the test widened by ``max_noise_scale`` are mostly true pairs, so
+        the median of their body chi^2 / median(chi^2(body dof)) estimates the squared scale robustly.
         Clipped to [1 / max_noise_scale^2, max_noise_scale^2]; 1 with fewer than ``min_calibration_pairs``.
         """
-        ratios = []
-        for _, _, d2, dof, feet in pairs:
-            if not np.isfinite(d2).any():
-                continue
-            loose = calibrated(d2, feet, self.max_noise_scale ** 2)
-            cost = np.where(np.isfinite(d2), 0.5 * loose - self.evidence_per_dof * dof, np.inf)
-            best_b, best_a = np.argmin(cost, axis=1), np.argmin(cost, axis=0)
-            rows = np.flatnonzero(best_a[best_b] == np.arange(len(cost)))          # mutual best partners
-            rows = rows[np.isfinite(cost[rows, best_b[rows]])]
-            cols = best_b[rows]
-            has_feet = np.isfinite(feet[rows, cols])
-            body_dof = dof[rows, cols] - 2 * has_feet
-            body = d2[rows, cols] - np.where(has_feet, feet[rows, cols], 0.0)
-            ratios += (body[body_dof > 0] / chi2_medians(body_dof[body_dof > 0])).tolist()
-            if len(ratios) >= CALIBRATION_SAMPLE:             # enough for a median; the rest costs time only
-                break
         if len(ratios) < self.min_calibration_pairs:
             return 1.0
         return float(np.clip(np.median(ratios), self.max_noise_scale ** -2, self.max_noise_scale ** 2))
