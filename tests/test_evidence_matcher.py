@@ -66,7 +66,8 @@ def test_the_gate_rejects_true_pairs_at_its_nominal_rate_whatever_the_degrees_of
         uv = [rig[v].project(X) + rng.normal(0, 2.0, X.shape[:2] + (2,)) for v in (0, 1)]
         var = np.full((400, joints), 4.0)
         out, dof = np.empty((400, 400)), np.empty((400, 400), dtype=np.int64)
-        pair_chi2(uv[0], var, uv[1], var, F, np.full((400, 400), np.nan), gate_limits(rate, joints), 1, 1e9, out, dof)
+        pair_chi2(uv[0], var, uv[1], var, F, np.full((400, 400), np.nan), gate_limits(rate, joints), 1, 1e9, 1.0, out,
+                  dof)
         rejected = np.mean(~np.isfinite(np.diag(out)))
         assert abs(rejected - rate) < 3 * np.sqrt(rate * (1 - rate) / 400), (joints, rejected)
         assert np.all(np.diag(dof)[np.isfinite(np.diag(out))] == joints)
@@ -81,7 +82,7 @@ def test_the_chi_square_is_the_sum_of_sampson_distances_and_the_feet_term():
     a, b = rig[0].project(X), rig[1].project(X) + np.array([3.0, -2.0])
     var = np.array([[4.0, 9.0, 1.0]])
     out, dof = np.empty((1, 1)), np.empty((1, 1), dtype=np.int64)
-    pair_chi2(a, var, b, var, F, np.array([[2.5]]), gate_limits(1e-9, 5), 1, 1e9, out, dof)
+    pair_chi2(a, var, b, var, F, np.array([[2.5]]), gate_limits(1e-9, 5), 1, 1e9, 1.0, out, dof)
     ha, hb = np.c_[a[0], np.ones(3)], np.c_[b[0], np.ones(3)]
     la, lb = ha @ F.T, hb @ F
     e = np.sum(hb * la, axis=1)

@@ -9,7 +9,8 @@ For detections i (view a) and j (view b) the evidence is a chi-square in the uni
   e^2 / (s_b^2 |F x_a|_12^2 + s_a^2 |F^T x_b|_12^2), e = x_b^T F x_a, with each joint's pixel sigma
   s = max(sigma_min, sqrt(sigma_px^2 + (c sqrt(box area))^2) / score^score_power) (the 2D model of the
   MAP, fitted to Shelf's OpenPose errors by benchmarks/fit_sigma_model.py): 1 degree of freedom each,
-  capped at outlier_sd^2 so that a swapped or hidden joint counts as one bad joint, not as a wrong person.
+  capped at outlier_sd^2 (in variances of the model) so that a swapped or hidden joint counts as one
+  bad joint, not as a wrong person.
 
 Under "same person" the sum D^2 is chi^2 with dof = 2 [feet] + common joints, so the gate is the test
 D^2 <= chi^2_{1 - reject_rate}(dof): a pair sharing 3 joints and one sharing 20 are judged on the same
@@ -47,14 +48,13 @@ from reconstruction.matching.merge import _as_edges, pair_edges, solve_pair
 
 TOO_LITTLE_EVIDENCE = "too_little_evidence"      # no usable foot and fewer than min_dof usable joints
 NON_FINITE_KEYPOINTS = "non_finite_keypoints"    # ... and some keypoints were NaN / inf (treated as missing)
-CALIBRATION_SAMPLE = 200                         # mutual best pairs enough for the median of the noise calibration
+CALIBRATION_SAMPLE = 400                         # mutual best pairs enough for the median of the noise calibration
 
 
-def calibrated(d2: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
-    """The chi^2 with its body part divided by the squared noise scale: (Na, Nb) x2 -> (Na, Nb). The feet term
-    keeps its own model (its ground floor is foot size and calibration, not pixel noise)."""
-    has_feet = np.isfinite(feet)
-    return np.where(has_feet, feet, 0.0) + (d2 - np.where(has_feet, feet, 0.0)) / scale2
+def calibrated(body: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
+    """D^2 = feet + body / scale2: (Na, Nb) x2 -> (Na, Nb). The feet term keeps its own model (its ground
+    floor is foot size and calibration, not pixel noise); a missing feet term (NaN) adds nothing."""
+    return np.where(np.isfinite(feet), feet, 0.0) + body / scale2
 
 
 def chi2_medians(dof: np.ndarray) -> np.ndarray:
@@ -118,7 +118,7 @@ def warm_up() -> None:
     with the compiler."""
     uv, var = np.zeros((1, 2, 2)), np.ones((1, 2))
     out, dof = np.empty((1, 1)), np.empty((1, 1), dtype=np.int64)
-    pair_chi2(uv, var, uv, var, np.eye(3), np.full((1, 1), np.nan), np.full(5, np.inf), 1, 9.0, out, dof)
+    pair_chi2(uv, var, uv, var, np.eye(3), np.full((1, 1), np.nan), np.full(5, np.inf), 1, 9.0, 1.0, out, dof)
     merge_linked(np.zeros(1, np.int64), np.ones(1, np.int64), np.arange(2, dtype=np.int64), np.ones((2, 2), bool))
 
 
@@ -131,7 +131,8 @@ class EvidenceMatcher:
     score_power (the 2D pixel sigma model of :func:`joint_sigma`), min_views, feet (FeetMatcher keys for the ground-plane feet: pixel_sigma,
     ground_sigma_floor, foot_rule, ankle_height_m ...); calibrate (scale the model's noise to the frame's,
     :meth:`noise_scale2`), max_noise_scale and min_calibration_pairs (its bounds); outlier_sd (one joint adds at
-    most outlier_sd^2 to D^2: a few outlying joints do not reject a true pair); link_scale (the noise factor of
+    most outlier_sd^2 model variances to D^2, whatever the calibration: a few outlying joints do not reject
+    a true pair); link_scale (the noise factor of
     the looser test every cross pair of two merging persons must pass). Detections left out of every person are counted
     by reason in ``last_unmatched_reasons`` and ``unmatched_reasons``.
     """
@@ -140,7 +141,7 @@ class EvidenceMatcher:
                  min_score: float = 0.2, c: float = 0.016, sigma_min: float = 1.0, sigma_px: float = 5.2,
                  score_power: float = 1.27, min_views: int = 2,
                  feet: dict | None = None, calibrate: bool = True, max_noise_scale: float = 4.0,
-                 min_calibration_pairs: int = 5, outlier_sd: float = 3.0, link_scale: float = 2.0) -> None:
+                 min_calibration_pairs: int = 5, outlier_sd: float = 12.0, link_scale: float = 2.0) -> None:
         if not 0 < reject_rate < 1 or int(min_dof) < 1 or int(min_views) < 1:
             raise ValueError(f"need 0 < reject_rate < 1, min_dof >= 1, min_views >= 1; got {reject_rate}, "
                              f"{min_dof}, {min_views}")
@@ -177,9 +178,10 @@ class EvidenceMatcher:
         return self._fundamentals[key][1]
 
     def pair_evidence(self, views: list[ViewDetections], rig: Rig):
-        """The evidence function of one frame: (a, b[, noise2]) -> chi^2 (N_a, N_b), dof (N_a, N_b), feet term
-        (N_a, N_b) (NaN where either has no feet); chi^2 is inf where the pair fails the test with the noise
-        variance times ``noise2`` (default: the loosest any calibration allows, ``max_noise_scale`` ** 2)."""
+        """The evidence function of one frame: (a, b[, scale2]) -> body chi^2 (N_a, N_b) in model units, dof
+        (N_a, N_b), feet term (N_a, N_b) (NaN where either has no feet); the body term is inf where
+        feet + body / scale2 fails the link test (default scale2: the loosest any calibration allows,
+        ``max_noise_scale`` ** 2, so that no later test needs a pair it dropped)."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         feats = self.feet.features([_finite(v) for v in views], rig)
@@ -188,16 +190,19 @@ class EvidenceMatcher:
         J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
         limits = gate_limits(self.reject_rate, J + 2)
         loosest = self.max_noise_scale ** 2 if self.calibrate else 1.0
+        link2 = self.link_scale ** 2     # the widest test any later step applies (complete linkage)
 
-        def evidence(a: int, b: int, noise2: float = loosest) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        def evidence(a: int, b: int, scale2: float = loosest) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             fa, fb = feats[a], feats[b]
-            d2 = mahalanobis_distances(fa.p, fb.p, fa.cov, fb.cov, self.feet.ground_sigma_floor) ** 2
-            d2 = np.where(fa.has_p[:, None] & fb.has_p[None, :], d2, np.nan)
+            feet = mahalanobis_distances(fa.p, fb.p, fa.cov, fb.cov, self.feet.ground_sigma_floor) ** 2
+            feet = np.where(fa.has_p[:, None] & fb.has_p[None, :], feet, np.nan)
             out = np.empty((len(fa), len(fb)))
             dof = np.empty((len(fa), len(fb)), dtype=np.int64)
             pair_chi2(joints[a][0], joints[a][1], joints[b][0], joints[b][1], self._fundamental(rig, a, b),
-                      np.ascontiguousarray(d2), limits * noise2, self.min_dof, self.outlier_sd ** 2 * noise2, out, dof)
-            return out, dof, d2
+                      np.ascontiguousarray(feet), limits * link2, self.min_dof, self.outlier_sd ** 2, scale2, out,
+                      dof)
+            body = (out - np.where(np.isfinite(feet), feet, 0.0)) * scale2       # model units; inf = rejected
+            return body, dof, feet
 
         return evidence, feats, joints
 
@@ -211,8 +216,8 @@ class EvidenceMatcher:
         limits = gate_limits(self.reject_rate, next((v.keypoints.shape[1] for v in views if len(v)), 23) + 2)
         edges = [np.zeros((0, 5))]
         linked = np.zeros((offsets[-1], offsets[-1]), dtype=bool)
-        for a, b, d2, dof, feet in pairs:
-            d2 = calibrated(d2, feet, scale2)
+        for a, b, body, dof, feet in pairs:
+            d2 = calibrated(body, feet, scale2)
             block = d2 <= limits[dof] * self.link_scale ** 2
             linked[offsets[a]:offsets[a + 1], offsets[b]:offsets[b + 1]] = block
             linked[offsets[b]:offsets[b + 1], offsets[a]:offsets[a + 1]] = block.T
@@ -230,11 +235,13 @@ class EvidenceMatcher:
     def _calibrated_pairs(self, evidence, counts: list[int]) -> tuple[list[tuple], float]:
         """The evidence of every view pair (a, b, chi^2, dof, feet) and the squared noise scale of the frame.
 
-        View pairs are taken in order under the loosest test until the calibration has its sample
-        (:meth:`noise_scale2`); the others are computed under the widest test still needed, the link test
-        at the calibrated scale, so that their loops stop early.
+        View pairs are taken, neighbours first, under the loosest test until the calibration has its sample
+        (:meth:`noise_scale2`); the others are computed at the calibrated scale, so that their loops stop
+        as soon as the link test fails.
         """
-        view_pairs = [(a, b) for a, b in combinations(range(len(counts)), 2) if counts[a] and counts[b]]
+        # neighbours first ((0, 1), (1, 2), ..., then (0, 2), ...): the sample covers every view early
+        view_pairs = sorted(((a, b) for a, b in combinations(range(len(counts)), 2) if counts[a] and counts[b]),
+                            key=lambda ab: (ab[1] - ab[0], ab[0]))
         pairs, ratios = [], []
         if self.calibrate:
             for a, b in view_pairs:
@@ -243,23 +250,21 @@ class EvidenceMatcher:
                 if len(ratios) >= CALIBRATION_SAMPLE:
                     break
         scale2 = self.noise_scale2(ratios) if self.calibrate else 1.0
-        pairs += [(a, b, *evidence(a, b, scale2 * self.link_scale ** 2)) for a, b in view_pairs[len(pairs):]]
+        pairs += [(a, b, *evidence(a, b, scale2)) for a, b in view_pairs[len(pairs):]]
         return pairs, scale2
 
-    def calibration_ratios(self, d2: np.ndarray, dof: np.ndarray, feet: np.ndarray) -> list[float]:
+    def calibration_ratios(self, body: np.ndarray, dof: np.ndarray, feet: np.ndarray) -> list[float]:
         """Body chi^2 / median(chi^2(body dof)) of a view pair's mutual best partners under the loosest test."""
-        if not np.isfinite(d2).any():
+        if not np.isfinite(body).any():
             return []
-        loose = calibrated(d2, feet, self.max_noise_scale ** 2)
-        cost = np.where(np.isfinite(d2), 0.5 * loose - self.evidence_per_dof * dof, np.inf)
+        loose = calibrated(body, feet, self.max_noise_scale ** 2)
+        cost = np.where(np.isfinite(loose), 0.5 * loose - self.evidence_per_dof * dof, np.inf)
         best_b, best_a = np.argmin(cost, axis=1), np.argmin(cost, axis=0)
         rows = np.flatnonzero(best_a[best_b] == np.arange(len(cost)))                  # mutual best partners
         rows = rows[np.isfinite(cost[rows, best_b[rows]])]
         cols = best_b[rows]
-        has_feet = np.isfinite(feet[rows, cols])
-        body_dof = dof[rows, cols] - 2 * has_feet
-        body = d2[rows, cols] - np.where(has_feet, feet[rows, cols], 0.0)
-        return (body[body_dof > 0] / chi2_medians(body_dof[body_dof > 0])).tolist()
+        body_dof = dof[rows, cols] - 2 * np.isfinite(feet[rows, cols])
+        return (body[rows, cols][body_dof > 0] / chi2_medians(body_dof[body_dof > 0])).tolist()
 
     def noise_scale2(self, ratios: list[float]) -> float:
         """The frame's 2D noise over the model, squared, from :meth:`calibration_ratios` (their median).

@@ -33,13 +33,14 @@ def _masks(var: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.ndarray, F: np.ndarray,
-              feet_d2: np.ndarray, limits: np.ndarray, min_dof: int, cap: float, chi2_out: np.ndarray, dof_out: np.ndarray) -> None:
-    """Chi-square and degrees of freedom of every pair (i, j); chi2_out[i, j] = inf where rejected.
+              feet_d2: np.ndarray, limits: np.ndarray, min_dof: int, cap: float, body_scale2: float, chi2_out: np.ndarray, dof_out: np.ndarray) -> None:
+    """Chi-square feet + body / body_scale2 and degrees of freedom of every pair (i, j); inf where rejected.
 
     uv_a (Na, J, 2) undistorted pixels, var_a (Na, J) pixel variances (0 = joint not usable), the same for
     b; F (3, 3) with x_b^T F x_a = 0; feet_d2 (Na, Nb) squared Mahalanobis feet distance (2 dof), NaN where
     either detection has no feet; limits (D + 1,) the gate chi^2 quantile per dof; cap: the most one joint
-    adds (an outlying joint, e.g. a left / right swap, counts as a bad joint, not as a wrong person).
+    adds (an outlying joint, e.g. a left / right swap, counts as a bad joint, not as a wrong person);
+    body_scale2: the squared noise scale the body terms are divided by (the feet term keeps its own model).
     """
     Na, J = var_a.shape
     Nb = var_b.shape[0]
@@ -83,7 +84,7 @@ def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.n
                     m0, m1 = lb[j, k, 0], lb[j, k, 1]
                     denom = var_b[j, k] * (l0 * l0 + l1 * l1) + var_a[i, k] * (m0 * m0 + m1 * m1)
                     if denom > 0.0:
-                        d2 += min(e * e / denom, cap)
+                        d2 += min(e * e / denom, cap) / body_scale2
                         dof += 1
                         if d2 > limits[possible]:
                             break
