@@ -28,7 +28,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 ROBUST_LOSSES = ("none", "huber", "cauchy")
-_EPS_DEPTH = 1e-6  # m; projections of points behind a camera are clamped to this depth
+EPS_DEPTH = 1e-6  # m; projections of points behind a camera are clamped to this depth
 BLOCK_DIAG = (np.arange(3), np.arange(3))      # diagonal entries of 3x3 blocks stored first: (3, 3, ...) -> (3, ...)
 _SYM6 = np.array([0, 1, 2, 4, 5, 8])           # the distinct entries of a flat symmetric 3x3 matrix ...
 _SYM9 = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # ... and back to all 9
@@ -118,7 +118,7 @@ def _project_xy(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray
     """Pixel x, y and clamped depth of 3D joints in every view: (P, J, 3), (V, 3, 4) -> 3 x (V, P, J)."""
     P, J, _ = X.shape
     hom = np.matmul(proj[:, :, :3], X.reshape(-1, 3).T) + proj[:, :, 3:]                     # (V, 3, P*J)
-    depth = np.maximum(hom[:, 2], _EPS_DEPTH)
+    depth = np.maximum(hom[:, 2], EPS_DEPTH)
     shape = (len(proj), P, J)
     return (hom[:, 0] / depth).reshape(shape), (hom[:, 1] / depth).reshape(shape), depth.reshape(shape)
 
@@ -268,7 +268,7 @@ def _likelihood_terms(X: np.ndarray, batch: PoseBatch) -> tuple[np.ndarray, np.n
     sh = batch.shared
     V, n = sh.num_views, J * P
     hom = (sh.proj_rows @ X.reshape(3, n) + sh.proj_t).reshape(3, V, n)
-    inv_depth = 1.0 / np.maximum(hom[2], _EPS_DEPTH)
+    inv_depth = 1.0 / np.maximum(hom[2], EPS_DEPTH)
     p = hom[:2] * inv_depth                                                             # (2, V, n)
     w = batch.w.reshape(V, n)
     r = (batch.uv.reshape(2, V, n) - p) * w

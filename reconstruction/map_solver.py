@@ -351,12 +351,13 @@ class MAPReconstruction:
         DLT (P, J, 4), placed (P,)."""
         bboxes = np.asarray(bboxes, dtype=np.float64)
         dlt = triangulate_dlt(poses2d_und, proj, self.min_views)
+        uv, inv_sigma = self._observations(poses2d_und, bboxes)
         if self.fix_swaps:                                      # left / right swaps of the detector, undone
-            swaps = find_swaps(poses2d_und, self._observations(poses2d_und, bboxes)[1], proj,
-                               dlt if self.min_views == 2 else None)
+            swaps = find_swaps(poses2d_und, inv_sigma, proj, dlt if self.min_views == 2 else None)
             self.last_swaps = len(swaps)
             if swaps:
                 poses2d_und = apply_swaps(poses2d_und, swaps)
+                uv, inv_sigma = apply_swaps(uv, swaps), apply_swaps(inv_sigma[..., None], swaps)[..., 0]
                 redo = sorted({p for _, p, _, _ in swaps})
                 dlt = dlt.copy()
                 dlt[redo] = triangulate_dlt(poses2d_und[:, redo], proj, self.min_views)
@@ -364,8 +365,7 @@ class MAPReconstruction:
         idx = np.flatnonzero(placed)
         if len(idx) == 0:
             return X, dlt, placed
-        und = poses2d_und[:, idx]
-        uv, inv_sigma = self._observations(und, bboxes[:, idx])
+        und, uv, inv_sigma = poses2d_und[:, idx], uv[:, idx], inv_sigma[:, idx]
         Xp = X[idx]
         solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
         for k, prior in enumerate(stages):

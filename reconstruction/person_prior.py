@@ -24,31 +24,29 @@ Two estimates, both from the maximum-likelihood joints X (P, J, 3) of a frame:
 """
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 from scipy.stats import chi2
 
 from data.bone_lengths import BONE_NAMES
 from reconstruction.block_solver import inverse_3x3
+from reconstruction.map_estimation import EPS_DEPTH
 
 STATURE_SD = 0.053          # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02        # relative SD of one bone group's length given the stature (left = right)
 OUTLIER_SD = 3.0            # a bone measured this many SD from its posterior is dropped and the posterior redone
-_EPS_DEPTH = 1e-6
+_CHI2_MEDIANS = np.concatenate([[np.nan], chi2.median(np.arange(1, 64))])
 
 
-@lru_cache(maxsize=64)
-def _chi2_median(dof: int) -> float:
-    """Median of chi^2 with dof degrees of freedom."""
-    return float(chi2.median(dof))
+def chi2_medians(dof: np.ndarray) -> np.ndarray:
+    """Median of chi^2 for each entry's degrees of freedom (NaN for 0): int array -> float array."""
+    return _CHI2_MEDIANS[np.clip(dof, 0, len(_CHI2_MEDIANS) - 1)]
 
 
 def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixels (V, P, J, 2) and clamped depths (V, P, J) of joints (P, J, 3) in views (V, 3, 4)."""
     P, J, _ = X.shape
     hom = (proj[:, :, :3] @ X.reshape(-1, 3).T + proj[:, :, 3:]).reshape(len(proj), 3, P, J)
-    z = np.maximum(hom[:, 2], _EPS_DEPTH)
+    z = np.maximum(hom[:, 2], EPS_DEPTH)
     return np.stack([hom[:, 0] / z, hom[:, 1] / z], axis=-1), z
 
 
@@ -71,9 +69,8 @@ def noise_scale(X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.n
     seen = inv_sigma > 0
     r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma ** 2, 0.0)       # (V, P, J)
     rss, views = r2.sum(axis=0), seen.sum(axis=0)                                     # (P, J)
-    medians = np.array([_chi2_median(2 * n - 3) if n >= 2 else np.nan for n in range(proj.shape[0] + 1)])
     ok = views >= 2
-    ratio = np.sort(np.where(ok, rss / np.where(ok, medians[views], 1.0), np.inf), axis=1)   # valid ones first
+    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)  # valid first
     n = ok.sum(axis=1)
     rows = np.arange(len(X))
     a = ratio[rows, np.maximum(n - 1, 0) // 2]

@@ -45,6 +45,7 @@ from reconstruction.matching.evidence_kernels import merge_linked, pair_chi2
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.feet_uncertainty import mahalanobis_distances
 from reconstruction.matching.merge import _as_edges, pair_edges, solve_pair
+from reconstruction.person_prior import chi2_medians
 
 TOO_LITTLE_EVIDENCE = "too_little_evidence"      # no usable foot and fewer than min_dof usable joints
 NON_FINITE_KEYPOINTS = "non_finite_keypoints"    # ... and some keypoints were NaN / inf (treated as missing)
@@ -55,14 +56,6 @@ def calibrated(body: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
     """D^2 = feet + body / scale2: (Na, Nb) x2 -> (Na, Nb). The feet term keeps its own model (its ground
     floor is foot size and calibration, not pixel noise); a missing feet term (NaN) adds nothing."""
     return np.where(np.isfinite(feet), feet, 0.0) + body / scale2
-
-
-def chi2_medians(dof: np.ndarray) -> np.ndarray:
-    """Median of chi^2 for each entry's degrees of freedom: int array -> float array."""
-    return _CHI2_MEDIANS[np.minimum(dof, len(_CHI2_MEDIANS) - 1)]
-
-
-_CHI2_MEDIANS = np.concatenate([[np.nan], chi2.median(np.arange(1, 64))])
 
 
 @lru_cache(maxsize=16)
