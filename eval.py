@@ -38,12 +38,13 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     t0 = time.perf_counter()
     sequence = instantiate(cfg.dataset, _convert_="all")
     t_data = time.perf_counter() - t0
-    pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction))
+    tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None   # tracking=off: none
+    pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
     stage_s = sequence.meta.get("stage_seconds", {})  # e.g. 2D grouping done while loading
     report.timings = {"dataset": t_data - sum(stage_s.values()), **stage_s, **report.timings}
 
-    frames = ((r.frame, r.poses3d, r.assignment) for r in report.results)
+    frames = ((r.frame, r.poses3d, r.assignment, r.ids) for r in report.results)
     write_poses3d(out_dir / cfg.output, frames, sequence.rig.names)
     atomic_write_text(out_dir / cfg.metrics_file, json.dumps(
         {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped),

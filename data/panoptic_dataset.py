@@ -62,7 +62,8 @@ def load_panoptic_sequence(root: str | Path, sequence: str = "160906_band1", cam
     files = _select_frames(all_files, frames, seq_dir / POSE_DIR)
     ground_truth = {frame: read_bodies(path) for frame, path in files.items()}
     meta = {"dataset": "panoptic", "root": str(root), "sequence": sequence, "cameras": names,
-            "gt_min_confidence": GT_MIN_CONFIDENCE, "gt_panoptic15": {}}
+            "gt_min_confidence": GT_MIN_CONFIDENCE, "gt_panoptic15": {},
+            "persistent_ids": True}      # Panoptic body ids name one person over the sequence
     if poses2d is not None:
         views_by_frame = _read_poses2d(poses2d, rig, meta)
         source = f"2D poses from {poses2d}"

@@ -11,22 +11,23 @@ from data.atomic_io import atomic_write_text
 from data.keypoints import COCO23_NAMES
 
 
-def poses3d_document(frames: Iterable[tuple[int, np.ndarray, np.ndarray]], camera_names: list[str]) -> dict:
-    """The poses3d.json document of (frame, poses (P, 23, 4), assignment (P, V)) triples."""
+def poses3d_document(frames: Iterable[tuple], camera_names: list[str]) -> dict:
+    """The poses3d.json document of (frame, poses (P, 23, 4), assignment (P, V)[, ids (P,)]) tuples; without
+    ids a person's id is its index in the frame (DESIGN.md: with tracking, the track id)."""
     out_frames = []
-    for frame, poses, assignment in frames:
+    for frame, poses, assignment, *rest in frames:
+        ids = np.arange(len(poses)) if not rest or rest[0] is None else np.asarray(rest[0])
         people = []
         for p, pose in enumerate(np.asarray(poses, dtype=np.float64)):
             kps = np.where(pose[:, 3:4] > 0, pose, 0.0)
             views = {camera_names[v]: int(d) for v, d in enumerate(assignment[p]) if d >= 0}
-            people.append({"id": p, "keypoints": np.round(kps, 6).tolist(), "views": views})
+            people.append({"id": int(ids[p]), "keypoints": np.round(kps, 6).tolist(), "views": views})
         out_frames.append({"frame": int(frame), "poses": people})
     return {"keypoints": list(COCO23_NAMES), "units": "m", "frames": out_frames}
 
 
-def write_poses3d(path: str | Path, frames: Iterable[tuple[int, np.ndarray, np.ndarray]],
-                  camera_names: list[str]) -> None:
-    """Write poses3d.json atomically from (frame, poses (P, 23, 4), assignment (P, V)) triples."""
+def write_poses3d(path: str | Path, frames: Iterable[tuple], camera_names: list[str]) -> None:
+    """Write poses3d.json atomically from (frame, poses (P, 23, 4), assignment (P, V)[, ids (P,)]) tuples."""
     atomic_write_text(path, json.dumps(poses3d_document(frames, camera_names)))
 
 

@@ -14,6 +14,7 @@ from evaluation.correspondence import CorrespondenceCounts, correspondence_count
 from evaluation.pcp import PART_NAMES
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.report import format_table
+from tracking.metrics import IdentityEvaluator
 from evaluation.reprojection import frame_reprojection_errors, reprojection_stats
 from reconstruction.pipeline import FrameResult, MultiViewPipeline
 
@@ -42,6 +43,7 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
     """
     results, skipped, pairs, reprojection = [], Counter(), CorrespondenceCounts(), []
     has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
+    identities = IdentityEvaluator(evaluator.max_dist_m) if _tracks_identities(sequence, pipeline) else None
     t_eval = 0.0
     for frame in tqdm(sequence.frames, desc="frames", unit="frame", disable=not progress):
         result = pipeline(frame)
@@ -51,6 +53,8 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
         t0 = time.perf_counter()
         if frame.gt_poses is not None:
             evaluator.update(result.poses3d, frame.gt_poses)
+            if identities is not None:
+                identities.update(result.poses3d, result.ids, frame.gt_poses, frame.gt_ids)
         if has_ids:
             pairs = pairs + correspondence_counts(result.assignment, [v.person_ids for v in frame.views])
         for protocol in sequence.protocols:
@@ -63,6 +67,8 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
     metrics = evaluator.summary() if has_gt else {}
     if has_ids:
         metrics.update({f"matching_{k}": v for k, v in pairs.as_dict().items()})
+    if identities is not None:
+        metrics.update({f"tracking_{k}": v for k, v in identities.summary().items()})
     stats = reprojection_stats(np.concatenate(reprojection) if reprojection else np.zeros(0))
     metrics.update({f"reprojection_{k}_px": stats[k] for k in ("mean", "min", "max")})
     metrics["reprojection_var_px2"] = stats["var"]
@@ -71,6 +77,12 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
     protocols = {p.name: p.summary() for p in sequence.protocols}
     reports = [p.report() for p in sequence.protocols]
     return SequenceReport(results, metrics, skipped, timings, unmatched, protocols, reports)
+
+
+def _tracks_identities(sequence: Sequence, pipeline: MultiViewPipeline) -> bool:
+    """Whether identity metrics apply: a tracker runs and the sequence's GT ids persist across frames."""
+    return (getattr(pipeline, "tracker", None) is not None and bool(sequence.meta.get("persistent_ids"))
+            and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None))
 
 
 def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str:
@@ -84,7 +96,7 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
                       ["PCP average (%)", m["pcp_average"]], ["GT persons recalled (%)", m["recall"]],
                       ["predictions matched to GT (%)", m["precision"]],
                       ["GT persons / predictions", f"{m['num_gt']} / {m['num_pred']}"],
-                      *_matching_rows(m)]), "",
+                      *_matching_rows(m), *_tracking_rows(m)]), "",
                   format_table(["MPJPE (mm)", *JOINT_GROUPS], [["", *(m[f"mpjpe_{g}_mm"] for g in JOINT_GROUPS)]]),
                   "", format_table(["PCP (%)", *PART_NAMES], [["", *(m[f"pcp_{p}"] for p in PART_NAMES)]]), ""]
     if "reprojection_mean_px" in m:
@@ -112,3 +124,13 @@ def _matching_rows(m: dict[str, float]) -> list[list[object]]:
     return [["matching precision, pairs (%)", 100.0 * m["matching_precision"]],
             ["matching recall, pairs (%)", 100.0 * m["matching_recall"]],
             ["GT persons matched pure and complete (%)", 100.0 * m["matching_recovered_share"]]]
+
+
+def _tracking_rows(m: dict[str, float]) -> list[list[object]]:
+    """Report rows of the identity metrics (tracking on, persistent ground-truth ids)."""
+    if "tracking_id_switches" not in m:
+        return []
+    return [["identity switches (per 100 GT person-frames)",
+             f"{m['tracking_id_switches']} ({m['tracking_id_switches_per_100']:.2f})"],
+            ["GT person-frames with their most frequent track id (%)", m["tracking_idf1_like"]],
+            ["track fragmentations", m["tracking_fragmentations"]]]

@@ -33,6 +33,7 @@ from data.keypoints import SHELF14_NAMES, coco23_to_shelf14, with_mid_hip
 from data.atomic_io import atomic_write_text
 from data.shelf import load_4dassoc_skeletons
 from evaluation.pcp import PART_JOINTS, PART_NAMES, correct_parts, pcp_by_part
+from tracking.metrics import IdentityEvaluator
 
 if TYPE_CHECKING:
     from data.multiview import Frame
@@ -271,12 +272,20 @@ class ShelfProtocol:
         self.gt_path, self.baseline_path = gt_path, baseline_path
         self.first_frame, self.alpha = first_frame, alpha
         self.evaluator = ShelfEvaluator(alpha)
+        self.identities = IdentityEvaluator()
         self.predictions: dict[int, np.ndarray] = {}
         self._baseline: tuple[tuple[int, ...], dict] | None = None   # (frames, summary) of the last scoring
 
     def update(self, frame: Frame, result: FrameResult) -> None:
-        """Score one frame's poses3d (P, 23, 4) against the GT of frame.index."""
-        self.update_shelf15(frame.index, coco23_predictions_to_shelf15(result.poses3d))
+        """Score one frame's poses3d (P, 23, 4) against the GT of frame.index; with track ids, record the id of
+        the prediction each annotated actor takes (identity switches of actors 1-3 in the summary)."""
+        pred = coco23_predictions_to_shelf15(result.poses3d)
+        self.update_shelf15(frame.index, pred)
+        if result.ids is not None:
+            for actor, gt in self.gt[frame.index].items():
+                if _annotated(actor, np.asarray(gt)):
+                    best = select_prediction(pred, np.asarray(gt)[:, :3])[0]
+                    self.identities.record(actor, int(result.ids[best]) if best >= 0 else -1)
 
     def update_shelf15(self, frame: int, pred: np.ndarray) -> None:
         """Score Shelf-14 + mid-hip predictions (P, 15, 3), NaN = missing, of one Shelf frame."""
@@ -288,6 +297,9 @@ class ShelfProtocol:
     def summary(self) -> dict:
         """{"ours": ShelfEvaluator summary, "4d_association": the same for skel.txt (when given)}."""
         out = {"ours": self.evaluator.summary()}
+        if self.identities.history:
+            out["tracking"] = {**self.identities.summary(AVERAGED_ACTOR_IDS),
+                               "actors": [a + 1 for a in AVERAGED_ACTOR_IDS]}
         if self.baseline_path is not None and self.gt_path is not None and self.predictions:
             frames = tuple(sorted(self.predictions))
             if self._baseline is None or self._baseline[0] != frames:
@@ -307,6 +319,11 @@ class ShelfProtocol:
         if "4d_association" in summary:
             lines += ["", format_table(summary["4d_association"], "4D Association stored output, same code")]
         lines += ["", _headline(summary)]
+        if "tracking" in summary:
+            t = summary["tracking"]
+            lines.append(f"Tracking, actors 1-3 (the track id of the prediction each actor takes): {t['id_switches']} "
+                         f"identity switches, {t['idf1_like']:.1f} % of actor-frames with their most frequent id, "
+                         f"{t['fragmentations']} fragmentations")
         return "\n".join(lines)
 
     def write(self, out_dir: str | Path) -> Path:

@@ -1,10 +1,10 @@
-"""The multi-view pipeline of one frame: matching -> gathering -> reconstruction, with stage timings."""
+"""The multi-view pipeline of one frame: matching -> gathering -> reconstruction [-> tracking], with stage timings."""
 from __future__ import annotations
 
 import time
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -15,13 +15,21 @@ Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
 Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
 
 
+class Tracker(Protocol):
+    """What the pipeline needs of a tracker (tracking.Tracker): frame number, poses (P, J, 4) -> ids (P,)."""
+
+    def update(self, frame: int, poses3d: np.ndarray) -> np.ndarray: ...
+
+
 @dataclass
 class FrameResult:
-    """poses3d (P, J, 4): x, y, z (m) and confidence; assignment (P, V): detection index per view or -1."""
+    """poses3d (P, J, 4): x, y, z (m) and confidence; assignment (P, V): detection index per view or -1;
+    ids (P,): the persons' track ids with a tracker, else None (the index in the frame is the id)."""
 
     frame: int
     poses3d: np.ndarray
     assignment: np.ndarray
+    ids: np.ndarray | None = None
 
 
 def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -43,12 +51,14 @@ def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[n
 
 
 class MultiViewPipeline:
-    """Match persons across views, then reconstruct them; accumulates seconds per stage."""
+    """Match persons across views, reconstruct them, then (with a tracker) give them track ids; accumulates
+    seconds per stage. One pipeline serves one sequence: a tracker expects increasing frame numbers."""
 
-    def __init__(self, rig: Rig, matcher: Matcher, reconstructor: Reconstructor) -> None:
+    def __init__(self, rig: Rig, matcher: Matcher, reconstructor: Reconstructor, tracker: Tracker | None = None) -> None:
         self.rig = rig
         self.matcher = matcher
         self.reconstructor = reconstructor
+        self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
 
     def __call__(self, frame: Frame) -> FrameResult:
@@ -61,6 +71,9 @@ class MultiViewPipeline:
         poses2d, bboxes = gather_views(frame.views, assignment)
         poses3d = self.reconstructor(poses2d, bboxes, self.rig) if len(assignment) else np.zeros((0, poses2d.shape[2], 4))
         t2 = time.perf_counter()
+        ids = None if self.tracker is None else self.tracker.update(frame.index, poses3d)
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
-        return FrameResult(frame.index, poses3d, assignment)
+        if self.tracker is not None:
+            self.timings["tracking"] += time.perf_counter() - t2
+        return FrameResult(frame.index, poses3d, assignment, ids)

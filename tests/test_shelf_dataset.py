@@ -13,7 +13,7 @@ from data.keypoints import COCO23_TO_SHELF14_LIMBS, SHELF_HEAD_BLEND, SHELF_HEAD
 from data.multiview import Frame
 from data.poses2d_io import write_poses2d
 from data.shelf_dataset import load_shelf
-from evaluation.shelf_protocol import ShelfProtocol
+from evaluation.shelf_protocol import AVERAGED_ACTOR_IDS, ShelfProtocol
 from reconstruction.pipeline import FrameResult
 
 CONFIGS = str(Path(__file__).resolve().parents[1] / "configs")
@@ -83,6 +83,18 @@ def test_ground_truth_through_the_protocol_scores_100_and_the_baseline_uses_the_
     text = protocol.report()
     assert "frames 300-339 (40)" in text and "4D Association stored output, same code" in text
     assert "Shelf average PCP, actors 1-3: strict 100.00" in text
+
+
+def test_track_ids_of_the_predictions_actors_take_give_the_identity_summary(five_frames) -> None:
+    protocol = load_shelf(five_frames.meta["root"], frames="0:10", baseline=None).protocols[0]
+    for k, (frame, gt) in enumerate(sorted(protocol.gt.items())):
+        poses = np.array([_coco23_from_shelf15(p) for p in gt.values()]).reshape(-1, 23, 4)
+        ids = np.arange(len(poses)) + (100 if k >= 6 else 0)        # every actor switches id once, at frame 6
+        protocol.update(Frame(frame, []), FrameResult(frame, poses, np.zeros((len(poses), 5), int), ids))
+    tracking = protocol.summary()["tracking"]
+    actors = sum(a in AVERAGED_ACTOR_IDS for a in protocol.gt[300])
+    assert tracking["id_switches"] == actors and tracking["idf1_like"] == pytest.approx(60.0)
+    assert "identity switches" in protocol.report()
 
 
 def test_a_frame_without_predictions_is_wrong_when_strict_and_skipped_when_lenient(shelf_root: Path) -> None:

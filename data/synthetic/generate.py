@@ -46,6 +46,7 @@ def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
         frames.append(Frame(index=f, views=views, gt_poses=gt, gt_ids=ids.astype(np.int64)))
     meta = {
         "source": "synthetic",
+        "persistent_ids": True,          # gt_ids name the same person in every frame (identity metrics apply)
         "config": cfg.to_dict(),
         "area": list(scene.area),
         "persons": [{"id": i, "stature": b.stature, "walking": bool(scene.walking[:, i].any())}

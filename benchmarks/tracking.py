@@ -1,0 +1,90 @@
+"""Identity metrics and cost of the tracker (``tracking=on``) beside ``tracking=off``, same frames, one process.
+
+    python -m benchmarks.tracking [--data ../shared/data] [--sets shelf,panoptic,crowd] [--crowd-frames 50]
+
+Sets: Shelf (frames 300-600, actors 1-3: the track id of the prediction each actor takes), Panoptic band1
+and band2 of ``panoptic_seq`` at 5 px (20 consecutive frames, persistent body ids), the synthetic walking
+crowd of ``configs/dataset/crowd.yaml`` (surveillance rig, 2 px) with 10 and 100 people. Columns: identity
+switches (per 100 GT person-frames), the share of GT person-frames whose prediction carries that person's
+most frequent track id (IDF1-like, %), fragmentations, MPJPE (mm; Shelf: strict PCP %) with tracking on
+and off, and the tracker's ms per frame beside the reconstruction's, one core.
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import copy  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from hydra import compose, initialize_config_dir  # noqa: E402
+from hydra.utils import instantiate  # noqa: E402
+
+from evaluation.pose3d import Pose3DEvaluator  # noqa: E402
+from evaluation.report import format_table  # noqa: E402
+from evaluation.sequence_eval import evaluate_sequence  # noqa: E402
+from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
+HEADERS = ("set", "ID switches (per 100)", "IDF1-like (%)", "fragmentations", "MPJPE / PCP on", "MPJPE / PCP off",
+           "tracker ms / frame", "reconstruction ms / frame")
+
+
+def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[str]]:
+    """Set label -> dataset overrides."""
+    sets: dict[str, list[str]] = {}
+    if "shelf" in names:
+        sets["Shelf (PCP)"] = ["dataset=shelf", f"dataset.root={data}/shelf"]
+    if "panoptic" in names:
+        for seq in ("160906_band1", "160906_band2"):
+            sets[f"Panoptic {seq[-5:]} 5 px"] = ["dataset=panoptic", f"dataset.root={data}/panoptic_seq",
+                                                 f"dataset.sequence={seq}", "dataset.noise_px=5"]
+    if "crowd" in names:
+        for n in (10, 100):
+            sets[f"crowd {n} people, {crowd_frames} frames"] = [
+                "dataset=crowd", f"dataset.num_persons={n}", f"dataset.num_frames={crowd_frames}"]
+    return sets
+
+
+def run(sequence, cfg) -> tuple[dict, dict, float, float]:
+    """Metrics, Shelf summary, tracker and reconstruction ms per frame of one configuration."""
+    sequence = copy.deepcopy(sequence)
+    tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
+    pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
+    report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), progress=False)
+    n = max(len(sequence.frames), 1)
+    return (report.metrics, report.protocols.get("shelf", {}), 1e3 * report.timings.get("tracking", 0.0) / n,
+            1e3 * report.timings.get("reconstruction", 0.0) / n)
+
+
+def main(argv: list[str] | None = None) -> list[list]:
+    """Print the table; returns its rows."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--data", default="../shared/data")
+    parser.add_argument("--sets", default="shelf,panoptic,crowd")
+    parser.add_argument("--crowd-frames", type=int, default=50)
+    args = parser.parse_args(argv)
+    rows = []
+    with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
+        for label, overrides in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items():
+            sequence = instantiate(compose("eval", overrides=overrides).dataset, _convert_="all")
+            on, shelf_on, ms_track, ms_rec = run(sequence, compose("eval", overrides=[*overrides, "tracking=on"]))
+            off, shelf_off, _, _ = run(sequence, compose("eval", overrides=[*overrides, "tracking=off"]))
+            if shelf_on:
+                ident = shelf_on["tracking"]
+                quality = [shelf_on["ours"]["strict"]["average"]["average"], shelf_off["ours"]["strict"]["average"]["average"]]
+            else:
+                ident = {k[len("tracking_"):]: v for k, v in on.items() if k.startswith("tracking_")}
+                quality = [on["mpjpe_mm"], off["mpjpe_mm"]]
+            rows.append([label, f"{ident['id_switches']} ({ident['id_switches_per_100']:.2f})", ident["idf1_like"],
+                         ident["fragmentations"], *quality, ms_track, ms_rec])
+    print("Tracking (tracking=on) beside tracking=off; one core; identity metrics against persistent GT ids")
+    print(format_table(HEADERS, rows, floatfmt=".2f"))
+    return rows
+
+
+if __name__ == "__main__":
+    main()

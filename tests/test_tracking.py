@@ -1,0 +1,154 @@
+"""The online tracker (tracking/tracker.py) and its identity metrics (tracking/metrics.py)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from data.bone_lengths import BONE_PAIRS
+from data.synthetic.body import mean_body, pose_joints
+from tracking import Tracker
+from tracking.tracker import CORE_JOINTS, mean_distances
+from tracking.metrics import IdentityEvaluator
+
+FPS = 25.0
+
+
+def _walker(start, heading: float, speed: float, frame: int, scale: float = 1.0) -> np.ndarray:
+    """A walking mean body (scaled stature) at a frame: (23, 4), score 1."""
+    t = frame / FPS
+    x, y = start[0] + speed * t * np.cos(heading), start[1] + speed * t * np.sin(heading)
+    joints = pose_joints(mean_body(1.7 * scale), x, y, heading, phase=0.8 * t, walking=True)
+    return np.concatenate([joints, np.ones((len(joints), 1))], axis=1)
+
+
+def _noisy(poses: np.ndarray, rng: np.random.Generator, sd: float = 0.02) -> np.ndarray:
+    out = poses.copy()
+    out[..., :3] += rng.normal(0, sd, out[..., :3].shape)
+    return out
+
+
+def test_two_people_crossing_paths_keep_their_ids():
+    rng = np.random.default_rng(0)
+    tracker = Tracker()
+    seen = {0: set(), 1: set()}
+    for f in range(100):
+        a = _walker((-2.4, 0.0), 0.0, 1.2, f)            # along x
+        b = _walker((0.0, -2.4), np.pi / 2, 1.2, f - 4)  # along y, 4 frames behind: closest approach ~0.3 m
+        order = rng.permutation(2)                       # the frame's persons come in any order
+        poses = _noisy(np.stack([a, b])[order], rng)
+        ids = tracker.update(f, poses)
+        for slot, person in enumerate(order):
+            seen[int(person)].add(int(ids[slot]))
+    assert all(len(s) == 1 for s in seen.values()) and seen[0] != seen[1]
+
+
+def test_a_person_who_returns_after_the_death_age_gets_a_new_id_and_before_it_keeps_it():
+    tracker = Tracker(max_age=5, min_hits=2)
+    pose = _walker((0.0, 0.0), 0.0, 0.0, 0)
+    first = tracker.update(0, pose[None])[0]
+    tracker.update(1, pose[None])
+    tracker.update(2, np.zeros((0, 23, 4)))                  # missed 4 frames (2..5): within max_age
+    assert tracker.update(6, pose[None])[0] == first
+    assert tracker.update(13, pose[None])[0] != first         # gone 6 frames after its last hit: a new id
+
+
+def test_a_tentative_track_missed_once_is_dropped():
+    tracker = Tracker(min_hits=3)
+    pose = _walker((0.0, 0.0), 0.0, 0.0, 0)
+    first = tracker.update(0, pose[None])[0]
+    tracker.update(1, np.zeros((0, 23, 4)))
+    assert tracker.update(2, pose[None])[0] != first
+
+
+def test_frames_that_go_backwards_or_repeat_stop_with_a_message():
+    tracker = Tracker()
+    tracker.update(5, np.zeros((0, 23, 4)))
+    for bad in (5, 4):
+        with pytest.raises(ValueError, match="must\\s+increase"):
+            tracker.update(bad, np.zeros((0, 23, 4)))
+
+
+def test_a_gap_is_predicted_over_the_missed_frames_not_taken_as_a_jump():
+    tracker = Tracker()
+    for f in range(20):
+        ids = tracker.update(f, _walker((0.0, 0.0), 0.0, 1.5, f)[None])
+    # frames 20..27 missing: the body is 9 x 6 cm further on at frame 28; taken as one frame's step, the
+    # velocity would jump to 0.54 m per frame
+    assert tracker.update(28, _walker((0.0, 0.0), 0.0, 1.5, 28)[None])[0] == ids[0]
+    hips = tracker.tracks[0].velocity[11:13].mean(axis=0)
+    np.testing.assert_allclose(hips[:2], [1.5 / FPS, 0.0], atol=0.01)    # horizontal: the hips bob in z
+
+
+def test_the_bone_lengths_of_a_track_converge_to_the_bodys_own():
+    rng = np.random.default_rng(1)
+    tracker = Tracker()
+    for f in range(30):
+        tracker.update(f, _noisy(_walker((0.0, 0.0), 0.3, 1.0, f, scale=1.15)[None], rng, sd=0.005))
+    median, sd, count = tracker.tracks[0].bone_lengths()
+    truth = _walker((0.0, 0.0), 0.3, 1.0, 0, scale=1.15)
+    true_len = np.linalg.norm(truth[BONE_PAIRS[:, 0], :3] - truth[BONE_PAIRS[:, 1], :3], axis=-1)
+    assert np.all(count == 30)
+    assert np.max(np.abs(median - true_len)) < 0.005
+    assert np.all(sd < 0.03)
+
+
+def test_identity_metrics_count_switches_fragments_and_the_kept_share():
+    ev = IdentityEvaluator(max_dist_m=0.5)
+    gt = np.stack([_walker((0.0, 0.0), 0.0, 0.0, 0), _walker((3.0, 0.0), 0.0, 0.0, 0)])
+    gt_ids = np.array([10, 11])
+    #            frame:    0        1        2        3        4        5
+    tracks_of_0 = [7, 7, 8, -1, 8, 7]      # one switch 7->8, one back 8->7; one gap (fragment)
+    for t0 in tracks_of_0:
+        pred = gt if t0 >= 0 else gt[1:]
+        ids = np.array([t0, 3]) if t0 >= 0 else np.array([3])
+        ev.update(pred, ids, gt, gt_ids)
+    s = ev.summary()
+    assert s["id_switches"] == 2 and s["fragmentations"] == 1 and s["gt_person_frames"] == 12
+    assert s["idf1_like"] == pytest.approx(100 * (3 + 6) / 12)
+
+
+def test_pre_gated_mean_distances_equal_the_brute_force_within_the_gate():
+    rng = np.random.default_rng(3)
+    guess = rng.uniform(-3, 3, (12, 1, 3)) + rng.normal(0, 0.3, (12, 23, 3))
+    seen = rng.random((12, 23)) > 0.2
+    poses = np.concatenate([rng.uniform(-3, 3, (15, 1, 3)) + rng.normal(0, 0.3, (15, 23, 3)),
+                            (rng.random((15, 23, 1)) > 0.2).astype(float)], axis=-1)
+    poses[0, CORE_JOINTS, 3] = 0.0                       # a person without head and trunk: every joint counts
+    got = mean_distances(guess, seen, poses, max_m=1.0)
+    for t in range(12):
+        for p in range(15):
+            both = seen[t] & (poses[p, :, 3] > 0)
+            core = np.zeros(23, bool)
+            core[CORE_JOINTS] = True
+            use = both & core if (both & core).any() else both
+            want = np.linalg.norm(guess[t, use] - poses[p, use, :3], axis=-1).mean() if use.any() else np.inf
+            if want <= 1.0:
+                assert got[t, p] == pytest.approx(want)
+            else:
+                assert got[t, p] > 1.0
+
+
+def test_the_pipeline_gives_track_ids_to_poses3d_json_and_identity_metrics(tmp_path):
+    from data.poses_io import write_poses3d
+    from data.synthetic import SyntheticConfig, generate_sequence
+    from evaluation.pose3d import Pose3DEvaluator
+    from evaluation.sequence_eval import evaluate_sequence
+    from reconstruction.matching import OracleMatcher
+    from reconstruction.pipeline import MultiViewPipeline
+    from reconstruction.reconstructors import VanillaTriangulation
+
+    sequence = generate_sequence(SyntheticConfig(num_persons=4, num_frames=6, num_cameras=3, seed=2))
+    pipeline = MultiViewPipeline(sequence.rig, OracleMatcher(), VanillaTriangulation(), Tracker())
+    report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(), progress=False)
+    assert report.metrics["tracking_id_switches"] == 0 and report.metrics["tracking_idf1_like"] == 100.0
+    assert "tracking" in report.timings
+    write_poses3d(tmp_path / "p.json", [(r.frame, r.poses3d, r.assignment, r.ids) for r in report.results],
+                  sequence.rig.names)
+    frames = json.loads((tmp_path / "p.json").read_text())["frames"]
+    first = {p["id"] for p in frames[0]["poses"]}
+    assert all({p["id"] for p in f["poses"]} == first for f in frames) and len(first) == 4
+    untracked = MultiViewPipeline(sequence.rig, OracleMatcher(), VanillaTriangulation())
+    assert untracked(sequence.frames[0]).ids is None
+    assert "tracking_id_switches" not in evaluate_sequence(sequence, untracked, Pose3DEvaluator(), progress=False).metrics

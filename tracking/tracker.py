@@ -1,0 +1,286 @@
+"""Online 3D pose tracker: ``Tracker.update(frame, poses3d) -> ids``, frame by frame (a live rig or a file).
+
+Motion model: every joint of a track moves with constant velocity, filtered by a Kalman filter with
+white-acceleration process noise (``accel_sd_m`` per frame^2), isotropic measurement noise
+(``measurement_sd_m``) and a new track's velocity unknown (``velocity_sd_m`` per frame: any walking
+speed at 5 frames per second); the three axes share one 2x2 covariance per joint. Time is counted in frames, so
+a gap in the frame numbers is a longer prediction (missed frames), never a jump the velocity believes.
+
+Association: the frame's persons against the tracks' predictions (the whole body moved with the mean
+velocity of its head and trunk joints: limbs swing, the trunk moves steadily) by Hungarian assignment
+(scipy's ``linear_sum_assignment``) on the mean distance over the head and trunk joints both have (all
+shared joints where they share none of those), to the prediction or to the last position, whichever is
+nearer (a person may stop or turn at any frame: the velocity guides, it does not bind), gated at
+``max_distance_m`` (widened by ``gate_growth_m`` per frame since the track was last seen). A person no
+track takes starts a tentative track; it is confirmed after ``min_hits`` consecutive hits, and a
+tentative track missed once is dropped. A confirmed track dies after ``max_age`` frames without a hit,
+so a person who comes back later gets a new id. Ids are given at birth and never reused.
+
+Each track also keeps its person's bone lengths: a robust running estimate (median and MAD-based SD of
+the lengths seen in the last ``bone_window`` frames where both ends were reconstructed).
+
+The state of all tracks is held in arrays over tracks (:class:`TrackState`), so a frame of a hundred
+persons costs a few vectorised operations, not a hundred small ones; :attr:`Tracker.tracks` gives
+per-track views (:class:`Track`).
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from data.bone_lengths import BONE_PAIRS
+
+MAD_TO_SD = 1.4826   # SD of a normal distribution per median absolute deviation
+# Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
+# shoulders, hips) move with the body; arms and legs swing by tens of cm between frames at 5 fps.
+CORE_JOINTS = np.array([0, 1, 2, 3, 4, 5, 6, 11, 12])
+BODY_SPAN_M = 1.0    # m: the centres of any two subsets of one body's head and trunk joints lie this close
+
+
+@dataclass
+class Track:
+    """A snapshot of one track: id, joint positions (J, 3), velocities (J, 3) m / frame, joints ever seen
+    (J,), last frame with a hit, hits, confirmed, and the bone lengths of its last observations (n, L)."""
+
+    id: int
+    position: np.ndarray
+    velocity: np.ndarray
+    seen: np.ndarray
+    last_frame: int
+    hits: int
+    confirmed: bool
+    bones: np.ndarray
+
+    def bone_lengths(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Robust bone lengths of the track: median (L,) m, SD (L,) m (MAD-based) and count (L,); NaN unseen."""
+        return robust_lengths(self.bones)
+
+
+def robust_lengths(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Median, MAD-based SD and count of each column, NaN = not observed: (n, L) -> (L,) x3 (NaN where none)."""
+    lengths = np.asarray(lengths, dtype=np.float64)
+    count = np.isfinite(lengths).sum(axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)    # all-NaN columns: bones never seen
+        median = np.nanmedian(lengths, axis=0) if len(lengths) else np.full(lengths.shape[1], np.nan)
+        mad = np.nanmedian(np.abs(lengths - median), axis=0) if len(lengths) else median
+    return median, np.where(count > 1, MAD_TO_SD * mad, np.nan), count
+
+
+@dataclass
+class TrackState:
+    """All tracks as arrays: ids (T,), position / velocity (T, J, 3), per-axis covariance entries p00, p01,
+    p11 (T, J) of (position, velocity), seen (T, J), last_frame, hits (T,), confirmed (T,), bones (T, W, L)
+    ring buffer of bone lengths (NaN = none) with its next slot (T,)."""
+
+    ids: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    p00: np.ndarray
+    p01: np.ndarray
+    p11: np.ndarray
+    seen: np.ndarray
+    last_frame: np.ndarray
+    hits: np.ndarray
+    confirmed: np.ndarray
+    bones: np.ndarray
+    slot: np.ndarray
+
+    @classmethod
+    def empty(cls, joints: int, window: int) -> "TrackState":
+        """No track, for poses of J joints and a bone window W."""
+        z = lambda *shape, dtype=np.float64: np.zeros((0, *shape), dtype=dtype)  # noqa: E731
+        return cls(z(dtype=np.int64), z(joints, 3), z(joints, 3), z(joints), z(joints), z(joints),
+                   z(joints, dtype=bool), z(dtype=np.int64), z(dtype=np.int64), z(dtype=bool),
+                   z(window, len(BONE_PAIRS)), z(dtype=np.int64))
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def select(self, keep: np.ndarray) -> "TrackState":
+        """The tracks at the given indices or boolean mask."""
+        return TrackState(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
+
+    def extend(self, other: "TrackState") -> "TrackState":
+        """These tracks followed by other's."""
+        return TrackState(*(np.concatenate([getattr(self, f), getattr(other, f)]) for f in self.__dataclass_fields__))
+
+
+def bone_lengths_of(poses3d: np.ndarray) -> np.ndarray:
+    """Bone lengths of poses, NaN where an end is missing: (P, J, 4) -> (P, L) m."""
+    a, b = BONE_PAIRS[:, 0], BONE_PAIRS[:, 1]
+    ok = (poses3d[:, a, 3] > 0) & (poses3d[:, b, 3] > 0)
+    return np.where(ok, np.linalg.norm(poses3d[:, a, :3] - poses3d[:, b, :3], axis=-1), np.nan)
+
+
+def _core_mask(joints: int) -> np.ndarray:
+    """The head and trunk joints among J: (J,) bool."""
+    core = np.zeros(joints, dtype=bool)
+    core[CORE_JOINTS[CORE_JOINTS < joints]] = True
+    return core
+
+
+def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max_m: float = np.inf) -> np.ndarray:
+    """Mean distance over the head and trunk joints both have (all shared joints where they share none):
+    guesses (T, J, 3) with seen (T, J), poses (P, J, 4) -> (T, P) m, inf where nothing is shared. Pairs
+    whose head-and-trunk centres are farther apart than max_m + BODY_SPAN_M are inf without computing."""
+    valid = poses3d[..., 3] > 0
+    core = _core_mask(poses3d.shape[1])
+    far = np.linalg.norm(_centres(guess, seen, core)[:, None] - _centres(poses3d[..., :3], valid, core)[None], axis=-1)
+    rows, cols = np.nonzero(far <= max_m + BODY_SPAN_M)
+    out = np.full(far.shape, np.inf)
+    out[rows, cols] = _pair_mean_distance(guess[rows][:, core], seen[rows][:, core], poses3d[cols][:, core, :3],
+                                          valid[cols][:, core])
+    left = ~np.isfinite(out[rows, cols])            # pairs without a shared trunk joint: every joint
+    if left.any():
+        r, c = rows[left], cols[left]
+        out[r, c] = _pair_mean_distance(guess[r], seen[r], poses3d[c, :, :3], valid[c])
+    return out
+
+
+def _centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray) -> np.ndarray:
+    """Mean of the valid head and trunk joints (of all valid joints without any): (N, J, 3), (N, J) -> (N, 3)."""
+    use = ok & core
+    use = np.where(use.any(axis=1, keepdims=True), use, ok)
+    return np.where(use[..., None], points, 0.0).sum(axis=1) / np.maximum(use.sum(axis=1), 1)[:, None]
+
+
+def _pair_mean_distance(a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np.ndarray) -> np.ndarray:
+    """Mean over the joints valid in both of |a - b|, pair by pair: (K, J, 3), (K, J) x2 -> (K,), inf if none."""
+    both = a_ok & b_ok
+    dist = np.sqrt(((a - b) ** 2).sum(-1))
+    n = both.sum(-1)
+    return np.where(n > 0, np.where(both, dist, 0.0).sum(-1) / np.maximum(n, 1), np.inf)
+
+
+class Tracker:
+    """Frame-by-frame tracker of 3D poses; ``update(frame, poses3d (P, J, 4)) -> ids (P,)``."""
+
+    def __init__(self, max_distance_m: float = 0.5, gate_growth_m: float = 0.1, min_hits: int = 3,
+                 max_age: int = 10, accel_sd_m: float = 0.05, measurement_sd_m: float = 0.03,
+                 velocity_sd_m: float = 0.5, bone_window: int = 100) -> None:
+        if not min(max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m) > 0 or not gate_growth_m >= 0:
+            raise ValueError("tracking: max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m must be > 0 and "
+                             f"gate_growth_m >= 0; got {max_distance_m}, {accel_sd_m}, {measurement_sd_m}, "
+                             f"{velocity_sd_m}, {gate_growth_m}")
+        if int(min_hits) < 1 or int(max_age) < 0 or int(bone_window) < 1:
+            raise ValueError(f"tracking: need min_hits >= 1, max_age >= 0, bone_window >= 1; got {min_hits}, "
+                             f"{max_age}, {bone_window}")
+        self.max_distance_m, self.gate_growth_m = float(max_distance_m), float(gate_growth_m)
+        self.min_hits, self.max_age, self.bone_window = int(min_hits), int(max_age), int(bone_window)
+        self.q, self.r2, self.v2 = float(accel_sd_m) ** 2, float(measurement_sd_m) ** 2, float(velocity_sd_m) ** 2
+        self.state: TrackState | None = None
+        self.last_frame: int | None = None
+        self._next_id = 0
+
+    @property
+    def tracks(self) -> list[Track]:
+        """Snapshots of the live tracks, oldest first."""
+        st = self.state
+        if st is None:
+            return []
+        return [Track(int(st.ids[t]), st.position[t].copy(), st.velocity[t].copy(), st.seen[t].copy(),
+                      int(st.last_frame[t]), int(st.hits[t]), bool(st.confirmed[t]),
+                      st.bones[t][np.isfinite(st.bones[t]).any(axis=1)]) for t in range(len(st))]
+
+    def update(self, frame: int, poses3d: np.ndarray) -> np.ndarray:
+        """Associate one frame's persons with the tracks and update them: (P, J, 4) -> track ids (P,).
+
+        Frame numbers must increase; a gap counts as missed frames for every track.
+        """
+        frame = int(frame)
+        if self.last_frame is not None and frame <= self.last_frame:
+            raise ValueError(f"tracking: frame {frame} comes after frame {self.last_frame}; frame numbers must "
+                             "increase (sort the sequence, remove repeated frames)")
+        poses3d = np.asarray(poses3d, dtype=np.float64)
+        if poses3d.ndim != 3 or poses3d.shape[-1] != 4:
+            raise ValueError(f"tracking: poses must be (P, J, 4), got {poses3d.shape}")
+        if self.state is None:
+            self.state = TrackState.empty(poses3d.shape[1], self.bone_window)
+        self.last_frame = frame
+        st = self.state.select(self._alive(self.state, frame - 1))              # gone during a gap
+        tracks, persons = self._associate(st, frame, poses3d)
+        ids = np.full(len(poses3d), -1, dtype=np.int64)
+        if len(tracks):
+            self._correct(st, tracks, frame, poses3d[persons])
+            ids[persons] = st.ids[tracks]
+        hit = np.zeros(len(st), dtype=bool)
+        hit[tracks] = True
+        st = st.select(hit | self._alive(st, frame))
+        born = np.flatnonzero(ids < 0)
+        if len(born):
+            ids[born] = np.arange(self._next_id, self._next_id + len(born))
+            self._next_id += len(born)
+            st = st.extend(self._births(ids[born], frame, poses3d[born]))
+        self.state = st
+        return ids
+
+    def _alive(self, st: TrackState, frame: int) -> np.ndarray:
+        """Which tracks not hit after their last frame survive up to this frame: tentative ones die at once,
+        confirmed ones after max_age frames without a hit: (T,) bool."""
+        return frame - st.last_frame <= np.where(st.confirmed, self.max_age, 0)
+
+    def _associate(self, st: TrackState, frame: int, poses3d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Gated Hungarian assignment of tracks to persons: -> track indices (K,), person indices (K,)."""
+        none = np.zeros(0, dtype=np.int64)
+        if not len(st) or not len(poses3d):
+            return none, none
+        dt = (frame - st.last_frame).astype(np.float64)
+        predicted = st.position + dt[:, None, None] * self._body_velocity(st)[:, None, :]
+        gate = self.max_distance_m + self.gate_growth_m * (dt - 1.0)
+        cost = np.minimum(mean_distances(predicted, st.seen, poses3d, gate.max()),
+                          mean_distances(st.position, st.seen, poses3d, gate.max()))
+        cost = np.where(cost <= gate[:, None], cost, np.inf)
+        if not np.isfinite(cost).any():
+            return none, none
+        rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e9))
+        ok = np.isfinite(cost[rows, cols])
+        return rows[ok].astype(np.int64), cols[ok].astype(np.int64)
+
+    @staticmethod
+    def _body_velocity(st: TrackState) -> np.ndarray:
+        """Mean velocity of each track's seen head and trunk joints (all seen joints without any): (T, 3)."""
+        use = st.seen & _core_mask(st.seen.shape[1])
+        use = np.where(use.any(axis=1, keepdims=True), use, st.seen)
+        n = np.maximum(use.sum(axis=1), 1)[:, None]
+        return np.where(use[..., None], st.velocity, 0.0).sum(axis=1) / n
+
+    def _births(self, ids: np.ndarray, frame: int, poses3d: np.ndarray) -> TrackState:
+        """Tentative tracks at persons' joints: ids (B,), (B, J, 4) -> TrackState of B tracks."""
+        B, J = poses3d.shape[:2]
+        seen = poses3d[..., 3] > 0
+        bones = np.full((B, self.bone_window, len(BONE_PAIRS)), np.nan)
+        bones[:, 0] = bone_lengths_of(poses3d)
+        return TrackState(ids.astype(np.int64), np.where(seen[..., None], poses3d[..., :3], 0.0), np.zeros((B, J, 3)),
+                          np.full((B, J), self.r2), np.zeros((B, J)), np.full((B, J), self.v2), seen,
+                          np.full(B, frame, dtype=np.int64), np.ones(B, dtype=np.int64),
+                          np.full(B, self.min_hits <= 1), bones, np.ones(B, dtype=np.int64) % self.bone_window)
+
+    def _correct(self, st: TrackState, tracks: np.ndarray, frame: int, poses3d: np.ndarray) -> None:
+        """Kalman predict over the frames since each track's last hit, then update with the observed joints
+        (a joint seen for the first time starts there): tracks (K,), poses (K, J, 4); st changed in place."""
+        dt = (frame - st.last_frame[tracks]).astype(np.float64)[:, None]              # (K, 1)
+        p00, p01, p11 = st.p00[tracks], st.p01[tracks], st.p11[tracks]
+        p00 = p00 + 2 * dt * p01 + dt ** 2 * p11 + self.q * dt ** 4 / 4
+        p01 = p01 + dt * p11 + self.q * dt ** 3 / 2
+        p11 = p11 + self.q * dt ** 2
+        x = st.position[tracks] + dt[..., None] * st.velocity[tracks]
+        obs = poses3d[..., 3] > 0
+        seen = st.seen[tracks]
+        upd, new = obs & seen, obs & ~seen
+        k0, k1 = p00 / (p00 + self.r2), p01 / (p00 + self.r2)
+        innov = poses3d[..., :3] - x
+        st.position[tracks] = np.where(upd[..., None], x + k0[..., None] * innov, np.where(new[..., None], poses3d[..., :3], x))
+        st.velocity[tracks] = np.where(upd[..., None], st.velocity[tracks] + k1[..., None] * innov, st.velocity[tracks])
+        st.p00[tracks] = np.where(upd, (1 - k0) * p00, p00)
+        st.p11[tracks] = np.where(upd, p11 - k1 * p01, p11)
+        st.p01[tracks] = np.where(upd, (1 - k0) * p01, p01)
+        st.seen[tracks] = seen | obs
+        st.last_frame[tracks] = frame
+        st.hits[tracks] += 1
+        st.confirmed[tracks] |= st.hits[tracks] >= self.min_hits
+        st.bones[tracks, st.slot[tracks]] = bone_lengths_of(poses3d)
+        st.slot[tracks] = (st.slot[tracks] + 1) % self.bone_window
