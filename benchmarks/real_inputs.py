@@ -12,16 +12,18 @@ no foot joints); Wildtrack (7 real cameras, synthetic bodies at the annotated po
 synthetic crowd sweep of 10-400 people on the surveillance rig of ``configs/dataset/crowd.yaml``; the
 speed setting of the issues, 100 people in 7 ring views (``timing``).
 
-Rows (Hydra overrides of ``configs/eval.yaml``): ``default`` (no override), ``paper`` (the paper's exact
+Rows (Hydra overrides of ``configs/eval.yaml``): ``default`` (no override: tracking and its temporal
+evidence included), ``default, tracking off`` (every frame on its own), ``paper`` (the paper's exact
 method: feet-only matching and MLE -> MAP with the population bone table and the fixed 2D sigma model),
 ``epipolar + vanilla``, ``epipolar + mle_map`` and ``oracle + vanilla`` (ground-truth identities group the
-detections: the upper bound; not on Shelf, whose detections carry no identities).
+detections: the upper bound; not on Shelf, whose detections carry no identities); every row but the
+default runs with ``tracking=off``.
 
 Columns: people found = GT persons matched by a prediction within ``evaluation.max_dist_m`` (%), and of
 those seen in >= 2 views (%); false positives = predictions matched to no GT person; matching pair
 precision / recall against GT identities; absolute MPJPE (mm, GT-matched, no root alignment, all joints
 valid in both); PCP (%, alpha 0.5; Shelf: the strict Shelf protocol averaged over actors 1-3);
-ms / frame = matching + reconstruction (Shelf: + PAF grouping), one BLAS thread.
+ms / frame = matching + reconstruction + tracking (Shelf: + PAF grouping), one BLAS thread.
 """
 from __future__ import annotations
 
@@ -49,13 +51,15 @@ from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 ROWS = {
     "default": [],
-    "paper": ["matching=feet_paper", "reconstruction=paper"],
-    "epipolar + vanilla": ["matching=epipolar", "reconstruction=vanilla"],
-    "epipolar + mle_map": ["matching=epipolar", "reconstruction=mle_map"],
-    "oracle + vanilla": ["matching=oracle", "reconstruction=vanilla"],
+    "default, tracking off": ["tracking=off"],
+    "paper": ["matching=feet_paper", "reconstruction=paper", "tracking=off"],
+    "epipolar + vanilla": ["matching=epipolar", "reconstruction=vanilla", "tracking=off"],
+    "epipolar + mle_map": ["matching=epipolar", "reconstruction=mle_map", "tracking=off"],
+    "oracle + vanilla": ["matching=oracle", "reconstruction=vanilla", "tracking=off"],
 }
-ROW_KEYS = {"default": "default", "paper": "paper", "epipolar_vanilla": "epipolar + vanilla",
-            "epipolar_mle_map": "epipolar + mle_map", "oracle": "oracle + vanilla"}
+ROW_KEYS = {"default": "default", "untracked": "default, tracking off", "paper": "paper",
+            "epipolar_vanilla": "epipolar + vanilla", "epipolar_mle_map": "epipolar + mle_map",
+            "oracle": "oracle + vanilla"}
 CROWD_SIZES = (10, 50, 100, 200, 400)
 HEADERS = ("dev set", "configuration", "found (%)", "found of >=2 views (%)", "false pos.", "pair P (%)",
            "pair R (%)", "MPJPE (mm)", "PCP (%)", "ms / frame")
@@ -102,10 +106,11 @@ def detectable_persons(sequence) -> tuple[int, int]:
 def run_row(sequence, cfg) -> list:
     """One table row's values: the pipeline of cfg on a fresh copy of the sequence."""
     sequence = copy.deepcopy(sequence)
-    pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction))
+    tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
+    pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), progress=False)
     m, frames = report.metrics, max(len(sequence.frames), 1)
-    ms = 1e3 * (report.timings.get("matching", 0.0) + report.timings.get("reconstruction", 0.0)
+    ms = 1e3 * (sum(report.timings.get(k, 0.0) for k in ("matching", "reconstruction", "tracking"))
                 + sequence.meta.get("stage_seconds", {}).get("grouping", 0.0)) / frames
     if "shelf" in report.protocols:
         shelf = report.protocols["shelf"]

@@ -42,8 +42,8 @@ import numpy as np
 
 from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from reconstruction.camera import Rig
-from reconstruction.block_solver import (EliminationPlan, elimination_plan, graph_components, solve_blocks,
-                                         solve_dense)
+from reconstruction.block_solver import (EliminationPlan, elimination_plan, graph_components, inverse_3x3,
+                                         solve_blocks, solve_dense)
 from reconstruction.compiled_solver import solve_poses_compiled
 from reconstruction.lm_solver import LMResult, minimize
 from reconstruction.map_estimation import (BLOCK_DIAG, ROBUST_LOSSES, Blocks, PoseBatch, PoseProblem, joint_sigma,
@@ -317,6 +317,7 @@ class MAPReconstruction:
             raise ValueError(f"sigma_px and score_power must be >= 0, got {sigma_px}, {score_power}")
         self.sigma_px, self.score_power = float(sigma_px), float(score_power)
         self.fix_swaps, self.last_swaps = bool(fix_swaps), 0
+        self.last_joint_variance = np.zeros((0, 0))    # (P, J) m^2 of the last call (the tracker's measurement noise)
         self.bone_mean, self.bone_std = resolve_bone_table(bone_table)
         self.proportion_sd = proportion_sds(self.bone_mean, self.bone_std, ABSOLUTE_SD_M)
         self.robust, self.robust_scale = robust, float(robust_scale)
@@ -364,6 +365,7 @@ class MAPReconstruction:
         X, placed = initial_poses(dlt, poses2d_und, proj)
         idx = np.flatnonzero(placed)
         if len(idx) == 0:
+            self.last_joint_variance = np.full(X.shape[:2], np.inf)
             return X, dlt, placed
         und, uv, inv_sigma = poses2d_und[:, idx], uv[:, idx], inv_sigma[:, idx]
         Xp = X[idx]
@@ -378,7 +380,23 @@ class MAPReconstruction:
             Xp, _ = solve_fn(problem, Xp, self.max_iterations, self.xtol, self.ftol)
         X = X.copy()
         X[idx] = Xp
+        self.last_joint_variance = np.full(X.shape[:2], np.inf)
+        self.last_joint_variance[idx] = self._joint_variance(Xp, uv, inv_sigma, proj)
         return X, dlt, placed
+
+    def _joint_variance(self, X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray) -> np.ndarray:
+        """Per-axis variance (m^2, a third of the covariance's trace) of every joint, at each person's noise scale:
+        (P, J, 3), (V, P, J, 2), (V, P, J), (V, 3, 4) -> (P, J). The likelihood's information, plus for a joint
+        seen in one view the bone tie along every axis (the prior fixes its depth); inf for a joint no view sees."""
+        scale = (noise_scale(X, uv, inv_sigma, proj, self.min_noise_scale) if self.noise_scale == "estimate"
+                 else np.ones(len(X)))
+        info = joint_information(X, proj, inv_sigma / scale[None, :, None])
+        views = (inv_sigma > 0).sum(axis=0)
+        tie = np.where(views == 1, 1.0 / self.bone_tie_sd_m ** 2, 0.0) if self.prior_weight > 0 else 0.0 * views
+        info = info + tie[..., None, None] * np.eye(3)
+        cov, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
+        var = (cov[0, 0] + cov[1, 1] + cov[2, 2]) / 3
+        return np.where((views >= 1 + (tie == 0)) & np.isfinite(var) & (var > 0), var, np.inf)
 
     def _person_problem(self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
                         mle: np.ndarray) -> PoseProblem:

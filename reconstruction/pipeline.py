@@ -16,9 +16,11 @@ Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
 
 
 class Tracker(Protocol):
-    """What the pipeline needs of a tracker (tracking.Tracker): frame number, poses (P, J, 4) -> ids (P,)."""
+    """What the pipeline needs of a tracker (tracking.Tracker): frame number, poses (P, J, 4), per-joint
+    variances (P, J) or None -> (ids (P,), poses (P, J, 4))."""
 
-    def update(self, frame: int, poses3d: np.ndarray) -> np.ndarray: ...
+    def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 @dataclass
@@ -71,7 +73,11 @@ class MultiViewPipeline:
         poses2d, bboxes = gather_views(frame.views, assignment)
         poses3d = self.reconstructor(poses2d, bboxes, self.rig) if len(assignment) else np.zeros((0, poses2d.shape[2], 4))
         t2 = time.perf_counter()
-        ids = None if self.tracker is None else self.tracker.update(frame.index, poses3d)
+        ids = None
+        if self.tracker is not None:           # the reconstruction's joint variances, where it has them
+            variance = getattr(self.reconstructor, "last_joint_variance", None)
+            variance = variance if variance is not None and variance.shape == poses3d.shape[:2] else None
+            ids, poses3d = self.tracker.update(frame.index, poses3d, variance)
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
         if self.tracker is not None:

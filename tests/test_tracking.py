@@ -15,11 +15,11 @@ from tracking.metrics import IdentityEvaluator
 FPS = 25.0
 
 
-def _walker(start, heading: float, speed: float, frame: int, scale: float = 1.0) -> np.ndarray:
-    """A walking mean body (scaled stature) at a frame: (23, 4), score 1."""
+def _walker(start, heading: float, speed: float, frame: int, scale: float = 1.0, walking: bool = True) -> np.ndarray:
+    """A walking (or standing) mean body (scaled stature) at a frame: (23, 4), score 1."""
     t = frame / FPS
     x, y = start[0] + speed * t * np.cos(heading), start[1] + speed * t * np.sin(heading)
-    joints = pose_joints(mean_body(1.7 * scale), x, y, heading, phase=0.8 * t, walking=True)
+    joints = pose_joints(mean_body(1.7 * scale), x, y, heading, phase=0.8 * t, walking=walking)
     return np.concatenate([joints, np.ones((len(joints), 1))], axis=1)
 
 
@@ -38,7 +38,7 @@ def test_two_people_crossing_paths_keep_their_ids():
         b = _walker((0.0, -2.4), np.pi / 2, 1.2, f - 4)  # along y, 4 frames behind: closest approach ~0.3 m
         order = rng.permutation(2)                       # the frame's persons come in any order
         poses = _noisy(np.stack([a, b])[order], rng)
-        ids = tracker.update(f, poses)
+        ids = tracker.update(f, poses).ids
         for slot, person in enumerate(order):
             seen[int(person)].add(int(ids[slot]))
     assert all(len(s) == 1 for s in seen.values()) and seen[0] != seen[1]
@@ -47,19 +47,19 @@ def test_two_people_crossing_paths_keep_their_ids():
 def test_a_person_who_returns_after_the_death_age_gets_a_new_id_and_before_it_keeps_it():
     tracker = Tracker(max_age=5, min_hits=2)
     pose = _walker((0.0, 0.0), 0.0, 0.0, 0)
-    first = tracker.update(0, pose[None])[0]
+    first = tracker.update(0, pose[None]).ids[0]
     tracker.update(1, pose[None])
     tracker.update(2, np.zeros((0, 23, 4)))                  # missed 4 frames (2..5): within max_age
-    assert tracker.update(6, pose[None])[0] == first
-    assert tracker.update(13, pose[None])[0] != first         # gone 6 frames after its last hit: a new id
+    assert tracker.update(6, pose[None]).ids[0] == first
+    assert tracker.update(13, pose[None]).ids[0] != first         # gone 6 frames after its last hit: a new id
 
 
 def test_a_tentative_track_missed_once_is_dropped():
     tracker = Tracker(min_hits=3)
     pose = _walker((0.0, 0.0), 0.0, 0.0, 0)
-    first = tracker.update(0, pose[None])[0]
+    first = tracker.update(0, pose[None]).ids[0]
     tracker.update(1, np.zeros((0, 23, 4)))
-    assert tracker.update(2, pose[None])[0] != first
+    assert tracker.update(2, pose[None]).ids[0] != first
 
 
 def test_frames_that_go_backwards_or_repeat_stop_with_a_message():
@@ -73,10 +73,10 @@ def test_frames_that_go_backwards_or_repeat_stop_with_a_message():
 def test_a_gap_is_predicted_over_the_missed_frames_not_taken_as_a_jump():
     tracker = Tracker()
     for f in range(20):
-        ids = tracker.update(f, _walker((0.0, 0.0), 0.0, 1.5, f)[None])
+        ids = tracker.update(f, _walker((0.0, 0.0), 0.0, 1.5, f)[None]).ids
     # frames 20..27 missing: the body is 9 x 6 cm further on at frame 28; taken as one frame's step, the
     # velocity would jump to 0.54 m per frame
-    assert tracker.update(28, _walker((0.0, 0.0), 0.0, 1.5, 28)[None])[0] == ids[0]
+    assert tracker.update(28, _walker((0.0, 0.0), 0.0, 1.5, 28)[None]).ids[0] == ids[0]
     hips = tracker.tracks[0].velocity[11:13].mean(axis=0)
     np.testing.assert_allclose(hips[:2], [1.5 / FPS, 0.0], atol=0.01)    # horizontal: the hips bob in z
 
@@ -152,3 +152,68 @@ def test_the_pipeline_gives_track_ids_to_poses3d_json_and_identity_metrics(tmp_p
     untracked = MultiViewPipeline(sequence.rig, OracleMatcher(), VanillaTriangulation())
     assert untracked(sequence.frames[0]).ids is None
     assert "tracking_id_switches" not in evaluate_sequence(sequence, untracked, Pose3DEvaluator(), progress=False).metrics
+
+
+def test_exact_joints_are_kept_and_noisy_ones_are_smoothed():
+    rng = np.random.default_rng(4)
+    exact, smooth = Tracker(), Tracker()
+    raw_err, out_err = [], []
+    for f in range(40):
+        truth = _walker((0.0, 0.0), 0.2, 0.0, f, walking=False)[None]      # a player on a stage
+        kept = exact.update(f, truth, np.full((1, 23), 1e-10)).poses3d
+        np.testing.assert_allclose(kept, truth, atol=1e-6)
+        noisy = _noisy(truth, rng, sd=0.01)
+        out = smooth.update(f, noisy, np.full((1, 23), 1e-4)).poses3d
+        if f >= 10:
+            raw_err.append(np.linalg.norm(noisy[0, :, :3] - truth[0, :, :3], axis=-1).mean())
+            out_err.append(np.linalg.norm(out[0, :, :3] - truth[0, :, :3], axis=-1).mean())
+    assert np.mean(out_err) < 0.75 * np.mean(raw_err)
+
+
+def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
+    from data.synthetic.observe import bbox_from_keypoints
+    from data.synthetic.rigs import ring_rig
+    from reconstruction.map_solver import MLEMAPReconstruction
+
+    rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
+    rng = np.random.default_rng(5)
+    tracker, rec = Tracker(), MLEMAPReconstruction()
+    hidden = 9                                           # left wrist: no view sees it in frames 20-22
+    for f in range(23):
+        truth = _walker((-1.0, 0.0), 0.0, 1.2, f)
+        uv = rig.project(truth[None, :, :3]) + rng.normal(0, 1.0, (4, 1, 23, 2))
+        poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
+        if f >= 20:
+            poses2d[:, 0, hidden, 2] = 0.0
+        boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
+        alone = rec(poses2d, boxes, rig)
+        out = tracker.update(f, alone, rec.last_joint_variance).poses3d
+    tracked, by_prior = (np.linalg.norm(p[0, hidden, :3] - truth[hidden, :3]) for p in (out, alone))
+    assert tracked < 0.05 and tracked < by_prior
+    assert out[0, hidden, 3] == alone[0, hidden, 3] < 0.5      # the reconstruction's low score is kept
+
+
+def test_the_map_reports_each_joints_variance_for_the_tracker():
+    from data.synthetic.observe import bbox_from_keypoints
+    from data.synthetic.rigs import ring_rig
+    from reconstruction.map_solver import MLEMAPReconstruction
+
+    rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
+    X = _walker((0.0, 0.0), 0.4, 0.0, 0)[None, :, :3]
+    rng = np.random.default_rng(0)
+    out = {}
+    for noise in (1.0, 4.0):
+        uv = rig.project(X) + rng.normal(0, noise, (4, 1, 23, 2))
+        poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
+        poses2d[1:, 0, 9, 2] = 0.0                       # the left wrist seen in one view only
+        poses2d[:, 0, 10, 2] = 0.0                       # the right wrist in none
+        boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
+        rec = MLEMAPReconstruction()
+        rec(poses2d, boxes, rig)
+        out[noise] = rec.last_joint_variance
+    var = out[1.0][0]
+    assert var.shape == (23,) and np.isinf(var[10])
+    many = np.ones(23, bool)
+    many[[9, 10]] = False                                 # seen in 4 views: the likelihood fixes them
+    assert np.all(np.isfinite(var[many])) and np.all(out[4.0][0, many] > 4 * var[many])
+    assert 10 * var[many].max() < var[9] < 0.03 ** 2      # one view: the bone tie fixes its depth

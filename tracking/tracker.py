@@ -1,4 +1,5 @@
-"""Online 3D pose tracker: ``Tracker.update(frame, poses3d) -> ids``, frame by frame (a live rig or a file).
+"""Online 3D pose tracker: ``Tracker.update(frame, poses3d[, variance]) -> (ids, poses3d)``, frame by frame
+(a live rig or a file).
 
 Motion model: every joint of a track moves with constant velocity, filtered by a Kalman filter with
 white-acceleration process noise (``accel_sd_m`` per frame^2), isotropic measurement noise
@@ -16,6 +17,15 @@ track takes starts a tentative track; it is confirmed after ``min_hits`` consecu
 tentative track missed once is dropped. A confirmed track dies after ``max_age`` frames without a hit,
 so a person who comes back later gets a new id. Ids are given at birth and never reused.
 
+Temporal evidence (``smooth``): each joint of a track is also filtered as a random walk whose process
+variance follows the innovations (an exponential average, rate ``smooth_rate``, of how far the joint
+moves beyond what its variances explain, at least ``smooth_floor_m`` squared; ``smooth_initial_m`` for a
+new joint), updated with the reconstruction's joint and its variance (``variance``: the likelihood's
+per-joint variance of the MAP, so exact 2D keeps the triangulated point and a joint the views do not fix
+comes from the motion). A joint the reconstruction does not see in this frame moves on with its
+velocity in the motion filter. A slow person is smoothed over many frames, a fast one over few: one default serves a band
+playing at 30 fps and a crowd walking at 5 fps.
+
 Each track also keeps its person's bone lengths: a robust running estimate (median and MAD-based SD of
 the lengths seen in the last ``bone_window`` frames where both ends were reconstructed).
 
@@ -27,6 +37,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -37,7 +48,17 @@ MAD_TO_SD = 1.4826   # SD of a normal distribution per median absolute deviation
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
 # shoulders, hips) move with the body; arms and legs swing by tens of cm between frames at 5 fps.
 CORE_JOINTS = np.array([0, 1, 2, 3, 4, 5, 6, 11, 12])
+# m^2: variance of a joint no view sees, placed by the reconstruction's bone prior alone (a bone's direction is
+# unknown: about 15 cm); the motion filter does not take such a joint as a measurement
+UNSEEN_VAR_M2 = 0.15 ** 2
 BODY_SPAN_M = 1.0    # m: the centres of any two subsets of one body's head and trunk joints lie this close
+
+
+class Tracked(NamedTuple):
+    """One frame's output of the tracker: ids (P,) and poses (P, J, 4), smoothed where the tracker smooths."""
+
+    ids: np.ndarray
+    poses3d: np.ndarray
 
 
 @dataclass
@@ -74,7 +95,9 @@ def robust_lengths(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
 class TrackState:
     """All tracks as arrays: ids (T,), position / velocity (T, J, 3), per-axis covariance entries p00, p01,
     p11 (T, J) of (position, velocity), seen (T, J), last_frame, hits (T,), confirmed (T,), bones (T, W, L)
-    ring buffer of bone lengths (NaN = none) with its next slot (T,)."""
+    ring buffer of bone lengths (NaN = none) with its next slot (T,); the smoothed joints sx (T, J, 3), their
+    per-axis variance sp (T, J) and adaptive process variance sq (T, J) m^2 per frame; live (T, J): measured at
+    the last hit (association and the body's velocity use these: a joint unmeasured for a while drifts)."""
 
     ids: np.ndarray
     position: np.ndarray
@@ -88,6 +111,10 @@ class TrackState:
     confirmed: np.ndarray
     bones: np.ndarray
     slot: np.ndarray
+    sx: np.ndarray
+    sp: np.ndarray
+    sq: np.ndarray
+    live: np.ndarray
 
     @classmethod
     def empty(cls, joints: int, window: int) -> "TrackState":
@@ -95,7 +122,8 @@ class TrackState:
         z = lambda *shape, dtype=np.float64: np.zeros((0, *shape), dtype=dtype)  # noqa: E731
         return cls(z(dtype=np.int64), z(joints, 3), z(joints, 3), z(joints), z(joints), z(joints),
                    z(joints, dtype=bool), z(dtype=np.int64), z(dtype=np.int64), z(dtype=bool),
-                   z(window, len(BONE_PAIRS)), z(dtype=np.int64))
+                   z(window, len(BONE_PAIRS)), z(dtype=np.int64), z(joints, 3), z(joints), z(joints),
+                   z(joints, dtype=bool))
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -161,7 +189,8 @@ class Tracker:
 
     def __init__(self, max_distance_m: float = 0.5, gate_growth_m: float = 0.1, min_hits: int = 3,
                  max_age: int = 10, accel_sd_m: float = 0.05, measurement_sd_m: float = 0.03,
-                 velocity_sd_m: float = 0.5, bone_window: int = 100) -> None:
+                 velocity_sd_m: float = 0.5, bone_window: int = 100, smooth: bool = True,
+                 smooth_rate: float = 0.3, smooth_floor_m: float = 0.001, smooth_initial_m: float = 0.01) -> None:
         if not min(max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m) > 0 or not gate_growth_m >= 0:
             raise ValueError("tracking: max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m must be > 0 and "
                              f"gate_growth_m >= 0; got {max_distance_m}, {accel_sd_m}, {measurement_sd_m}, "
@@ -172,6 +201,11 @@ class Tracker:
         self.max_distance_m, self.gate_growth_m = float(max_distance_m), float(gate_growth_m)
         self.min_hits, self.max_age, self.bone_window = int(min_hits), int(max_age), int(bone_window)
         self.q, self.r2, self.v2 = float(accel_sd_m) ** 2, float(measurement_sd_m) ** 2, float(velocity_sd_m) ** 2
+        if not (0 < smooth_rate <= 1 and smooth_floor_m > 0 and smooth_initial_m > 0):
+            raise ValueError(f"tracking: need 0 < smooth_rate <= 1, smooth_floor_m > 0, smooth_initial_m > 0; got "
+                             f"{smooth_rate}, {smooth_floor_m}, {smooth_initial_m}")
+        self.smooth, self.smooth_rate = bool(smooth), float(smooth_rate)
+        self.smooth_floor2, self.smooth_q0 = float(smooth_floor_m) ** 2, float(smooth_initial_m) ** 2
         self.state: TrackState | None = None
         self.last_frame: int | None = None
         self._next_id = 0
@@ -186,8 +220,10 @@ class Tracker:
                       int(st.last_frame[t]), int(st.hits[t]), bool(st.confirmed[t]),
                       st.bones[t][np.isfinite(st.bones[t]).any(axis=1)]) for t in range(len(st))]
 
-    def update(self, frame: int, poses3d: np.ndarray) -> np.ndarray:
-        """Associate one frame's persons with the tracks and update them: (P, J, 4) -> track ids (P,).
+    def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None) -> Tracked:
+        """Associate one frame's persons with the tracks and update them: (P, J, 4), per-joint variance (P, J)
+        m^2 of the reconstruction (None: ``measurement_sd_m`` squared for every joint) -> Tracked(ids (P,),
+        poses3d (P, J, 4)), the poses smoothed over time where ``smooth`` (a new track's as given).
 
         Frame numbers must increase; a gap counts as missed frames for every track.
         """
@@ -198,15 +234,20 @@ class Tracker:
         poses3d = np.asarray(poses3d, dtype=np.float64)
         if poses3d.ndim != 3 or poses3d.shape[-1] != 4:
             raise ValueError(f"tracking: poses must be (P, J, 4), got {poses3d.shape}")
+        variance = self._variance(variance, poses3d)
         if self.state is None:
             self.state = TrackState.empty(poses3d.shape[1], self.bone_window)
         self.last_frame = frame
         st = self.state.select(self._alive(self.state, frame - 1))              # gone during a gap
         tracks, persons = self._associate(st, frame, poses3d)
         ids = np.full(len(poses3d), -1, dtype=np.int64)
+        out = poses3d.copy()
         if len(tracks):
-            self._correct(st, tracks, frame, poses3d[persons])
+            self._correct(st, tracks, frame, poses3d[persons], variance[persons])
             ids[persons] = st.ids[tracks]
+            if self.smooth:                    # confirmed tracks only: a new one may be a wrong match
+                use = (poses3d[persons, :, 3:] > 0) & st.confirmed[tracks, None, None]
+                out[persons, :, :3] = np.where(use, st.sx[tracks], poses3d[persons, :, :3])
         hit = np.zeros(len(st), dtype=bool)
         hit[tracks] = True
         st = st.select(hit | self._alive(st, frame))
@@ -214,9 +255,19 @@ class Tracker:
         if len(born):
             ids[born] = np.arange(self._next_id, self._next_id + len(born))
             self._next_id += len(born)
-            st = st.extend(self._births(ids[born], frame, poses3d[born]))
+            st = st.extend(self._births(ids[born], frame, poses3d[born], variance[born]))
         self.state = st
-        return ids
+        return Tracked(ids, out)
+
+    def _variance(self, variance: np.ndarray | None, poses3d: np.ndarray) -> np.ndarray:
+        """The joints' measurement variances (P, J) m^2: the given ones where finite and > 0 (at most
+        UNSEEN_VAR_M2), UNSEEN_VAR_M2 where no view fixes the joint; without any, measurement_sd_m squared."""
+        if variance is None:
+            return np.full(poses3d.shape[:2], self.r2)
+        variance = np.asarray(variance, dtype=np.float64)
+        if variance.shape != poses3d.shape[:2]:
+            raise ValueError(f"tracking: variances {variance.shape} do not match poses {poses3d.shape}")
+        return np.where(np.isfinite(variance) & (variance > 0), np.minimum(variance, UNSEEN_VAR_M2), UNSEEN_VAR_M2)
 
     def _alive(self, st: TrackState, frame: int) -> np.ndarray:
         """Which tracks not hit after their last frame survive up to this frame: tentative ones die at once,
@@ -231,8 +282,9 @@ class Tracker:
         dt = (frame - st.last_frame).astype(np.float64)
         predicted = st.position + dt[:, None, None] * self._body_velocity(st)[:, None, :]
         gate = self.max_distance_m + self.gate_growth_m * (dt - 1.0)
-        cost = np.minimum(mean_distances(predicted, st.seen, poses3d, gate.max()),
-                          mean_distances(st.position, st.seen, poses3d, gate.max()))
+        live = np.where(st.live.any(axis=1, keepdims=True), st.live, st.seen)
+        cost = np.minimum(mean_distances(predicted, live, poses3d, gate.max()),
+                          mean_distances(st.position, live, poses3d, gate.max()))
         cost = np.where(cost <= gate[:, None], cost, np.inf)
         if not np.isfinite(cost).any():
             return none, none
@@ -242,39 +294,45 @@ class Tracker:
 
     @staticmethod
     def _body_velocity(st: TrackState) -> np.ndarray:
-        """Mean velocity of each track's seen head and trunk joints (all seen joints without any): (T, 3)."""
-        use = st.seen & _core_mask(st.seen.shape[1])
-        use = np.where(use.any(axis=1, keepdims=True), use, st.seen)
+        """Mean velocity of each track's live head and trunk joints (all live joints without any): (T, 3)."""
+        use = st.live & _core_mask(st.live.shape[1])
+        use = np.where(use.any(axis=1, keepdims=True), use, st.live)
         n = np.maximum(use.sum(axis=1), 1)[:, None]
         return np.where(use[..., None], st.velocity, 0.0).sum(axis=1) / n
 
-    def _births(self, ids: np.ndarray, frame: int, poses3d: np.ndarray) -> TrackState:
-        """Tentative tracks at persons' joints: ids (B,), (B, J, 4) -> TrackState of B tracks."""
+    def _births(self, ids: np.ndarray, frame: int, poses3d: np.ndarray, variance: np.ndarray) -> TrackState:
+        """Tentative tracks at persons' joints: ids (B,), (B, J, 4), joint variances (B, J) -> B tracks."""
         B, J = poses3d.shape[:2]
         seen = poses3d[..., 3] > 0
         bones = np.full((B, self.bone_window, len(BONE_PAIRS)), np.nan)
-        bones[:, 0] = bone_lengths_of(poses3d)
+        bones[:, 0] = bone_lengths_of(np.where((variance < UNSEEN_VAR_M2)[..., None], poses3d, 0.0))
         return TrackState(ids.astype(np.int64), np.where(seen[..., None], poses3d[..., :3], 0.0), np.zeros((B, J, 3)),
                           np.full((B, J), self.r2), np.zeros((B, J)), np.full((B, J), self.v2), seen,
                           np.full(B, frame, dtype=np.int64), np.ones(B, dtype=np.int64),
-                          np.full(B, self.min_hits <= 1), bones, np.ones(B, dtype=np.int64) % self.bone_window)
+                          np.full(B, self.min_hits <= 1), bones, np.ones(B, dtype=np.int64) % self.bone_window,
+                          np.where(seen[..., None], poses3d[..., :3], 0.0), np.where(seen, variance, 0.0),
+                          np.full((B, J), self.smooth_q0), seen & (variance < UNSEEN_VAR_M2))
 
-    def _correct(self, st: TrackState, tracks: np.ndarray, frame: int, poses3d: np.ndarray) -> None:
+    def _correct(self, st: TrackState, tracks: np.ndarray, frame: int, poses3d: np.ndarray,
+                 variance: np.ndarray) -> None:
         """Kalman predict over the frames since each track's last hit, then update with the observed joints
-        (a joint seen for the first time starts there): tracks (K,), poses (K, J, 4); st changed in place."""
+        (a joint seen for the first time starts there): tracks (K,), poses (K, J, 4), variances (K, J); st
+        changed in place (the motion filter, then the smoother, then the bone lengths)."""
         dt = (frame - st.last_frame[tracks]).astype(np.float64)[:, None]              # (K, 1)
+        self._smooth(st, tracks, dt, poses3d, variance)
         p00, p01, p11 = st.p00[tracks], st.p01[tracks], st.p11[tracks]
         p00 = p00 + 2 * dt * p01 + dt ** 2 * p11 + self.q * dt ** 4 / 4
         p01 = p01 + dt * p11 + self.q * dt ** 3 / 2
         p11 = p11 + self.q * dt ** 2
         x = st.position[tracks] + dt[..., None] * st.velocity[tracks]
-        obs = poses3d[..., 3] > 0
+        obs = (poses3d[..., 3] > 0) & (variance < UNSEEN_VAR_M2)     # a joint no view fixes is no measurement
         seen = st.seen[tracks]
         upd, new = obs & seen, obs & ~seen
         k0, k1 = p00 / (p00 + self.r2), p01 / (p00 + self.r2)
         innov = poses3d[..., :3] - x
         st.position[tracks] = np.where(upd[..., None], x + k0[..., None] * innov, np.where(new[..., None], poses3d[..., :3], x))
         st.velocity[tracks] = np.where(upd[..., None], st.velocity[tracks] + k1[..., None] * innov, st.velocity[tracks])
+        st.live[tracks] = obs
         st.p00[tracks] = np.where(upd, (1 - k0) * p00, p00)
         st.p11[tracks] = np.where(upd, p11 - k1 * p01, p11)
         st.p01[tracks] = np.where(upd, (1 - k0) * p01, p01)
@@ -282,5 +340,30 @@ class Tracker:
         st.last_frame[tracks] = frame
         st.hits[tracks] += 1
         st.confirmed[tracks] |= st.hits[tracks] >= self.min_hits
-        st.bones[tracks, st.slot[tracks]] = bone_lengths_of(poses3d)
+        st.bones[tracks, st.slot[tracks]] = bone_lengths_of(np.where(obs[..., None], poses3d, 0.0))
         st.slot[tracks] = (st.slot[tracks] + 1) % self.bone_window
+
+    def _smooth(self, st: TrackState, tracks: np.ndarray, dt: np.ndarray, poses3d: np.ndarray,
+                variance: np.ndarray) -> None:
+        """The smoother of each joint: a random walk whose process variance follows the innovations (a joint the
+        reconstruction does not see moves with the body), updated with the reconstruction's joint (its variance):
+        tracks (K,), dt (K, 1), poses (K, J, 4), variances (K, J); st changed in place."""
+        obs = poses3d[..., 3] > 0
+        fresh = obs & ~st.seen[tracks]
+        upd = obs & st.seen[tracks]
+        # seen joints: a random walk (limbs swing; the adaptive noise follows them); unseen ones move on with the
+        # motion filter's velocity of that joint
+        unseen = (variance >= UNSEEN_VAR_M2)[..., None]
+        v = np.where(unseen, st.velocity[tracks], 0.0)
+        x = st.sx[tracks] + dt[..., None] * v
+        p, q = st.sp[tracks], st.sq[tracks]
+        innov = poses3d[..., :3] - x
+        excess = (innov ** 2).sum(-1) / 3 - p - variance
+        rate = np.maximum(self.smooth_rate, 1.0 / st.hits[tracks])[:, None]   # a plain mean over the first hits
+        q = np.where(upd, (1 - rate) * q + rate * np.maximum(excess, self.smooth_floor2), q)
+        p = p + dt * q
+        gain = p / (p + variance)
+        st.sx[tracks] = np.where(upd[..., None], x + gain[..., None] * innov,
+                                 np.where(fresh[..., None], poses3d[..., :3], x))
+        st.sp[tracks] = np.where(upd, (1 - gain) * p, np.where(fresh, variance, p))
+        st.sq[tracks] = np.where(fresh, self.smooth_q0, q)
