@@ -168,6 +168,10 @@ def test_exact_joints_are_kept_and_noisy_ones_are_smoothed():
             raw_err.append(np.linalg.norm(noisy[0, :, :3] - truth[0, :, :3], axis=-1).mean())
             out_err.append(np.linalg.norm(out[0, :, :3] - truth[0, :, :3], axis=-1).mean())
     assert np.mean(out_err) < 0.75 * np.mean(raw_err)
+    plain = Tracker()                                    # no variances (e.g. reconstruction=vanilla): ids only
+    for f in range(5):
+        noisy = _noisy(_walker((0.0, 0.0), 0.2, 0.0, f, walking=False)[None], rng, sd=0.01)
+        np.testing.assert_array_equal(plain.update(f, noisy).poses3d, noisy)
 
 
 def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():

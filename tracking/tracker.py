@@ -222,8 +222,10 @@ class Tracker:
 
     def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None) -> Tracked:
         """Associate one frame's persons with the tracks and update them: (P, J, 4), per-joint variance (P, J)
-        m^2 of the reconstruction (None: ``measurement_sd_m`` squared for every joint) -> Tracked(ids (P,),
-        poses3d (P, J, 4)), the poses smoothed over time where ``smooth`` (a new track's as given).
+        m^2 of the reconstruction -> Tracked(ids (P,), poses3d (P, J, 4)), the poses smoothed over time where
+        ``smooth`` and variances are given (a new track's as given). Without variances (a reconstruction that
+        has none, e.g. reconstruction=vanilla) the poses pass through and the motion filter takes
+        ``measurement_sd_m`` for every joint.
 
         Frame numbers must increase; a gap counts as missed frames for every track.
         """
@@ -234,6 +236,7 @@ class Tracker:
         poses3d = np.asarray(poses3d, dtype=np.float64)
         if poses3d.ndim != 3 or poses3d.shape[-1] != 4:
             raise ValueError(f"tracking: poses must be (P, J, 4), got {poses3d.shape}")
+        smooth = self.smooth and variance is not None          # without variances nothing to weigh: ids only
         variance = self._variance(variance, poses3d)
         if self.state is None:
             self.state = TrackState.empty(poses3d.shape[1], self.bone_window)
@@ -245,7 +248,7 @@ class Tracker:
         if len(tracks):
             self._correct(st, tracks, frame, poses3d[persons], variance[persons])
             ids[persons] = st.ids[tracks]
-            if self.smooth:                    # confirmed tracks only: a new one may be a wrong match
+            if smooth:                         # confirmed tracks only: a new one may be a wrong match
                 use = (poses3d[persons, :, 3:] > 0) & st.confirmed[tracks, None, None]
                 out[persons, :, :3] = np.where(use, st.sx[tracks], poses3d[persons, :, :3])
         hit = np.zeros(len(st), dtype=bool)
