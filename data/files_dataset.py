@@ -26,7 +26,7 @@ def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str
     rig = load_rig(cameras)
     if not Path(poses2d).is_file():
         raise FileNotFoundError(f"{poses2d}: poses2d.json not found")
-    views = read_poses2d(poses2d, rig.names)
+    views = read_poses2d(poses2d, rig.names, [c.size for c in rig])
     numbers = sorted(views) if frames is None else _frame_numbers(frames)
     empty = [f for f in numbers if f not in views]
     out = [Frame(f, views.get(f) or [ViewDetections.empty() for _ in rig.names]) for f in numbers]

@@ -35,8 +35,11 @@ class Camera:
                 raise ValueError(f"camera {self.name!r}: {key} has a non-finite value")
             value.flags.writeable = False
             object.__setattr__(self, key, value)
-        w, h = (int(s) for s in self.size)
-        if w <= 0 or h <= 0:
+        try:
+            w, h = (int(s) for s in self.size)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"camera {self.name!r}: size must be two integers (w, h), got {self.size}") from None
+        if not (0 < w < 2 ** 31 and 0 < h < 2 ** 31):
             raise ValueError(f"camera {self.name!r}: size must be positive, got {self.size}")
         object.__setattr__(self, "size", (w, h))
         object.__setattr__(self, "_fov_r2", self._field_of_view_r2())
