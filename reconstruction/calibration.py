@@ -362,12 +362,19 @@ def detect_format(path: str | Path) -> str:
                  "{name: {K, dist, R, t, size}}, 4D Association, VoxelPose or Panoptic JSON)")
 
 
-def load_rig(path: str | Path, fmt: str = "auto", **kwargs: Any) -> Rig:
+def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: Any) -> Rig:
     """Load any supported calibration: fmt in cameras_json, 4dassoc, voxelpose, panoptic, wildtrack,
-    shelf_p, or auto (detected from the file content or folder layout); kwargs go to the loader."""
+    shelf_p, or auto (detected from the file content or folder layout); kwargs go to the loader. With
+    ``check``, the rig check (reconstruction/check_rig.py) runs: RigError (a CalibrationError) where every
+    result would be garbage, RigWarning for what looks wrong."""
     loaders = {"cameras_json": load_cameras_json, "4dassoc": load_4dassoc, "voxelpose": load_voxelpose,
                "panoptic": load_panoptic, "wildtrack": load_wildtrack, "shelf_p": load_shelf_projections}
     fmt = detect_format(path) if fmt == "auto" else fmt
     if fmt not in loaders:
         raise CalibrationError(f"{path}: unknown calibration format {fmt!r}, expected auto or one of {list(loaders)}")
-    return loaders[fmt](path, **kwargs)
+    rig = loaders[fmt](path, **kwargs)
+    if check:
+        from reconstruction.check_rig import check_rig  # it imports this module
+
+        check_rig(rig, path)
+    return rig

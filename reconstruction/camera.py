@@ -137,7 +137,11 @@ class Camera:
 
     def image_to_ground_homography(self) -> np.ndarray:
         """Homography from undistorted pixels to ground (X, Y) on z = 0: (3, 3)."""
-        H = np.linalg.inv(self.ground_to_image_homography())
+        try:
+            H = np.linalg.inv(self.ground_to_image_homography())
+        except np.linalg.LinAlgError:
+            raise ValueError(f"camera {self.name!r}: its centre lies on the ground plane z = 0, so pixels have no "
+                             f"ground point") from None
         return H / H[2, 2]
 
     def image_to_ground(self, uv: np.ndarray, undistort: bool = True) -> np.ndarray:
