@@ -147,7 +147,7 @@ def rig_findings(rig: Rig, tol: RigTolerances = RigTolerances()) -> list[Finding
     if far:
         d = np.linalg.norm([c.center for c in far], axis=1)
         out.append(Finding("warning", f"camera{'s' if len(far) > 1 else ''} {_names(far)}: centre {d.min():.4g}"
-                                      f"{f'-{d.max():.4g}' if len(far) > 1 else ''} m from the world origin "
+                                      f"{f'-{d.max():.4g}' if d.max() > d.min() * 1.001 else ''} m from the world origin "
                                       f"(more than {tol.max_centre_distance_m:g} m): is t in millimetres or "
                                       f"centimetres? cameras.json wants metres"))
     below = [c for c in cams if c.center[2] < -tol.ground_clearance_m]
