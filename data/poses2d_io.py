@@ -9,8 +9,9 @@ belong; a frame or id outside 64-bit integers; a camera not in the calibration; 
 other than 69; a non-finite number; a score (detection or keypoint) outside [0, 1] (up to
 ``SCORE_SLACK`` above 1 is clipped to 1: OpenPose's confidences can exceed 1 slightly); a scored
 keypoint or a box corner farther outside the image than ``OUTSIDE_IMAGE_TOLERANCE`` image sizes; a
-negative box width or height; and the same detection twice (same frame, camera and keypoints:
-rejected, not merged, because a duplicate is a concatenation or export bug that a merge would hide).
+negative box width or height; and the same detection twice (same frame, camera and keypoints, at
+least one of them scored: rejected, not merged, because a duplicate is a concatenation or export bug
+that a merge would hide; detections without any scored joint, e.g. a 2D model's empty boxes, may repeat).
 """
 from __future__ import annotations
 
@@ -165,7 +166,7 @@ def read_poses2d(path: str | Path, camera_names: list[str],
         where = f"{path}: entry {i}: frame {frame}, camera {camera_names[v]!r}"
         det = _check_values(where, det, None if image_sizes is None else tuple(image_sizes[v]))
         key = (frame, v, det[0].tobytes())
-        if key in seen:
+        if key in seen and np.any(det[0][:, 2] > 0):  # detections without any joint carry nothing twice
             raise Poses2DError(f"{path}: entries {seen[key]} and {i} are the same detection (frame {frame}, camera "
                                f"{camera_names[v]!r}, identical keypoints): remove the duplicate")
         seen[key] = i
