@@ -145,7 +145,8 @@ def rig_findings(rig: Rig, tol: RigTolerances = RigTolerances()) -> list[Finding
                                       f"(one camera copied under two names?)"))
     far = [c for c, d in zip(cams, np.linalg.norm(C, axis=1)) if d > tol.max_centre_distance_m]
     if far:
-        d = np.linalg.norm([c.center for c in far], axis=1)
+        with np.errstate(over="ignore"):
+            d = np.minimum(np.linalg.norm([c.center for c in far], axis=1), np.finfo(np.float64).max)
         out.append(Finding("warning", f"camera{'s' if len(far) > 1 else ''} {_names(far)}: centre {d.min():.4g}"
                                       f"{f'-{d.max():.4g}' if d.max() > d.min() * 1.001 else ''} m from the world origin "
                                       f"(more than {tol.max_centre_distance_m:g} m): is t in millimetres or "
