@@ -8,7 +8,9 @@ the Hydra run directory.
 from __future__ import annotations
 
 import json
+import sys
 import time
+import warnings
 from pathlib import Path
 
 import hydra
@@ -16,6 +18,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from omegaconf import DictConfig
+from omegaconf.errors import MissingMandatoryValue
 
 from data.atomic_io import atomic_write_text
 from data.poses_io import write_poses3d
@@ -24,6 +27,7 @@ from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_r
 from evaluation.visualize import save_run_pictures
 from data.poses2d_io import Poses2DError
 from reconstruction.calibration import CalibrationError
+from reconstruction.check_rig import RigWarning
 from reconstruction.pipeline import MultiViewPipeline
 
 PROTOCOL = ("absolute MPJPE (mm, no root alignment) over all frames; each GT person matched one-to-one "
@@ -78,15 +82,30 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
     return metrics
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """warnings.showwarning for the run: RigWarning as one line 'warning: ...', others as Python prints them."""
+    if issubclass(category, RigWarning):
+        print(f"warning: {message}", file=sys.stderr if file is None else file)
+    else:
+        _show_warning(message, category, filename, lineno, file, line)
+
+
+_show_warning = warnings.showwarning
+
+
 @hydra.main(config_path="configs", config_name="eval", version_base="1.3")
 def main(cfg: DictConfig) -> dict:
     """Hydra entry point; returns the metrics (for sweeps). Bad input files and bad config values stop
     with one message (a ValueError while building the dataset, matcher or reconstruction is one of them)."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    warnings.showwarning = _one_line_warning
     if cfg.checkpoint:
         return run_pose2d(cfg, out_dir)
     try:
         return run(cfg, out_dir).metrics
+    except MissingMandatoryValue as err:  # e.g. dataset=files without dataset.cameras=...
+        raise SystemExit(f"error: {err.full_key} is not set: give it on the command line "
+                         f"({err.full_key}=...; see configs/{err.full_key.split('.')[0]}/)") from None
     except (CalibrationError, Poses2DError, InstantiationException) as err:
         cause = err.__cause__ if isinstance(err, InstantiationException) else err
         if isinstance(cause, (ValueError, FileNotFoundError)):  # CalibrationError, Poses2DError are ValueErrors

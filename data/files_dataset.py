@@ -2,7 +2,9 @@
 
 The calibration is read by :func:`reconstruction.calibration.load_rig` (format detected: cameras.json,
 4D Association, VoxelPose, Panoptic, a Wildtrack folder, Shelf P-matrices); the 2D poses by
-:func:`data.poses2d_io.read_poses2d`, which checks every entry against the calibration's camera names.
+:func:`data.poses2d_io.read_poses2d`, which checks every entry against the calibration's camera names and image sizes. The rig check
+(:mod:`reconstruction.check_rig`) then runs with the 2D poses: errors stop, warnings (RigWarning) name
+the camera and the likely mistake.
 Frames are the frame numbers found in the file, or the ones asked for: a frame without any detection
 in any view is still a frame (the pipeline then reports it as skipped), so that a detector's output,
 which omits empty frames, can be evaluated over a fixed range.
@@ -14,6 +16,7 @@ from pathlib import Path
 from data.multiview import Frame, Sequence, ViewDetections
 from data.poses2d_io import read_poses2d
 from reconstruction.calibration import load_rig
+from reconstruction.check_rig import check_rig
 
 
 def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str | None = None) -> Sequence:
@@ -23,10 +26,11 @@ def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str
     = range(start, stop, step) of frame numbers. Frames of the file outside the selection are dropped
     (counted in ``meta["frames_not_selected"]``); selected frames absent from the file have no detections.
     """
-    rig = load_rig(cameras)
+    rig = load_rig(cameras, check=False)
     if not Path(poses2d).is_file():
         raise FileNotFoundError(f"{poses2d}: poses2d.json not found")
-    views = read_poses2d(poses2d, rig.names)
+    views = read_poses2d(poses2d, rig.names, [c.size for c in rig])
+    check_rig(rig, cameras, views)  # load_rig ran the geometric checks; this adds the 2D poses against the rig
     numbers = sorted(views) if frames is None else _frame_numbers(frames)
     empty = [f for f in numbers if f not in views]
     out = [Frame(f, views.get(f) or [ViewDetections.empty() for _ in rig.names]) for f in numbers]

@@ -1,9 +1,23 @@
-"""OpenPose's own JSON output (``--write_json``): BODY_25 people per image, read as COCO-23 detections."""
+"""OpenPose's own JSON output (``--write_json``): BODY_25 people per image, read as COCO-23 detections.
+
+Command line: one folder of ``<name>_<frame:012d>_keypoints.json`` files per camera -> poses2d.json::
+
+    python -m data.openpose_json cam_a=openpose/cam_a cam_b=openpose/cam_b -o poses2d.json
+    python -m data.openpose_json 'openpose/*' -o poses2d.json      # camera name = folder name
+
+A folder argument may be ``name=folder`` (camera name given) or a folder or glob pattern (camera name =
+folder name). Keypoint scores are clipped to [0, 1] (OpenPose's confidences can exceed 1 slightly).
+``--cameras cameras.json`` checks the names against a calibration and the pixels against its image sizes.
+"""
 from __future__ import annotations
 
+import argparse
+import glob
 import json
 import re
+import sys
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -88,3 +102,69 @@ def load_openpose_dir(directory: str | Path, margin: float = 0.1) -> dict[int, V
     if not frames:
         raise ValueError(f"{directory}: no <name>_<frame:012d>_keypoints.json files")
     return frames
+
+
+def camera_folders(specs: Sequence[str]) -> dict[str, Path]:
+    """{camera name: folder} of ``name=folder``, folder or glob-pattern arguments (name = folder name)."""
+    out: dict[str, Path] = {}
+    for spec in specs:
+        name, sep, folder = spec.partition("=")
+        if sep and name and not glob.has_magic(name):
+            pairs = [(name, Path(folder))]
+        else:
+            matches = sorted(glob.glob(spec)) if glob.has_magic(spec) else [spec]
+            pairs = [(Path(m).name, Path(m)) for m in matches if Path(m).is_dir() or not glob.has_magic(spec)]
+            if not pairs:
+                raise ValueError(f"{spec}: no folder matches this pattern")
+        for cam, path in pairs:
+            if cam in out:
+                raise ValueError(f"camera {cam!r} is given twice ({out[cam]}, {path}); name them: name=folder")
+            out[cam] = path
+    return out
+
+
+def convert(folders: dict[str, Path], margin: float = 0.1) -> dict[int, list[ViewDetections]]:
+    """OpenPose folders per camera -> {frame: one ViewDetections (N, 23, 3) per camera, in folders' order},
+    keypoint scores clipped to [0, 1]; frames missing in a camera get no detections there."""
+    per_camera = [load_openpose_dir(folder, margin) for folder in folders.values()]
+    frames: dict[int, list[ViewDetections]] = {}
+    for v, views in enumerate(per_camera):
+        for frame, dets in views.items():
+            dets.keypoints[..., 2] = np.clip(dets.keypoints[..., 2], 0.0, 1.0)
+            dets.scores = np.clip(dets.scores, 0.0, 1.0)
+            frames.setdefault(frame, [ViewDetections.empty() for _ in per_camera])[v] = dets
+    return dict(sorted(frames.items()))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line (module docstring); a bad folder or file stops with one line 'error: ...'."""
+    from data.poses2d_io import read_poses2d, write_poses2d
+
+    parser = argparse.ArgumentParser(prog="python -m data.openpose_json",
+                                     description="OpenPose BODY_25 JSON folders (one per camera) -> poses2d.json "
+                                                 "(COCO-23)")
+    parser.add_argument("folders", nargs="+", help="name=folder, folder or glob pattern per camera")
+    parser.add_argument("-o", "--output", required=True, help="poses2d.json to write")
+    parser.add_argument("--cameras", help="calibration whose camera names and image sizes to check against")
+    parser.add_argument("--margin", type=float, default=0.1, help="box margin around the joints (fraction)")
+    args = parser.parse_args(argv)
+    try:
+        folders = camera_folders(args.folders)
+        frames = convert(folders, args.margin)
+        names = list(folders)
+        write_poses2d(args.output, frames, names)
+        if args.cameras:
+            from reconstruction.calibration import load_rig
+
+            rig = load_rig(args.cameras)
+            read_poses2d(args.output, rig.names, [c.size for c in rig])
+    except ValueError as err:  # the loaders' errors name the file or folder
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    count = sum(len(d) for views in frames.values() for d in views)
+    print(f"Wrote {args.output}: {count} detections in {len(frames)} frames of cameras {', '.join(names)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

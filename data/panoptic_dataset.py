@@ -209,6 +209,6 @@ def _read_poses2d(path: str, rig: Rig, meta: dict) -> dict[int, list[ViewDetecti
     """Detections per frame from a poses2d.json, one ViewDetections per camera in rig order."""
     from data.poses2d_io import read_poses2d  # imported here: the reader is optional for generated input
 
-    views = read_poses2d(path, list(rig.names))
+    views = read_poses2d(path, list(rig.names), [c.size for c in rig])
     meta["poses2d"] = str(path)
     return views

@@ -141,5 +141,5 @@ def _read_poses2d(path: str | Path, rig: Rig) -> dict[int, list[ViewDetections]]
 
     if not Path(path).is_file():
         raise FileNotFoundError(f"{path}: poses2d.json not found")
-    return read_poses2d(path, list(rig.names))
+    return read_poses2d(path, list(rig.names), [c.size for c in rig])
 

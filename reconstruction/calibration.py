@@ -29,6 +29,9 @@ WILDTRACK_SIZE = (1920, 1080)
 WILDTRACK_GRID_ORIGIN = (-3.0, -9.0)  # metres: world (X, Y) of grid cell (0, 0) in gt_positions_mvdet.txt
 WILDTRACK_GRID_STEP = 0.025  # metres per grid cell
 SHELF_SIZE = (1032, 776)
+# Image sides (px) accepted in a calibration: a side outside this range is a typo or a unit mistake
+# (e.g. [10, 10], 1e308), not a camera; real sensors run from a few hundred to some ten thousand pixels.
+IMAGE_SIDE_RANGE_PX = (32, 100_000)
 # Panoptic world (cm, y down) -> ours (m, z up): x_ours = (x, z, -y) / 100; a proper rotation (det +1).
 _PANOPTIC_M = ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0))
 
@@ -44,15 +47,39 @@ def _error(path: str | Path, camera: str | None, key: str | None, what: str) -> 
     return CalibrationError(": ".join(where))
 
 
+def _non_number(value: Any) -> Any | None:
+    """The first leaf of nested lists that is not a JSON number (str, bool, None, object), else None."""
+    if isinstance(value, (list, tuple)):
+        for item in value:
+            bad = _non_number(item)
+            if bad is not None:
+                return bad
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return (value,)  # wrapped, so that a bad None is still reported
+    return None
+
+
+def _missing_key(entry: Mapping, key: str) -> str:
+    """'is missing', with a hint when the key is there in another case ('t' -> 'T')."""
+    other = [k for k in entry if isinstance(k, str) and k.lower() == key.lower() and k != key]
+    return f"is missing (found {other[0]!r}: keys are case-sensitive)" if other else "is missing"
+
+
 def _array(entry: Any, key: str, shape: tuple[int, ...], path: str | Path, camera: str) -> np.ndarray:
-    """entry[key] as a finite float array of `shape` (any nesting with that many numbers is accepted)."""
+    """entry[key] as a finite float array of `shape` (any nesting with that many numbers is accepted);
+    strings and booleans where numbers belong are named, not converted."""
     if not isinstance(entry, Mapping):
         raise _error(path, camera, None, f"entry is a {type(entry).__name__}, expected an object")
     if key not in entry:
-        raise _error(path, camera, key, "is missing")
+        raise _error(path, camera, key, _missing_key(entry, key))
+    bad = _non_number(entry[key])
+    if bad is not None:
+        raise _error(path, camera, key, f"is not an array of numbers: {bad[0]!r} ({type(bad[0]).__name__}) "
+                                          f"where a number belongs")
     try:
         value = np.array(entry[key], dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise _error(path, camera, key, "is not an array of numbers") from None
     if value.size != math.prod(shape):
         raise _error(path, camera, key, f"has shape {value.shape}, expected {shape}")
@@ -78,20 +105,41 @@ def _camera(name: str, K: np.ndarray, dist: np.ndarray, R: np.ndarray, t: np.nda
     if not np.allclose(K[2], (0.0, 0.0, 1.0), atol=1e-9) or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise _error(path, name, keys[0], "is not an intrinsic matrix (positive focal lengths, last row 0 0 1)")
     R = _rotation(R, path, name, keys[1])
-    w, h = size
+    w, h = (float(s) for s in size)
     if w != int(w) or h != int(h) or w <= 0 or h <= 0:
         raise _error(path, name, keys[2], f"is not a positive integer image size: {list(size)}")
+    lo, hi = IMAGE_SIDE_RANGE_PX
+    if not (lo <= w <= hi and lo <= h <= hi):
+        raise _error(path, name, keys[2], f"is not a plausible image size (w, h) = ({w:g}, {h:g}) px: each side "
+                     f"must lie in [{lo}, {hi}] (IMAGE_SIDE_RANGE_PX)")
     return Camera(name, K, dist, R, t, (int(w), int(h)))
 
 
+class _DuplicateKey(ValueError):
+    """A key that appears twice in one JSON object (json keeps the last one silently)."""
+
+
+def unique_keys(pairs: list[tuple[str, Any]]) -> dict:
+    """object_pairs_hook for json.load: the object as a dict; _DuplicateKey naming a repeated key."""
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(key)
+        out[key] = value
+    return out
+
+
 def _read_json(path: str | Path) -> Any:
-    """Parsed JSON of a calibration file; CalibrationError when missing or unreadable."""
+    """Parsed JSON of a calibration file; CalibrationError when missing, unreadable or with a key twice."""
     try:
         with open(path, encoding="utf-8") as f:
-            return json.load(f)
+            return json.load(f, object_pairs_hook=unique_keys)
     except FileNotFoundError:
         raise _error(path, None, None, "calibration file not found") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except _DuplicateKey as exc:
+        raise _error(path, None, None, f"key {exc.args[0]!r} appears twice in one object (a camera or a "
+                                       f"parameter given twice; JSON would keep only the last)") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise _error(path, None, None, f"cannot read calibration JSON ({exc})") from None
 
 
@@ -280,6 +328,13 @@ def load_wildtrack_positions(path: str | Path) -> dict[int, np.ndarray]:
 
 
 # --- dispatch --------------------------------------------------------------------------------------
+_SIGNATURES = (("4dassoc", {"K", "RT"}), ("voxelpose", {"R", "T", "fx"}), ("cameras_json", {"K", "R", "t"}))
+_ALL_KEYS = {"cameras_json": {"K", "dist", "R", "t", "size"}, "4dassoc": {"K", "RT", "imgSize"},
+             "voxelpose": {"R", "T", "fx", "fy", "cx", "cy", "k", "p"}}
+# Without a complete camera, the format whose keys make up at least this fraction of the cameras' keys wins.
+FORMAT_MIN_KEY_OVERLAP = 0.5
+
+
 def detect_format(path: str | Path) -> str:
     """The calibration format name of a file or folder (see load_rig)."""
     path = Path(path)
@@ -292,21 +347,34 @@ def detect_format(path: str | Path) -> str:
     data = _read_json(path)
     if isinstance(data, Mapping) and isinstance(data.get("cameras"), list):
         return "panoptic"
-    first = next(iter(data.values()), None) if isinstance(data, Mapping) else None
-    keys = set(first) if isinstance(first, Mapping) else set()
-    for fmt, required in (("4dassoc", {"K", "RT"}), ("voxelpose", {"R", "T", "fx"}),
-                          ("cameras_json", {"K", "R", "t"})):
-        if required <= keys:
+    entries = [e for e in data.values() if isinstance(e, Mapping)] if isinstance(data, Mapping) else []
+    for fmt, required in _SIGNATURES:  # a camera with every required key decides; the loader names the others
+        if any(required <= set(e) for e in entries):
             return fmt
-    raise _error(path, None, None, "cannot detect the calibration format of this file")
+    # No camera is complete (e.g. a typo 't' -> 'T' in a one-camera file): the format whose keys the
+    # cameras share most, so that its loader names the camera and the missing key.
+    keys = set().union(*(set(e) for e in entries)) if entries else set()
+    overlap = {fmt: len(keys & every) / len(every) for fmt, every in _ALL_KEYS.items()}
+    best = max(overlap, key=overlap.get)
+    if overlap[best] >= FORMAT_MIN_KEY_OVERLAP:
+        return best
+    raise _error(path, None, None, "cannot detect the calibration format of this file (expected cameras.json "
+                 "{name: {K, dist, R, t, size}}, 4D Association, VoxelPose or Panoptic JSON)")
 
 
-def load_rig(path: str | Path, fmt: str = "auto", **kwargs: Any) -> Rig:
+def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: Any) -> Rig:
     """Load any supported calibration: fmt in cameras_json, 4dassoc, voxelpose, panoptic, wildtrack,
-    shelf_p, or auto (detected from the file content or folder layout); kwargs go to the loader."""
+    shelf_p, or auto (detected from the file content or folder layout); kwargs go to the loader. With
+    ``check``, the rig check (reconstruction/check_rig.py) runs: RigError (a CalibrationError) where every
+    result would be garbage, RigWarning for what looks wrong."""
     loaders = {"cameras_json": load_cameras_json, "4dassoc": load_4dassoc, "voxelpose": load_voxelpose,
                "panoptic": load_panoptic, "wildtrack": load_wildtrack, "shelf_p": load_shelf_projections}
     fmt = detect_format(path) if fmt == "auto" else fmt
     if fmt not in loaders:
         raise CalibrationError(f"{path}: unknown calibration format {fmt!r}, expected auto or one of {list(loaders)}")
-    return loaders[fmt](path, **kwargs)
+    rig = loaders[fmt](path, **kwargs)
+    if check:
+        from reconstruction.check_rig import check_rig  # it imports this module
+
+        check_rig(rig, path)
+    return rig

@@ -35,8 +35,11 @@ class Camera:
                 raise ValueError(f"camera {self.name!r}: {key} has a non-finite value")
             value.flags.writeable = False
             object.__setattr__(self, key, value)
-        w, h = (int(s) for s in self.size)
-        if w <= 0 or h <= 0:
+        try:
+            w, h = (int(s) for s in self.size)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"camera {self.name!r}: size must be two integers (w, h), got {self.size}") from None
+        if not (0 < w < 2 ** 31 and 0 < h < 2 ** 31):
             raise ValueError(f"camera {self.name!r}: size must be positive, got {self.size}")
         object.__setattr__(self, "size", (w, h))
         object.__setattr__(self, "_fov_r2", self._field_of_view_r2())
@@ -134,7 +137,11 @@ class Camera:
 
     def image_to_ground_homography(self) -> np.ndarray:
         """Homography from undistorted pixels to ground (X, Y) on z = 0: (3, 3)."""
-        H = np.linalg.inv(self.ground_to_image_homography())
+        try:
+            H = np.linalg.inv(self.ground_to_image_homography())
+        except np.linalg.LinAlgError:
+            raise ValueError(f"camera {self.name!r}: its centre lies on the ground plane z = 0, so pixels have no "
+                             f"ground point") from None
         return H / H[2, 2]
 
     def image_to_ground(self, uv: np.ndarray, undistort: bool = True) -> np.ndarray:

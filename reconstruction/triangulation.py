@@ -17,15 +17,17 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
     projection matrices of those pixels. Each view contributes two equations, normalised to unit
     length and weighted by the joint's score. The output is (x, y, z, confidence) with confidence
     the mean score of the views used, and 0 (with NaN-free zeros for x, y, z) for a joint seen in
-    fewer than ``min_views`` views.
+    fewer than ``min_views`` views. Non-finite pixels or scores count as not seen; pixels so large that
+    the equations overflow give confidence 0.
     """
     poses2d = np.asarray(poses2d, dtype=np.float64)
     proj = np.asarray(proj, dtype=np.float64)
     V, P, J, _ = poses2d.shape
     if proj.shape != (V, 3, 4):
         raise ValueError(f"proj has shape {proj.shape}, expected ({V}, 3, 4) for {V} views")
-    xy, score = poses2d[..., :2], np.clip(poses2d[..., 2], 0.0, None)
-    score = np.where(np.isfinite(xy[..., 0]) & np.isfinite(xy[..., 1]), score, 0.0)
+    xy, score = poses2d[..., :2], poses2d[..., 2]
+    finite = np.isfinite(xy[..., 0]) & np.isfinite(xy[..., 1]) & np.isfinite(score)
+    score = np.where(finite, np.clip(np.where(finite, score, 0.0), 0.0, None), 0.0)
     xy = np.where(score[..., None] > 0, xy, 0.0)
 
     seen = (score > 0).sum(axis=0).reshape(P * J)
@@ -34,10 +36,16 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
     if np.any(solve):
         # the right singular vector of the smallest singular value of the stacked rows A is the
         # eigenvector of the smallest eigenvalue of A^T A (a 4x4 eigh is ~3x cheaper than the SVD)
-        A_tA = _normal_matrices(xy.reshape(V, P * J, 2)[:, solve], score.reshape(V, P * J)[:, solve], proj)
-        X = smallest_eigenvectors(A_tA)
+        # the DLT is invariant to a common scale of a point's weights: scores relative to their largest,
+        # so that huge scores cannot overflow the squared weights
+        s = score.reshape(V, P * J)[:, solve]
+        with np.errstate(over="ignore", invalid="ignore"):
+            A_tA = _normal_matrices(xy.reshape(V, P * J, 2)[:, solve], s / np.where(s.max(axis=0) > 0, s.max(axis=0), 1.0), proj)
+        usable = np.isfinite(A_tA).all(axis=(1, 2))  # pixels so large that the rows overflow: not solvable
+        X = np.zeros((len(A_tA), 4))
+        X[usable] = smallest_eigenvectors(A_tA[usable]) if usable.any() else X[usable]
         w = X[:, 3:4]
-        ok = np.abs(w[:, 0]) > 1e-12
+        ok = (np.abs(w[:, 0]) > 1e-12) & usable
         pts = np.where(ok[:, None], X[:, :3] / np.where(ok, w[:, 0], 1.0)[:, None], 0.0)
         conf = score.reshape(V, P * J)[:, solve].sum(axis=0) / seen[solve]
         out[solve, :3] = pts

@@ -17,18 +17,30 @@ import numpy as np
 from reconstruction.camera import Camera, apply_homography
 
 _DIFF_STEP_PX = 0.5  # central-difference step of the undistortion Jacobian
+_TINY = 1e-12        # relative size under which a homography's H[2, 2] counts as 0
+
+
+def normalized(H: np.ndarray) -> np.ndarray:
+    """A homography scaled to H[2, 2] = 1, or to unit norm where H[2, 2] is 0 (the plane's origin on the
+    camera's principal plane): (3, 3) -> (3, 3)."""
+    scale = H[2, 2] if abs(H[2, 2]) > _TINY * np.abs(H).max() else np.linalg.norm(H)
+    return H / scale
 
 
 def plane_to_image_homography(camera: Camera, height: float = 0.0) -> np.ndarray:
     """Homography from (X, Y) on the plane z = height to undistorted pixels: (3, 3)."""
     H = camera.K @ np.column_stack([camera.R[:, 0], camera.R[:, 1], height * camera.R[:, 2] + camera.t])
-    return H / H[2, 2]
+    return normalized(H)
 
 
-def image_to_plane_homography(camera: Camera, height: float = 0.0) -> np.ndarray:
-    """Homography from undistorted pixels to (X, Y) on the plane z = height: (3, 3)."""
-    H = np.linalg.inv(plane_to_image_homography(camera, height))
-    return H / H[2, 2]
+def image_to_plane_homography(camera: Camera, height: float = 0.0) -> np.ndarray | None:
+    """Homography from undistorted pixels to (X, Y) on the plane z = height: (3, 3); None when the camera's
+    centre lies on that plane (every ray meets it at infinity or everywhere: no mapping)."""
+    try:
+        H = np.linalg.inv(plane_to_image_homography(camera, height))
+    except np.linalg.LinAlgError:
+        return None
+    return normalized(H) if np.all(np.isfinite(H)) else None
 
 
 def homography_jacobian(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -55,7 +67,8 @@ def joints_on_planes(camera: Camera, uv: np.ndarray, heights: np.ndarray,
                      sigma_px: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Distorted pixels (N, K, 2) of joints at heights (K,) m -> plane (X, Y) (N, K, 2), depth (N, K)
     of that 3D point in the camera, and the (X, Y) covariance (N, K, 2, 2) if sigma_px (scalar or
-    (N, K) px) is given."""
+    (N, K) px) is given. Joints at the height of the camera's centre get NaN (no point on that plane);
+    callers treat non-finite points as unusable."""
     uv = np.asarray(uv, dtype=np.float64)
     heights = np.broadcast_to(np.asarray(heights, dtype=np.float64), uv.shape[1:2])
     und = camera.undistort_points(uv)
@@ -64,6 +77,10 @@ def joints_on_planes(camera: Camera, uv: np.ndarray, heights: np.ndarray,
     for h in np.unique(heights):
         cols = heights == h
         H = image_to_plane_homography(camera, float(h))
+        if H is None:  # camera centre on this plane: its joints have no place on it (dropped as unusable)
+            xy[:, cols] = np.nan
+            J[:, cols] = np.nan
+            continue
         xy[:, cols] = apply_homography(H, und[:, cols])
         J[:, cols] = homography_jacobian(H, und[:, cols])
     point = np.concatenate([xy, np.broadcast_to(heights[None, :, None], uv.shape[:2] + (1,))], axis=-1)
