@@ -21,7 +21,8 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 
-from data.atomic_io import atomic_write_text
+from data.atomic_io import atomic_write_text, exit_on_sigterm
+from data.run_folders import register_resolvers
 from data.topdown_dataset import EpochSampler
 from evaluation.coco_eval import write_coco_results
 from models.training import (TrainState, build_codec, build_dataset, build_loader, build_loss, build_model,
@@ -132,5 +133,8 @@ def main(cfg: DictConfig) -> dict:
         raise SystemExit(f"error: {err}") from None
 
 
+register_resolvers()      # ${run_id:} in the run folder names, before hydra.main composes the config
+
 if __name__ == "__main__":
+    exit_on_sigterm()
     main()
