@@ -2,7 +2,8 @@
 
 - ``${run_id:}`` (an OmegaConf resolver, registered by :func:`register_resolvers` before ``hydra.main``)
   names a run: the start time to the microsecond and the process id, e.g. ``2025-05-01_13-45-07.123456_4242``.
-  Two runs started in the same second, on one host, get two folders.
+  Two runs started in the same second, on one host, get two folders. The ranks of a torchrun job share one:
+  ``torchrun_<rendezvous id>``.
 - :class:`RunFolderGuard` (a Hydra callback listed under ``hydra.callbacks`` in the configs) checks the run
   folder (the sweep folder of a multirun) before Hydra writes anything into it: a folder that already holds
   files of another run stops the run with one line, unless ``overwrite=true``. Stale temporaries of killed
@@ -32,7 +33,11 @@ SHOWN_FILES = 3                  # files named in the refusal message
 
 @lru_cache(maxsize=1)
 def run_id() -> str:
-    """This process's run name: start time with microseconds, then the pid (fixed for the process)."""
+    """This process's run name: start time with microseconds, then the pid (fixed for the process). Under
+    torchrun every rank must find the same folder: the rendezvous id (a uuid with --standalone) or the agent's pid."""
+    elastic = os.environ.get("TORCHELASTIC_RUN_ID")
+    if elastic is not None:
+        return f"torchrun_{elastic[:8] if elastic != 'none' else f'agent{os.getppid()}'}"
     return f"{datetime.now():%Y-%m-%d_%H-%M-%S.%f}_{os.getpid()}"
 
 
@@ -42,12 +47,15 @@ def register_resolvers() -> None:
         OmegaConf.register_new_resolver("run_id", run_id, use_cache=True)
 
 
-def other_runs_files(folder: Path, limit: int = SHOWN_FILES) -> list[str]:
-    """Up to limit files under folder (relative paths) that are not temporaries; stale temporaries are deleted."""
+def other_runs_files(folder: Path, log_name: str, limit: int = SHOWN_FILES) -> list[str]:
+    """Up to limit files under folder (relative paths) that are not temporaries or the job's log (which holds no
+    output, and which the other ranks of a torchrun job may have opened already); stale temporaries are deleted."""
     found: list[str] = []
     for root, _, names in os.walk(folder):
         for name in sorted(names):
             path = Path(root) / name
+            if root == str(folder) and name == log_name:
+                continue
             if is_temporary(path):
                 if is_stale(path):
                     path.unlink(missing_ok=True)
@@ -58,9 +66,10 @@ def other_runs_files(folder: Path, limit: int = SHOWN_FILES) -> list[str]:
     return found
 
 
-def check_folder(folder: Path, overwrite: bool, key: str) -> bool:
-    """Stop with one line when folder holds another run's files and overwrite is off -> whether it does."""
-    files = other_runs_files(folder) if folder.is_dir() else []
+def check_folder(folder: Path, config: DictConfig, key: str) -> bool:
+    """Stop with one line when folder holds another run's files and config.overwrite is off -> whether it does."""
+    overwrite = bool(config.get("overwrite", False))
+    files = other_runs_files(folder, f"{config.hydra.job.name}.log") if folder.is_dir() else []
     if files and not overwrite:
         shown = ", ".join(files) + (", ..." if len(files) >= SHOWN_FILES else "")
         raise SystemExit(f"error: {folder} already holds the files of another run ({shown}); "
@@ -75,10 +84,14 @@ class RunFolderGuard(Callback):
         self.staged: tuple[Path, Path] | None = None   # (.hydra.incomplete, .hydra) of an overwriting run
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
-        """Check hydra.run.dir before Hydra writes into it."""
-        folder = Path(config.hydra.run.dir)
-        occupied = check_folder(folder, bool(config.get("overwrite", False)), "hydra.run.dir")
+        """Check hydra.run.dir before Hydra writes into it (rank 0 of a torchrun job; the others write no .hydra/)."""
         subdir = config.hydra.output_subdir
+        if int(os.environ.get("RANK", "0")) > 0:
+            with read_write(config.hydra), open_dict(config.hydra):
+                config.hydra.output_subdir = None
+            return
+        folder = Path(config.hydra.run.dir)
+        occupied = check_folder(folder, config, "hydra.run.dir")
         if occupied and subdir is not None and (folder / subdir).exists():
             staging = f"{subdir}{STAGING_SUFFIX}"
             shutil.rmtree(folder / staging, ignore_errors=True)     # left by an earlier killed run
@@ -88,7 +101,7 @@ class RunFolderGuard(Callback):
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         """Check hydra.sweep.dir before the launcher writes into it (its jobs' folders lie inside)."""
-        check_folder(Path(config.hydra.sweep.dir), bool(config.get("overwrite", False)), "hydra.sweep.dir")
+        check_folder(Path(config.hydra.sweep.dir), config, "hydra.sweep.dir")
 
     def on_job_end(self, config: DictConfig, job_return: JobReturn, **kwargs: Any) -> None:
         """A completed overwriting run: its staged config replaces the earlier run's."""

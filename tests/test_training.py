@@ -25,7 +25,8 @@ from evaluation.coco_eval import evaluate_keypoints
 from models.fastpose import FastPose
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss
-from models.training import TrainState, decode_predictions, save_checkpoint, train_one_epoch
+from models.checkpoint_io import read_checkpoint
+from models.training import TrainState, decode_predictions, save_checkpoint, save_weights, train_one_epoch
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = ["model=fastpose_r18", "data.input_size=[64,64]", "data.sigma=1.0", "trainer.batch_size=4",
@@ -243,7 +244,7 @@ def test_killed_run_resumes_from_its_last_checkpoint(synthetic_root, tmp_path):
     cmd = [sys.executable, "train.py", *TINY, f"data.root={synthetic_root}", "trainer.epochs=10000",
            f"hydra.run.dir={run_dir}"]
     kill_after_first_checkpoint(cmd, checkpoint)
-    saved = torch.load(checkpoint, map_location="cpu", weights_only=False)   # whole, whenever the kill came
+    saved = read_checkpoint(checkpoint)   # whole, whenever the kill came
     epoch, step = saved["epoch"], saved["global_step"]
     assert epoch >= 1 and saved["step_in_epoch"] == 0 and step > 0
     straight = run_training(synthetic_root, tmp_path / "straight", f"trainer.epochs={epoch + 1}")
@@ -294,7 +295,7 @@ def test_torchrun_two_processes_shard_the_epoch(synthetic_root, tmp_path):
                                         synthetic_root / "train" / "images"), MultiModalHeatmapCodec((64, 64), (16, 16)),
                             (64, 64))
     per_rank = -(-len(single) // 2)                                     # DistributedSampler-style shards
-    checkpoint = torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+    checkpoint = read_checkpoint(run_dir / "checkpoints" / "last.ckpt")
     assert checkpoint["epoch"] == 2 and checkpoint["global_step"] == 2 * -(-per_rank // 4)
     assert checkpoint["global_step"] < 2 * -(-len(single) // 4)         # fewer steps than one process takes
     assert list(run_dir.glob("events.out.tfevents.*")) and (run_dir / "metrics.json").is_file()
@@ -313,6 +314,6 @@ def test_mu_lambda_multirun_writes_checkpoints_and_tensorboard(synthetic_root, t
     for mu in ("0", "0.5"):
         run_dir = sweep / f"loss.foot_weight=1.5,loss.mu={mu}"          # named by the swept settings only
         assert list(run_dir.glob("events.out.tfevents.*")), sorted(p.name for p in sweep.iterdir())
-        checkpoint = torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+        checkpoint = read_checkpoint(run_dir / "checkpoints" / "last.ckpt")
         assert checkpoint["global_step"] == 2 and checkpoint["config"]["loss"]["mu"] == float(mu)
         assert checkpoint["config"]["model"]["depth"] == 18 and (run_dir / "val_predictions.json").is_file()
