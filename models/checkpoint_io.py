@@ -1,7 +1,8 @@
 """Checkpoint files of train.py, checked when read: a versioned envelope around the serialized state.
 
 A file is ``torch.save({"format": FORMAT, "version": VERSION, "kind": "resume" | "weights", "sha256": <hex>,
-"payload": <bytes>})``, where payload is the torch-serialized state dict and sha256 its digest. Reading
+"payload": <uint8 tensor>})``, where payload holds the torch-serialized state dict (as a tensor it is stored raw,
+not as a pickled string) and sha256 is its digest. Reading
 checks the envelope, the digest and the keys the kind needs, so a truncated, empty, random or bit-flipped
 file, or a weights file (best.pth) given where a resume checkpoint (last.ckpt) is needed, stops with one
 CheckpointError naming the file. Files of this repo written before the envelope (a plain state dict, no
@@ -46,8 +47,8 @@ def write_checkpoint(state: dict, path: str | Path, kind: str) -> None:
     buffer = io.BytesIO()
     torch.save(state, buffer)
     payload = buffer.getvalue()
-    atomic_torch_save({"format": FORMAT, "version": VERSION, "kind": kind,
-                       "sha256": hashlib.sha256(payload).hexdigest(), "payload": payload}, path)
+    atomic_torch_save({"format": FORMAT, "version": VERSION, "kind": kind, "sha256": hashlib.sha256(payload).hexdigest(),
+                       "payload": torch.frombuffer(bytearray(payload), dtype=torch.uint8)}, path)
 
 
 def _load(source: str | Path | io.BytesIO, path: Path, what: str) -> Any:
@@ -69,8 +70,8 @@ def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
         if not isinstance(outer["version"], int) or outer["version"] > VERSION:
             raise CheckpointError(f"{path}: checkpoint format version {outer['version']!r}; this code reads up to "
                                   f"{VERSION}")
-        payload = outer["payload"]
-        if not isinstance(payload, bytes) or hashlib.sha256(payload).hexdigest() != outer["sha256"]:
+        payload = outer["payload"].numpy().tobytes() if isinstance(outer["payload"], torch.Tensor) else None
+        if payload is None or hashlib.sha256(payload).hexdigest() != outer["sha256"]:
             raise CheckpointError(f"{path}: checksum mismatch, the file is corrupted")
         state = _load(io.BytesIO(payload), path, "the checked payload")
         return state, outer["kind"]
