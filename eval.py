@@ -2,8 +2,8 @@
 or a 2D checkpoint of train.py: ``python eval.py checkpoint=<.ckpt/.pth> [pose2d.ann_file=...]``.
 
 Builds the dataset's sequence, matches persons across views, reconstructs them in 3D, prints the
-metrics with their protocol and the time of each stage, and writes poses3d.json and metrics.json into
-the Hydra run directory.
+metrics with their protocol and the time of each stage, and writes poses3d.json, metrics.json and the
+printed report (report.txt) into the Hydra run directory.
 """
 from __future__ import annotations
 
@@ -20,8 +20,10 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 from omegaconf.errors import MissingMandatoryValue
 
-from data.atomic_io import atomic_write_text
+from data.atomic_io import atomic_write_text, exit_on_sigterm
+from data.config_checks import ConfigError, check_bool, check_int, check_number
 from data.poses_io import write_poses3d
+from data.run_folders import register_resolvers
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
 from evaluation.visualize import save_run_pictures
@@ -37,11 +39,29 @@ PROTOCOL = ("absolute MPJPE (mm, no root alignment) over all frames; each GT per
             "in one person, against ground-truth identities")
 
 
+def check_config(cfg: DictConfig) -> None:
+    """Stop with one line naming the key when a top-level or evaluation value has the wrong type or range."""
+    check_number(cfg, "evaluation.max_dist_m")
+    check_number(cfg, "evaluation.alpha")
+    check_int(cfg, "vis_frame", 0, nullable=True)
+    for key in ("vis", "progress", "overwrite"):
+        check_bool(cfg, key)
+
+
+def check_sequence(cfg: DictConfig, sequence) -> None:
+    """Stop with one line when the dataset cannot be evaluated as configured (before the frames are run)."""
+    if len(sequence.rig) < 2:
+        key = "dataset.num_cameras" if "num_cameras" in cfg.dataset else "dataset"
+        raise ConfigError(f"{key}: the rig has {len(sequence.rig)} camera; triangulation needs at least 2")
+
+
 def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
-    """Evaluate the configured dataset, matcher and reconstruction; write outputs into out_dir."""
+    """Evaluate the configured dataset, matcher and reconstruction; write outputs and report.txt into out_dir."""
+    check_config(cfg)
     t0 = time.perf_counter()
     sequence = instantiate(cfg.dataset, _convert_="all")
     t_data = time.perf_counter() - t0
+    check_sequence(cfg, sequence)
     tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None   # tracking=off: none
     pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
@@ -56,14 +76,18 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     for protocol in sequence.protocols:
         if hasattr(protocol, "write"):      # e.g. the Shelf-14 predictions that were scored
             protocol.write(out_dir)
+    text = (f"{sequence.meta.get('description', 'dataset')}: {len(sequence.frames)} frames, "
+            f"{len(sequence.rig)} cameras\n{format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation))}")
+    atomic_write_text(out_dir / cfg.report_file, text + "\n")
+    print(f"\n{text}\n\nWrote {out_dir / cfg.output}, {cfg.metrics_file} and {cfg.report_file}")
     if cfg.vis:
-        pictures = save_run_pictures(out_dir / cfg.vis_dir, sequence, report.results, cfg.vis_frame,
-                                     cfg.vis_images, cfg.vis_pattern, pipeline.matcher)
+        try:
+            pictures = save_run_pictures(out_dir / cfg.vis_dir, sequence, report.results, cfg.vis_frame,
+                                         cfg.vis_images, cfg.vis_pattern, pipeline.matcher)
+        except ValueError as err:   # e.g. vis_frame was skipped: the report above stands, the pictures are missing
+            raise ConfigError(f"vis_frame={cfg.vis_frame}: {err}; no pictures drawn (the outputs and the report "
+                              "above are written)") from None
         print("Pictures: " + ", ".join(str(p) for p in pictures))
-    print(f"\n{sequence.meta.get('description', 'dataset')}: {len(sequence.frames)} frames, "
-          f"{len(sequence.rig)} cameras")
-    print(format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation)))
-    print(f"\nWrote {out_dir / cfg.output} and {cfg.metrics_file}")
     return report
 
 
@@ -76,9 +100,11 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
         metrics = evaluate_checkpoint(cfg, out_dir)
     except (FileNotFoundError, ValueError) as err:
         raise SystemExit(f"error: {err}") from None
-    print(f"{cfg.checkpoint} ({cfg.pose2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person area")
-    print("\n".join(f"  {k:8s} {v:.4f}" for k, v in metrics.items()))
-    print(f"\nWrote {out_dir / cfg.pose2d.output}, {cfg.pose2d.results_file} and {cfg.metrics_file}")
+    text = (f"{cfg.checkpoint} ({cfg.pose2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person "
+            "area\n" + "\n".join(f"  {k:8s} {v:.4f}" for k, v in metrics.items()))
+    atomic_write_text(out_dir / cfg.report_file, text + "\n")
+    print(f"{text}\n\nWrote {out_dir / cfg.pose2d.output}, {cfg.pose2d.results_file}, {cfg.metrics_file} and "
+          f"{cfg.report_file}")
     return metrics
 
 
@@ -106,6 +132,8 @@ def main(cfg: DictConfig) -> dict:
     except MissingMandatoryValue as err:  # e.g. dataset=files without dataset.cameras=...
         raise SystemExit(f"error: {err.full_key} is not set: give it on the command line "
                          f"({err.full_key}=...; see configs/{err.full_key.split('.')[0]}/)") from None
+    except ConfigError as err:
+        raise SystemExit(f"error: {err}") from None
     except (CalibrationError, Poses2DError, InstantiationException) as err:
         cause = err.__cause__ if isinstance(err, InstantiationException) else err
         if isinstance(cause, (ValueError, FileNotFoundError)):  # CalibrationError, Poses2DError are ValueErrors
@@ -113,5 +141,8 @@ def main(cfg: DictConfig) -> dict:
         raise
 
 
+register_resolvers()      # ${run_id:} in the run folder names, before hydra.main composes the config
+
 if __name__ == "__main__":
+    exit_on_sigterm()
     main()

@@ -21,12 +21,16 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 
-from data.atomic_io import atomic_write_text
+from data.atomic_io import atomic_write_text, exit_on_sigterm
+from data.run_folders import register_resolvers
 from data.topdown_dataset import EpochSampler
 from evaluation.coco_eval import write_coco_results
+from data.config_checks import ConfigError
+from models.checkpoint_io import CheckpointError, read_checkpoint
+from models.resume import resume_config
 from models.training import (TrainState, build_codec, build_dataset, build_loader, build_loss, build_model,
-                             build_optimizer, build_scheduler, load_checkpoint, save_checkpoint, save_weights,
-                             seed_everything, setup_distributed, train_one_epoch, validate)
+                             build_optimizer, build_scheduler, check_train_config, load_checkpoint, save_checkpoint,
+                             save_weights, seed_everything, setup_distributed, train_one_epoch, validate)
 
 log = logging.getLogger(__name__)
 
@@ -36,9 +40,17 @@ def _reached(state: TrainState, max_steps: int | None) -> bool:
     return max_steps is not None and state.global_step >= max_steps
 
 
-def run(cfg: DictConfig, run_dir: Path) -> dict:
+def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None
+        ) -> dict:
     """Train (or resume) per cfg into run_dir -> {"losses": {global step: loss}, "metrics": last validation
-    metrics, "state": final TrainState}. Only rank 0 validates, logs and saves."""
+    metrics, "state": final TrainState}. Only rank 0 validates, logs and saves.
+
+    checkpoint: cfg.resume already read (read here when None); choices: the config groups chosen, stored in
+    the checkpoints so that a resume command can tell whether its group overrides change anything.
+    """
+    check_train_config(cfg)
+    if cfg.resume and checkpoint is None:
+        checkpoint = read_checkpoint(cfg.resume, "resume")
     trainer, run_dir = cfg.trainer, Path(run_dir)
     rank, world, device = setup_distributed(trainer.device)
     if trainer.threads:
@@ -55,7 +67,7 @@ def run(cfg: DictConfig, run_dir: Path) -> dict:
     model = build_model(cfg).to(device)
     loss_fn, optimizer = build_loss(cfg), build_optimizer(cfg, model)
     scheduler = build_scheduler(cfg, optimizer)
-    state = load_checkpoint(cfg.resume, model, optimizer, scheduler) if cfg.resume else TrainState()
+    state = load_checkpoint(checkpoint, model, optimizer, scheduler) if checkpoint else TrainState()
     net = DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None) if world > 1 else model
     writer = SummaryWriter(str(run_dir)) if rank == 0 else None
     config = OmegaConf.to_container(cfg, resolve=True)
@@ -81,7 +93,7 @@ def run(cfg: DictConfig, run_dir: Path) -> dict:
         if rank == 0:
             if last or (finished and state.epoch % trainer.val_every == 0):
                 metrics = _validate(cfg, model, val_loader, loss_fn, device, writer, state, run_dir)
-            _save(cfg, run_dir, model, optimizer, scheduler, state, config, metrics)
+            _save(cfg, run_dir, model, optimizer, scheduler, state, config, metrics, choices)
         if world > 1:
             dist.barrier()
     if writer is not None:
@@ -111,26 +123,38 @@ def _validate(cfg: DictConfig, model: nn.Module, loader: DataLoader, loss_fn: nn
 
 
 def _save(cfg: DictConfig, run_dir: Path, model: nn.Module, optimizer: torch.optim.Optimizer, scheduler: Any,
-          state: TrainState, config: dict, metrics: dict[str, float]) -> None:
+          state: TrainState, config: dict, metrics: dict[str, float], choices: dict[str, str] | None) -> None:
     """Write checkpoints/last.ckpt, and the weights to best.pth when the latest validation beat the best AP
     (all joints)."""
     folder = run_dir / cfg.checkpoint_dir
     improved = metrics.get("AP_all", -1.0) > state.best_ap
     if improved:
         state.best_ap = metrics["AP_all"]
-    save_checkpoint(folder / "last.ckpt", model, optimizer, scheduler, state, config)
+    save_checkpoint(folder / "last.ckpt", model, optimizer, scheduler, state, config, choices)
     if improved:
         save_weights(folder / "best.pth", model, state, metrics, config)
 
 
 @hydra.main(config_path="configs", config_name="train", version_base="1.3")
 def main(cfg: DictConfig) -> dict:
-    """Hydra entry point; returns the last validation metrics (for sweeps). A missing file stops with one line."""
+    """Hydra entry point; returns the last validation metrics (for sweeps). With resume=<last.ckpt> the stored
+    config of that run is restored (models/resume.py). A missing or damaged file, a bad config value or an
+    unsafe override of a resumed run stops with one line."""
+    hydra_cfg = HydraConfig.get()
+    choices = {k: v for k, v in hydra_cfg.runtime.choices.items() if not k.startswith("hydra")}
     try:
-        return run(cfg, Path(HydraConfig.get().runtime.output_dir))["metrics"]
-    except FileNotFoundError as err:
+        checkpoint = None
+        if cfg.resume:
+            checkpoint = read_checkpoint(cfg.resume, "resume")
+            cfg = resume_config(cfg, checkpoint, list(hydra_cfg.overrides.task), choices, cfg.resume)
+            choices = checkpoint.get("choices")
+            log.info("resuming %s with its stored config", cfg.resume)
+        return run(cfg, Path(hydra_cfg.runtime.output_dir), checkpoint, choices)["metrics"]
+    except (FileNotFoundError, ConfigError, CheckpointError) as err:
         raise SystemExit(f"error: {err}") from None
 
+register_resolvers()      # ${run_id:} in the run folder names, before hydra.main composes the config
 
 if __name__ == "__main__":
+    exit_on_sigterm()
     main()

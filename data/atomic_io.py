@@ -1,12 +1,25 @@
 """Atomic file output: write under a temporary name beside the target, then rename it into place, so
-an interrupted run never leaves a half-written file (DESIGN.md). Used by every writer of the repo."""
+an interrupted run never leaves a half-written file (DESIGN.md). Used by every writer of the repo.
+
+A temporary is named ``.<target name>.<host>.<pid>.<random>.tmp``. It is removed on every exit Python
+sees (an exception, KeyboardInterrupt, SystemExit: SIGTERM becomes one when the entry points call
+:func:`exit_on_sigterm`). A process killed outright (SIGKILL, power loss) leaves it behind; such a stale
+temporary (its writer is no longer running on this host) is removed by the next write to the same target
+and by the run-folder check of eval.py / train.py, and is never read as an output.
+"""
 from __future__ import annotations
 
 import os
+import re
+import signal
+import socket
+import sys
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Iterator
+
+TEMPORARY = re.compile(r"^\.(?P<target>.+)\.(?P<host>[A-Za-z0-9-]+)\.(?P<pid>\d+)\.[^.]+\.tmp$")
 
 
 def _umask() -> int:
@@ -16,15 +29,62 @@ def _umask() -> int:
     return mask
 
 
+def _host() -> str:
+    """This machine's short host name, reduced to the characters a temporary's name may hold."""
+    return re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname().split(".")[0]) or "host"
+
+
+def _running(pid: int) -> bool:
+    """Whether a process with this id exists on this host."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:      # someone else's process
+        return True
+    return True
+
+
+def is_temporary(path: Path) -> bool:
+    """Whether path is named like a temporary of :func:`atomic_open`."""
+    return TEMPORARY.match(path.name) is not None
+
+
+def is_stale(path: Path) -> bool:
+    """Whether path is a temporary whose writer, on this host, is no longer running (killed before its rename)."""
+    match = TEMPORARY.match(path.name)
+    if match is None or match["host"] != _host():
+        return False              # another host's writer may still be running
+    pid = int(match["pid"])
+    return pid != os.getpid() and not _running(pid)
+
+
+def remove_stale_temporaries(folder: str | Path, target: str | None = None, recursive: bool = False) -> list[Path]:
+    """Delete the stale temporaries in folder (of one target name, or all; in subfolders too) -> their paths."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    candidates = folder.rglob("*.tmp") if recursive else folder.glob("*.tmp")
+    removed = []
+    for path in candidates:
+        match = TEMPORARY.match(path.name)
+        if match and (target is None or match["target"] == target) and is_stale(path):
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
+
+
 @contextmanager
 def atomic_open(path: str | Path, binary: bool = False, fsync: bool = False) -> Iterator[IO]:
     """Open a temporary file beside path for writing; on success it replaces path, on error it vanishes.
 
     The file gets the permissions a plain open() would give (0666 minus the umask), not mkstemp's 0600.
+    Stale temporaries of the same target, left by a killed writer, are removed first.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    remove_stale_temporaries(path.parent, target=path.name)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_host()}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb" if binary else "w") as f:
             yield f
@@ -48,3 +108,14 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write bytes to path atomically."""
     with atomic_open(path, binary=True) as f:
         f.write(data)
+
+
+def _exit_on_signal(signum: int, frame: object) -> None:
+    """Signal handler: leave through SystemExit, so that with-blocks and finally-clauses run."""
+    sys.exit(128 + signum)
+
+
+def exit_on_sigterm() -> None:
+    """Turn SIGTERM (kill, a scheduler's stop, torchrun ending its workers) into SystemExit(143) in this
+    process, so temporaries are removed as for Ctrl-C; Python's default would end it without cleanup."""
+    signal.signal(signal.SIGTERM, _exit_on_signal)

@@ -32,6 +32,7 @@ from data.poses2d_io import write_poses2d
 from data.topdown_dataset import EpochSampler, TopDownDataset
 from evaluation.coco_eval import evaluate_keypoints, write_coco_results
 from models.candidates import candidates_to_image, find_candidates
+from models.checkpoint_io import read_checkpoint
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.joint_association import associate_joints
 from models.training import AP_SUBSETS, build_codec, decode_predictions, select_device
@@ -41,12 +42,7 @@ DECODERS = ("single", "association")
 
 def load_trained_model(path: str | Path, device: torch.device) -> tuple[nn.Module, DictConfig]:
     """The network of a train.py checkpoint or weights file, in eval mode on device, and its training config."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such checkpoint")
-    checkpoint = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(checkpoint, dict) or not {"model", "config"} <= set(checkpoint):
-        raise ValueError(f"{path}: not a train.py checkpoint (needs the keys 'model' and 'config')")
+    checkpoint = read_checkpoint(path)   # a missing or damaged file -> FileNotFoundError / CheckpointError
     train_cfg = OmegaConf.create(checkpoint["config"])
     model = instantiate(train_cfg.model, pretrained=None)  # the weights come from the checkpoint
     model.load_state_dict(checkpoint["model"])

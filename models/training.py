@@ -20,25 +20,27 @@ import numpy as np
 import torch
 import torch.distributed as dist
 from hydra.utils import instantiate
-from omegaconf import DictConfig
+from omegaconf import DictConfig, ListConfig, OmegaConf
 from torch import nn
 from torch.utils.data import DataLoader, Sampler
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
-from data.atomic_io import atomic_open
 from data.coco_keypoints import load_keypoint_dataset
+from data.config_checks import ConfigError, check_bool, check_int, check_number, fail, is_int, value_of
 from data.crop_transforms import CropAugmentation, transform_points
 from data.records import ImageRecord
 from data.show_targets import GREEN, RED, tile_grid, tint
 from data.topdown_dataset import TopDownDataset, denormalize_image
 from evaluation.coco_eval import evaluate_keypoints
+from models.checkpoint_io import atomic_torch_save, read_checkpoint, write_checkpoint  # noqa: F401 (re-exported)
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss
 
 log = logging.getLogger(__name__)
 
 HEATMAP_STRIDE = 4  # FastPose's output stride
+INPUT_MULTIPLE = 32  # FastPose's trunk stride: the input width and height must be multiples of it
 AP_SUBSETS = ("all", "body", "foot")
 
 
@@ -90,13 +92,62 @@ def setup_distributed(device_name: str) -> tuple[int, int, torch.device]:
     return rank, world, device
 
 
+def _plain(value: Any) -> Any:
+    """Containers as plain python."""
+    return OmegaConf.to_container(value) if isinstance(value, (DictConfig, ListConfig)) else value
+
+
+# --- config checks --------------------------------------------------------------------------------
+
+def check_device(cfg: DictConfig, key: str) -> None:
+    """cfg[key] names a device this machine has: auto, cpu, cuda, cuda:N (N < the CUDA device count)."""
+    name = value_of(cfg, key)
+    if name == "auto":
+        return
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError):
+        fail(key, name, "must be auto, cpu, cuda or cuda:N")
+    if device.type == "cuda" and not torch.cuda.is_available():
+        fail(key, name, "CUDA is not available on this machine (use auto or cpu)")
+    if device.type == "cuda" and device.index is not None and device.index >= torch.cuda.device_count():
+        fail(key, name, f"this machine has {torch.cuda.device_count()} CUDA device(s)")
+
+
+def check_input_size(cfg: DictConfig, key: str = "data.input_size") -> None:
+    """cfg[key] is [w, h], positive multiples of INPUT_MULTIPLE (what FastPose's strides need)."""
+    size = _plain(value_of(cfg, key))
+    if not (isinstance(size, list) and len(size) == 2 and all(is_int(v) and v > 0 for v in size)):
+        fail(key, size, "must be [width, height] in pixels")
+    if any(v % INPUT_MULTIPLE for v in size):
+        fail(key, size, f"width and height must be multiples of {INPUT_MULTIPLE} (FastPose's stride)")
+
+
+def check_train_config(cfg: DictConfig) -> None:
+    """Stop with one ConfigError naming the key when a trainer, data, loss or optimizer value is of the wrong
+    type or range (before any data is read)."""
+    for key, minimum, nullable in (("trainer.epochs", 1, False), ("trainer.max_steps", 1, True),
+                                   ("trainer.batch_size", 1, False), ("trainer.val_batch_size", 1, False),
+                                   ("trainer.num_workers", 0, False), ("trainer.seed", 0, False),
+                                   ("trainer.threads", 1, True), ("trainer.log_every", 1, False),
+                                   ("trainer.val_every", 1, False), ("trainer.grid_images", 0, False)):
+        check_int(cfg, key, minimum, nullable)
+    check_bool(cfg, "trainer.progress")
+    check_device(cfg, "trainer.device")
+    check_input_size(cfg)
+    check_number(cfg, "data.sigma")
+    check_number(cfg, "optimizer.lr")
+    check_number(cfg, "loss.mu", strict=False)
+    check_number(cfg, "loss.foot_weight", strict=False)
+
+
 # --- builders ---------------------------------------------------------------------------------------
 
 def build_codec(cfg: DictConfig) -> MultiModalHeatmapCodec:
     """The target codec: input_size and sigma from cfg.data, heatmaps a quarter of the input, mu from cfg.loss."""
     w, h = (int(v) for v in cfg.data.input_size)
-    if w % 32 or h % 32:
-        raise ValueError(f"data.input_size {[w, h]} must be multiples of 32 (FastPose)")
+    if w % INPUT_MULTIPLE or h % INPUT_MULTIPLE:
+        raise ConfigError(f"data.input_size={[w, h]}: must be multiples of {INPUT_MULTIPLE} (FastPose)")
     return MultiModalHeatmapCodec((w, h), (w // HEATMAP_STRIDE, h // HEATMAP_STRIDE), cfg.data.sigma, cfg.loss.mu)
 
 
@@ -258,38 +309,32 @@ def set_rng_states(states: dict) -> None:
         torch.cuda.set_rng_state_all(states["cuda"])
 
 
-def atomic_torch_save(obj: Any, path: str | Path) -> None:
-    """torch.save obj to a temporary file beside path, fsync it, then rename it over path."""
-    with atomic_open(path, binary=True, fsync=True) as f:
-        torch.save(obj, f)
-
-
 def save_checkpoint(path: str | Path, model: nn.Module, optimizer: torch.optim.Optimizer, scheduler: Any,
-                    state: TrainState, config: dict) -> None:
-    """Write model, optimizer, scheduler, position, RNG states and config to path atomically."""
-    atomic_torch_save({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                       "scheduler": scheduler.state_dict(), **asdict(state), "rng": rng_states(),
-                       "config": config}, path)
+                    state: TrainState, config: dict, choices: dict[str, str] | None = None) -> None:
+    """Write model, optimizer, scheduler, position, RNG states, config and the config groups chosen (choices,
+    None if unknown) to path atomically, checksummed (models/checkpoint_io.py)."""
+    write_checkpoint({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                      "scheduler": scheduler.state_dict(), **asdict(state), "rng": rng_states(),
+                      "config": config, "choices": choices}, path, "resume")
 
 
 def save_weights(path: str | Path, model: nn.Module, state: TrainState, metrics: dict[str, float],
                  config: dict) -> None:
     """Write the model weights with the position, validation metrics and config (no optimizer) atomically."""
-    atomic_torch_save({"model": model.state_dict(), **asdict(state), "metrics": dict(metrics),
-                       "config": config}, path)
+    write_checkpoint({"model": model.state_dict(), **asdict(state), "metrics": dict(metrics), "config": config},
+                     path, "weights")
 
 
-def load_checkpoint(path: str | Path, model: nn.Module, optimizer: torch.optim.Optimizer | None = None,
+def load_checkpoint(checkpoint: str | Path | dict, model: nn.Module, optimizer: torch.optim.Optimizer | None = None,
                     scheduler: Any = None, restore_rng: bool = True) -> TrainState:
-    """Load a :func:`save_checkpoint` file into model (and optimizer, scheduler, RNG states) -> its TrainState.
+    """Load a :func:`save_checkpoint` file (a path, or what read_checkpoint returned) into model (and optimizer,
+    scheduler, RNG states) -> its TrainState.
 
     Tensors are read onto the CPU and copied onto the model's device by load_state_dict. The file is
     unpickled in full (it holds RNG states), so load only checkpoints you trust.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such checkpoint")
-    checkpoint = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(checkpoint, dict):
+        checkpoint = read_checkpoint(checkpoint, "resume")
     model.load_state_dict(checkpoint["model"])
     if optimizer is not None:
         optimizer.load_state_dict(checkpoint["optimizer"])

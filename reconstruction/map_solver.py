@@ -42,6 +42,7 @@ import numpy as np
 
 from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from reconstruction.camera import Rig
+from reconstruction.compile_notice import compile_notice
 from reconstruction.block_solver import (EliminationPlan, elimination_plan, graph_components, inverse_3x3,
                                          solve_blocks, solve_dense)
 from reconstruction.compiled_solver import solve_poses_compiled
@@ -327,7 +328,8 @@ class MAPReconstruction:
         self.single_view_score, self.unseen_score = float(single_view_score), float(unseen_score)
         self.mle_first = bool(mle_first)
         self.solver = solver
-        warm_up()
+        with compile_notice("MAP solver"):   # one line while numba compiles (first run)
+            warm_up()
 
     def problem(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
                 prior: bool) -> PoseProblem:

@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hydra import compose, initialize_config_dir
 
 import eval as eval_script
@@ -92,3 +93,23 @@ def test_every_dataset_gets_the_default_matcher_and_reconstruction_unless_the_co
     assert len(datasets) >= 5
     assert all(chosen[f"dataset={d}"] == ("EvidenceMatcher", "MLEMAPReconstruction") for d in datasets)
     assert chosen["matching=feet_paper"][0] == "FeetMatcher"
+
+
+@pytest.mark.parametrize("override, key", [
+    ("evaluation.max_dist_m=abc", "evaluation.max_dist_m"), ("dataset.num_cameras=1", "num_cameras"),
+    ("dataset.num_persons=0", "num_persons"), ("vis_frame=-1", "vis_frame")])
+def test_a_bad_value_stops_with_one_line_naming_the_key(tmp_path, override, key):
+    cmd = [sys.executable, "eval.py", override, "progress=false", "dataset.num_frames=1", f"hydra.run.dir={tmp_path}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
+    assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert proc.stderr.startswith("error: ") and key in proc.stderr and not (tmp_path / "poses3d.json").exists()
+
+
+def test_a_frame_to_draw_that_is_not_reconstructed_is_reported_after_the_report(tmp_path):
+    cmd = [sys.executable, "eval.py", "vis=true", "vis_frame=999", "progress=false", "dataset.num_frames=1",
+           "reconstruction=vanilla", f"hydra.run.dir={tmp_path}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
+    assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: vis_frame=999")
+    assert "MPJPE all 23 joints (mm)" in proc.stdout
+    report = (tmp_path / "report.txt").read_text()
+    assert "MPJPE all 23 joints (mm)" in report and report.strip() in proc.stdout

@@ -25,7 +25,8 @@ from evaluation.coco_eval import evaluate_keypoints
 from models.fastpose import FastPose
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss
-from models.training import TrainState, decode_predictions, save_checkpoint, train_one_epoch
+from models.checkpoint_io import read_checkpoint
+from models.training import TrainState, decode_predictions, save_checkpoint, save_weights, train_one_epoch
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = ["model=fastpose_r18", "data.input_size=[64,64]", "data.sigma=1.0", "trainer.batch_size=4",
@@ -221,8 +222,9 @@ def test_resume_reproduces_the_uninterrupted_losses(synthetic_root, tmp_path):
         assert loss == pytest.approx(straight["losses"][step], rel=1e-6), step
 
 
-def kill_after_first_checkpoint(cmd: list[str], checkpoint: Path, timeout_s: float = 120.0) -> None:
-    """Start cmd, wait until checkpoint exists, let it run on a little, then SIGKILL it."""
+def kill_after_first_checkpoint(cmd: list[str], checkpoint: Path, timeout_s: float = 120.0, run_on_s: float = 1.0
+                                ) -> None:
+    """Start cmd, wait until checkpoint exists, let it run on run_on_s seconds, then SIGKILL it."""
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + timeout_s
     try:
@@ -230,28 +232,121 @@ def kill_after_first_checkpoint(cmd: list[str], checkpoint: Path, timeout_s: flo
             assert proc.poll() is None, proc.stderr.read()[-3000:]
             assert time.monotonic() < deadline, "no checkpoint in time"
             time.sleep(0.05)
-        time.sleep(1.0)                            # killed somewhere in a later epoch
+        time.sleep(run_on_s)                       # killed somewhere in a later epoch
         assert proc.poll() is None, "the run ended before it was killed"
     finally:
         proc.kill()
         proc.wait()
 
 
-def test_killed_run_resumes_from_its_last_checkpoint(synthetic_root, tmp_path):
-    run_dir = tmp_path / "killed"
+SMALL = ["+experiment=train_small", "trainer.epochs=10000", "trainer.log_every=1", "trainer.val_every=1000"]  # max_steps
+#                                                                             bounds the run, only its end is validated
+
+
+@pytest.fixture(scope="module")
+def killed_run(synthetic_root, tmp_path_factory) -> tuple[Path, int]:
+    """A train_small run (tiny overrides, max_steps = 3 epochs) SIGKILLed after its first checkpoint ->
+    (its last.ckpt, its max_steps)."""
+    run_dir = tmp_path_factory.mktemp("killed") / "run"
     checkpoint = run_dir / "checkpoints" / "last.ckpt"
-    cmd = [sys.executable, "train.py", *TINY, f"data.root={synthetic_root}", "trainer.epochs=10000",
+    steps_per_epoch = -(-len(TopDownDataset(load_coco23(synthetic_root / "train" / "annotations.json",
+                                                        synthetic_root / "train" / "images"),
+                                            MultiModalHeatmapCodec((64, 64), (16, 16)), (64, 64))) // 4)
+    max_steps = 3 * steps_per_epoch
+    cmd = [sys.executable, "train.py", *TINY, *SMALL, f"data.root={synthetic_root}", f"trainer.max_steps={max_steps}",
            f"hydra.run.dir={run_dir}"]
-    kill_after_first_checkpoint(cmd, checkpoint)
-    saved = torch.load(checkpoint, map_location="cpu", weights_only=False)   # whole, whenever the kill came
-    epoch, step = saved["epoch"], saved["global_step"]
-    assert epoch >= 1 and saved["step_in_epoch"] == 0 and step > 0
-    straight = run_training(synthetic_root, tmp_path / "straight", f"trainer.epochs={epoch + 1}")
-    resumed = run_training(synthetic_root, tmp_path / "resumed", f"trainer.epochs={epoch + 1}",
-                           f"resume={checkpoint}")
-    assert min(resumed["losses"]) == step + 1 and max(resumed["losses"]) == straight["state"].global_step
-    for s, loss in resumed["losses"].items():
-        assert loss == pytest.approx(straight["losses"][s], rel=1e-6), s
+    kill_after_first_checkpoint(cmd, checkpoint, run_on_s=0.0)
+    return checkpoint, max_steps
+
+
+def tensorboard_losses(run_dir: Path) -> dict[int, float]:
+    """The train/loss scalars of a run's TensorBoard events: {step: loss}."""
+    accumulator = pytest.importorskip("tensorboard.backend.event_processing.event_accumulator")
+    events = accumulator.EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
+    events.Reload()
+    return {e.step: e.value for e in events.Scalars("train/loss")}
+
+
+def test_killed_run_resumes_with_its_stored_config_from_the_command_line(killed_run, synthetic_root, tmp_path):
+    checkpoint, max_steps = killed_run
+    saved = read_checkpoint(checkpoint)                          # whole, whenever the kill came
+    step = saved["global_step"]
+    assert saved["epoch"] >= 1 and saved["step_in_epoch"] == 0 and 0 < step < max_steps
+    assert saved["choices"]["experiment"] == "train_small"
+    resumed_dir = tmp_path / "resumed"
+    proc = subprocess.run([sys.executable, "train.py", f"resume={checkpoint}", f"hydra.run.dir={resumed_dir}"],
+                          capture_output=True, text=True, cwd=REPO, timeout=300)   # no other override
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert read_checkpoint(resumed_dir / "checkpoints" / "last.ckpt")["global_step"] == max_steps
+    straight = run_training(synthetic_root, tmp_path / "straight", *SMALL, f"trainer.max_steps={max_steps}")
+    resumed = tensorboard_losses(resumed_dir)
+    assert sorted(resumed) == list(range(step + 1, max_steps + 1))
+    for s, loss in resumed.items():
+        assert loss == pytest.approx(straight["losses"][s], rel=1e-5), s
+
+
+@pytest.mark.parametrize("override, key", [("trainer.batch_size=8", "trainer.batch_size"), ("model=fastpose_r50", "model"),
+                                           ("optimizer.lr=0.1", "optimizer.lr")])
+def test_an_unsafe_override_of_a_resumed_run_stops_with_one_line(killed_run, tmp_path, override, key):
+    checkpoint, _ = killed_run
+    proc = subprocess.run([sys.executable, "train.py", f"resume={checkpoint}", override, f"hydra.run.dir={tmp_path}"],
+                          capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert proc.stderr.startswith(f"error: resume: {override} would change {key} ") and str(checkpoint) in proc.stderr
+
+
+def corrupt(kind: str, good: bytes, weights: Path) -> bytes:
+    """A damaged version of the checkpoint bytes good (or the weights file's bytes)."""
+    if kind == "truncated":
+        return good[: len(good) // 2]
+    if kind == "empty":
+        return b""
+    if kind == "random":
+        return np.random.default_rng(0).bytes(len(good))
+    if kind == "flipped":
+        middle = len(good) // 2
+        return good[:middle] + bytes(b ^ 0xFF for b in good[middle:middle + 8]) + good[middle + 8:]
+    return weights.read_bytes()
+
+
+@pytest.mark.parametrize("kind, says", [("truncated", "cannot be read"), ("empty", "empty file"),
+                                        ("random", "cannot be read"), ("flipped", "checksum mismatch"),
+                                        ("best.pth", "model weights only")])
+def test_a_damaged_checkpoint_stops_resume_with_one_line_naming_the_file(tmp_path, kind, says):
+    model = FastPose(18)
+    optimizer = torch.optim.Adam(model.parameters())
+    scheduler = torch.optim.lr_scheduler.MultiStepLR(optimizer, [1])
+    good, weights = tmp_path / "last.ckpt", tmp_path / "best.pth"
+    save_checkpoint(good, model, optimizer, scheduler, TrainState(epoch=1), {"ok": 1})
+    save_weights(weights, model, TrainState(epoch=1), {}, {"ok": 1})
+    bad = tmp_path / f"{kind}.ckpt"
+    bad.write_bytes(corrupt(kind, good.read_bytes(), weights))
+    proc = subprocess.run([sys.executable, "train.py", f"resume={bad}", f"hydra.run.dir={tmp_path / 'run'}"],
+                          capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.startswith(f"error: {bad}: ") and says in proc.stderr
+
+
+def test_a_checkpoint_written_before_the_envelope_loads_with_a_warning(tmp_path, caplog):
+    model = torch.nn.Linear(2, 2)
+    legacy = {"model": model.state_dict(), "epoch": 1, "global_step": 3, "config": {"ok": 1}}
+    torch.save(legacy, tmp_path / "old.pth")
+    with caplog.at_level("WARNING"):
+        assert read_checkpoint(tmp_path / "old.pth")["global_step"] == 3
+    assert "no checksum" in caplog.text
+
+
+@pytest.mark.parametrize("override, key", [
+    ("trainer.max_steps=abc", "trainer.max_steps"), ("trainer.batch_size=0", "trainer.batch_size"),
+    ("data.input_size=[100,100]", "data.input_size"), ("optimizer.lr=-1", "optimizer.lr"),
+    ("trainer.epochs=0", "trainer.epochs"),
+    pytest.param("trainer.device=cuda", "trainer.device",
+                 marks=pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA"))])
+def test_a_bad_config_value_stops_training_with_one_line_naming_the_key(tmp_path, override, key):
+    proc = subprocess.run([sys.executable, "train.py", override, f"hydra.run.dir={tmp_path}"],
+                          capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.startswith(f"error: {key}=")
 
 
 def test_tensorboard_logs_losses_lr_ap_and_heatmap_grid(synthetic_root, tmp_path):
@@ -294,7 +389,7 @@ def test_torchrun_two_processes_shard_the_epoch(synthetic_root, tmp_path):
                                         synthetic_root / "train" / "images"), MultiModalHeatmapCodec((64, 64), (16, 16)),
                             (64, 64))
     per_rank = -(-len(single) // 2)                                     # DistributedSampler-style shards
-    checkpoint = torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+    checkpoint = read_checkpoint(run_dir / "checkpoints" / "last.ckpt")
     assert checkpoint["epoch"] == 2 and checkpoint["global_step"] == 2 * -(-per_rank // 4)
     assert checkpoint["global_step"] < 2 * -(-len(single) // 4)         # fewer steps than one process takes
     assert list(run_dir.glob("events.out.tfevents.*")) and (run_dir / "metrics.json").is_file()
@@ -313,6 +408,6 @@ def test_mu_lambda_multirun_writes_checkpoints_and_tensorboard(synthetic_root, t
     for mu in ("0", "0.5"):
         run_dir = sweep / f"loss.foot_weight=1.5,loss.mu={mu}"          # named by the swept settings only
         assert list(run_dir.glob("events.out.tfevents.*")), sorted(p.name for p in sweep.iterdir())
-        checkpoint = torch.load(run_dir / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+        checkpoint = read_checkpoint(run_dir / "checkpoints" / "last.ckpt")
         assert checkpoint["global_step"] == 2 and checkpoint["config"]["loss"]["mu"] == float(mu)
         assert checkpoint["config"]["model"]["depth"] == 18 and (run_dir / "val_predictions.json").is_file()

@@ -39,6 +39,7 @@ from scipy.stats import chi2
 
 from data.multiview import ViewDetections
 from reconstruction.camera import Rig
+from reconstruction.compile_notice import compile_notice
 from reconstruction.map_estimation import joint_sigma
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence_kernels import merge_linked, pair_chi2
@@ -158,7 +159,8 @@ class EvidenceMatcher:
         self.link_scale = float(link_scale)
         self.last_noise_scale = 1.0
         self._fundamentals: dict[tuple[int, int, int], tuple[Rig, np.ndarray]] = {}
-        warm_up()
+        with compile_notice("evidence matcher"):   # one line while numba compiles (first run)
+            warm_up()
         self.feet = FeetMatcher(min_views=min_views, **{"pixel_sigma": 5.0, **(feet or {})})
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()

@@ -1,0 +1,104 @@
+"""Checkpoint files of train.py, checked when read: a versioned envelope around the serialized state.
+
+A file is ``torch.save({"format": FORMAT, "version": VERSION, "kind": "resume" | "weights", "sha256": <hex>,
+"payload": <uint8 tensor>})``, where payload holds the torch-serialized state dict (as a tensor it is stored raw,
+not as a pickled string) and sha256 is its digest. Reading
+checks the envelope, the digest and the keys the kind needs, so a truncated, empty, random or bit-flipped
+file, or a weights file (best.pth) given where a resume checkpoint (last.ckpt) is needed, stops with one
+CheckpointError naming the file. Files of this repo written before the envelope (a plain state dict, no
+checksum) are still read, with a warning: nothing can be checked but their keys.
+
+The payload is unpickled in full (it holds numpy and python RNG states): load only checkpoints you trust.
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import logging
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from data.atomic_io import atomic_open
+
+log = logging.getLogger(__name__)
+
+FORMAT = "multiview-crowd-pose/train-checkpoint"
+VERSION = 2                    # 1: the plain state dict written before the envelope
+KEYS = {"resume": ("model", "optimizer", "scheduler", "epoch", "step_in_epoch", "global_step", "best_ap", "rng",
+                   "config"),
+        "weights": ("model", "epoch", "global_step", "config")}
+ENVELOPE_KEYS = ("format", "version", "kind", "sha256", "payload")
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file that cannot be used; the message names the file."""
+
+
+def atomic_torch_save(obj: Any, path: str | Path) -> None:
+    """torch.save obj to a temporary file beside path, fsync it, then rename it over path."""
+    with atomic_open(path, binary=True, fsync=True) as f:
+        torch.save(obj, f)
+
+
+def write_checkpoint(state: dict, path: str | Path, kind: str) -> None:
+    """Write state (a dict holding KEYS[kind]) to path atomically, in the envelope with its sha256."""
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    payload = buffer.getvalue()
+    atomic_torch_save({"format": FORMAT, "version": VERSION, "kind": kind, "sha256": hashlib.sha256(payload).hexdigest(),
+                       "payload": torch.frombuffer(bytearray(payload), dtype=torch.uint8)}, path)
+
+
+def _load(source: str | Path | io.BytesIO, path: Path, what: str) -> Any:
+    """torch.load onto the CPU; any failure -> CheckpointError naming path."""
+    try:
+        return torch.load(source, map_location="cpu", weights_only=False)
+    except Exception as err:  # truncated zip, random bytes, bad pickle: torch raises many kinds
+        reason = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise CheckpointError(f"{path}: {what} cannot be read ({reason[:120]}); the file is truncated, corrupted "
+                              "or not a train.py checkpoint") from None
+
+
+def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
+    """The state dict and kind of a loaded file (the envelope checked, or a pre-envelope state dict)."""
+    if isinstance(outer, dict) and outer.get("format") == FORMAT:
+        missing = [k for k in ENVELOPE_KEYS if k not in outer]
+        if missing:
+            raise CheckpointError(f"{path}: checkpoint envelope lacks {', '.join(missing)}")
+        if not isinstance(outer["version"], int) or outer["version"] > VERSION:
+            raise CheckpointError(f"{path}: checkpoint format version {outer['version']!r}; this code reads up to "
+                                  f"{VERSION}")
+        payload = outer["payload"].numpy().tobytes() if isinstance(outer["payload"], torch.Tensor) else None
+        if payload is None or hashlib.sha256(payload).hexdigest() != outer["sha256"]:
+            raise CheckpointError(f"{path}: checksum mismatch, the file is corrupted")
+        state = _load(io.BytesIO(payload), path, "the checked payload")
+        return state, outer["kind"]
+    if isinstance(outer, dict) and "model" in outer and "config" in outer:
+        log.warning("%s: checkpoint written before format version %d: no checksum to verify, loaded unchecked",
+                    path, VERSION)
+        return outer, "resume" if "optimizer" in outer else "weights"
+    raise CheckpointError(f"{path}: not a train.py checkpoint")
+
+
+def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
+    """The checked state dict of a train.py file; kind 'resume' also refuses a weights-only file (best.pth).
+
+    Raises FileNotFoundError for a missing file, CheckpointError (a ValueError) for a file that cannot be used.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint")
+    if path.stat().st_size == 0:
+        raise CheckpointError(f"{path}: empty file, not a checkpoint")
+    state, found = _unwrap(_load(path, path, "the file"), path)
+    if not isinstance(state, dict):
+        raise CheckpointError(f"{path}: the checked payload is not a state dict")
+    if kind == "resume" and found != "resume":
+        raise CheckpointError(f"{path}: holds model weights only (like best.pth); resume needs the run's "
+                              "checkpoints/last.ckpt")
+    missing = [k for k in KEYS.get(found, ()) if k not in state]
+    if found not in KEYS or missing:
+        raise CheckpointError(f"{path}: {found!r} checkpoint lacks {', '.join(missing) or 'a known kind'}")
+    return state
