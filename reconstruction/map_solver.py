@@ -36,7 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -59,6 +59,8 @@ SOLVERS = ("compiled", "numpy")
 BONE_PRIORS = ("adaptive", "population")   # each person's own bone lengths (person_prior.py) | the table's means
 NOISE_SCALES = ("estimate", "model")       # 2D sigma = model x the person's estimated scale | the model alone
 BONE_GROUPS = bone_groups()
+# MLE poses (P, J, 4) -> each person's bone lengths from earlier frames (P, L) m and their standard errors (P, L)
+Skeletons = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 DENSE_MAX_UNITS = 16  # from this many persons the block elimination beats one dense LAPACK solve per person
 
 
@@ -238,6 +240,20 @@ def _person_problem(problem: PoseProblem, p: int) -> PoseProblem:
                    bone_weight=np.asarray(problem.bone_weight[p]))
 
 
+def combine_estimates(mean: np.ndarray, sd: np.ndarray, other: np.ndarray, other_sd: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Precision-weighted combination of two independent estimates, either ignored where its value or SD is
+    NaN / inf: (P, L) x4 -> mean (P, L), SD (P, L) (the first mean and SD inf where neither has any)."""
+    first = np.isfinite(mean) & np.isfinite(sd) & (sd > 0)
+    use = np.isfinite(other) & np.isfinite(other_sd) & (other_sd > 0)
+    w1 = np.where(first, 1.0 / np.where(first, sd, 1.0) ** 2, 0.0)
+    w2 = np.where(use, 1.0 / np.where(use, other_sd, 1.0) ** 2, 0.0)
+    w = w1 + w2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        combined = (w1 * np.where(first, mean, 0.0) + w2 * np.where(use, other, 0.0)) / w
+        return np.where(w > 0, combined, mean), np.where(w > 0, 1.0 / np.sqrt(w), np.inf)
+
+
 def output_confidence(dlt_conf: np.ndarray, poses2d: np.ndarray, placed: np.ndarray, output_min_views: int,
                       single_view_score: float, unseen_score: float) -> np.ndarray:
     """Confidence of each reconstructed joint (see the module docstring): (P, J), (V, P, J, 3), (P,) -> (P, J)."""
@@ -319,6 +335,9 @@ class MAPReconstruction:
         self.sigma_px, self.score_power = float(sigma_px), float(score_power)
         self.fix_swaps, self.last_swaps = bool(fix_swaps), 0
         self.last_joint_variance = np.zeros((0, 0))    # (P, J) m^2 of the last call (the tracker's measurement noise)
+        self.takes_skeletons = self.bone_prior == "adaptive"     # the tracker's bone lengths refine the prior
+        self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))  # (P, L) m measured by the last MLE, NaN unmeasured
+        self._bone_measurements: np.ndarray | None = None
         self.bone_mean, self.bone_std = resolve_bone_table(bone_table)
         self.proportion_sd = proportion_sds(self.bone_mean, self.bone_std, ABSOLUTE_SD_M)
         self.robust, self.robust_scale = robust, float(robust_scale)
@@ -348,10 +367,11 @@ class MAPReconstruction:
         return PoseProblem(proj, uv, inv_sigma, BONE_PAIRS, self.bone_mean, weight, anchor, self.anchor_weight,
                            self.robust, self.robust_scale)
 
-    def solve(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray,
-              stages: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def solve(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, stages: tuple[bool, ...],
+              skeletons: Skeletons | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Swaps undone (fix_swaps), DLT, then one solve per stage (True = with the prior): -> X (P, J, 3),
-        DLT (P, J, 4), placed (P,)."""
+        DLT (P, J, 4), placed (P,). ``skeletons``: the persons' own bone lengths from earlier frames (a
+        tracker's), asked with the MLE poses (see :meth:`_person_problem`)."""
         bboxes = np.asarray(bboxes, dtype=np.float64)
         dlt = triangulate_dlt(poses2d_und, proj, self.min_views)
         uv, inv_sigma = self._observations(poses2d_und, bboxes)
@@ -368,22 +388,27 @@ class MAPReconstruction:
         idx = np.flatnonzero(placed)
         if len(idx) == 0:
             self.last_joint_variance = np.full(X.shape[:2], np.inf)
+            self.last_bone_lengths = np.full((len(X), len(BONE_PAIRS)), np.nan)
             return X, dlt, placed
         und, uv, inv_sigma = poses2d_und[:, idx], uv[:, idx], inv_sigma[:, idx]
         Xp = X[idx]
+        self._bone_measurements = None
         solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
         for k, prior in enumerate(stages):
             if k == 0:
                 problem = self._problem(uv, inv_sigma, proj, Xp, prior)
             else:                                   # after the MLE: outliers re-initialised, the person's prior
                 mle, Xp = Xp, reinitialise_outliers(Xp, und, proj)
-                problem = (self._person_problem(uv, inv_sigma, proj, Xp, mle) if prior
+                problem = (self._person_problem(uv, inv_sigma, proj, Xp, mle, skeletons) if prior
                            else self._problem(uv, inv_sigma, proj, Xp, False))
             Xp, _ = solve_fn(problem, Xp, self.max_iterations, self.xtol, self.ftol)
         X = X.copy()
         X[idx] = Xp
         self.last_joint_variance = np.full(X.shape[:2], np.inf)
         self.last_joint_variance[idx] = self._joint_variance(Xp, uv, inv_sigma, proj)
+        self.last_bone_lengths = np.full((len(X), len(BONE_PAIRS)), np.nan)
+        if self._bone_measurements is not None:
+            self.last_bone_lengths[idx] = self._bone_measurements
         return X, dlt, placed
 
     def _joint_variance(self, X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray) -> np.ndarray:
@@ -401,8 +426,13 @@ class MAPReconstruction:
         return np.where((views >= 1 + (tie == 0)) & np.isfinite(var) & (var > 0), var, np.inf)
 
     def _person_problem(self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
-                        mle: np.ndarray) -> PoseProblem:
-        """The MAP problem after an MLE solve (P, J, 3): each person's noise scale and bone table (person_prior.py)."""
+                        mle: np.ndarray, skeletons: Skeletons | None = None) -> PoseProblem:
+        """The MAP problem after an MLE solve (P, J, 3): each person's noise scale and bone table (person_prior.py).
+
+        With ``skeletons`` (MLE poses (P, J, 4) -> the person's bone lengths (P, L) measured in earlier frames and
+        their standard errors (P, L), NaN / inf where unknown), each bone's measurement in this frame is combined
+        with the earlier frames' by precision before the population prior is applied, once: a person followed
+        for a while is fitted with their own skeleton."""
         scale = (noise_scale(mle, uv, inv_sigma, proj, self.min_noise_scale) if self.noise_scale == "estimate"
                  else np.ones(len(mle)))
         inv_sigma = inv_sigma / scale[None, :, None]
@@ -411,6 +441,11 @@ class MAPReconstruction:
         info = joint_information(mle, proj, inv_sigma)
         measured = (inv_sigma > 0).sum(axis=0) >= 2
         lengths, variances = bone_variances(mle, info, BONE_PAIRS, measured)
+        self._bone_measurements = np.where(np.isfinite(variances), lengths, np.nan)
+        if skeletons is not None:        # this frame's measurement and the earlier frames' as one
+            own, se = skeletons(np.concatenate([mle, measured[..., None].astype(np.float64)], axis=-1))
+            lengths, sd = combine_estimates(lengths, np.sqrt(variances), own, se)
+            variances = sd ** 2
         mean, sd = person_bone_lengths(lengths, variances, self.bone_mean, self.proportion_sd, self.bone_tie_sd_m,
                                        BONE_GROUPS)
         weight = self.prior_weight / np.sqrt(sd ** 2 + self.bone_tie_sd_m ** 2)
@@ -423,13 +458,16 @@ class MAPReconstruction:
         adaptive = self.bone_prior == "adaptive" or self.noise_scale == "estimate"
         return (False, True) if self.mle_first or (adaptive and self.prior_weight > 0) else (True,)
 
-    def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig) -> np.ndarray:
-        """Reconstruct matched persons: (V, P, J, 3), (V, P, 4) -> (P, J, 4)."""
+    def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig, skeletons: Skeletons | None = None
+                 ) -> np.ndarray:
+        """Reconstruct matched persons: (V, P, J, 3), (V, P, 4) -> (P, J, 4); skeletons: see :meth:`solve`."""
         und = rig.undistort(poses2d)
         P, J = und.shape[1:3]
         if P == 0:
+            self.last_joint_variance = np.zeros((0, J))
+            self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))
             return np.zeros((0, J, 4))
-        X, dlt, placed = self.solve(und, bboxes, rig.projection_matrices(), self.stages())
+        X, dlt, placed = self.solve(und, bboxes, rig.projection_matrices(), self.stages(), skeletons)
         conf = output_confidence(dlt[..., 3], und, placed, self.output_min_views, self.single_view_score,
                                  self.unseen_score)
         return np.concatenate([np.where(conf[..., None] > 0, X, 0.0), conf[..., None]], axis=-1)

@@ -19,8 +19,13 @@ class Tracker(Protocol):
     """What the pipeline needs of a tracker (tracking.Tracker): frame number, poses (P, J, 4), per-joint
     variances (P, J) or None -> (ids (P,), poses (P, J, 4))."""
 
-    def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None
-               ) -> tuple[np.ndarray, np.ndarray]: ...
+    def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None,
+               bone_lengths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def _of_frame(values: np.ndarray | None, persons: int) -> np.ndarray | None:
+    """A reconstruction's per-person output of the last frame (P, ...), or None when it has none for P persons."""
+    return values if values is not None and len(values) == persons else None
 
 
 @dataclass
@@ -63,6 +68,14 @@ class MultiViewPipeline:
         self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
 
+    def _reconstruct(self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray) -> np.ndarray:
+        """The reconstruction of a frame: (V, P, J, 3), (V, P, 4) -> (P, J, 4); a reconstruction that takes
+        ``skeletons`` (the MAP) gets the tracker's bone lengths of the tracks its persons would join."""
+        skeletons = getattr(self.tracker, "skeletons", None)
+        if skeletons is not None and getattr(self.reconstructor, "takes_skeletons", False):
+            return self.reconstructor(poses2d, bboxes, self.rig, skeletons=lambda poses: skeletons(frame, poses))
+        return self.reconstructor(poses2d, bboxes, self.rig)
+
     def __call__(self, frame: Frame) -> FrameResult:
         """Reconstruct one frame: Frame with V views -> FrameResult."""
         if len(frame.views) != len(self.rig):
@@ -71,13 +84,13 @@ class MultiViewPipeline:
         assignment = self.matcher(frame.views, self.rig)
         t1 = time.perf_counter()
         poses2d, bboxes = gather_views(frame.views, assignment)
-        poses3d = self.reconstructor(poses2d, bboxes, self.rig) if len(assignment) else np.zeros((0, poses2d.shape[2], 4))
+        poses3d = self._reconstruct(frame.index, poses2d, bboxes) if len(assignment) else np.zeros((0, poses2d.shape[2], 4))
         t2 = time.perf_counter()
         ids = None
-        if self.tracker is not None:           # the reconstruction's joint variances, where it has them
-            variance = getattr(self.reconstructor, "last_joint_variance", None)
-            variance = variance if variance is not None and variance.shape == poses3d.shape[:2] else None
-            ids, poses3d = self.tracker.update(frame.index, poses3d, variance)
+        if self.tracker is not None:           # the reconstruction's joint variances and bones, where it has them
+            variance = _of_frame(getattr(self.reconstructor, "last_joint_variance", None), len(poses3d))
+            bones = _of_frame(getattr(self.reconstructor, "last_bone_lengths", None), len(poses3d))
+            ids, poses3d = self.tracker.update(frame.index, poses3d, variance, bones)
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
         if self.tracker is not None:

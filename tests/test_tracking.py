@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -9,7 +10,8 @@ import pytest
 from data.bone_lengths import BONE_PAIRS
 from data.synthetic.body import mean_body, pose_joints
 from tracking import Tracker
-from tracking.tracker import CORE_JOINTS, mean_distances
+from reconstruction.map_solver import combine_estimates
+from tracking.tracker import CORE_JOINTS, mean_distances, robust_lengths
 from tracking.metrics import IdentityEvaluator
 
 FPS = 25.0
@@ -221,3 +223,58 @@ def test_the_map_reports_each_joints_variance_for_the_tracker():
     many[[9, 10]] = False                                 # seen in 4 views: the likelihood fixes them
     assert np.all(np.isfinite(var[many])) and np.all(out[4.0][0, many] > 4 * var[many])
     assert 10 * var[many].max() < var[9] < 0.03 ** 2      # one view: the bone tie fixes its depth
+
+
+def test_robust_lengths_match_numpys_nanmedian():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(7, 31, 5))
+    x[rng.random(x.shape) < 0.3] = np.nan
+    x[0, :, 0] = np.nan
+    median, sd, count = robust_lengths(x, axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ref = np.nanmedian(x, axis=1)
+        mad = np.nanmedian(np.abs(x - ref[:, None]), axis=1)
+    np.testing.assert_allclose(median, ref, equal_nan=True)
+    np.testing.assert_allclose(sd, np.where(count > 1, 1.4826 * mad, np.nan), equal_nan=True)
+    np.testing.assert_array_equal(count, np.isfinite(x).sum(axis=1))
+
+
+def test_precision_weighted_combination_of_two_bone_estimates():
+    mean, sd = combine_estimates(np.array([[0.30, 0.40]]), np.array([[0.02, 0.02]]),
+                                 np.array([[0.34, np.nan]]), np.array([[0.01, 0.01]]))
+    np.testing.assert_allclose(mean, [[(0.30 / 4e-4 + 0.34 / 1e-4) / (1 / 4e-4 + 1 / 1e-4), 0.40]])
+    np.testing.assert_allclose(sd, [[1 / np.sqrt(1 / 4e-4 + 1 / 1e-4), 0.02]])
+
+
+def test_a_tracked_persons_own_skeleton_sharpens_the_maps_bones():
+    from data.synthetic.observe import bbox_from_keypoints
+    from data.synthetic.rigs import ring_rig
+    from reconstruction.map_solver import MLEMAPReconstruction
+    from reconstruction.pipeline import MultiViewPipeline
+
+    rig = ring_rig(3, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
+    a, b = BONE_PAIRS[:, 0], BONE_PAIRS[:, 1]
+    errors, measured = {}, []
+    for tracked in (False, True):
+        rng = np.random.default_rng(7)
+        tracker, rec = Tracker(smooth=False), MLEMAPReconstruction()
+        pipe = MultiViewPipeline(rig, None, rec, tracker if tracked else None)
+        err = []
+        for f in range(30):
+            truth = _walker((-0.5, 0.0), 0.3, 0.0, f, scale=1.15, walking=False)[:, :3]   # 15 % above the table
+            true_bones = np.linalg.norm(truth[a] - truth[b], axis=-1)
+            uv = rig.project(truth[None]) + rng.normal(0, 4.0, (3, 1, 23, 2))
+            poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
+            boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
+            out = pipe._reconstruct(f, poses2d, boxes)
+            if tracked:
+                tracker.update(f, out, rec.last_joint_variance, rec.last_bone_lengths)
+                measured.append(np.abs(rec.last_bone_lengths[0] - true_bones).mean())
+            if f >= 20:
+                err.append(np.abs(np.linalg.norm(out[0, a, :3] - out[0, b, :3], axis=-1) - true_bones).mean())
+        errors[tracked] = np.mean(err)
+    median, _, count = tracker.tracks[0].bone_lengths()
+    assert np.all(count == 30)
+    assert np.abs(median - true_bones).mean() < 0.5 * np.mean(measured)   # the track knows the body better
+    assert errors[True] < errors[False]                                   # and the MAP's bones follow

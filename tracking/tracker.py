@@ -80,15 +80,25 @@ class Track:
         return robust_lengths(self.bones)
 
 
-def robust_lengths(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Median, MAD-based SD and count of each column, NaN = not observed: (n, L) -> (L,) x3 (NaN where none)."""
-    lengths = np.asarray(lengths, dtype=np.float64)
-    count = np.isfinite(lengths).sum(axis=0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)    # all-NaN columns: bones never seen
-        median = np.nanmedian(lengths, axis=0) if len(lengths) else np.full(lengths.shape[1], np.nan)
-        mad = np.nanmedian(np.abs(lengths - median), axis=0) if len(lengths) else median
+def robust_lengths(lengths: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Median, MAD-based SD and count along an axis, NaN = not observed: e.g. (n, L) -> (L,) x3, or
+    (K, n, L) with axis 1 -> (K, L) x3; median and SD NaN where nothing was observed."""
+    lengths = np.moveaxis(np.asarray(lengths, dtype=np.float64), axis, -1)
+    count = np.isfinite(lengths).sum(axis=-1)
+    median = _sorted_median(lengths, count)
+    mad = _sorted_median(np.abs(lengths - median[..., None]), count)
     return median, np.where(count > 1, MAD_TO_SD * mad, np.nan), count
+
+
+def _sorted_median(values: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Median of the finite values along the last axis, NaN last after sorting: (..., n), (...) -> (...)."""
+    ordered = np.sort(values, axis=-1)                     # NaN sort to the end
+    lo = np.maximum(count - 1, 0) // 2
+    hi = np.minimum(count // 2, max(values.shape[-1] - 1, 0))
+    if values.shape[-1] == 0:
+        return np.full(count.shape, np.nan)
+    pick = lambda k: np.take_along_axis(ordered, k[..., None], axis=-1)[..., 0]  # noqa: E731
+    return np.where(count > 0, 0.5 * (pick(lo) + pick(hi)), np.nan)
 
 
 @dataclass
@@ -190,7 +200,8 @@ class Tracker:
     def __init__(self, max_distance_m: float = 0.5, gate_growth_m: float = 0.1, min_hits: int = 3,
                  max_age: int = 10, accel_sd_m: float = 0.05, measurement_sd_m: float = 0.03,
                  velocity_sd_m: float = 0.5, bone_window: int = 100, smooth: bool = True,
-                 smooth_rate: float = 0.3, smooth_floor_m: float = 0.001, smooth_initial_m: float = 0.01) -> None:
+                 smooth_rate: float = 0.3, smooth_floor_m: float = 0.001, smooth_initial_m: float = 0.01,
+                 skeleton_min_frames: int = 5) -> None:
         if not min(max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m) > 0 or not gate_growth_m >= 0:
             raise ValueError("tracking: max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m must be > 0 and "
                              f"gate_growth_m >= 0; got {max_distance_m}, {accel_sd_m}, {measurement_sd_m}, "
@@ -205,6 +216,7 @@ class Tracker:
             raise ValueError(f"tracking: need 0 < smooth_rate <= 1, smooth_floor_m > 0, smooth_initial_m > 0; got "
                              f"{smooth_rate}, {smooth_floor_m}, {smooth_initial_m}")
         self.smooth, self.smooth_rate = bool(smooth), float(smooth_rate)
+        self.skeleton_min_frames = int(skeleton_min_frames)     # 0: the tracks' skeletons are never offered
         self.smooth_floor2, self.smooth_q0 = float(smooth_floor_m) ** 2, float(smooth_initial_m) ** 2
         self.state: TrackState | None = None
         self.last_frame: int | None = None
@@ -220,12 +232,14 @@ class Tracker:
                       int(st.last_frame[t]), int(st.hits[t]), bool(st.confirmed[t]),
                       st.bones[t][np.isfinite(st.bones[t]).any(axis=1)]) for t in range(len(st))]
 
-    def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None) -> Tracked:
+    def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None,
+               bone_lengths: np.ndarray | None = None) -> Tracked:
         """Associate one frame's persons with the tracks and update them: (P, J, 4), per-joint variance (P, J)
         m^2 of the reconstruction -> Tracked(ids (P,), poses3d (P, J, 4)), the poses smoothed over time where
         ``smooth`` and variances are given (a new track's as given). Without variances (a reconstruction that
         has none, e.g. reconstruction=vanilla) the poses pass through and the motion filter takes
-        ``measurement_sd_m`` for every joint.
+        ``measurement_sd_m`` for every joint. ``bone_lengths`` (P, L) m, NaN where unmeasured: the bones the
+        reconstruction measured (before its prior), which the tracks keep instead of the output poses'.
 
         Frame numbers must increase; a gap counts as missed frames for every track.
         """
@@ -238,6 +252,7 @@ class Tracker:
             raise ValueError(f"tracking: poses must be (P, J, 4), got {poses3d.shape}")
         smooth = self.smooth and variance is not None          # without variances nothing to weigh: ids only
         variance = self._variance(variance, poses3d)
+        bones = self._bones(bone_lengths, poses3d, variance)
         if self.state is None:
             self.state = TrackState.empty(poses3d.shape[1], self.bone_window)
         self.last_frame = frame
@@ -246,7 +261,7 @@ class Tracker:
         ids = np.full(len(poses3d), -1, dtype=np.int64)
         out = poses3d.copy()
         if len(tracks):
-            self._correct(st, tracks, frame, poses3d[persons], variance[persons])
+            self._correct(st, tracks, frame, poses3d[persons], variance[persons], bones[persons])
             ids[persons] = st.ids[tracks]
             if smooth:                         # confirmed tracks only: a new one may be a wrong match
                 use = (poses3d[persons, :, 3:] > 0) & st.confirmed[tracks, None, None]
@@ -258,9 +273,40 @@ class Tracker:
         if len(born):
             ids[born] = np.arange(self._next_id, self._next_id + len(born))
             self._next_id += len(born)
-            st = st.extend(self._births(ids[born], frame, poses3d[born], variance[born]))
+            st = st.extend(self._births(ids[born], frame, poses3d[born], variance[born], bones[born]))
         self.state = st
         return Tracked(ids, out)
+
+    def skeletons(self, frame: int, poses3d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The bone lengths of the confirmed track each person of a coming frame would join, without updating:
+        (P, J, 4) -> median (P, L) m and its standard error (P, L) m (MAD-based SD / sqrt(count)); NaN / inf
+        where the person joins no confirmed track or a bone was seen in fewer than skeleton_min_frames frames."""
+        median = np.full((len(poses3d), len(BONE_PAIRS)), np.nan)
+        se = np.full(median.shape, np.inf)
+        stale = self.last_frame is not None and frame <= self.last_frame
+        if self.state is None or not len(self.state) or not self.skeleton_min_frames or stale:
+            return median, se
+        st = self.state.select(self._alive(self.state, frame - 1))
+        tracks, persons = self._associate(st, frame, np.asarray(poses3d, dtype=np.float64))
+        keep = st.confirmed[tracks]
+        tracks, persons = tracks[keep], persons[keep]
+        if len(tracks):
+            m, sd, count = robust_lengths(st.bones[tracks], axis=1)
+            ok = count >= self.skeleton_min_frames
+            median[persons] = np.where(ok, m, np.nan)
+            se[persons] = np.where(ok & np.isfinite(sd), sd / np.sqrt(np.maximum(count, 1)), np.inf)
+        return median, se
+
+    @staticmethod
+    def _bones(lengths: np.ndarray | None, poses3d: np.ndarray, variance: np.ndarray) -> np.ndarray:
+        """The bone lengths each person adds to its track (P, L): the given ones, else those of the joints the
+        reconstruction measured (variance below UNSEEN_VAR_M2)."""
+        if lengths is not None:
+            lengths = np.asarray(lengths, dtype=np.float64)
+            if lengths.shape != (len(poses3d), len(BONE_PAIRS)):
+                raise ValueError(f"tracking: bone lengths {lengths.shape} do not match {len(poses3d)} poses")
+            return lengths
+        return bone_lengths_of(np.where((variance < UNSEEN_VAR_M2)[..., None], poses3d, 0.0))
 
     def _variance(self, variance: np.ndarray | None, poses3d: np.ndarray) -> np.ndarray:
         """The joints' measurement variances (P, J) m^2: the given ones where finite and > 0 (at most
@@ -303,12 +349,13 @@ class Tracker:
         n = np.maximum(use.sum(axis=1), 1)[:, None]
         return np.where(use[..., None], st.velocity, 0.0).sum(axis=1) / n
 
-    def _births(self, ids: np.ndarray, frame: int, poses3d: np.ndarray, variance: np.ndarray) -> TrackState:
+    def _births(self, ids: np.ndarray, frame: int, poses3d: np.ndarray, variance: np.ndarray,
+                lengths: np.ndarray) -> TrackState:
         """Tentative tracks at persons' joints: ids (B,), (B, J, 4), joint variances (B, J) -> B tracks."""
         B, J = poses3d.shape[:2]
         seen = poses3d[..., 3] > 0
         bones = np.full((B, self.bone_window, len(BONE_PAIRS)), np.nan)
-        bones[:, 0] = bone_lengths_of(np.where((variance < UNSEEN_VAR_M2)[..., None], poses3d, 0.0))
+        bones[:, 0] = lengths
         return TrackState(ids.astype(np.int64), np.where(seen[..., None], poses3d[..., :3], 0.0), np.zeros((B, J, 3)),
                           np.full((B, J), self.r2), np.zeros((B, J)), np.full((B, J), self.v2), seen,
                           np.full(B, frame, dtype=np.int64), np.ones(B, dtype=np.int64),
@@ -317,7 +364,7 @@ class Tracker:
                           np.full((B, J), self.smooth_q0), seen & (variance < UNSEEN_VAR_M2))
 
     def _correct(self, st: TrackState, tracks: np.ndarray, frame: int, poses3d: np.ndarray,
-                 variance: np.ndarray) -> None:
+                 variance: np.ndarray, lengths: np.ndarray) -> None:
         """Kalman predict over the frames since each track's last hit, then update with the observed joints
         (a joint seen for the first time starts there): tracks (K,), poses (K, J, 4), variances (K, J); st
         changed in place (the motion filter, then the smoother, then the bone lengths)."""
@@ -343,7 +390,7 @@ class Tracker:
         st.last_frame[tracks] = frame
         st.hits[tracks] += 1
         st.confirmed[tracks] |= st.hits[tracks] >= self.min_hits
-        st.bones[tracks, st.slot[tracks]] = bone_lengths_of(np.where(obs[..., None], poses3d, 0.0))
+        st.bones[tracks, st.slot[tracks]] = lengths
         st.slot[tracks] = (st.slot[tracks] + 1) % self.bone_window
 
     def _smooth(self, st: TrackState, tracks: np.ndarray, dt: np.ndarray, poses3d: np.ndarray,
