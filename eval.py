@@ -91,6 +91,14 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     return report
 
 
+def _why_missing(name: str, value: float) -> str:
+    """The reason printed beside a COCO metric of -1 (pycocotools' value when nothing could be scored)."""
+    if value != -1:
+        return ""
+    subset = name.split("_", 1)[-1]
+    return f"  (-1: the set has no annotated {subset} keypoints to score)"
+
+
 def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
     """Evaluate the 2D checkpoint cfg.checkpoint (evaluation/pose2d_eval.py), print and return its metrics;
     a missing or bad file stops with one line."""
@@ -101,7 +109,7 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
     except (FileNotFoundError, ValueError) as err:
         raise SystemExit(f"error: {err}") from None
     text = (f"{cfg.checkpoint} ({cfg.pose2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person "
-            "area\n" + "\n".join(f"  {k:8s} {v:.4f}" for k, v in metrics.items()))
+            "area\n" + "\n".join(f"  {k:8s} {v:.4f}" + _why_missing(k, v) for k, v in metrics.items()))
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
     print(f"{text}\n\nWrote {out_dir / cfg.pose2d.output}, {cfg.pose2d.results_file}, {cfg.metrics_file} and "
           f"{cfg.report_file}")

@@ -113,3 +113,8 @@ def test_a_frame_to_draw_that_is_not_reconstructed_is_reported_after_the_report(
     assert "MPJPE all 23 joints (mm)" in proc.stdout
     report = (tmp_path / "report.txt").read_text()
     assert "MPJPE all 23 joints (mm)" in report and report.strip() in proc.stdout
+
+
+def test_a_2d_metric_of_minus_one_says_why():
+    assert "no annotated foot keypoints" in eval_script._why_missing("AP_foot", -1.0)
+    assert eval_script._why_missing("AP_foot", 0.42) == ""

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+from tqdm import tqdm
 
 from data.multiview import Frame, Sequence
 from data.synthetic.config import SyntheticConfig
@@ -11,6 +12,7 @@ from data.synthetic.scene import scene_poses, simulate_scene
 from reconstruction.camera import Rig
 
 RING_CLEARANCE_M = 4.0  # default ring radius: the area's half diagonal plus this
+PROGRESS_MIN_WORK = 200  # persons x cameras per frame from which building the frames shows a bar (on a terminal)
 
 
 def build_rig(cfg: SyntheticConfig, area: tuple[float, float, float, float]) -> Rig:
@@ -38,7 +40,9 @@ def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
         rig = build_rig(cfg, scene.area)
     poses = scene_poses(scene)
     frames = []
-    for f, frame_seed in enumerate(render_seed.spawn(scene.num_frames)):
+    seeds = render_seed.spawn(scene.num_frames)
+    for f, frame_seed in enumerate(tqdm(seeds, desc="synthetic frames", unit="frame", leave=False,
+                                        disable=None if scene.num_persons * len(rig) >= PROGRESS_MIN_WORK else True)):
         rng = np.random.default_rng(frame_seed)
         ids = np.flatnonzero(scene.present[f])
         views = [observe_view(cam, poses[f, ids], ids, cfg, rng) for cam in rig]
