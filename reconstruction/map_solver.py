@@ -334,7 +334,7 @@ class MAPReconstruction:
             raise ValueError(f"sigma_px and score_power must be >= 0, got {sigma_px}, {score_power}")
         self.sigma_px, self.score_power = float(sigma_px), float(score_power)
         self.fix_swaps, self.last_swaps = bool(fix_swaps), 0
-        self.last_joint_variance = np.zeros((0, 0))    # (P, J) m^2 of the last call (the tracker's measurement noise)
+        self._variance_inputs: tuple = ((0, 0), None)  # what last_joint_variance is computed from, on demand
         self.takes_skeletons = self.bone_prior == "adaptive"     # the tracker's bone lengths refine the prior
         self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))  # (P, L) m measured by the last MLE, NaN unmeasured
         self._bone_measurements: np.ndarray | None = None
@@ -387,7 +387,7 @@ class MAPReconstruction:
         X, placed = initial_poses(dlt, poses2d_und, proj)
         idx = np.flatnonzero(placed)
         if len(idx) == 0:
-            self.last_joint_variance = np.full(X.shape[:2], np.inf)
+            self._variance_inputs = (X.shape[:2], None)
             self.last_bone_lengths = np.full((len(X), len(BONE_PAIRS)), np.nan)
             return X, dlt, placed
         und, uv, inv_sigma = poses2d_und[:, idx], uv[:, idx], inv_sigma[:, idx]
@@ -404,12 +404,24 @@ class MAPReconstruction:
             Xp, _ = solve_fn(problem, Xp, self.max_iterations, self.xtol, self.ftol)
         X = X.copy()
         X[idx] = Xp
-        self.last_joint_variance = np.full(X.shape[:2], np.inf)
-        self.last_joint_variance[idx] = self._joint_variance(Xp, uv, inv_sigma, proj)
+        self._variance_inputs = (X.shape[:2], (idx, Xp, uv, inv_sigma, proj))
         self.last_bone_lengths = np.full((len(X), len(BONE_PAIRS)), np.nan)
         if self._bone_measurements is not None:
             self.last_bone_lengths[idx] = self._bone_measurements
         return X, dlt, placed
+
+    @property
+    def last_joint_variance(self) -> np.ndarray:
+        """Per-axis variance (P, J) m^2 of every joint of the last call (see :meth:`_joint_variance`; inf for a
+        person not placed), computed when asked (a tracker's measurement noise) and kept."""
+        shape, inputs = self._variance_inputs
+        if isinstance(inputs, np.ndarray) or inputs is None:
+            return np.full(shape, np.inf) if inputs is None else inputs
+        idx, X, uv, inv_sigma, proj = inputs
+        out = np.full(shape, np.inf)
+        out[idx] = self._joint_variance(X, uv, inv_sigma, proj)
+        self._variance_inputs = (shape, out)
+        return out
 
     def _joint_variance(self, X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray) -> np.ndarray:
         """Per-axis variance (m^2, a third of the covariance's trace) of every joint, at each person's noise scale:
@@ -464,7 +476,7 @@ class MAPReconstruction:
         und = rig.undistort(poses2d)
         P, J = und.shape[1:3]
         if P == 0:
-            self.last_joint_variance = np.zeros((0, J))
+            self._variance_inputs = ((0, J), None)
             self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))
             return np.zeros((0, J, 4))
         X, dlt, placed = self.solve(und, bboxes, rig.projection_matrices(), self.stages(), skeletons)
