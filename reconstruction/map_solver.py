@@ -338,6 +338,7 @@ class MAPReconstruction:
         self.takes_skeletons = self.bone_prior == "adaptive"     # the tracker's bone lengths refine the prior
         self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))  # (P, L) m measured by the last MLE, NaN unmeasured
         self._bone_measurements: np.ndarray | None = None
+        self._mle_information: np.ndarray | None = None
         self.bone_mean, self.bone_std = resolve_bone_table(bone_table)
         self.proportion_sd = proportion_sds(self.bone_mean, self.bone_std, ABSOLUTE_SD_M)
         self.robust, self.robust_scale = robust, float(robust_scale)
@@ -392,7 +393,7 @@ class MAPReconstruction:
             return X, dlt, placed
         und, uv, inv_sigma = poses2d_und[:, idx], uv[:, idx], inv_sigma[:, idx]
         Xp = X[idx]
-        self._bone_measurements = None
+        self._bone_measurements = self._mle_information = None
         solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
         for k, prior in enumerate(stages):
             if k == 0:
@@ -425,11 +426,14 @@ class MAPReconstruction:
 
     def _joint_variance(self, X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray) -> np.ndarray:
         """Per-axis variance (m^2, a third of the covariance's trace) of every joint, at each person's noise scale:
-        (P, J, 3), (V, P, J, 2), (V, P, J), (V, 3, 4) -> (P, J). The likelihood's information, plus for a joint
+        (P, J, 3), (V, P, J, 2), (V, P, J), (V, 3, 4) -> (P, J). The likelihood's information (at the MLE poses
+        where the MAP had them), plus for a joint
         seen in one view the bone tie along every axis (the prior fixes its depth); inf for a joint no view sees."""
-        scale = (noise_scale(X, uv, inv_sigma, proj, self.min_noise_scale) if self.noise_scale == "estimate"
-                 else np.ones(len(X)))
-        info = joint_information(X, proj, inv_sigma / scale[None, :, None])
+        info = self._mle_information       # at the MLE poses, with the person's noise scale (the MAP is close)
+        if info is None or len(info) != len(X):
+            scale = (noise_scale(X, uv, inv_sigma, proj, self.min_noise_scale) if self.noise_scale == "estimate"
+                     else np.ones(len(X)))
+            info = joint_information(X, proj, inv_sigma / scale[None, :, None])
         views = (inv_sigma > 0).sum(axis=0)
         tie = np.where(views == 1, 1.0 / self.bone_tie_sd_m ** 2, 0.0) if self.prior_weight > 0 else 0.0 * views
         info = info + tie[..., None, None] * np.eye(3)
@@ -451,6 +455,7 @@ class MAPReconstruction:
         if self.bone_prior == "population":
             return self._problem(uv, inv_sigma, proj, anchor, True)
         info = joint_information(mle, proj, inv_sigma)
+        self._mle_information = info            # the joints' information, kept for last_joint_variance
         measured = (inv_sigma > 0).sum(axis=0) >= 2
         lengths, variances = bone_variances(mle, info, BONE_PAIRS, measured)
         self._bone_measurements = np.where(np.isfinite(variances), lengths, np.nan)
