@@ -53,6 +53,11 @@ def check_sequence(cfg: DictConfig, sequence) -> None:
     if len(sequence.rig) < 2:
         key = "dataset.num_cameras" if "num_cameras" in cfg.dataset else "dataset"
         raise ConfigError(f"{key}: the rig has {len(sequence.rig)} camera; triangulation needs at least 2")
+    numbers = [f.index for f in sequence.frames]
+    back = next((i for i in range(1, len(numbers)) if numbers[i] <= numbers[i - 1]), None)
+    if cfg.tracking.get("_target_") and back is not None:
+        raise ConfigError(f"dataset.frames: frame {numbers[back]} comes after frame {numbers[back - 1]}; tracking needs "
+                          "increasing frame numbers (sort or de-duplicate the frames, or tracking=off)")
 
 
 def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:

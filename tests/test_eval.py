@@ -118,3 +118,18 @@ def test_a_frame_to_draw_that_is_not_reconstructed_is_reported_after_the_report(
 def test_a_2d_metric_of_minus_one_says_why():
     assert "no annotated foot keypoints" in eval_script._why_missing("AP_foot", -1.0)
     assert eval_script._why_missing("AP_foot", 0.42) == ""
+
+
+def test_frames_out_of_order_stop_a_tracked_run_with_one_line(tmp_path):
+    from data.poses2d_io import write_poses2d
+    from data.synthetic import SyntheticConfig, generate_sequence
+    from reconstruction.calibration import save_cameras_json
+
+    seq = generate_sequence(SyntheticConfig(num_persons=2, num_frames=3, num_cameras=3, seed=1))
+    save_cameras_json(seq.rig, tmp_path / "cameras.json")
+    write_poses2d(tmp_path / "poses2d.json", {f.index: f.views for f in seq.frames}, seq.rig.names)
+    files = ["dataset=files", f"dataset.cameras={tmp_path / 'cameras.json'}",
+             f"dataset.poses2d={tmp_path / 'poses2d.json'}", "dataset.frames=2:-1:-1"]
+    with pytest.raises(eval_script.ConfigError, match="frame 1 comes after frame 2"):
+        run_eval(tmp_path, files)
+    run_eval(tmp_path, [*files, "tracking=off"])          # every frame on its own: any order
