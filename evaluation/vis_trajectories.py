@@ -34,7 +34,8 @@ def ground_tracks(frames: list[SequenceFrame]) -> dict[int, np.ndarray]:
 
 def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> Figure:
     """The top view of (frame, poses (P, 23, 4), ids (P,) or None) tuples: a path per id (broken where
-    it is absent), start (circle) and end (square) marked, cameras as named triangles with an arrow."""
+    it is absent; dots without tracking), start (ring) and end (square) marked, cameras as named triangles
+    with an arrow along the viewing direction."""
     seq, tracked = sequence_frames(frames)
     tracks = ground_tracks(seq)
     colors = id_colors(tracks)
@@ -44,7 +45,10 @@ def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> F
         seen = np.flatnonzero(np.isfinite(xy).all(axis=1))
         if not len(seen):
             continue
-        ax.plot(*xy.T, color=colors[i], linewidth=1.5)     # NaN rows break the line
+        if tracked:
+            ax.plot(*xy.T, color=colors[i], linewidth=1.5)     # NaN rows break the line
+        else:       # an id is an index in each frame: joining them would join different persons
+            ax.plot(*xy.T, color=colors[i], marker=".", markersize=3, linestyle="none")
         ax.plot(*xy[seen[-1]], marker=END_MARKER, color=colors[i], markersize=END_SIZE, linestyle="none")
         ax.plot(*xy[seen[0]], marker=START_MARKER, color=colors[i], markersize=START_SIZE, markerfacecolor="none",
                 linestyle="none")                       # a ring over the end: a standing person shows both
@@ -61,8 +65,8 @@ def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> F
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
-    kind = "track" if tracked else "per-frame id (tracking off)"
-    ax.set_title(title or f"ground trajectories of the root (mid-hip), {len(tracks)} {kind}s, {len(seq)} frames")
+    kind = "tracks" if tracked else "per-frame ids (tracking off)"
+    ax.set_title(title or f"ground trajectories of the root (mid-hip), {len(tracks)} {kind}, {len(seq)} frames")
     handles = [Line2D([], [], marker=START_MARKER, color="black", markersize=START_SIZE, markerfacecolor="none",
                       linestyle="none", label="start"),
                Line2D([], [], marker=END_MARKER, color="black", markersize=END_SIZE, linestyle="none", label="end"),

@@ -20,7 +20,7 @@ from data.synthetic.rigs import ring_rig  # noqa: E402
 from evaluation.sequence_data import id_colors, pose_roots  # noqa: E402
 from evaluation.sequence_html import UNTRACKED_NOTE, camera_glyph  # noqa: E402
 from evaluation.sequence_view import main, plot_trajectories, write_sequence_html  # noqa: E402
-from evaluation.vis_trajectories import DPI, FIGSIZE_IN  # noqa: E402
+from evaluation.vis_trajectories import DPI, FIGSIZE_IN, trajectories_figure  # noqa: E402
 from tests.test_eval import run_eval  # noqa: E402
 
 DATA = re.compile(r'<script type="application/json" id="sequence-data">(.*?)</script>', re.S)
@@ -175,3 +175,13 @@ def test_eval_with_vis_sequence_writes_the_viewer_and_the_trajectories(tmp_path)
     assert [f["frame"] for f in data["frames"]] == [f for f, _, _ in written] and len(written) == 3
     assert [f["ids"] for f in data["frames"]] == [ids.tolist() for _, _, ids in written]
     assert data["tracked"] and mpimg.imread(png).shape[:2] == (800, 1000)
+
+
+def test_without_tracking_the_trajectories_are_dots_not_paths_joining_different_persons(tmp_path):
+    frames = _walkers(12)
+    fig_tracked = trajectories_figure(frames, ring_rig(4, 6.0, 2.5))
+    fig_untracked = trajectories_figure([(f, p, None) for f, p, _ in frames], ring_rig(4, 6.0, 2.5))
+    styles = [{line.get_linestyle() for line in fig.axes[0].lines if line.get_marker() in ("None", ".")}
+              for fig in (fig_tracked, fig_untracked)]
+    assert styles == [{"-"}, {"None"}]
+    assert "tracking off" in fig_untracked.axes[0].get_title()
