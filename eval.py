@@ -26,6 +26,7 @@ from data.poses_io import write_poses3d
 from data.run_folders import register_resolvers
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
+from evaluation.sequence_view import save_sequence_pictures
 from evaluation.visualize import save_run_pictures
 from data.poses2d_io import Poses2DError
 from reconstruction.calibration import CalibrationError
@@ -43,8 +44,9 @@ def check_config(cfg: DictConfig) -> None:
     """Stop with one line naming the key when a top-level or evaluation value has the wrong type or range."""
     check_number(cfg, "evaluation.max_dist_m")
     check_number(cfg, "evaluation.alpha")
+    check_number(cfg, "vis_sequence_max_mb")
     check_int(cfg, "vis_frame", 0, nullable=True)
-    for key in ("vis", "progress", "overwrite"):
+    for key in ("vis", "vis_sequence", "progress", "overwrite"):
         check_bool(cfg, key)
 
 
@@ -93,6 +95,13 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
             raise ConfigError(f"vis_frame={cfg.vis_frame}: {err}; no pictures drawn (the outputs and the report "
                               "above are written)") from None
         print("Pictures: " + ", ".join(str(p) for p in pictures))
+    if cfg.vis_sequence and not report.results:
+        print("Pictures over time: none, no frame was reconstructed")
+    elif cfg.vis_sequence:
+        title = f"{sequence.meta.get('description', 'dataset')}: {out_dir.name}"
+        pictures = save_sequence_pictures(out_dir / cfg.vis_dir, report.results, sequence.rig, title,
+                                          cfg.vis_sequence_max_mb)
+        print("Pictures over time: " + ", ".join(str(p) for p in pictures))
     return report
 
 

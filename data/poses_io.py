@@ -31,10 +31,17 @@ def write_poses3d(path: str | Path, frames: Iterable[tuple], camera_names: list[
     atomic_write_text(path, json.dumps(poses3d_document(frames, camera_names)))
 
 
-def read_poses3d(path: str | Path) -> dict[int, np.ndarray]:
-    """Read poses3d.json: {frame: (P, 23, 4) x, y, z, score}."""
+def read_poses3d_frames(path: str | Path) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """Read poses3d.json keeping the ids, in file order: [(frame, poses (P, 23, 4) x, y, z, score, ids (P,))]."""
     doc = json.loads(Path(path).read_text())
     if doc.get("units") != "m" or len(doc.get("keypoints", [])) != len(COCO23_NAMES):
         raise ValueError(f"{path}: not a poses3d.json with 23 keypoints in metres")
-    return {int(f["frame"]): np.array([p["keypoints"] for p in f["poses"]], dtype=np.float64).reshape(-1, 23, 4)
-            for f in doc["frames"]}
+    return [(int(f["frame"]),
+             np.array([p["keypoints"] for p in f["poses"]], dtype=np.float64).reshape(-1, 23, 4),
+             np.array([p["id"] for p in f["poses"]], dtype=np.int64))
+            for f in doc["frames"]]
+
+
+def read_poses3d(path: str | Path) -> dict[int, np.ndarray]:
+    """Read poses3d.json: {frame: (P, 23, 4) x, y, z, score}."""
+    return {frame: poses for frame, poses, _ in read_poses3d_frames(path)}
