@@ -12,6 +12,8 @@ for what the model leaves out (foot size, joints above the ground, calibration).
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from reconstruction.camera import Camera, apply_homography
@@ -41,6 +43,15 @@ def image_to_plane_homography(camera: Camera, height: float = 0.0) -> np.ndarray
     except np.linalg.LinAlgError:
         return None
     return normalized(H) if np.all(np.isfinite(H)) else None
+
+
+@lru_cache(maxsize=256)
+def cached_image_to_plane(camera: Camera, height: float) -> np.ndarray | None:
+    """:func:`image_to_plane_homography`, computed once per (camera, height): cameras are immutable; read-only."""
+    H = image_to_plane_homography(camera, height)
+    if H is not None:
+        H.flags.writeable = False
+    return H
 
 
 def homography_jacobian(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -76,7 +87,7 @@ def joints_on_planes(camera: Camera, uv: np.ndarray, heights: np.ndarray,
     J = np.zeros(uv.shape + (2,))
     for h in np.unique(heights):
         cols = heights == h
-        H = image_to_plane_homography(camera, float(h))
+        H = cached_image_to_plane(camera, float(h))
         if H is None:  # camera centre on this plane: its joints have no place on it (dropped as unusable)
             xy[:, cols] = np.nan
             J[:, cols] = np.nan
