@@ -51,6 +51,7 @@ CORE_JOINTS = np.array([0, 1, 2, 3, 4, 5, 6, 11, 12])
 # m^2: variance of a joint no view sees, placed by the reconstruction's bone prior alone (a bone's direction is
 # unknown: about 15 cm); the motion filter does not take such a joint as a measurement
 UNSEEN_VAR_M2 = 0.15 ** 2
+SKELETON_REFRESH = 5  # hits between two updates of a track's robust skeleton (it changes slowly)
 BODY_SPAN_M = 1.0    # m: the centres of any two subsets of one body's head and trunk joints lie this close
 
 
@@ -107,7 +108,9 @@ class TrackState:
     p11 (T, J) of (position, velocity), seen (T, J), last_frame, hits (T,), confirmed (T,), bones (T, W, L)
     ring buffer of bone lengths (NaN = none) with its next slot (T,); the smoothed joints sx (T, J, 3), their
     per-axis variance sp (T, J) and adaptive process variance sq (T, J) m^2 per frame; live (T, J): measured at
-    the last hit (association and the body's velocity use these: a joint unmeasured for a while drifts)."""
+    the last hit (association and the body's velocity use these: a joint unmeasured for a while drifts); the
+    skeleton's robust bone lengths skel_median, standard errors skel_se and counts skel_count (T, L), refreshed
+    every SKELETON_REFRESH hits."""
 
     ids: np.ndarray
     position: np.ndarray
@@ -125,6 +128,9 @@ class TrackState:
     sp: np.ndarray
     sq: np.ndarray
     live: np.ndarray
+    skel_median: np.ndarray
+    skel_se: np.ndarray
+    skel_count: np.ndarray
 
     @classmethod
     def empty(cls, joints: int, window: int) -> "TrackState":
@@ -133,7 +139,7 @@ class TrackState:
         return cls(z(dtype=np.int64), z(joints, 3), z(joints, 3), z(joints), z(joints), z(joints),
                    z(joints, dtype=bool), z(dtype=np.int64), z(dtype=np.int64), z(dtype=bool),
                    z(window, len(BONE_PAIRS)), z(dtype=np.int64), z(joints, 3), z(joints), z(joints),
-                   z(joints, dtype=bool))
+                   z(joints, dtype=bool), z(len(BONE_PAIRS)), z(len(BONE_PAIRS)), z(len(BONE_PAIRS), dtype=np.int64))
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -219,6 +225,7 @@ class Tracker:
         self.skeleton_min_frames = int(skeleton_min_frames)     # 0: the tracks' skeletons are never offered
         self.smooth_floor2, self.smooth_q0 = float(smooth_floor_m) ** 2, float(smooth_initial_m) ** 2
         self.state: TrackState | None = None
+        self._pairing: tuple | None = None      # (frame, persons, track ids, person indices) of skeletons()
         self.last_frame: int | None = None
         self._next_id = 0
 
@@ -257,7 +264,7 @@ class Tracker:
             self.state = TrackState.empty(poses3d.shape[1], self.bone_window)
         self.last_frame = frame
         st = self.state.select(self._alive(self.state, frame - 1))              # gone during a gap
-        tracks, persons = self._associate(st, frame, poses3d)
+        tracks, persons = self._reused_pairing(st, frame, len(poses3d)) or self._associate(st, frame, poses3d)
         ids = np.full(len(poses3d), -1, dtype=np.int64)
         out = poses3d.copy()
         if len(tracks):
@@ -288,13 +295,13 @@ class Tracker:
             return median, se
         st = self.state.select(self._alive(self.state, frame - 1))
         tracks, persons = self._associate(st, frame, np.asarray(poses3d, dtype=np.float64))
+        self._pairing = (frame, len(poses3d), st.ids[tracks], persons)       # update() reuses it for this frame
         keep = st.confirmed[tracks]
         tracks, persons = tracks[keep], persons[keep]
         if len(tracks):
-            m, sd, count = robust_lengths(st.bones[tracks], axis=1)
-            ok = count >= self.skeleton_min_frames
-            median[persons] = np.where(ok, m, np.nan)
-            se[persons] = np.where(ok & np.isfinite(sd), sd / np.sqrt(np.maximum(count, 1)), np.inf)
+            ok = st.skel_count[tracks] >= self.skeleton_min_frames
+            median[persons] = np.where(ok, st.skel_median[tracks], np.nan)
+            se[persons] = np.where(ok, st.skel_se[tracks], np.inf)
         return median, se
 
     @staticmethod
@@ -317,6 +324,16 @@ class Tracker:
         if variance.shape != poses3d.shape[:2]:
             raise ValueError(f"tracking: variances {variance.shape} do not match poses {poses3d.shape}")
         return np.where(np.isfinite(variance) & (variance > 0), np.minimum(variance, UNSEEN_VAR_M2), UNSEEN_VAR_M2)
+
+    def _reused_pairing(self, st: TrackState, frame: int, persons: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The assignment :meth:`skeletons` made for this frame's persons (from the MLE poses, before the MAP
+        moved them by millimetres), as track indices of st and person indices; None if there is none."""
+        pairing, self._pairing = self._pairing, None
+        if pairing is None or pairing[0] != frame or pairing[1] != persons:
+            return None
+        index = {int(i): t for t, i in enumerate(st.ids)}
+        tracks = np.array([index.get(int(i), -1) for i in pairing[2]], dtype=np.int64)
+        return (tracks, pairing[3]) if np.all(tracks >= 0) else None
 
     def _alive(self, st: TrackState, frame: int) -> np.ndarray:
         """Which tracks not hit after their last frame survive up to this frame: tentative ones die at once,
@@ -352,16 +369,17 @@ class Tracker:
     def _births(self, ids: np.ndarray, frame: int, poses3d: np.ndarray, variance: np.ndarray,
                 lengths: np.ndarray) -> TrackState:
         """Tentative tracks at persons' joints: ids (B,), (B, J, 4), joint variances (B, J) -> B tracks."""
-        B, J = poses3d.shape[:2]
+        (B, J), L = poses3d.shape[:2], len(BONE_PAIRS)
         seen = poses3d[..., 3] > 0
-        bones = np.full((B, self.bone_window, len(BONE_PAIRS)), np.nan)
+        bones = np.full((B, self.bone_window, L), np.nan)
         bones[:, 0] = lengths
         return TrackState(ids.astype(np.int64), np.where(seen[..., None], poses3d[..., :3], 0.0), np.zeros((B, J, 3)),
                           np.full((B, J), self.r2), np.zeros((B, J)), np.full((B, J), self.v2), seen,
                           np.full(B, frame, dtype=np.int64), np.ones(B, dtype=np.int64),
                           np.full(B, self.min_hits <= 1), bones, np.ones(B, dtype=np.int64) % self.bone_window,
                           np.where(seen[..., None], poses3d[..., :3], 0.0), np.where(seen, variance, 0.0),
-                          np.full((B, J), self.smooth_q0), seen & (variance < UNSEEN_VAR_M2))
+                          np.full((B, J), self.smooth_q0), seen & (variance < UNSEEN_VAR_M2),
+                          np.full((B, L), np.nan), np.full((B, L), np.inf), np.zeros((B, L), dtype=np.int64))
 
     def _correct(self, st: TrackState, tracks: np.ndarray, frame: int, poses3d: np.ndarray,
                  variance: np.ndarray, lengths: np.ndarray) -> None:
@@ -392,6 +410,11 @@ class Tracker:
         st.confirmed[tracks] |= st.hits[tracks] >= self.min_hits
         st.bones[tracks, st.slot[tracks]] = lengths
         st.slot[tracks] = (st.slot[tracks] + 1) % self.bone_window
+        refresh = tracks[st.hits[tracks] % SKELETON_REFRESH == 0]
+        if len(refresh):
+            median, sd, count = robust_lengths(st.bones[refresh], axis=1)
+            st.skel_median[refresh], st.skel_count[refresh] = median, count
+            st.skel_se[refresh] = np.where(np.isfinite(sd), sd / np.sqrt(np.maximum(count, 1)), np.inf)
 
     def _smooth(self, st: TrackState, tracks: np.ndarray, dt: np.ndarray, poses3d: np.ndarray,
                 variance: np.ndarray) -> None:
