@@ -145,7 +145,9 @@ class TrackState:
         return len(self.ids)
 
     def select(self, keep: np.ndarray) -> "TrackState":
-        """The tracks at the given indices or boolean mask."""
+        """The tracks at the given indices or boolean mask (these tracks themselves when the mask keeps all)."""
+        if keep.dtype == bool and keep.all():
+            return self
         return TrackState(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
     def extend(self, other: "TrackState") -> "TrackState":
