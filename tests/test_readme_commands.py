@@ -1,6 +1,6 @@
 """README's commands match the code: eval.py / train.py overrides compose, modules' --help work, fast ones run.
 
-Every ``python ...`` command of README.md (fenced code blocks, indented ones included, and inline code spans
+Every ``python ...`` command of README.md and the docs/*.md pages it links (fenced code blocks, indented ones included, and inline code spans
 in the prose) is collected with its line number. eval.py / train.py commands are composed with Hydra's
 compose API (not run); ``python -m X`` commands must import and answer ``--help``, which must list every
 ``--option`` README gives them; a curated set of fast commands (each under ~10 s here) is run for real,
@@ -27,6 +27,7 @@ from tests.conftest import require_data_dir
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
+DOCS = (README, *sorted((REPO / "docs").glob("*.md")))   # the front page and the reference pages it links
 CONFIGS = REPO / "configs"
 PLACEHOLDER = "PLACEHOLDER"  # stands for <run dir>, <date_time>, <.pth>, ... and `...`
 RUN_TIMEOUT_S = 120  # generous: the first run after an install compiles numba's kernels (15-35 s)
@@ -39,9 +40,10 @@ class ReadmeCommand:
     line: int
     text: str
     where: str  # "block" (fenced code block) or "inline" (code span in the prose)
+    doc: str = "README.md"  # the page, relative to the repository root
 
     def __str__(self) -> str:
-        return f"README.md:{self.line} ({self.where}): {self.text}"
+        return f"{self.doc}:{self.line} ({self.where}): {self.text}"
 
 
 def _strip_comment(line: str) -> str:
@@ -63,11 +65,16 @@ def _python_parts(text: str) -> list[str]:
     return [p for p in parts if re.match(r"(python3?|torchrun)\s", p + " ")]
 
 
-@lru_cache(maxsize=1)
 def _prose_spans() -> tuple[tuple[int, str], ...]:
+    """(line, text) of every inline code span of README.md and docs/*.md (see _page_spans); the page is lost."""
+    return tuple(span for page in DOCS for span in _page_spans(page))
+
+
+@lru_cache(maxsize=8)
+def _page_spans(page: Path) -> tuple[tuple[int, str], ...]:
     """(line, text) of every inline code span outside fenced blocks, whitespace (and line breaks) collapsed."""
     prose, in_block = [], False
-    for number, raw in enumerate(README.read_text(encoding="utf-8").splitlines(), start=1):
+    for number, raw in enumerate(page.read_text(encoding="utf-8").splitlines(), start=1):
         if raw.strip().startswith("```"):
             in_block = not in_block
         elif not in_block:
@@ -85,8 +92,14 @@ def _prose_spans() -> tuple[tuple[int, str], ...]:
 
 @lru_cache(maxsize=1)
 def readme_commands() -> tuple[ReadmeCommand, ...]:
-    """Every python/torchrun command in README.md's bash blocks and inline code spans, in order."""
-    lines = README.read_text(encoding="utf-8").splitlines()
+    """Every python/torchrun command of README.md and docs/*.md (bash blocks and inline code spans), in order."""
+    return tuple(c for page in DOCS for c in _page_commands(page))
+
+
+def _page_commands(page: Path) -> tuple[ReadmeCommand, ...]:
+    """Every python/torchrun command in one page's bash blocks and inline code spans, in order."""
+    doc = str(page.relative_to(REPO))
+    lines = page.read_text(encoding="utf-8").splitlines()
     commands: list[ReadmeCommand] = []
     in_block, is_shell = False, False
     pending, pending_line = "", 0
@@ -106,8 +119,8 @@ def readme_commands() -> tuple[ReadmeCommand, ...]:
             pending += code[:-1].strip() + " "
             continue
         full, pending = (pending + code.strip()).strip(), ""
-        commands += [ReadmeCommand(pending_line, part, "block") for part in _python_parts(full)]
-    commands += [ReadmeCommand(line, span, "inline") for line, span in _prose_spans()
+        commands += [ReadmeCommand(pending_line, part, "block", doc) for part in _python_parts(full)]
+    commands += [ReadmeCommand(line, span, "inline", doc) for line, span in _page_spans(page)
                  if re.match(r"(python3?|torchrun)\s", span + " ")]
     return tuple(sorted(set(commands), key=lambda c: (c.line, c.text)))
 
@@ -281,7 +294,7 @@ def test_readme_module_imports_and_answers_help(module: str) -> None:
 def _readme_command(text: str) -> ReadmeCommand:
     """The README command with this exact text (the curated list must follow README)."""
     found = [c for c in readme_commands() if c.text == text]
-    assert found, f"README.md no longer holds the command `{text}`: update the curated list in this test"
+    assert found, f"README.md / docs no longer hold the command `{text}`: update the curated list in this test"
     return found[0]
 
 
@@ -433,6 +446,6 @@ def test_config_keys_named_in_readme_prose_exist() -> None:
         else:
             ok = key in known or _is_python_object(key)
         if not ok:
-            missing.append(f"README.md:{line}: `{span}`: {mention!r} is neither a config key nor a config choice"
-                           if not choice else f"README.md:{line}: `{span}`: no configs/{key}/{choice}.yaml")
+            missing.append(f"README.md or docs, line {line}: `{span}`: {mention!r} is neither a config key nor a config choice"
+                           if not choice else f"README.md or docs, line {line}: `{span}`: no configs/{key}/{choice}.yaml")
     assert not missing, "\n".join(missing)
