@@ -2,7 +2,7 @@
 
 ``tracking.tracker`` holds the online tracker (constant-velocity Kalman filter per joint, Hungarian
 association on a gated 3D distance, track birth and death, each track's bone lengths);
-``tracking.metrics`` the identity metrics against ground-truth ids. May import ``data`` (keypoint and
+``evaluation.identity`` the identity metrics against ground-truth ids. May import ``data`` (keypoint and
 bone metadata) and numpy / scipy; nothing imports upwards from here but the pipeline and evaluation.
 """
 from tracking.tracker import Track, Tracker
