@@ -20,17 +20,18 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 from omegaconf.errors import MissingMandatoryValue
 
-from data.atomic_io import atomic_write_text, exit_on_sigterm
+from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
 from data.config_checks import ConfigError, check_bool, check_int, check_number
-from data.poses_io import write_poses3d
-from data.run_folders import register_resolvers
+from data.formats.poses_io import write_poses3d
+from run_folders import register_resolvers
 from evaluation.pose3d import Pose3DEvaluator
+from evaluation.protocols import attach_protocols
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
-from evaluation.sequence_view import save_sequence_pictures
-from evaluation.visualize import save_run_pictures
-from data.poses2d_io import Poses2DError
-from reconstruction.calibration import CalibrationError
-from reconstruction.check_rig import RigWarning
+from evaluation.pictures.sequence_view import save_sequence_pictures
+from evaluation.pictures.visualize import save_run_pictures
+from data.formats.poses2d_io import Poses2DError
+from data.geometry.calibration import CalibrationError
+from data.geometry.check_rig import RigWarning
 from reconstruction.pipeline import MultiViewPipeline
 
 PROTOCOL = ("absolute MPJPE (mm, no root alignment) over all frames; each GT person matched one-to-one "
@@ -66,7 +67,7 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     """Evaluate the configured dataset, matcher and reconstruction; write outputs and report.txt into out_dir."""
     check_config(cfg)
     t0 = time.perf_counter()
-    sequence = instantiate(cfg.dataset, _convert_="all")
+    sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))   # protocols: evaluation/protocols
     t_data = time.perf_counter() - t0
     check_sequence(cfg, sequence)
     tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None   # tracking=off: none

@@ -21,10 +21,10 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 
-from data.atomic_io import atomic_write_text, exit_on_sigterm
-from data.run_folders import register_resolvers
-from data.topdown_dataset import EpochSampler
-from evaluation.coco_eval import write_coco_results
+from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
+from run_folders import register_resolvers
+from data.pose2d.topdown_dataset import EpochSampler
+from data.pose2d.coco_eval import write_coco_results
 from data.config_checks import ConfigError
 from models.checkpoint_io import CheckpointError, read_checkpoint
 from models.resume import resume_config

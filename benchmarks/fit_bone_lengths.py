@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from data.atomic_io import atomic_write_text
+from data.formats.atomic_io import atomic_write_text
 from data.bone_lengths import BONE_MEAN, BONE_NAMES, BONE_STD, bone_table_dict, estimate_bone_table
 from data.keypoints import PANOPTIC19_TO_COCO23, SHELF14_TO_COCO23, to_coco23
-from data.shelf import load_4dassoc_skeletons
+from data.formats.fourd_skeletons import load_4dassoc_skeletons
 from evaluation.report import format_table
-from reconstruction.calibration import panoptic_world_to_ours
+from data.geometry.calibration import panoptic_world_to_ours
 
 DEFAULT_SHELF = Path("../shared/data/shelf/4d_association/gt.txt")
 

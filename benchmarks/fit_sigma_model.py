@@ -3,7 +3,7 @@
     python -m benchmarks.fit_sigma_model [--root ../shared/data/shelf] [--frames 0:301]
 
 The Shelf 2D ground truth is the projection of ``tum/actorsGT.mat`` through the Shelf cameras. Every
-PAF-grouped OpenPose detection (data/shelf_dataset.py) is paired with the actor whose projected joints
+PAF-grouped OpenPose detection (data/datasets/shelf.py) is paired with the actor whose projected joints
 lie closest (median distance over the 12 limb joints, below ``--max-px``); the pixel error of each of
 its 12 limb joints (the Shelf-14 joints that are COCO keypoints; the two head joints are not) is kept
 with the joint's score and the box size sqrt(w h). The model is
@@ -27,9 +27,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from data.keypoints import COCO23_TO_SHELF14_LIMBS
-from data.shelf_dataset import load_shelf
+from data.datasets.shelf import load_shelf
+from models.paf_grouping import group_view
 from evaluation.report import format_table
-from evaluation.shelf_protocol import load_actors_gt
+from evaluation.protocols.shelf import load_actors_gt
 
 RAYLEIGH_MEDIAN = float(np.sqrt(2 * np.log(2)))
 SCORE_BINS = (0.2, 0.4, 0.55, 0.7, 0.8, 0.9, 1.01)
@@ -39,7 +40,7 @@ MIN_BIN = 30
 
 def joint_errors(root: Path, frames: str | None, max_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixel errors, scores and box sizes of every matched detection's scored limb joints: 3 x (K,)."""
-    seq = load_shelf(root, frames=frames, baseline=None)
+    seq = load_shelf(root, frames=frames, baseline=None, grouper=group_view)
     first = seq.meta["first_frame"]
     gt = load_actors_gt(root / "tum" / "actorsGT.mat", range(first, first + 301))
     errors, scores, sizes = [], [], []

@@ -17,7 +17,7 @@ from typing import Sequence
 
 from omegaconf import OmegaConf
 
-from data.atomic_io import atomic_write_text
+from data.formats.atomic_io import atomic_write_text
 from evaluation.report import format_table
 
 # name -> (column header, factor, format); fractions are shown as percentages

@@ -36,12 +36,12 @@ from tqdm import tqdm  # noqa: E402
 
 from data.keypoints import FOOT_JOINTS  # noqa: E402
 from data.multiview import ViewDetections  # noqa: E402
-from data.atomic_io import atomic_write_text  # noqa: E402
+from data.formats.atomic_io import atomic_write_text  # noqa: E402
 from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts  # noqa: E402
 from evaluation.report import format_table  # noqa: E402
-from reconstruction.calibration import load_wildtrack, load_wildtrack_positions  # noqa: E402
-from reconstruction.camera import Rig  # noqa: E402
+from data.geometry.calibration import load_wildtrack, load_wildtrack_positions  # noqa: E402
+from data.geometry.camera import Rig  # noqa: E402
 from reconstruction.matching import (EpipolarMatcher, EvidenceMatcher, FeetEpipolarMatcher, FeetMatcher,  # noqa: E402
                                      OracleMatcher, RansacMatcher)
 

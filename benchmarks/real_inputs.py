@@ -42,7 +42,7 @@ from hydra import compose, initialize_config_dir  # noqa: E402
 from hydra.utils import instantiate  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from data.atomic_io import atomic_write_text  # noqa: E402
+from data.formats.atomic_io import atomic_write_text  # noqa: E402
 from evaluation.pose3d import Pose3DEvaluator  # noqa: E402
 from evaluation.report import format_table  # noqa: E402
 from evaluation.sequence_eval import evaluate_sequence  # noqa: E402

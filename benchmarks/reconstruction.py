@@ -10,7 +10,7 @@ Run from the repository root:  python -m benchmarks.reconstruction [--quick] [--
     the 2D detections and against the noise-free projections of the ground truth, at 5 px.
 (c) ms per frame vs persons (1, 10, 50, 100) in 7 views and vs views (2, 4, 8) for 20 persons: our
     mle_map stage against per-person scipy.optimize.least_squares(method='trf', jac='2-point', default
-    tolerances) on the same residuals (reconstruction.map_estimation.residual_vector) from the same DLT
+    tolerances) on the same residuals (reconstruction.solver.map_estimation.residual_vector) from the same DLT
     start, both MLE then MAP.
 (d) The robust losses (none / huber / cauchy) of mle_map against 2D outliers: 0, 10, 20 % of the
     detections with left and right swapped, ring, 5 px.
@@ -33,21 +33,21 @@ from scipy.optimize import least_squares  # noqa: E402
 
 from data.keypoints import flip_permutation  # noqa: E402
 from data.multiview import Frame, Sequence  # noqa: E402
-from data.atomic_io import atomic_write_text  # noqa: E402
+from data.formats.atomic_io import atomic_write_text  # noqa: E402
 from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
 from evaluation.pose3d import Pose3DEvaluator  # noqa: E402
 from evaluation.report import format_table  # noqa: E402
 from evaluation.reprojection import frame_reprojection_errors, reprojection_stats  # noqa: E402
-from reconstruction.calibration import load_wildtrack, load_wildtrack_positions  # noqa: E402
-from reconstruction.camera import Rig  # noqa: E402
-from reconstruction.map_estimation import PoseProblem, residual_vector  # noqa: E402
-from reconstruction.map_solver import (MAPReconstruction, MLEMAPReconstruction, MLEReconstruction,  # noqa: E402
+from data.geometry.calibration import load_wildtrack, load_wildtrack_positions  # noqa: E402
+from data.geometry.camera import Rig  # noqa: E402
+from reconstruction.solver.map_estimation import PoseProblem, residual_vector  # noqa: E402
+from reconstruction.solver.map_solver import (MAPReconstruction, MLEMAPReconstruction, MLEReconstruction,  # noqa: E402
                                        output_confidence)
 from reconstruction.matching import OracleMatcher  # noqa: E402
 from reconstruction.pipeline import gather_views  # noqa: E402
-from reconstruction.pose_init import initial_poses  # noqa: E402
+from reconstruction.solver.pose_init import initial_poses  # noqa: E402
 from reconstruction.reconstructors import VanillaTriangulation  # noqa: E402
-from reconstruction.triangulation import triangulate_dlt  # noqa: E402
+from data.geometry.triangulation import triangulate_dlt  # noqa: E402
 
 WILDTRACK_AREA = (-3.0, 9.0, -9.0, 27.0)
 NOISES = (2.0, 5.0, 10.0)

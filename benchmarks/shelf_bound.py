@@ -14,7 +14,7 @@ Shelf protocol is scored beside two oracles that use the ground truth to choose,
 
 No reconstruction that picks among these detections frame by frame, however robust, can exceed the
 second bound; temporal evidence (tracking) or a better 2D detector can. Protocol: strict Shelf PCP,
-alpha 0.5, mean of actors 1-3 (evaluation/shelf_protocol.py).
+alpha 0.5, mean of actors 1-3 (evaluation/protocols/shelf.py).
 """
 from __future__ import annotations
 
@@ -30,10 +30,11 @@ from tqdm import tqdm
 from data.keypoints import COCO23_TO_SHELF14_LIMBS, coco23_to_shelf14, with_mid_hip
 from evaluation.pcp import correct_parts
 from evaluation.report import format_table
-from evaluation.shelf_protocol import AVERAGED_ACTOR_IDS, coco23_predictions_to_shelf15, select_prediction
-from reconstruction.camera import Rig
+from evaluation.protocols import attach_protocols
+from evaluation.protocols.shelf import AVERAGED_ACTOR_IDS, coco23_predictions_to_shelf15, select_prediction
+from data.geometry.camera import Rig
 from reconstruction.pipeline import MultiViewPipeline
-from reconstruction.triangulation import triangulate_dlt
+from data.geometry.triangulation import triangulate_dlt
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 HEAD = (12, 13)                 # Shelf-14 head bottom, head top
@@ -100,7 +101,7 @@ def run(overrides: list[str], max_px: float) -> dict[str, dict[int, list[np.ndar
     """Rows of correct parts per method and actor: {method: {actor id: [(10,) bool per frame]}}."""
     with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
         cfg = compose("eval", overrides=overrides)
-    sequence = instantiate(cfg.dataset, _convert_="all")
+    sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))
     rig, protocol = sequence.rig, sequence.protocols[0]
     pipeline = MultiViewPipeline(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction))
     rows: dict[str, dict[int, list[np.ndarray]]] = {m: {a: [] for a in AVERAGED_ACTOR_IDS} for m in METHODS}

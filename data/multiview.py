@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reconstruction.camera import Rig
+from data.geometry.camera import Rig
 
 
 @dataclass
@@ -59,7 +59,9 @@ class Frame:
 @dataclass
 class Sequence:
     """A rig and its frames, a free-form description of where they came from, and the benchmark
-    protocols to score them with beside the generic metrics (evaluation/protocols.py)."""
+    protocols to score them with beside the generic metrics (evaluation/protocols/base.py). A loader never
+    builds them (datasets sit below evaluation): it lists their plain-data inputs in ``meta["protocol_inputs"]``
+    and :func:`evaluation.protocols.attach_protocols` builds them."""
 
     rig: Rig
     frames: list[Frame]

@@ -6,7 +6,7 @@ without augmentation and decoded either with one peak per joint (``decode=single
 validation) or as the paper's joint-candidate SPPE does (``decode=association``): up to ``top_m`` local
 maxima per joint (models.candidates), then CrowdPose's global joint association over all boxes of an
 image (models.joint_association), so two boxes never claim one joint. Outputs: COCO OKS AP/AR (all 23,
-body 17, foot 6) through evaluation.coco_eval, the COCO results file and poses2d.json for the
+body 17, foot 6) through data.pose2d.coco_eval, the COCO results file and poses2d.json for the
 multi-view pipeline (``eval.py dataset=files dataset.poses2d=...``). An image entry of the annotation
 file may carry ``frame`` and ``camera``; without them the frame is the image id and the camera "0".
 """
@@ -24,13 +24,13 @@ from omegaconf import DictConfig, OmegaConf
 from torch import nn
 from torch.utils.data import DataLoader
 
-from data.atomic_io import atomic_write_text
-from data.coco_keypoints import load_keypoint_dataset
+from data.formats.atomic_io import atomic_write_text
+from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
-from data.poses2d_io import write_poses2d
-from data.topdown_dataset import EpochSampler, TopDownDataset
-from evaluation.coco_eval import evaluate_keypoints, write_coco_results
+from data.formats.poses2d_io import write_poses2d
+from data.pose2d.topdown_dataset import EpochSampler, TopDownDataset
+from data.pose2d.coco_eval import evaluate_keypoints, write_coco_results
 from models.candidates import candidates_to_image, find_candidates
 from models.checkpoint_io import read_checkpoint
 from models.heatmap_codec import MultiModalHeatmapCodec

@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from data.multiview import ViewDetections
-from reconstruction.camera import Rig
+from data.geometry.camera import Rig
 from reconstruction.pipeline import gather_views
-from reconstruction.triangulation import reprojection_error
+from data.geometry.triangulation import reprojection_error
 
 
 def reprojection_stats(errors: np.ndarray) -> dict[str, float]:

@@ -13,8 +13,9 @@ from data.multiview import Sequence
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts
 from evaluation.pcp import PART_NAMES
 from evaluation.pose3d import Pose3DEvaluator
+from evaluation.protocols import attach_protocols
 from evaluation.report import format_table
-from tracking.metrics import IdentityEvaluator
+from evaluation.identity import IdentityEvaluator
 from evaluation.reprojection import frame_reprojection_errors, reprojection_stats
 from reconstruction.pipeline import FrameResult, MultiViewPipeline
 
@@ -41,6 +42,7 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
     Every sequence also gets the statistics of the reprojection error of the reconstructed joints
     against the 2D detections they were fitted to (the paper's Table 3; ``reprojection_*`` metrics).
     """
+    attach_protocols(sequence)   # the dataset's own protocols (meta["protocol_inputs"]), unless attached already
     results, skipped, pairs, reprojection = [], Counter(), CorrespondenceCounts(), []
     has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
     identities = IdentityEvaluator(evaluator.max_dist_m) if _tracks_identities(sequence, pipeline) else None

@@ -20,7 +20,7 @@ from typing import Any
 
 import torch
 
-from data.atomic_io import atomic_open
+from data.formats.atomic_io import atomic_open
 
 log = logging.getLogger(__name__)
 

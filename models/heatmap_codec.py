@@ -1,6 +1,6 @@
 """Multi-modal heatmap targets of the paper's Eq. 1 (``T + mu C``) and their decoding.
 
-Coordinates follow data/crop_transforms.py: pixel centres at integers, an image of width W spans
+Coordinates follow data/pose2d/crop_transforms.py: pixel centres at integers, an image of width W spans
 [-0.5, W - 0.5]. Crop-input and heatmap pixels share that convention, so a heatmap of width w covers the
 same extent as an input of width W and ``x_hm = (x_in + 0.5) * w / W - 0.5``; a stride-4 heatmap pixel i
 thus sits at the centre of input pixels 4i .. 4i + 3, and a flip x -> W - 1 - x of the input is exactly
@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter
 
-from data.crop_transforms import transform_points
+from data.pose2d.crop_transforms import transform_points
 from data.keypoints import NUM_JOINTS
 
 _LOG_EPS = 1e-10
@@ -92,7 +92,7 @@ class MultiModalHeatmapCodec:
     def encode_crop(self, keypoints_all: np.ndarray, own_index: int, affine: np.ndarray,
                     labelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Encode person ``own_index`` of an image: keypoints_all (N, 23, 3) in image pixels, affine (2, 3)
-        image -> crop input (data.crop_transforms.crop_affine) -> target (23, h, w), weight (23,)."""
+        image -> crop input (data.pose2d.crop_transforms.crop_affine) -> target (23, h, w), weight (23,)."""
         keypoints = np.array(keypoints_all, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
         keypoints[..., :2] = transform_points(keypoints[..., :2], affine)
         others = np.delete(keypoints, own_index, axis=0)

@@ -2,7 +2,7 @@
 epoch, validation with COCO OKS AP, checkpoints that resume exactly, distributed setup.
 
 Exact resumption rests on three things: the sample order is a seeded permutation per epoch
-(data.topdown_dataset.EpochSampler, which can start part-way through an epoch), augmentation is seeded
+(data.pose2d.topdown_dataset.EpochSampler, which can start part-way through an epoch), augmentation is seeded
 per (epoch, sample), and a checkpoint holds the model, optimizer, scheduler, the position (epoch, step in
 epoch, global step) and the torch / numpy / python RNG states.
 """
@@ -26,13 +26,13 @@ from torch.utils.data import DataLoader, Sampler
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
-from data.coco_keypoints import load_keypoint_dataset
+from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.config_checks import ConfigError, check_bool, check_int, check_number, fail, is_int, value_of
-from data.crop_transforms import CropAugmentation, transform_points
-from data.records import ImageRecord
-from data.show_targets import GREEN, RED, tile_grid, tint
-from data.topdown_dataset import TopDownDataset, denormalize_image
-from evaluation.coco_eval import evaluate_keypoints
+from data.pose2d.crop_transforms import CropAugmentation, transform_points
+from data.pose2d.records import ImageRecord
+from models.show_targets import GREEN, RED, tile_grid, tint
+from data.pose2d.topdown_dataset import TopDownDataset, denormalize_image
+from data.pose2d.coco_eval import evaluate_keypoints
 from models.checkpoint_io import atomic_torch_save, read_checkpoint, write_checkpoint  # noqa: F401 (re-exported)
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss

@@ -9,7 +9,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from data.multiview import Frame, ViewDetections
-from reconstruction.camera import Rig
+from data.geometry.camera import Rig
 
 Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
 Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]

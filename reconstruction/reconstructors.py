@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from reconstruction.camera import Rig
-from reconstruction.triangulation import triangulate_dlt
+from data.geometry.camera import Rig
+from data.geometry.triangulation import triangulate_dlt
 
 
 class VanillaTriangulation:

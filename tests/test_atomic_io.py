@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from data.atomic_io import _host, atomic_open, atomic_write_bytes, atomic_write_text, is_stale, is_temporary
+from data.formats.atomic_io import _host, atomic_open, atomic_write_bytes, atomic_write_text, is_stale, is_temporary
 
 
 def test_write_replaces_the_file_and_leaves_no_temporary(tmp_path):
@@ -50,7 +50,7 @@ def test_a_temporary_is_named_after_its_target_and_removed_on_keyboard_interrupt
 
 
 def test_sigterm_removes_the_temporary(tmp_path):
-    code = ("import time; from data.atomic_io import atomic_open, exit_on_sigterm\n"
+    code = ("import time; from data.formats.atomic_io import atomic_open, exit_on_sigterm\n"
             "exit_on_sigterm()\n"
             f"with atomic_open({str(tmp_path / 'out.txt')!r}) as f:\n"
             "    f.write('half'); f.flush(); print('writing', flush=True); time.sleep(60)\n")

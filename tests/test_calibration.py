@@ -9,12 +9,12 @@ import cv2
 import numpy as np
 import pytest
 
-from data.shelf import load_4dassoc_skeletons
-from reconstruction.calibration import (CalibrationError, decompose_projection, detect_format, load_4dassoc,
+from data.formats.fourd_skeletons import load_4dassoc_skeletons
+from data.geometry.calibration import (CalibrationError, decompose_projection, detect_format, load_4dassoc,
                                         load_cameras_json, load_panoptic, load_rig, load_shelf_projections,
                                         load_voxelpose, load_wildtrack, load_wildtrack_positions,
                                         panoptic_world_to_ours, save_cameras_json)
-from reconstruction.camera import Camera, Rig
+from data.geometry.camera import Camera, Rig
 
 PANOPTIC_SEQ = "panoptic/160906_band1"
 PANOPTIC_CAMERAS = ["00_00", "00_03", "00_12", "00_16", "00_30"]

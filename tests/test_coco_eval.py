@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.coco_keypoints import load_coco_wholebody
+from data.pose2d.coco_keypoints import load_coco_wholebody
 from data.keypoints import BODY_JOINTS, NUM_JOINTS, OKS_SIGMAS
-from data.records import ImageRecord
-from evaluation.coco_eval import STAT_NAMES, SUBSET_JOINTS, evaluate_keypoints, write_coco_results
+from data.pose2d.records import ImageRecord
+from data.pose2d.coco_eval import STAT_NAMES, SUBSET_JOINTS, evaluate_keypoints, write_coco_results
 
 
 @pytest.fixture(scope="module")

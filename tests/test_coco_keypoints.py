@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.coco_keypoints import (load_coco23, load_coco_wholebody, load_crowdpose, load_detections,
+from data.pose2d.coco_keypoints import (load_coco23, load_coco_wholebody, load_crowdpose, load_detections,
                                  load_keypoint_dataset, training_persons, write_coco_keypoints)
 from data.keypoints import CROWDPOSE14_TO_COCO23, NUM_JOINTS
 

@@ -2,7 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
-from data.crop_transforms import (CropAugmentation, box_to_center_scale, crop_affine, flip_keypoints,
+from data.pose2d.crop_transforms import (CropAugmentation, box_to_center_scale, crop_affine, flip_keypoints,
                                   flip_points, sample_augmentation, transform_points)
 from data.keypoints import flip_permutation
 

@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.fourd_detections import BODY25_PAF_LIMBS, load_4dassoc_detections
+from data.formats.fourd_detections import BODY25_PAF_LIMBS, load_4dassoc_detections
 from data.keypoints import BODY25_TO_COCO23, JOINT_INDEX, to_coco23
 from data.multiview import ViewDetections
-from data.openpose_json import load_openpose_dir, load_openpose_json
-from data.paf_grouping import group_people, grouped_to_view_detections, limb_connections
-from data.poses2d_io import Poses2DError, read_poses2d, write_poses2d
-from reconstruction.calibration import load_4dassoc
+from data.formats.openpose_json import load_openpose_dir, load_openpose_json
+from models.paf_grouping import group_people, grouped_to_view_detections, limb_connections
+from data.formats.poses2d_io import Poses2DError, read_poses2d, write_poses2d
+from data.geometry.calibration import load_4dassoc
 
 SHELF = Path("shelf") / "4d_association"
 

@@ -9,7 +9,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 import eval as eval_script
-from data.poses_io import read_poses3d
+from data.formats.poses_io import read_poses3d
 
 CONFIGS = str(Path(__file__).resolve().parents[1] / "configs")
 
@@ -121,9 +121,9 @@ def test_a_2d_metric_of_minus_one_says_why():
 
 
 def test_frames_out_of_order_stop_a_tracked_run_with_one_line(tmp_path):
-    from data.poses2d_io import write_poses2d
+    from data.formats.poses2d_io import write_poses2d
     from data.synthetic import SyntheticConfig, generate_sequence
-    from reconstruction.calibration import save_cameras_json
+    from data.geometry.calibration import save_cameras_json
 
     seq = generate_sequence(SyntheticConfig(num_persons=2, num_frames=3, num_cameras=3, seed=1))
     save_cameras_json(seq.rig, tmp_path / "cameras.json")

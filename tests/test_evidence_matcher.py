@@ -11,7 +11,7 @@ from reconstruction.matching import EvidenceMatcher
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence import gate_limits, merge_complete
 from reconstruction.matching.evidence_kernels import pair_chi2
-from reconstruction.map_solver import MLEMAPReconstruction
+from reconstruction.solver.map_solver import MLEMAPReconstruction
 from reconstruction.pipeline import MultiViewPipeline
 
 FEET_AND_ANKLES = [*FOOT_JOINTS, LEFT_ANKLE, RIGHT_ANKLE]

@@ -6,7 +6,7 @@ import pytest
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from evaluation.correspondence import correspondence_counts
-from reconstruction.camera import Camera, Rig
+from data.geometry.camera import Camera, Rig
 from reconstruction.matching import FeetMatcher
 from reconstruction.matching.feet import (FEET_ABOVE_HORIZON, NO_COUNTERPART, NO_FOOT_JOINTS, edge_costs,
                                           feet_features, features_from_feet, pair_homography, to_image)

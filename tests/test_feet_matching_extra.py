@@ -6,7 +6,7 @@ import pytest
 
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
-from reconstruction.camera import Camera, apply_homography
+from data.geometry.camera import Camera, apply_homography
 from reconstruction.matching import FeetMatcher
 from reconstruction.matching.feet import NO_COUNTERPART, NO_FOOT_JOINTS, pair_homography
 from tests.test_feet_matching import crowd, matched_id_sets, person, ring_rig, scene

@@ -25,11 +25,11 @@ import pytest
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 
-from data.files_dataset import load_files
-from data.poses2d_io import Poses2DError
-from data.poses_io import write_poses3d
-from reconstruction.calibration import CalibrationError
-from reconstruction.check_rig import RigWarning
+from data.datasets.files import load_files
+from data.formats.poses2d_io import Poses2DError
+from data.formats.poses_io import write_poses3d
+from data.geometry.calibration import CalibrationError
+from data.geometry.check_rig import RigWarning
 from reconstruction.pipeline import MultiViewPipeline
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from data.crop_transforms import crop_affine, flip_keypoints, flip_points, transform_points
+from data.pose2d.crop_transforms import crop_affine, flip_keypoints, flip_points, transform_points
 from data.keypoints import FOOT_JOINTS, flip_permutation
 from models.heatmap_codec import MultiModalHeatmapCodec
 

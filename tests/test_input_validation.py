@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.files_dataset import load_files
-from data.poses2d_io import OUTSIDE_IMAGE_TOLERANCE, Poses2DError, read_poses2d
-from reconstruction.calibration import CalibrationError, load_panoptic, load_rig
-from reconstruction.camera import Camera, Rig
-from reconstruction.check_rig import RigError, RigWarning, main as check_rig_main, pose_findings, rig_findings
+from data.datasets.files import load_files
+from data.formats.poses2d_io import OUTSIDE_IMAGE_TOLERANCE, Poses2DError, read_poses2d
+from data.geometry.calibration import CalibrationError, load_panoptic, load_rig
+from data.geometry.camera import Camera, Rig
+from data.geometry.check_rig import RigError, RigWarning, main as check_rig_main, pose_findings, rig_findings
 from reconstruction.matching.feet import feet_features
 from reconstruction.matching.feet_uncertainty import image_to_plane_homography, joints_on_planes
-from reconstruction.triangulation import triangulate_dlt
+from data.geometry.triangulation import triangulate_dlt
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "own_rig"

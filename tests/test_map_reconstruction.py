@@ -14,19 +14,19 @@ from data.synthetic import SyntheticConfig, generate_sequence
 from data.synthetic.body import mean_body, pose_joints
 from data.synthetic.observe import bbox_from_keypoints
 from data.synthetic.rigs import ring_rig
-from reconstruction import map_estimation as me
-from reconstruction import map_solver
-from reconstruction import pose_kernels
-from reconstruction.block_solver import _assemble, elimination_plan, inverse_3x3, solve_blocks, solve_dense
-from reconstruction.compiled_solver import solve_poses_compiled, solver_plan
-from reconstruction.lm_solver import levenberg_marquardt
-from reconstruction.map_solver import (MAPReconstruction, MLEMAPReconstruction, MLEReconstruction,
+from reconstruction.solver import map_estimation as me
+from reconstruction.solver import map_solver
+from reconstruction.solver import pose_kernels
+from reconstruction.solver.block_solver import _assemble, elimination_plan, inverse_3x3, solve_blocks, solve_dense
+from reconstruction.solver.compiled_solver import solve_poses_compiled, solver_plan
+from reconstruction.solver.lm_solver import levenberg_marquardt
+from reconstruction.solver.map_solver import (MAPReconstruction, MLEMAPReconstruction, MLEReconstruction,
                                        bone_components, solve_poses)
 from reconstruction.matching import OracleMatcher
 from reconstruction.pipeline import gather_views
-from reconstruction.pose_init import initial_poses, reinitialise_outliers
+from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.reconstructors import VanillaTriangulation
-from reconstruction.triangulation import RQI_MIN_POINTS, smallest_eigenvectors, triangulate_dlt
+from data.geometry.triangulation import RQI_MIN_POINTS, smallest_eigenvectors, triangulate_dlt
 
 STAGES = {"vanilla": VanillaTriangulation, "mle": MLEReconstruction, "map": MAPReconstruction,
           "mle_map": MLEMAPReconstruction}
@@ -448,7 +448,7 @@ def test_outliers_of_a_solved_pose_are_reset_onto_their_ray_near_the_body():
 
 def test_mean_body_fit_is_the_scipy_kabsch_rotation_and_falls_back_to_yaw():
     from scipy.spatial.transform import Rotation
-    from reconstruction.pose_init import fit_mean_body
+    from reconstruction.solver.pose_init import fit_mean_body
     rng = np.random.default_rng(5)
     mean = np.array(MEAN_POSE)                                        # a writable copy for scipy
     R_true = Rotation.from_euler("zyx", [40, 8, -5], degrees=True)

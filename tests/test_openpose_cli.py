@@ -1,4 +1,4 @@
-"""python -m data.openpose_json: OpenPose BODY_25 folders (one per camera) -> a poses2d.json dataset=files reads."""
+"""python -m data.formats.openpose_json: OpenPose BODY_25 folders (one per camera) -> a poses2d.json dataset=files reads."""
 from __future__ import annotations
 
 import json
@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from data.files_dataset import load_files
+from data.datasets.files import load_files
 from data.keypoints import BODY25_TO_COCO23
-from data.openpose_json import camera_folders, main
+from data.formats.openpose_json import camera_folders, main
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "own_rig"
@@ -66,6 +66,6 @@ def test_named_folders_and_scores_above_one_are_clipped(tmp_path):
 
 
 def test_bad_folder_stops_with_one_line(tmp_path):
-    cmd = [sys.executable, "-m", "data.openpose_json", str(tmp_path / "missing"), "-o", str(tmp_path / "p.json")]
+    cmd = [sys.executable, "-m", "data.formats.openpose_json", str(tmp_path / "missing"), "-o", str(tmp_path / "p.json")]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert proc.returncode == 1 and proc.stderr.strip() == f"error: {tmp_path / 'missing'}: not a folder of OpenPose JSON files"

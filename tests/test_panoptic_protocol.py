@@ -1,4 +1,4 @@
-"""CMU Panoptic loader (data/panoptic_dataset.py) and protocols (evaluation/panoptic_protocol.py)."""
+"""CMU Panoptic loader (data/datasets/panoptic.py) and protocols (evaluation/protocols/panoptic.py)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from data.keypoints import FOOT_JOINTS, JOINT_INDEX
-from data.panoptic_dataset import DEFAULT_CAMERAS, load_panoptic_sequence
-from evaluation.panoptic_protocol import (
+from data.datasets.panoptic import DEFAULT_CAMERAS, load_panoptic_sequence
+from evaluation.protocols.panoptic import (
     AP_THRESHOLDS_MM, PanopticAPEvaluator, PanopticEvaluator, PanopticPoseEvaluator, average_precision,
     coco23_to_panoptic15, format_panoptic_report,
 )
@@ -172,7 +172,7 @@ def test_generated_2d_projects_back_within_the_noise(panoptic: Path) -> None:
 
 
 def test_poses2d_input_round_trip(band1, panoptic: Path, tmp_path: Path) -> None:
-    io = pytest.importorskip("data.poses2d_io")
+    io = pytest.importorskip("data.formats.poses2d_io")
     path = tmp_path / "poses2d.json"
     io.write_poses2d(path, {f.index: f.views for f in band1.frames}, list(band1.rig.names))
     read = load_panoptic_sequence(panoptic, "160906_band1", poses2d=str(path))

@@ -10,10 +10,10 @@ from data.synthetic.observe import bbox_from_keypoints
 from data.synthetic.rigs import ring_rig
 from evaluation.pcp import pcp_by_part
 from evaluation.pose3d import Pose3DEvaluator
-from reconstruction.map_solver import MAPReconstruction, MLEReconstruction
-from reconstruction.person_prior import (PROPORTION_SD, bone_groups, noise_scale, person_bone_lengths,
+from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstruction
+from reconstruction.solver.person_prior import (PROPORTION_SD, bone_groups, noise_scale, person_bone_lengths,
                                          proportion_sds)
-from reconstruction.side_swaps import apply_swaps, find_swaps
+from reconstruction.solver.side_swaps import apply_swaps, find_swaps
 
 
 def _scaled_body(scale: float, x: float = 0.0, y: float = 0.0) -> np.ndarray:

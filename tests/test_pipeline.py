@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from data.multiview import Frame, ViewDetections
-from data.poses_io import read_poses3d, write_poses3d
+from data.formats.poses_io import read_poses3d, write_poses3d
 from reconstruction.matching import OracleMatcher, assignment_from_labels
 from reconstruction.pipeline import MultiViewPipeline, gather_views
 from reconstruction.reconstructors import VanillaTriangulation

@@ -15,11 +15,11 @@ from torch.utils.data import DataLoader
 
 import eval as eval_script
 import train
-from data.coco_keypoints import load_coco_wholebody
-from data.poses2d_io import read_poses2d
-from data.synthetic_images import ImageOptions, generate_dataset
-from data.topdown_dataset import TopDownDataset
-from evaluation.coco_eval import evaluate_keypoints
+from data.pose2d.coco_keypoints import load_coco_wholebody
+from data.formats.poses2d_io import read_poses2d
+from data.pose2d.synthetic_images import ImageOptions, generate_dataset
+from data.pose2d.topdown_dataset import TopDownDataset
+from data.pose2d.coco_eval import evaluate_keypoints
 from evaluation.pose2d_eval import associate_crops, decode_candidates
 from models.heatmap_codec import MultiModalHeatmapCodec
 

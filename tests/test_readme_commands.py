@@ -169,7 +169,7 @@ def test_readme_commands_are_found_and_every_script_exists() -> None:
     joined = ("python eval.py dataset=files dataset.cameras=examples/own_rig/cameras.json "
               "dataset.poses2d=examples/own_rig/poses2d.json")
     assert joined in texts, "continuation lines are not joined"
-    assert any(c.where == "block" and c.text.startswith("python -m reconstruction.check_rig") for c in commands)
+    assert any(c.where == "block" and c.text.startswith("python -m data.geometry.check_rig") for c in commands)
     for command in commands:
         script, _ = _script_and_args(command)
         assert script != "other", f"{command}\nneither a script nor python -m MODULE"
@@ -310,14 +310,14 @@ FAST_COMMANDS = [
     ("python eval.py dataset.rig=../shared/data/wildtrack dataset.rig_format=wildtrack "
      "dataset.area='[-3,9,-9,27]'", ["progress=false", "hydra.run.dir={tmp}"], True),
     ("python eval.py dataset=shelf dataset.root=../shared/data/shelf", ["progress=false", "hydra.run.dir={tmp}"], True),
-    ("python -m reconstruction.check_rig cameras.json poses2d.json", [], False),
+    ("python -m data.geometry.check_rig cameras.json poses2d.json", [], False),
 ]
 
 
 def _fast_words(text: str, extra: list[str], tmp: Path) -> list[str]:
     """The words after ``python`` of a curated README command, outputs redirected into tmp."""
     words = shlex.split(_readme_command(text).text)[1:]
-    if words[:2] == ["-m", "reconstruction.check_rig"]:  # README's file names, as in examples/own_rig
+    if words[:2] == ["-m", "data.geometry.check_rig"]:  # README's file names, as in examples/own_rig
         words = [*words[:2], "examples/own_rig/cameras.json", "examples/own_rig/poses2d.json"]
     return [*words, *(e.format(tmp=tmp) for e in extra)]
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from data.atomic_io import _host
+from data.formats.atomic_io import _host
 
 REPO = Path(__file__).resolve().parents[1]
 QUICK = ["progress=false", "dataset.num_frames=1", "dataset.num_persons=3", "reconstruction=vanilla"]

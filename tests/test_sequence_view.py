@@ -14,13 +14,13 @@ import matplotlib.image as mpimg  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from data.poses_io import read_poses3d, read_poses3d_frames, write_poses3d  # noqa: E402
+from data.formats.poses_io import read_poses3d, read_poses3d_frames, write_poses3d  # noqa: E402
 from data.synthetic.body import mean_body, pose_joints  # noqa: E402
 from data.synthetic.rigs import ring_rig  # noqa: E402
-from evaluation.sequence_data import id_colors, pose_roots  # noqa: E402
-from evaluation.sequence_html import UNTRACKED_NOTE, camera_glyph  # noqa: E402
-from evaluation.sequence_view import main, plot_trajectories, write_sequence_html  # noqa: E402
-from evaluation.vis_trajectories import DPI, FIGSIZE_IN, trajectories_figure  # noqa: E402
+from evaluation.pictures.sequence_data import id_colors, pose_roots  # noqa: E402
+from evaluation.pictures.sequence_html import UNTRACKED_NOTE, camera_glyph  # noqa: E402
+from evaluation.pictures.sequence_view import main, plot_trajectories, write_sequence_html  # noqa: E402
+from evaluation.pictures.vis_trajectories import DPI, FIGSIZE_IN, trajectories_figure  # noqa: E402
 from tests.test_eval import run_eval  # noqa: E402
 
 DATA = re.compile(r'<script type="application/json" id="sequence-data">(.*?)</script>', re.S)

@@ -1,4 +1,4 @@
-"""The Shelf loader (data/shelf_dataset.py), its ShelfProtocol and eval.py on Shelf frames."""
+"""The Shelf loader (data/datasets/shelf.py), its ShelfProtocol and eval.py on Shelf frames."""
 from __future__ import annotations
 
 import json
@@ -11,10 +11,17 @@ from hydra import compose, initialize_config_dir
 import eval as eval_script
 from data.keypoints import COCO23_TO_SHELF14_LIMBS, SHELF_HEAD_BLEND, SHELF_HEAD_TOP_NOSE_SCALE
 from data.multiview import Frame
-from data.poses2d_io import write_poses2d
-from data.shelf_dataset import load_shelf
-from evaluation.shelf_protocol import AVERAGED_ACTOR_IDS, ShelfProtocol
+from data.formats.poses2d_io import write_poses2d
+from data.datasets.shelf import load_shelf as load_shelf_sequence
+from evaluation.protocols import attach_protocols
+from models.paf_grouping import group_view
+from evaluation.protocols.shelf import AVERAGED_ACTOR_IDS, ShelfProtocol
 from reconstruction.pipeline import FrameResult
+
+
+def load_shelf(*args, **kwargs):
+    """The Shelf loader as configs/dataset/shelf.yaml builds it (PAF grouper given), protocols attached as eval.py does."""
+    return attach_protocols(load_shelf_sequence(*args, grouper=group_view, **kwargs))
 
 CONFIGS = str(Path(__file__).resolve().parents[1] / "configs")
 

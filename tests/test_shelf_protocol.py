@@ -1,4 +1,4 @@
-"""The Shelf PCP protocol (evaluation/shelf_protocol.py) on hand-built cases and the real Shelf files."""
+"""The Shelf PCP protocol (evaluation/protocols/shelf.py) on hand-built cases and the real Shelf files."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.shelf import load_4dassoc_skeletons
+from data.formats.fourd_skeletons import load_4dassoc_skeletons
 from evaluation.pcp import PART_NAMES
-from evaluation.shelf_protocol import (ShelfEvaluator, coco23_predictions_to_shelf15, format_table,
+from evaluation.protocols.shelf import (ShelfEvaluator, coco23_predictions_to_shelf15, format_table,
                                        load_actors_gt, main, score_4dassoc_output, skel19_to_shelf15)
 
 

@@ -13,7 +13,7 @@ from data.synthetic.capsules import body_capsules, capsule_radii, occluded_joint
 from data.synthetic.observe import observe_view
 from data.synthetic.rigs import look_at_camera, ring_rig
 from data.synthetic.scene import place_persons, scene_area, simulate_scene
-from reconstruction.camera import Rig
+from data.geometry.camera import Rig
 
 PHASES = np.linspace(0.0, 1.0, 41)[:-1]
 HEAD = [0, 1, 2, 3, 4]

@@ -5,8 +5,8 @@ import cv2
 import numpy as np
 import pytest
 
-from data.coco_keypoints import load_coco23
-from data.synthetic_images import ImageOptions, generate_dataset, image_rng, main, save_preview, synthetic_image
+from data.pose2d.coco_keypoints import load_coco23
+from data.pose2d.synthetic_images import ImageOptions, generate_dataset, image_rng, main, save_preview, synthetic_image
 
 SMALL = ImageOptions(size=(192, 144), persons=(3, 6))
 

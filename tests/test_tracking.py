@@ -1,4 +1,4 @@
-"""The online tracker (tracking/tracker.py) and its identity metrics (tracking/metrics.py)."""
+"""The online tracker (tracking/tracker.py) and its identity metrics (evaluation/identity.py)."""
 from __future__ import annotations
 
 import json
@@ -10,9 +10,9 @@ import pytest
 from data.bone_lengths import BONE_PAIRS
 from data.synthetic.body import mean_body, pose_joints
 from tracking import Tracker
-from reconstruction.map_solver import combine_estimates
+from reconstruction.solver.map_solver import combine_estimates
 from tracking.tracker import CORE_JOINTS, mean_distances, robust_lengths
-from tracking.metrics import IdentityEvaluator
+from evaluation.identity import IdentityEvaluator
 
 FPS = 25.0
 
@@ -133,7 +133,7 @@ def test_pre_gated_mean_distances_equal_the_brute_force_within_the_gate():
 
 
 def test_the_pipeline_gives_track_ids_to_poses3d_json_and_identity_metrics(tmp_path):
-    from data.poses_io import write_poses3d
+    from data.formats.poses_io import write_poses3d
     from data.synthetic import SyntheticConfig, generate_sequence
     from evaluation.pose3d import Pose3DEvaluator
     from evaluation.sequence_eval import evaluate_sequence
@@ -179,7 +179,7 @@ def test_exact_joints_are_kept_and_noisy_ones_are_smoothed():
 def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
     from data.synthetic.observe import bbox_from_keypoints
     from data.synthetic.rigs import ring_rig
-    from reconstruction.map_solver import MLEMAPReconstruction
+    from reconstruction.solver.map_solver import MLEMAPReconstruction
 
     rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
     rng = np.random.default_rng(5)
@@ -202,7 +202,7 @@ def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
 def test_the_map_reports_each_joints_variance_for_the_tracker():
     from data.synthetic.observe import bbox_from_keypoints
     from data.synthetic.rigs import ring_rig
-    from reconstruction.map_solver import MLEMAPReconstruction
+    from reconstruction.solver.map_solver import MLEMAPReconstruction
 
     rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
     X = _walker((0.0, 0.0), 0.4, 0.0, 0)[None, :, :3]
@@ -250,7 +250,7 @@ def test_precision_weighted_combination_of_two_bone_estimates():
 def test_a_tracked_persons_own_skeleton_sharpens_the_maps_bones():
     from data.synthetic.observe import bbox_from_keypoints
     from data.synthetic.rigs import ring_rig
-    from reconstruction.map_solver import MLEMAPReconstruction
+    from reconstruction.solver.map_solver import MLEMAPReconstruction
     from reconstruction.pipeline import MultiViewPipeline
 
     rig = ring_rig(3, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))

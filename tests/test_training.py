@@ -14,14 +14,14 @@ from hydra import compose, initialize_config_dir
 from torch.utils.data import DataLoader
 
 import train
-from data.coco_keypoints import load_coco23, load_coco_wholebody, load_keypoint_dataset
-from data.crop_transforms import CropAugmentation, transform_points
+from data.pose2d.coco_keypoints import load_coco23, load_coco_wholebody, load_keypoint_dataset
+from data.pose2d.crop_transforms import CropAugmentation, transform_points
 from data.keypoints import FOOT_JOINTS, LEFT_FOOT, RIGHT_FOOT
-from data.show_targets import main as show_targets_main
-from data.show_targets import target_parts
-from data.synthetic_images import ImageOptions, generate_dataset
-from data.topdown_dataset import EpochSampler, TopDownDataset
-from evaluation.coco_eval import evaluate_keypoints
+from models.show_targets import main as show_targets_main
+from models.show_targets import target_parts
+from data.pose2d.synthetic_images import ImageOptions, generate_dataset
+from data.pose2d.topdown_dataset import EpochSampler, TopDownDataset
+from data.pose2d.coco_eval import evaluate_keypoints
 from models.fastpose import FastPose
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss

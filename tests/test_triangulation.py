@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from data.synthetic.rigs import ring_rig
-from reconstruction.camera import Rig
-from reconstruction.triangulation import reprojection_error, triangulate_dlt
+from data.geometry.camera import Rig
+from data.geometry.triangulation import reprojection_error, triangulate_dlt
 
 
 def ring(num: int, radius: float = 6.0, height: float = 2.5) -> Rig:

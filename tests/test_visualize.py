@@ -11,14 +11,14 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from data.keypoints import LIMBS, SHELF14_TO_COCO23, to_coco23  # noqa: E402
-from data.shelf import load_4dassoc_skeletons  # noqa: E402
+from data.formats.fourd_skeletons import load_4dassoc_skeletons  # noqa: E402
 from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
-from evaluation.vis_draw import CANVAS_GREY, UNMATCHED_COLOR, image_grid  # noqa: E402
-from evaluation.visualize import (draw_reprojections, image_png, load_view_images, person_colors,  # noqa: E402
+from evaluation.pictures.vis_draw import CANVAS_GREY, UNMATCHED_COLOR, image_grid  # noqa: E402
+from evaluation.pictures.visualize import (draw_reprojections, image_png, load_view_images, person_colors,  # noqa: E402
                                   plot_feet_on_ground, plot_scene_3d, plot_top_view, save_frame_pictures,
                                   save_run_pictures, write_png)
-from reconstruction.calibration import load_4dassoc  # noqa: E402
-from reconstruction.camera import Camera, Rig  # noqa: E402
+from data.geometry.calibration import load_4dassoc  # noqa: E402
+from data.geometry.camera import Camera, Rig  # noqa: E402
 from reconstruction.matching import FeetMatcher, OracleMatcher  # noqa: E402
 from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
 from reconstruction.reconstructors import VanillaTriangulation  # noqa: E402

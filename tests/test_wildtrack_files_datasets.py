@@ -11,18 +11,29 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 import eval as eval_script
-from data.files_dataset import load_files
+from data.datasets.files import load_files
 from data.multiview import Frame
-from data.panoptic_dataset import load_panoptic_sequence
-from data.poses2d_io import Poses2DError, write_poses2d
-from data.poses_io import read_poses3d
+from data.datasets.panoptic import load_panoptic_sequence as _load_panoptic
+from data.formats.poses2d_io import Poses2DError, write_poses2d
+from data.formats.poses_io import read_poses3d
 from data.synthetic import SyntheticConfig, generate_sequence
-from data.wildtrack_dataset import load_wildtrack_crowd
-from evaluation.coco_eval import STAT_NAMES, evaluate_keypoints
-from evaluation.panoptic_protocol import PanopticProtocol
-from evaluation.reprojection_coco import ReprojectionCOCOProtocol, coco_keypoint_stats
-from reconstruction.calibration import load_wildtrack_positions, save_cameras_json
+from data.datasets.wildtrack import load_wildtrack_crowd as _load_wildtrack
+from evaluation.protocols import attach_protocols
+from data.pose2d.coco_eval import STAT_NAMES, evaluate_keypoints
+from evaluation.protocols.panoptic import PanopticProtocol
+from evaluation.protocols.reprojection_coco import ReprojectionCOCOProtocol, coco_keypoint_stats
+from data.geometry.calibration import load_wildtrack_positions, save_cameras_json
 from reconstruction.pipeline import FrameResult
+
+
+def load_panoptic_sequence(*args, **kwargs):
+    """The Panoptic loader with its protocol attached, as eval.py does."""
+    return attach_protocols(_load_panoptic(*args, **kwargs))
+
+
+def load_wildtrack_crowd(*args, **kwargs):
+    """The Wildtrack loader with its protocol attached, as eval.py does."""
+    return attach_protocols(_load_wildtrack(*args, **kwargs))
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = str(ROOT / "configs")

@@ -29,7 +29,7 @@ class SyntheticConfig:
         Persons are placed there instead of sampled (walking and heading follow their motion).
     Cameras
       rig: "ring" for :func:`data.synthetic.rigs.ring_rig`, else a calibration file or folder path.
-      rig_format: format of that calibration (see reconstruction.calibration.load_rig); "auto" detects.
+      rig_format: format of that calibration (see data.geometry.calibration.load_rig); "auto" detects.
       num_cameras, camera_radius_m, camera_height_m: the ring: cameras on a circle of this radius
         around the area centre, at this height, looking at the centre at ``look_at_height_m``.
         camera_radius_m = None (default) puts the ring 4 m outside the area's corners (half

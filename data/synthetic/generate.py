@@ -9,7 +9,7 @@ from data.synthetic.config import SyntheticConfig
 from data.synthetic.observe import observe_view
 from data.synthetic.rigs import rig_from_file, ring_rig
 from data.synthetic.scene import scene_poses, simulate_scene
-from reconstruction.camera import Rig
+from data.geometry.camera import Rig
 
 RING_CLEARANCE_M = 4.0  # default ring radius: the area's half diagonal plus this
 PROGRESS_MIN_WORK = 200  # persons x cameras per frame from which building the frames shows a bar (on a terminal)

@@ -10,7 +10,7 @@ from data.multiview import ViewDetections
 from data.synthetic.body import pose_joints, sample_body
 from data.synthetic.capsules import occluded_joints
 from data.synthetic.config import SyntheticConfig
-from reconstruction.camera import Camera
+from data.geometry.camera import Camera
 
 # Joint scores: VISIBLE_SCORE (or OCCLUDED_SCORE for a hidden joint) times exp(-err^2 / (2 s^2)) with err
 # the pixel error actually drawn and s = NOISE_SCORE_PX, plus a uniform jitter, clipped to MIN_SCORE..1.

@@ -7,7 +7,7 @@ from typing import Sequence
 
 import numpy as np
 
-from reconstruction.camera import Camera, Rig
+from data.geometry.camera import Camera, Rig
 
 
 def look_at_camera(name: str, center: Sequence[float], target: Sequence[float], image_size: tuple[int, int],
@@ -43,7 +43,7 @@ def ring_rig(num_cameras: int, radius: float, height: float, look_at: Sequence[f
 
 
 def rig_from_file(path: str | Path, fmt: str = "auto") -> Rig:
-    """A rig read by reconstruction.calibration.load_rig (cameras.json, Panoptic, Shelf, Wildtrack...)."""
-    from reconstruction.calibration import load_rig
+    """A rig read by data.geometry.calibration.load_rig (cameras.json, Panoptic, Shelf, Wildtrack...)."""
+    from data.geometry.calibration import load_rig
 
     return load_rig(path, fmt)

@@ -17,7 +17,7 @@ from collections import Counter
 import numpy as np
 
 from data.multiview import ViewDetections
-from reconstruction.camera import Camera, Rig
+from data.geometry.camera import Camera, Rig
 from reconstruction.matching.merge import match_pairs
 
 TOO_FEW_JOINTS = "too_few_joints"  # fewer than min_common_joints joints with score >= min_score

@@ -38,15 +38,15 @@ import numpy as np
 from scipy.stats import chi2
 
 from data.multiview import ViewDetections
-from reconstruction.camera import Rig
+from data.geometry.camera import Rig
 from reconstruction.compile_notice import compile_notice
-from reconstruction.map_estimation import joint_sigma
+from reconstruction.solver.map_estimation import joint_sigma
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence_kernels import merge_linked, pair_chi2
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.feet_uncertainty import mahalanobis_distances
 from reconstruction.matching.merge import _as_edges, pair_edges, solve_pair
-from reconstruction.person_prior import chi2_medians
+from reconstruction.solver.person_prior import chi2_medians
 
 TOO_LITTLE_EVIDENCE = "too_little_evidence"      # no usable foot and fewer than min_dof usable joints
 NON_FINITE_KEYPOINTS = "non_finite_keypoints"    # ... and some keypoints were NaN / inf (treated as missing)

@@ -16,7 +16,7 @@ import numpy as np
 
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
-from reconstruction.camera import Camera, Rig
+from data.geometry.camera import Camera, Rig
 from reconstruction.matching.feet_uncertainty import (joint_sigmas, joints_on_planes, location_covariance,
                                                       mahalanobis_distances, mean_covariance)
 from reconstruction.matching.merge import match_pairs

@@ -25,7 +25,7 @@ from collections import Counter
 import numpy as np
 
 from data.multiview import ViewDetections
-from reconstruction.camera import Rig
+from data.geometry.camera import Rig
 from reconstruction.matching.epipolar import (TOO_FEW_JOINTS, epipolar_affinity, fundamental_matrix,
                                               undistorted_joints)
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher

@@ -16,7 +16,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from reconstruction.camera import Camera, apply_homography
+from data.geometry.camera import Camera, apply_homography
 
 _DIFF_STEP_PX = 0.5  # central-difference step of the undistortion Jacobian
 _TINY = 1e-12        # relative size under which a homography's H[2, 2] counts as 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from data.multiview import ViewDetections
-from reconstruction.camera import Rig
+from data.geometry.camera import Rig
 from reconstruction.matching.assignment import assignment_from_labels
 
 

@@ -43,7 +43,7 @@ import numpy as np
 
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
-from reconstruction.camera import Camera, Rig
+from data.geometry.camera import Camera, Rig
 from reconstruction.matching.epipolar import undistorted_joints, unmatched_counts
 from reconstruction.matching.merge import match_pairs
 

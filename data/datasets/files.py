@@ -1,0 +1,58 @@
+"""Your own rig: a calibration file and a poses2d.json (DESIGN.md) turned into a Sequence without ground truth.
+
+The calibration is read by :func:`data.geometry.calibration.load_rig` (format detected: cameras.json,
+4D Association, VoxelPose, Panoptic, a Wildtrack folder, Shelf P-matrices); the 2D poses by
+:func:`data.formats.poses2d_io.read_poses2d`, which checks every entry against the calibration's camera names and image sizes. The rig check
+(:mod:`data.geometry.check_rig`) then runs with the 2D poses: errors stop, warnings (RigWarning) name
+the camera and the likely mistake.
+Frames are the frame numbers found in the file, or the ones asked for: a frame without any detection
+in any view is still a frame (the pipeline then reports it as skipped), so that a detector's output,
+which omits empty frames, can be evaluated over a fixed range.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from data.multiview import Frame, Sequence, ViewDetections
+from data.formats.poses2d_io import read_poses2d
+from data.geometry.calibration import load_rig
+from data.geometry.check_rig import check_rig
+
+
+def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str | None = None) -> Sequence:
+    """The rig of ``cameras`` (V views) and one Frame per frame number with V ViewDetections (N, 23, 3).
+
+    ``frames``: None = every frame number in ``poses2d``; a list of frame numbers; or "start:stop[:step]"
+    = range(start, stop, step) of frame numbers. Frames of the file outside the selection are dropped
+    (counted in ``meta["frames_not_selected"]``); selected frames absent from the file have no detections.
+    """
+    rig = load_rig(cameras, check=False)
+    if not Path(poses2d).is_file():
+        raise FileNotFoundError(f"{poses2d}: poses2d.json not found")
+    views = read_poses2d(poses2d, rig.names, [c.size for c in rig])
+    check_rig(rig, cameras, views)  # load_rig ran the geometric checks; this adds the 2D poses against the rig
+    numbers = sorted(views) if frames is None else _frame_numbers(frames)
+    empty = [f for f in numbers if f not in views]
+    out = [Frame(f, views.get(f) or [ViewDetections.empty() for _ in rig.names]) for f in numbers]
+    detections = sum(len(v) for f in numbers for v in views.get(f, []))
+    meta = {"dataset": "files", "cameras": str(cameras), "poses2d": str(poses2d),
+            "frames_without_detections": len(empty), "frames_not_selected": len(set(views) - set(numbers)),
+            "description": f"{poses2d} ({detections} detections; {len(empty)} frames without any) on {cameras}, "
+                           f"no ground truth"}
+    return Sequence(rig, out, meta)
+
+
+def _frame_numbers(frames: list[int] | str) -> list[int]:
+    """Frame numbers of a list, or of a "start:stop[:step]" range string."""
+    if isinstance(frames, str):
+        try:
+            parts = [int(p) for p in frames.split(":")]
+            if len(parts) not in (2, 3):
+                raise ValueError
+            return list(range(*parts))
+        except ValueError:
+            raise ValueError(f"frames={frames!r}: expected a list of frame numbers or 'start:stop[:step]'") from None
+    try:
+        return sorted({int(f) for f in frames})
+    except (TypeError, ValueError):
+        raise ValueError(f"frames={frames!r}: expected a list of frame numbers or 'start:stop[:step]'") from None

@@ -1,0 +1,215 @@
+"""CMU Panoptic sequences as the dataset ships them, turned into a :class:`data.multiview.Sequence`.
+
+Layout read (``<root>/<seq>/...``): ``calibration_<seq>.json`` and
+``hdPose3d_stage1_coco19/body3DScene_XXXXXXXX.json`` (frame number XXXXXXXX); HD images are not needed.
+
+Ground truth: every body's ``joints19`` (cm, Panoptic world with y down) goes through
+:func:`data.geometry.calibration.panoptic_world_to_ours` (metres, z up) and into COCO-23 with
+``PANOPTIC19_TO_COCO23``. A joint is valid when its Panoptic confidence is above ``GT_MIN_CONFIDENCE``
+(0.1, VoxelPose's rule: ``joints_vis = confidence > 0.1``); coco19 has no foot joints, so the six
+COCO-23 foot joints are always invalid. ``gt_ids`` are the Panoptic body ids. The first 15 coco19
+joints (real neck and mid-hip included) are kept per frame in ``meta["gt_panoptic15"]`` for the
+Panoptic protocol (:mod:`evaluation.protocols.panoptic`), which the returned Sequence asks for in
+``meta["protocol_inputs"]``; the evaluation layer attaches it as ``PanopticProtocol``
+(:func:`evaluation.protocols.attach_protocols`; eval.py prints its tables and writes its summary under "panoptic").
+
+2D input: either a ``poses2d.json`` (DESIGN.md), or 2D poses generated from the ground truth by
+projecting it through the chosen cameras with Gaussian pixel noise and capsule occlusion
+(:func:`data.synthetic.observe.observe_view`, see :func:`observe_ground_truth`). Generated input is for
+protocol checks only: it carries ground-truth identities (so the oracle matcher works) and, like the
+ground truth, has no foot joints; the feet matcher then falls back to the ankles.
+"""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+from data.keypoints import FOOT_JOINTS, LEFT_ANKLE, LEFT_FOOT, PANOPTIC19_TO_COCO23, RIGHT_ANKLE, RIGHT_FOOT, to_coco23
+from data.multiview import Frame, Sequence, ViewDetections
+from data.synthetic.config import SyntheticConfig
+from data.synthetic.observe import bbox_from_keypoints, observe_view
+from data.geometry.calibration import load_panoptic, panoptic_world_to_ours
+from data.geometry.camera import Camera, Rig
+
+# The five HD cameras of VoxelPose's Panoptic experiments (panel 0, nodes 3, 6, 12, 13, 23).
+DEFAULT_CAMERAS = ("00_03", "00_06", "00_12", "00_13", "00_23")
+POSE_DIR = "hdPose3d_stage1_coco19"
+GT_MIN_CONFIDENCE = 0.1
+NUM_PANOPTIC_JOINTS = 19
+_POSE_FILE = re.compile(r"body3DScene_(\d+)\.json")
+
+
+def load_panoptic_sequence(root: str | Path, sequence: str = "160906_band1", cameras: list[str] | None = None,
+                           frames: list[int] | slice | str | None = None, poses2d: str | None = None,
+                           noise_px: float = 2.0, occlusion: bool = True, seed: int = 0,
+                           occluded_drop_prob: float = 0.3, occluded_noise_scale: float = 3.0,
+                           min_joints_in_view: int = 5) -> Sequence:
+    """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) per frame, 2D views.
+
+    ``frames``: None = every body3DScene file found; a list = those frame numbers; a slice or a
+    "start:stop:step" string = positions in the sorted list of found frames ("::12" keeps every 12th).
+    ``poses2d``: a poses2d.json to read the 2D input from; None generates it from the ground truth with
+    ``noise_px`` pixel noise SD (the same at every depth), ``occlusion`` and the other options of
+    :func:`observe_ground_truth`, deterministic for ``seed``.
+    """
+    seq_dir = Path(root) / sequence
+    names = list(DEFAULT_CAMERAS if cameras is None else (str(c) for c in cameras))
+    rig = load_panoptic(seq_dir / f"calibration_{sequence}.json", names)
+    all_files = find_pose_files(seq_dir)
+    files = _select_frames(all_files, frames, seq_dir / POSE_DIR)
+    ground_truth = {frame: read_bodies(path) for frame, path in files.items()}
+    meta = {"dataset": "panoptic", "root": str(root), "sequence": sequence, "cameras": names,
+            "gt_min_confidence": GT_MIN_CONFIDENCE, "gt_panoptic15": {},
+            "persistent_ids": True}      # Panoptic body ids name one person over the sequence
+    if poses2d is not None:
+        views_by_frame = _read_poses2d(poses2d, rig, meta)
+        source = f"2D poses from {poses2d}"
+    else:
+        cfg = SyntheticConfig(noise_px=noise_px, noise_depth_exponent=0.0, occlusion=occlusion,
+                              occluded_drop_prob=occluded_drop_prob, occluded_noise_scale=occluded_noise_scale,
+                              min_joints_in_view=min_joints_in_view, miss_rate=0.0, fp_rate=0.0)
+        rng = np.random.default_rng(seed)
+        views_by_frame = {f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng)
+                          for f, (ids, j19) in ground_truth.items()}
+        source = (f"2D generated from GT: {noise_px} px noise, occlusion {'on' if occlusion else 'off'}, "
+                  f"seed {seed}, no foot joints")
+    out = []
+    for frame, (ids, joints19) in ground_truth.items():
+        meta["gt_panoptic15"][frame] = panoptic19_to_ours(joints19)[:, :15]
+        views = views_by_frame.get(frame) or [ViewDetections.empty() for _ in names]
+        out.append(Frame(frame, views, _coco23(joints19), ids))
+    # Counted, not dropped silently: GT frames without 2D input, 2D frames without GT (not evaluated).
+    meta["frames_without_2d"] = sum(f not in views_by_frame for f in ground_truth)
+    meta["frames_2d_without_gt"] = sum(f not in all_files for f in views_by_frame)
+    meta["description"] = f"CMU Panoptic {sequence}: cameras {', '.join(names)}; {source}"
+    meta["protocol_inputs"] = [{"name": "panoptic", "gt15": meta["gt_panoptic15"]}]
+    return Sequence(rig, out, meta)
+
+
+def find_pose_files(seq_dir: str | Path) -> dict[int, Path]:
+    """{frame number: path} of the body3DScene_*.json files of a sequence folder, by frame number."""
+    pose_dir = Path(seq_dir) / POSE_DIR
+    if not pose_dir.is_dir():
+        raise FileNotFoundError(f"{pose_dir}: Panoptic ground-truth folder not found")
+    found = {int(m.group(1)): p for p in pose_dir.iterdir() if (m := _POSE_FILE.fullmatch(p.name))}
+    if not found:
+        raise FileNotFoundError(f"{pose_dir}: no body3DScene_*.json files")
+    return dict(sorted(found.items()))
+
+
+def read_bodies(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """A body3DScene file -> body ids (G,), joints19 (G, 19, 4) as stored (cm, y down, confidence)."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            bodies = json.load(f)["bodies"]
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: cannot read Panoptic bodies ({type(exc).__name__}: {exc})") from None
+    if not isinstance(bodies, list):
+        raise ValueError(f"{path}: 'bodies' is not a list")
+    ids, joints = [], []
+    for n, body in enumerate(bodies):
+        try:
+            ids.append(int(body["id"]))
+            j19 = np.array(body["joints19"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{path}: bodies[{n}] needs an integer 'id' and numeric 'joints19'") from None
+        if j19.size != NUM_PANOPTIC_JOINTS * 4 or not np.all(np.isfinite(j19)):
+            raise ValueError(f"{path}: bodies[{n}] (id {ids[-1]}) 'joints19' must be 76 finite numbers, "
+                             f"got {j19.size}")
+        joints.append(j19.reshape(NUM_PANOPTIC_JOINTS, 4))
+    return np.array(ids, dtype=np.int64), np.array(joints).reshape(-1, NUM_PANOPTIC_JOINTS, 4)
+
+
+def panoptic19_to_ours(joints19: np.ndarray) -> np.ndarray:
+    """Panoptic joints (cm, y down, confidence): (..., 19, 4) -> (metres, z up, validity 0/1) (..., 19, 4)."""
+    joints19 = np.asarray(joints19, dtype=np.float64)
+    valid = joints19[..., 3:4] > GT_MIN_CONFIDENCE
+    xyz = np.where(valid, panoptic_world_to_ours(joints19[..., :3]), 0.0)
+    return np.concatenate([xyz, valid.astype(np.float64)], axis=-1)
+
+
+def _coco23(joints19: np.ndarray) -> np.ndarray:
+    """Panoptic joints as stored -> COCO-23 ground truth (m, z up, validity), feet invalid: (G, 19, 4) -> (G, 23, 4)."""
+    return to_coco23(panoptic19_to_ours(joints19), PANOPTIC19_TO_COCO23)
+
+
+def observe_ground_truth(rig: Rig, gt_poses: np.ndarray, gt_ids: np.ndarray, cfg: SyntheticConfig,
+                         rng: np.random.Generator) -> list[ViewDetections]:
+    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera of the rig.
+
+    The synthetic generator's :func:`observe_view` does the projection, noise, occlusion and scores.
+    Joints invalid in the ground truth (the feet always) are filled in only so that its capsule body
+    model has no segments to the origin (feet at the ankle, others at the mean of the valid joints),
+    and are then removed (score 0); a person left with fewer than ``cfg.min_joints_in_view`` joints is
+    not detected in that view.
+    """
+    gt_poses = np.asarray(gt_poses, dtype=np.float64)
+    ids = np.asarray(gt_ids, dtype=np.int64)
+    valid_by_id = {int(i): gt_poses[n, :, 3] > 0 for n, i in enumerate(ids)}
+    filled = _fill_invalid(gt_poses)
+    return [_mask_invalid(observe_view(camera, filled, ids, cfg, rng), valid_by_id, camera, cfg)
+            for camera in rig]
+
+
+def _fill_invalid(poses: np.ndarray) -> np.ndarray:
+    """World joints with invalid ones filled (see observe_ground_truth): (P, 23, 4) -> new (P, 23, 3)."""
+    out = poses[..., :3].copy()
+    for p, pose in enumerate(poses):
+        valid = pose[:, 3] > 0
+        centre = pose[valid, :3].mean(axis=0) if np.any(valid) else np.zeros(3)
+        out[p, ~valid] = centre
+        for ankle, foot in ((LEFT_ANKLE, LEFT_FOOT), (RIGHT_ANKLE, RIGHT_FOOT)):
+            for j in foot:
+                if not valid[j]:
+                    out[p, j] = out[p, ankle]
+    return out
+
+
+def _mask_invalid(views: ViewDetections, valid_by_id: dict[int, np.ndarray], camera: Camera,
+                  cfg: SyntheticConfig) -> ViewDetections:
+    """Zero the joints invalid in the ground truth, drop persons left with too few joints, redo boxes."""
+    keypoints = views.keypoints.copy()
+    for n, pid in enumerate(views.person_ids):
+        if pid >= 0:
+            keypoints[n, ~valid_by_id[int(pid)]] = 0.0
+    keypoints[:, list(FOOT_JOINTS)] = 0.0
+    keep = (keypoints[..., 2] > 0).sum(axis=1) >= cfg.min_joints_in_view
+    if not np.any(keep):
+        return ViewDetections.empty(keypoints.shape[1])
+    keypoints = keypoints[keep]
+    valid = keypoints[..., 2] > 0
+    scores = (keypoints[..., 2] * valid).sum(axis=1) / valid.sum(axis=1)
+    return ViewDetections(keypoints, bbox_from_keypoints(keypoints, camera.size), scores,
+                          views.person_ids[keep], views.occluded[keep])
+
+
+def _select_frames(files: dict[int, Path], frames: list[int] | slice | str | None,
+                   pose_dir: Path) -> dict[int, Path]:
+    """The requested subset of {frame: path} (see load_panoptic_sequence for ``frames``)."""
+    if frames is None:
+        return files
+    if isinstance(frames, str):
+        try:
+            frames = slice(*(int(p) if p.strip() else None for p in frames.split(":")))
+        except (TypeError, ValueError):
+            raise ValueError(f"frames={frames!r}: expected a list of frame numbers or 'start:stop:step'") from None
+    numbers = list(files)
+    if isinstance(frames, slice):
+        return {f: files[f] for f in numbers[frames]}
+    missing = [int(f) for f in frames if int(f) not in files]
+    if missing:
+        raise ValueError(f"{pose_dir}: frame {missing[0]} requested but body3DScene_{missing[0]:08d}.json "
+                         f"is not there (found {numbers[0]}..{numbers[-1]}, {len(numbers)} files)")
+    return {int(f): files[int(f)] for f in frames}
+
+
+def _read_poses2d(path: str, rig: Rig, meta: dict) -> dict[int, list[ViewDetections]]:
+    """Detections per frame from a poses2d.json, one ViewDetections per camera in rig order."""
+    from data.formats.poses2d_io import read_poses2d  # imported here: the reader is optional for generated input
+
+    views = read_poses2d(path, list(rig.names), [c.size for c in rig])
+    meta["poses2d"] = str(path)
+    return views

@@ -1,0 +1,153 @@
+"""The Shelf benchmark (frames 300..600) as a :class:`data.multiview.Sequence`, scored by its own protocol.
+
+Layout read under ``root`` (4D Association's data/shelf, see ../shared/data/PROVENANCE.md):
+``4d_association/calibration.json`` (the 5 cameras), ``4d_association/detection/<camera>.txt``
+(ungrouped OpenPose BODY_25 candidates and PAFs), ``4d_association/gt.txt`` (Shelf-14 + mid-hip ground
+truth) and ``4d_association/skel.txt`` (4D Association's stored output, the baseline).
+
+2D input: the candidates of every camera frame are grouped into persons by part affinity
+by the ``grouper`` the config gives (``models.paf_grouping.group_view``) into COCO-23 ViewDetections; the seconds spent
+grouping go to ``meta["stage_seconds"]["grouping"]`` (eval.py prints them as a stage). Alternatively a
+``poses2d.json`` (DESIGN.md) of already-grouped COCO-23 detections, keyed by the Shelf frame number.
+Detections carry no identities (person_ids -1).
+
+Ground truth: Shelf-14 + mid-hip is not COCO-23, so ``Frame.gt_poses`` is None (the generic evaluator
+skips it); ``meta["protocol_inputs"]`` holds what the Shelf protocol needs (GT, its path, the baseline
+path), and the evaluation layer attaches :class:`evaluation.protocols.shelf.ShelfProtocol` from it
+(:func:`evaluation.protocols.attach_protocols`), which prints the standard Shelf PCP table for ours and
+for 4D Association.
+``Frame.index`` is the Shelf frame number (file frame i = ``first_frame`` + i).
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import time
+from pathlib import Path
+
+from data.keypoints import FOOT_JOINTS
+from data.formats.fourd_detections import FrameCandidates, load_4dassoc_detections
+from data.multiview import Frame, Sequence, ViewDetections
+from data.formats.fourd_skeletons import load_4dassoc_skeletons
+from data.geometry.calibration import load_4dassoc
+from data.geometry.camera import Rig
+
+
+def load_shelf(root: str | Path = "../shared/data/shelf", detections: str = "4d_association/detection",
+               calibration: str = "4d_association/calibration.json", gt: str = "4d_association/gt.txt",
+               baseline: str | None = "4d_association/skel.txt", first_frame: int = 300,
+               frames: str | list[int] | None = None, min_paf: float = 0.05, min_joints: int = 8,
+               min_mean_score: float = 0.4, bbox_margin: float = 0.1, poses2d: str | None = None,
+               alpha: float = 0.5, drop_feet: bool = False, grouper: Callable | None = None) -> Sequence:
+    """The Shelf rig (5 views) and one Frame per chosen frame with V ViewDetections (N, 23, 3), gt_poses None.
+
+    Paths are relative to ``root`` unless absolute. ``frames``: None = all frames of gt.txt; a
+    "start:stop[:step]" string = positions in the file (``"0:50"`` = Shelf frames 300..349); a list =
+    Shelf frame numbers. ``min_paf``, ``min_joints``, ``min_mean_score`` go to group_people;
+    ``drop_feet``: the 6 foot keypoints of every detection are removed (score 0, ankles kept), as a
+    COCO-17 detector would give them;
+    ``bbox_margin`` grows the boxes around the joints. ``grouper``: ``grouper(candidates, pafs, min_paf=,
+    min_joints=, min_mean_score=, margin=) -> ViewDetections`` (``models.paf_grouping.group_view``), needed
+    unless ``poses2d`` is given. ``poses2d``: grouped COCO-23 input instead of the
+    detection files (no grouping). ``baseline``: None = no 4D Association comparison. ``alpha``: PCP.
+    """
+    root = Path(root)
+    rig = load_4dassoc(_under(root, calibration))
+    gt_path = _under(root, gt)
+    gts = load_4dassoc_skeletons(gt_path)
+    numbers = _frame_numbers(frames, len(gts), first_frame, gt_path)
+    meta = {"dataset": "shelf", "root": str(root), "first_frame": first_frame, "frames": len(numbers)}
+    if poses2d is None:
+        if grouper is None:
+            raise ValueError("load_shelf: grouping the detection files needs a grouper "
+                             "(dataset.grouper: models.paf_grouping.group_view), or give dataset.poses2d")
+        views, seconds = _grouped_views(_under(root, detections), rig, numbers, first_frame, grouper,
+                                        dict(min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score),
+                                        bbox_margin)
+        meta["stage_seconds"] = {"grouping": seconds}
+        source = (f"OpenPose BODY_25 candidates of {_under(root, detections)} grouped by PAF (min_paf {min_paf:g}, "
+                  f"min_joints {min_joints}, min_mean_score {min_mean_score:g})")
+    else:
+        views = _read_poses2d(poses2d, rig)
+        meta["poses2d_frames_not_selected"] = len(set(views) - set(numbers))
+        source = f"grouped 2D poses from {poses2d}"
+    if drop_feet:
+        views = {n: [without_feet(v) for v in vs] for n, vs in views.items()}
+        source += "; the 6 foot keypoints removed (dataset.drop_feet)"
+    out = [Frame(n, views.get(n) or [ViewDetections.empty() for _ in rig.names]) for n in numbers]
+    detected = sum(len(v) for f in out for v in f.views)
+    meta["description"] = (f"Shelf frames {numbers[0]}-{numbers[-1]} ({len(numbers)}), cameras "
+                           f"{', '.join(rig.names)}: {source}; {detected / max(len(out), 1):.1f} detections per frame")
+    meta["protocol_inputs"] = [{"name": "shelf", "gt": {n: gts[n - first_frame] for n in numbers}, "gt_path": gt_path,
+                                "baseline_path": None if baseline is None else _under(root, baseline),
+                                "first_frame": first_frame, "alpha": alpha}]
+    return Sequence(rig, out, meta)
+
+
+def without_feet(view: ViewDetections) -> ViewDetections:
+    """A copy of the detections with the 6 COCO-23 foot joints missing (x, y, score 0): (N, 23, 3)."""
+    keypoints = view.keypoints.copy()
+    keypoints[:, FOOT_JOINTS] = 0.0
+    return ViewDetections(keypoints, view.bboxes, view.scores, view.person_ids, view.occluded)
+
+
+def _under(root: Path, path: str | Path) -> Path:
+    """path relative to root unless absolute; a missing path stops with its name."""
+    full = Path(path) if Path(path).is_absolute() else root / path
+    if not full.exists():
+        raise FileNotFoundError(f"{full}: Shelf file not found (root={root})")
+    return full
+
+
+def _frame_numbers(frames: str | list[int] | None, count: int, first: int, gt_path: Path) -> list[int]:
+    """Shelf frame numbers chosen: None = all `count` frames from `first`; "a:b[:c]" = file positions; a list."""
+    everything = list(range(first, first + count))
+    if frames is None:
+        return everything
+    if isinstance(frames, str):
+        try:
+            chosen = everything[slice(*(int(p) if p.strip() else None for p in frames.split(":")))]
+        except (TypeError, ValueError):
+            raise ValueError(f"frames={frames!r}: expected 'start:stop[:step]' or a list of frame numbers") from None
+    else:
+        chosen = [int(f) for f in frames]
+        outside = [f for f in chosen if f not in everything]
+        if outside:
+            raise ValueError(f"{gt_path}: frame {outside[0]} requested, the file holds {first}..{first + count - 1}")
+    if not chosen:
+        raise ValueError(f"frames={frames!r} selects no frame of {gt_path} ({first}..{first + count - 1})")
+    return chosen
+
+
+def _grouped_views(folder: Path, rig: Rig, numbers: list[int], first: int, grouper: Callable, grouping: dict,
+                   margin: float) -> tuple[dict[int, list[ViewDetections]], float]:
+    """{frame: V ViewDetections} from <folder>/<camera>.txt, and the seconds spent grouping."""
+    per_camera = [_camera_candidates(folder, name, rig.cameras[v].size, numbers, first)
+                  for v, name in enumerate(rig.names)]
+    t0 = time.perf_counter()
+    views = {n: [grouper(c[i].candidates, c[i].pafs, **grouping, margin=margin)
+                 for c in per_camera] for i, n in enumerate(numbers)}
+    return views, time.perf_counter() - t0
+
+
+def _camera_candidates(folder: Path, name: str, size: tuple[int, int], numbers: list[int],
+                       first: int) -> list[FrameCandidates]:
+    """The chosen frames of one camera's detection file."""
+    path = folder / f"{name}.txt"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: detection file of camera {name!r} not found")
+    frames = load_4dassoc_detections(path, (int(size[0]), int(size[1])))
+    if numbers[-1] - first >= len(frames):
+        raise ValueError(f"{path}: {len(frames)} frames, but frame {numbers[-1]} (position {numbers[-1] - first}) "
+                         "is asked for")
+    return [frames[n - first] for n in numbers]
+
+
+def _read_poses2d(path: str | Path, rig: Rig) -> dict[int, list[ViewDetections]]:
+    """Grouped COCO-23 detections {frame: V ViewDetections} from a poses2d.json."""
+    from data.formats.poses2d_io import read_poses2d
+
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: poses2d.json not found")
+    return read_poses2d(path, list(rig.names), [c.size for c in rig])
+

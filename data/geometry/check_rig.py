@@ -1,0 +1,376 @@
+"""Plausibility checks of a calibrated rig, and of 2D poses against it: ``python -m data.geometry.check_rig
+cameras.json [poses2d.json]``.
+
+A calibration can load cleanly and still be wrong: t in millimetres, R transposed (camera -> world), a
+camera copied under two names, the world's z axis not up. The checks below catch what users really get
+wrong; what makes every result garbage is an error (`RigError`, a `CalibrationError`), the rest a
+`RigWarning` naming the camera and the likely mistake. `load_rig` runs the geometric checks on every
+load, `data.datasets.files.load_files` adds the 2D check; this command runs both and prints one line
+per finding.
+
+Geometric checks (`rig_findings`):
+- all camera centres within ``min_baseline_m`` of each other: error (nothing can be triangulated); two
+  of them: warning (that view pair cannot triangulate);
+- a centre farther than ``max_centre_distance_m`` from the world origin: warning (t in mm or cm?);
+- a centre more than ``ground_clearance_m`` below the ground plane z = 0, or lower than
+  ``min_camera_height_m`` above it: warning (the feet matcher cuts foot rays with the planes of the feet
+  and ankles; a camera on such a plane cannot, and its feet are dropped);
+- an image y axis pointing up in the world by more than ``max_image_up`` (sine): warning (upside down,
+  R transposed or the world's z axis down);
+- no pixel of the image seeing the ground plane in front of the camera: warning;
+- a camera that does not see the common scene of the others (the point nearest to their optical axes,
+  allowed ``scene_margin`` image sizes outside the image): warning (R transposed or of another camera?).
+
+2D check (`pose_findings`): per view pair, each detection's joints are triangulated (DLT) with every
+detection of the other view and the mutual best pairs kept; a camera whose pairs reproject worse than
+``max_reprojection`` (a fraction of the image diagonal) gets a warning, naming the correction (R
+transposed, camera -> world pose, t in mm, poses of another camera) that makes its 2D poses fit, if any.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from data.multiview import ViewDetections
+from data.geometry.calibration import CalibrationError, load_rig
+from data.geometry.camera import Camera, Rig
+from data.geometry.triangulation import reprojection_error, triangulate_dlt
+
+
+_COST_CAP = 1e6  # reprojection errors (in image diagonals) are capped here, so that medians cannot overflow
+
+
+class RigError(CalibrationError):
+    """A calibration whose every result would be garbage (e.g. all cameras at one place)."""
+
+
+class RigWarning(UserWarning):
+    """A calibration or 2D input that loads but looks wrong; the message names camera and likely mistake."""
+
+
+@dataclass(frozen=True)
+class RigTolerances:
+    """The documented tolerances of the rig check (module docstring)."""
+
+    min_baseline_m: float = 0.05          # centres closer than this are one place
+    max_centre_distance_m: float = 250.0  # centres farther from the world origin: units other than metres
+    ground_clearance_m: float = 0.02      # a centre farther below z = 0 is below the ground plane
+    min_camera_height_m: float = 0.3      # a centre lower than this sits on the feet's / ankles' planes
+    max_image_up: float = 0.1             # sine of the angle the image's y axis may point up in the world
+    scene_margin: float = 0.5             # image sizes the common scene point may lie outside the image
+    max_reprojection: float = 0.02        # median 2-view reprojection error, fraction of the image diagonal
+    min_joints: int = 8                   # joints two detections must share to be triangulated
+    max_frames: int = 20                  # frames (evenly spread) the 2D check looks at
+    max_axes_condition: float = 1e6       # optical axes closer to parallel have no common point
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One result of the check: level "error" or "warning", and a one-line message."""
+
+    level: str
+    message: str
+
+
+def _share(fraction: float) -> str:
+    """A reprojection error as a share of the image diagonal, readable for huge values too."""
+    return f"{fraction:.1%} of the image diagonal" if fraction < 10 else f"{fraction:.3g} image diagonals"
+
+
+def _names(cameras: Iterable[Camera]) -> str:
+    """'a', 'b' and 'c' style list of camera names."""
+    return ", ".join(repr(c.name) for c in cameras)
+
+
+# --- geometry ---------------------------------------------------------------------------------------
+def axes_point(cameras: Sequence[Camera], max_condition: float) -> np.ndarray | None:
+    """The point nearest (least squares) to the cameras' optical axes: (3,), None if they are parallel."""
+    A, b = np.zeros((3, 3)), np.zeros(3)
+    for cam in cameras:
+        d = cam.R[2]
+        M = np.eye(3) - np.outer(d, d)
+        A += M
+        b += M @ cam.center
+    if len(cameras) < 2 or np.linalg.cond(A) > max_condition:
+        return None
+    return np.linalg.solve(A, b)
+
+
+def sees_point(cam: Camera, point: np.ndarray, margin: float) -> bool:
+    """Whether a world point (3,) is in front of the camera and projects within `margin` image sizes of it."""
+    x = cam.R @ point + cam.t
+    if x[2] <= 0:
+        return False
+    uv = (cam.K @ (x / x[2]))[:2]
+    size = np.asarray(cam.size, dtype=np.float64)
+    return bool(np.all(uv >= -margin * size) and np.all(uv <= (1 + margin) * size))
+
+
+def sees_ground(cam: Camera, grid: int = 9) -> bool:
+    """Whether some pixel of a grid x grid lattice over the (undistorted) image sees z = 0 in front."""
+    w, h = cam.size
+    u, v = np.meshgrid(np.linspace(0, w, grid), np.linspace(0, h, grid))
+    pixels = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
+    rays = pixels @ np.linalg.inv(cam.K).T @ cam.R  # world directions R^T K^-1 p: (grid^2, 3)
+    cz = cam.center[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = -cz / rays[:, 2]
+    return bool(np.any(np.isfinite(s) & (s > 0)))
+
+
+def rig_findings(rig: Rig, tol: RigTolerances = RigTolerances()) -> list[Finding]:
+    """The geometric findings of a rig (module docstring), errors first."""
+    cams = list(rig)
+    out: list[Finding] = []
+    if len(cams) < 2:
+        return [Finding("warning", f"only {len(cams)} camera: nothing can be triangulated")]
+    C = np.array([c.center for c in cams])
+    dist = np.linalg.norm(C[:, None] - C[None], axis=-1)
+    if dist.max() < tol.min_baseline_m:
+        out.append(Finding("error", f"all {len(cams)} cameras have their centre at ({C[0, 0]:.3g}, {C[0, 1]:.3g}, "
+                                    f"{C[0, 2]:.3g}) (within {tol.min_baseline_m} m): no baseline, nothing can be "
+                                    f"triangulated (R and t copied from one camera?)"))
+        return out
+    for a, b in zip(*np.nonzero(np.triu(dist < tol.min_baseline_m, 1))):
+        same = all(np.array_equal(getattr(cams[a], k), getattr(cams[b], k)) for k in ("K", "R", "t"))
+        out.append(Finding("warning", f"cameras {cams[a].name!r} and {cams[b].name!r} "
+                                      f"{'have identical calibrations' if same else 'share their centre'} "
+                                      f"({dist[a, b]:.3g} m apart): that view pair cannot triangulate "
+                                      f"(one camera copied under two names?)"))
+    far = [c for c, d in zip(cams, np.linalg.norm(C, axis=1)) if d > tol.max_centre_distance_m]
+    if far:
+        with np.errstate(over="ignore"):
+            d = np.minimum(np.linalg.norm([c.center for c in far], axis=1), np.finfo(np.float64).max)
+        out.append(Finding("warning", f"camera{'s' if len(far) > 1 else ''} {_names(far)}: centre {d.min():.4g}"
+                                      f"{f'-{d.max():.4g}' if d.max() > d.min() * 1.001 else ''} m from the world origin "
+                                      f"(more than {tol.max_centre_distance_m:g} m): is t in millimetres or "
+                                      f"centimetres? cameras.json wants metres"))
+    below = [c for c in cams if c.center[2] < -tol.ground_clearance_m]
+    on = [c for c in cams if -tol.ground_clearance_m <= c.center[2] < tol.min_camera_height_m]
+    if below:
+        out.append(Finding("warning", f"camera{'s' if len(below) > 1 else ''} {_names(below)}: centre below the "
+                                      f"ground plane z = 0 (the world must be z up with the floor at z = 0; "
+                                      f"y up or R transposed?)"))
+    if on:
+        out.append(Finding("warning", f"camera{'s' if len(on) > 1 else ''} {_names(on)}: centre at "
+                                      f"z = {min(c.center[2] for c in on):.3g} m, on or just above the ground "
+                                      f"plane (below {tol.min_camera_height_m} m): the feet matcher cannot place "
+                                      f"feet seen from the planes of the feet and ankles and drops them"))
+    upside = [c for c in cams if c.R[1, 2] > tol.max_image_up]
+    if upside:
+        out.append(Finding("warning", f"camera{'s' if len(upside) > 1 else ''} {_names(upside)}: the image's y "
+                                      f"axis points up in the world (upside down? R transposed, or the world's "
+                                      f"z axis pointing down?)"))
+    blind = [c for c in cams if c.center[2] >= tol.min_camera_height_m and not sees_ground(c)]
+    if blind:
+        out.append(Finding("warning", f"camera{'s' if len(blind) > 1 else ''} {_names(blind)}: the ground plane "
+                                      f"z = 0 is nowhere in the image (looking up? R transposed?); the feet "
+                                      f"matcher needs the floor in front of the cameras"))
+    out.extend(_scene_findings(cams, tol))
+    return out
+
+
+def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
+    """Cameras that do not look at the common scene of the others (module docstring)."""
+    cams = [c for c in cams if np.linalg.norm(c.center) <= tol.max_centre_distance_m]  # flagged already
+    if len(cams) == 2:
+        point = axes_point(cams, tol.max_axes_condition)
+        if point is not None and not all(sees_point(c, point, tol.scene_margin) for c in cams):
+            return [Finding("warning", f"cameras {_names(cams)} do not look at a common region (their optical "
+                                       f"axes meet behind or beside them): R transposed or of another camera?")]
+        return []
+    lost = []
+    for i, cam in enumerate(cams):
+        point = axes_point(cams[:i] + cams[i + 1:], tol.max_axes_condition)
+        if point is not None and not sees_point(cam, point, tol.scene_margin):
+            lost.append(cam)
+    if lost and len(lost) < len(cams):
+        return [Finding("warning", f"camera{'s' if len(lost) > 1 else ''} {_names(lost)}: not looking at the "
+                                   f"common scene of the other cameras (R transposed, camera -> world, or of "
+                                   f"another camera?)")]
+    if lost:
+        return [Finding("warning", "the cameras do not look at a common region (every camera misses the point "
+                                   "the others look at): R camera -> world instead of world -> camera?")]
+    return []
+
+
+# --- 2D poses against the rig ------------------------------------------------------------------------
+def _pair_costs(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.ndarray, min_joints: int) -> np.ndarray:
+    """Median reprojection error / image diagonal of every detection pair of two views, inf where they
+    share fewer than min_joints joints or the point lies behind a camera: (Na, 23, 3), (Nb, 23, 3) -> (Na, Nb)."""
+    Na, Nb, J = len(kp_a), len(kp_b), kp_a.shape[1]
+    ua = np.concatenate([cam_a.undistort_points(kp_a[..., :2]), kp_a[..., 2:]], -1)
+    ub = np.concatenate([cam_b.undistort_points(kp_b[..., :2]), kp_b[..., 2:]], -1)
+    both = (ua[:, None, :, 2] > 0) & (ub[None, :, :, 2] > 0)                                       # (Na, Nb, J)
+    poses = np.zeros((2, Na, Nb, J, 3))
+    poses[0, ..., :2], poses[1, ..., :2] = ua[:, None, :, :2], ub[None, :, :, :2]
+    poses[..., 2] = both
+    poses = poses.reshape(2, Na * Nb, J, 3)
+    proj = np.stack([cam_a.P, cam_b.P])
+    with np.errstate(all="ignore"):
+        X = triangulate_dlt(poses, proj)
+        err = reprojection_error(X, poses, proj)                                                # (2, P, J)
+        front = (cam_a.depth(X[..., :3]) > 0) & (cam_b.depth(X[..., :3]) > 0)
+    diag = np.array([np.hypot(*cam_a.size), np.hypot(*cam_b.size)])[:, None, None]
+    err = np.where(front[None], err / diag, np.inf)
+    err = np.where(both.reshape(1, Na * Nb, J), err, np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        cost = np.nanmedian(np.concatenate([err[0], err[1]], axis=1), axis=1).reshape(Na, Nb)
+    cost = np.minimum(np.nan_to_num(cost, nan=np.inf), _COST_CAP)
+    return np.where(both.sum(-1) >= min_joints, cost, np.inf)
+
+
+def _mutual_best(cost: np.ndarray) -> np.ndarray:
+    """Costs of the mutual best pairs of a (Na, Nb) cost matrix, finite ones only: (M,)."""
+    if cost.size == 0:
+        return np.zeros(0)
+    a_best, b_best = np.argmin(cost, axis=1), np.argmin(cost, axis=0)
+    keep = [cost[a, b] for a, b in enumerate(a_best) if b_best[b] == a and np.isfinite(cost[a, b])]
+    return np.array(keep)
+
+
+def _frames(views_by_frame: Mapping[int, list[ViewDetections]], count: int) -> list[list[ViewDetections]]:
+    """At most `count` frames spread evenly over the sequence."""
+    keys = sorted(views_by_frame)
+    pick = np.unique(np.linspace(0, len(keys) - 1, min(count, len(keys))).round().astype(int)) if keys else []
+    return [views_by_frame[keys[i]] for i in pick]
+
+
+def pair_fit(cam_a: Camera, cam_b: Camera, frames: list[list[ViewDetections]], a: int, b: int,
+             tol: RigTolerances) -> float:
+    """Median over the frames' mutual best detection pairs of views a, b (poses of those views, cameras
+    cam_a, cam_b) of their 2-view reprojection error (fraction of the diagonal); nan without detections
+    in both views."""
+    shared = [f for f in frames if len(f[a]) and len(f[b])]
+    costs = [_mutual_best(_pair_costs(cam_a, cam_b, f[a].keypoints, f[b].keypoints, tol.min_joints)) for f in shared]
+    costs = np.concatenate(costs) if costs else np.zeros(0)
+    if not len(costs):  # inf: detections in both views, but no pair of them triangulates in front of both
+        return float("inf") if shared else float("nan")
+    return float(np.median(costs))
+
+
+def camera_fit(cams: list[Camera], frames: list[list[ViewDetections]], v: int, partners: Iterable[int],
+               tol: RigTolerances, poses_of: int | None = None) -> float:
+    """Median of camera v's pair fits (pair_fit) with the partner views; poses_of: take view v's 2D poses
+    from that view instead (a name swap); nan without pairs."""
+    fits = [pair_fit(cams[v], cams[u], frames, v if poses_of is None else poses_of, u, tol) for u in partners]
+    fits = [f for f in fits if np.isfinite(f) or f == np.inf]
+    return float(np.median(fits)) if fits else float("nan")
+
+
+def _corrections(cam: Camera) -> list[tuple[str, Camera]]:
+    """Candidate corrections of a camera that does not fit its 2D poses: (what was wrong, corrected camera)."""
+    R, t = cam.R, cam.t
+    return [("R is transposed (give world -> camera)", replace_camera(cam, R.T, t)),
+            ("R, t are the camera -> world pose (invert them)", replace_camera(cam, R.T, -R.T @ t)),
+            ("t is in millimetres (metres expected)", replace_camera(cam, R, t / 1000.0)),
+            ("t is in centimetres (metres expected)", replace_camera(cam, R, t / 100.0))]
+
+
+def replace_camera(cam: Camera, R: np.ndarray, t: np.ndarray) -> Camera:
+    """The camera with another R (3, 3) and t (3,)."""
+    return Camera(cam.name, cam.K, cam.dist, R, t, cam.size)
+
+
+def _diagnose(cams: list[Camera], frames: list[list[ViewDetections]], v: int, good: list[int],
+              tol: RigTolerances) -> str:
+    """The correction of camera v that makes its 2D poses fit the good cameras, in words."""
+    for what, fixed in _corrections(cams[v]):
+        trial = cams[:v] + [fixed] + cams[v + 1:]
+        if camera_fit(trial, frames, v, good, tol) <= tol.max_reprojection:
+            return f"likely {what}"
+    for u in range(len(cams)):
+        if u != v and camera_fit(cams, frames, v, good, tol, poses_of=u) <= tol.max_reprojection:
+            return f"likely the 2D poses of camera {cams[u].name!r} (names swapped)"
+    return "a wrong R, t or K, or the 2D poses of another camera"
+
+
+def pose_findings(rig: Rig, views_by_frame: Mapping[int, list[ViewDetections]],
+                  tol: RigTolerances = RigTolerances()) -> list[Finding]:
+    """Cameras whose 2D poses do not fit the calibration (quick 2-view triangulation), each with the likely
+    mistake; views_by_frame {frame: V ViewDetections (N, 23, 3)}. The worst camera is set aside until the
+    remaining ones fit each other, so one wrong camera does not blame its partners."""
+    cams, frames = list(rig), _frames(views_by_frame, tol.max_frames)
+    V = len(cams)
+    if V < 2 or not frames:
+        return []
+    M = np.full((V, V), np.nan)
+    for a in range(V):
+        for b in range(a + 1, V):
+            M[a, b] = M[b, a] = pair_fit(cams[a], cams[b], frames, a, b, tol)
+    good, bad = list(range(V)), []
+    while len(good) >= 2:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            fit = {v: np.nanmedian([M[v, u] for u in good if u != v]) for v in good}
+        worst = max(good, key=lambda v: -1.0 if np.isnan(fit[v]) else fit[v])
+        if not fit[worst] > tol.max_reprojection:
+            break
+        good.remove(worst)
+        bad.append((worst, fit[worst]))
+    if not bad:
+        return []
+    if len(good) < 2:
+        values = [f for _, f in bad]
+        return [Finding("warning", f"the 2D poses fit no camera pair (median 2-view reprojection error "
+                                   f"{_share(min(values))} or more, more than "
+                                   f"{tol.max_reprojection:.0%}): t in other units, R camera -> world, or the "
+                                   f"2D poses of another rig?")]
+    return [Finding("warning", f"camera {cams[v].name!r}: its 2D poses do not fit the calibration (median 2-view "
+                               f"reprojection error {_share(f)} against the other cameras, more "
+                               f"than {tol.max_reprojection:.0%}): {_diagnose(cams, frames, v, good, tol)}")
+            for v, f in bad]
+
+
+# --- running the check --------------------------------------------------------------------------------
+def check_rig(rig: Rig, path: str | Path, views_by_frame: Mapping[int, list[ViewDetections]] | None = None,
+              tol: RigTolerances = RigTolerances(), warn: bool = True) -> list[Finding]:
+    """Run the checks (2D ones with views_by_frame); raise RigError on the first error, emit the warnings
+    as RigWarning (warn=True) prefixed with `path`, and return the findings."""
+    findings = rig_findings(rig, tol)
+    for f in findings:
+        if f.level == "error":
+            raise RigError(f"{path}: {f.message}")
+    if views_by_frame is not None:
+        findings += pose_findings(rig, views_by_frame, tol)
+    if warn:
+        for f in findings:
+            warnings.warn(f"{path}: {f.message}", RigWarning, stacklevel=2)
+    return findings
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line: print every finding in one line each; exit status 1 on an error, else 0."""
+    parser = argparse.ArgumentParser(prog="python -m data.geometry.check_rig", description=__doc__.split("\n")[0])
+    parser.add_argument("cameras", help="cameras.json or any calibration load_rig reads")
+    parser.add_argument("poses2d", nargs="?", help="poses2d.json to check against the calibration")
+    args = parser.parse_args(argv)
+    from data.formats.poses2d_io import read_poses2d  # data imports reconstruction: keep the module import light
+
+    try:
+        rig = load_rig(args.cameras, check=False)
+        findings = rig_findings(rig)
+        errors = [f for f in findings if f.level == "error"]
+        if args.poses2d and not errors:
+            views = read_poses2d(args.poses2d, rig.names, [c.size for c in rig])
+            findings += pose_findings(rig, views)
+    except (ValueError, OSError) as err:  # CalibrationError and Poses2DError are ValueErrors
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    for f in findings:
+        print(f"{f.level}: {args.cameras}: {f.message}")
+    errors = sum(f.level == "error" for f in findings)
+    print(f"{args.cameras}: {len(rig)} cameras{f', {args.poses2d}' if args.poses2d else ''}: {errors} errors, "
+          f"{len(findings) - errors} warnings")
+    return 1 if errors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,8 @@
+"""2D training data (layer 2) for the 2D network.
+
+``records`` (ImageRecord), ``coco_keypoints`` (COCO-format keypoint files -> records),
+``crop_transforms`` (top-down crop affine, flips, augmentation), ``topdown_dataset`` (the torch
+Dataset; its heatmap codec is given by the caller), ``synthetic_images`` (the synthetic image renderer),
+``coco_eval`` (the COCO keypoint AP/AR of that format: pycocotools OKS, used by training and evaluation).
+May import layers 1 and 2 (``data.*``); never the stages, ``evaluation`` or the entry points.
+"""

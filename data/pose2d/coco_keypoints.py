@@ -1,0 +1,279 @@
+"""COCO-format keypoint annotation files (COCO-WholeBody, COCO-23, CrowdPose) to and from ImageRecords.
+
+Every loader returns one :class:`data.pose2d.records.ImageRecord` per entry of the file's ``images`` list, in
+file order, with every non-crowd person of that image in COCO-23 order, however few joints it has: the
+joints of persons that are not training samples are still needed for the multi-modal targets of the
+others. :func:`training_persons` picks the training samples of a record.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from data.keypoints import COCO23_NAMES, CROWDPOSE14_TO_COCO23, LIMBS, NUM_BODY_JOINTS, NUM_JOINTS, to_coco23
+from data.formats.atomic_io import atomic_write_text
+from data.pose2d.records import ImageRecord
+
+KINDS = ("coco_wholebody", "coco23", "crowdpose")
+NUM_FOOT_JOINTS = NUM_JOINTS - NUM_BODY_JOINTS
+CROWDPOSE_JOINTS = len(CROWDPOSE14_TO_COCO23[CROWDPOSE14_TO_COCO23 >= 0]) + 2   # 12 limb joints, head, neck
+
+Converter = Callable[[dict], np.ndarray]
+
+
+# --- reading ----------------------------------------------------------------------------------------
+
+def _read_json(path: Path, what: str) -> Any:
+    """The parsed JSON of a file, or a ValueError naming the file."""
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+
+
+def _numbers(path: Path, ann: dict, key: str, count: int) -> np.ndarray:
+    """The annotation's list ``key`` as a (count,) float array, or a ValueError naming the annotation."""
+    value = ann.get(key)
+    if not isinstance(value, list):
+        raise ValueError(f"{path}: annotation id {ann.get('id')!r} has no list {key!r}")
+    if len(value) != count:
+        expected = f"{count} ({count // 3} keypoints x 3)" if key != "bbox" else str(count)
+        raise ValueError(f"{path}: annotation id {ann.get('id')!r} has {len(value)} numbers in {key!r}, "
+                         f"expected {expected}")
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: annotation id {ann.get('id')!r} has a non-numeric value in {key!r}") from None
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{path}: annotation id {ann.get('id')!r} has a non-finite value in {key!r}")
+    return arr
+
+
+def _person_category_ids(doc: dict) -> set:
+    """Ids of the categories named "person" (COCO: 1); {1} when the file lists none."""
+    ids = {c.get("id") for c in doc.get("categories", []) if isinstance(c, dict) and c.get("name") == "person"}
+    return ids or {1}
+
+
+def _load(path: Path, doc: Any, image_dir: str | Path, convert: Converter, labelled: np.ndarray,
+          skip_crowd: bool) -> list[ImageRecord]:
+    """Records of a parsed COCO keypoint file; convert maps one annotation to its (23, 3) keypoints."""
+    if not isinstance(doc, dict) or not isinstance(doc.get("images"), list) \
+            or not isinstance(doc.get("annotations"), list):
+        raise ValueError(f"{path}: not a COCO annotation file (needs the lists 'images' and 'annotations')")
+    persons: dict[Any, list[tuple[np.ndarray, np.ndarray, float]]] = {}
+    for img in doc["images"]:
+        if not isinstance(img, dict) or not all(k in img for k in ("id", "file_name", "width", "height")):
+            raise ValueError(f"{path}: image entry {img!r:.80} lacks one of id, file_name, width, height")
+        persons[img["id"]] = []
+    category_ids = _person_category_ids(doc)
+    for ann in doc["annotations"]:
+        if not isinstance(ann, dict):
+            raise ValueError(f"{path}: annotation {ann!r:.80} is not an object")
+        if ann.get("category_id", 1) not in category_ids or (skip_crowd and ann.get("iscrowd", 0)):
+            continue
+        if ann.get("image_id") not in persons:
+            raise ValueError(f"{path}: annotation id {ann.get('id')!r} refers to image id "
+                             f"{ann.get('image_id')!r}, which is not in 'images'")
+        keypoints = convert(ann)
+        box = _numbers(path, ann, "bbox", 4)
+        persons[ann["image_id"]].append((keypoints, box, _area(path, ann, box)))
+    image_dir = Path(image_dir)
+    return [_record(img, image_dir, persons[img["id"]], labelled) for img in doc["images"]]
+
+
+def _area(path: Path, ann: dict, box: np.ndarray) -> float:
+    """The annotation's COCO area, else (missing or 0) the box area w * h."""
+    try:
+        area = float(ann.get("area") or 0.0)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: annotation id {ann.get('id')!r} has a non-numeric 'area'") from None
+    if not math.isfinite(area) or area < 0:
+        raise ValueError(f"{path}: annotation id {ann.get('id')!r} has an invalid 'area' {area}")
+    return area if area > 0 else float(box[2] * box[3])
+
+
+def _record(img: dict, image_dir: Path, persons: list, labelled: np.ndarray) -> ImageRecord:
+    """One ImageRecord of an image entry and its (keypoints (23, 3), box (4,), area) persons."""
+    return ImageRecord(
+        image_id=int(img["id"]), file=image_dir / img["file_name"],
+        width=int(img["width"]), height=int(img["height"]),
+        keypoints=np.array([p[0] for p in persons]).reshape(-1, NUM_JOINTS, 3),
+        boxes=np.array([p[1] for p in persons]).reshape(-1, 4),
+        areas=np.array([p[2] for p in persons]), labelled=labelled.copy())
+
+
+def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
+    """COCO-WholeBody: ``keypoints`` (17 x 3) + ``foot_kpts`` (6 x 3, COCO-23 foot order) -> records, 23 labelled."""
+    path = Path(ann_file)
+
+    def convert(ann: dict) -> np.ndarray:
+        body = _numbers(path, ann, "keypoints", 3 * NUM_BODY_JOINTS).reshape(-1, 3)
+        feet = _numbers(path, ann, "foot_kpts", 3 * NUM_FOOT_JOINTS).reshape(-1, 3)
+        return np.concatenate([body, feet])
+
+    doc = _read_json(path, "annotation file")
+    return _load(path, doc, image_dir, convert, np.ones(NUM_JOINTS, dtype=bool), skip_crowd)
+
+
+def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
+    """COCO-format keypoints of 23 x 3 numbers (OpenPose foot layout, our synthetic set) -> records.
+
+    A file of COCO-17 body keypoints (17 x 3) is read too, its feet unlabelled. The count is taken
+    from the person category's ``keypoints`` names when it lists 17 or 23, else from the first
+    annotation; every annotation must have it.
+    """
+    path = Path(ann_file)
+    doc = _read_json(path, "annotation file")
+    count = _coco23_count(path, doc)
+    labelled = np.arange(NUM_JOINTS) < count
+
+    def convert(ann: dict) -> np.ndarray:
+        kps = _numbers(path, ann, "keypoints", 3 * count).reshape(-1, 3)
+        return np.concatenate([kps, np.zeros((NUM_JOINTS - count, 3))])
+
+    return _load(path, doc, image_dir, convert, labelled, skip_crowd)
+
+
+def _coco23_count(path: Path, doc: Any) -> int:
+    """Keypoints per person of a COCO-23 / COCO-17 file: 23 or 17."""
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: not a COCO annotation file")
+    for cat in doc.get("categories", []):
+        if isinstance(cat, dict) and len(cat.get("keypoints", [])) in (NUM_BODY_JOINTS, NUM_JOINTS):
+            return len(cat["keypoints"])
+    for ann in doc.get("annotations", []):
+        if isinstance(ann, dict) and isinstance(ann.get("keypoints"), list):
+            n = len(ann["keypoints"])
+            if n not in (3 * NUM_BODY_JOINTS, 3 * NUM_JOINTS):
+                raise ValueError(f"{path}: annotation id {ann.get('id')!r} has {n} numbers in 'keypoints', "
+                                 f"expected {3 * NUM_JOINTS} (23 x 3) or {3 * NUM_BODY_JOINTS} (17 x 3)")
+            return n // 3
+    return NUM_JOINTS
+
+
+def load_crowdpose(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
+    """CrowdPose-14 (14 x 3) -> COCO-23 records through CROWDPOSE14_TO_COCO23; only mapped joints labelled."""
+    path = Path(ann_file)
+
+    def convert(ann: dict) -> np.ndarray:
+        kps = _numbers(path, ann, "keypoints", 3 * CROWDPOSE_JOINTS).reshape(-1, 3)
+        return to_coco23(kps, CROWDPOSE14_TO_COCO23)
+
+    doc = _read_json(path, "annotation file")
+    return _load(path, doc, image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
+
+
+def load_detections(det_file: str | Path, records: list[ImageRecord], score_threshold: float = 0.0,
+                    category_id: int = 1) -> list[ImageRecord]:
+    """New records with det_boxes (M, 4) / det_scores (M,) from a COCO detection-results file.
+
+    Entries of another category or with score < score_threshold are dropped; entries of images not
+    in ``records`` are ignored. The given records are not modified.
+    """
+    path = Path(det_file)
+    dets = _read_json(path, "detections file")
+    if not isinstance(dets, list):
+        raise ValueError(f"{path}: a detection-results file must be a JSON list of "
+                         "{image_id, category_id, bbox, score} objects")
+    found: dict[int, list[tuple[np.ndarray, float]]] = {r.image_id: [] for r in records}
+    for i, det in enumerate(dets):
+        if not isinstance(det, dict) or not all(k in det for k in ("image_id", "bbox", "score")):
+            raise ValueError(f"{path}: entry {i} lacks one of image_id, bbox, score")
+        box, score = det["bbox"], det["score"]
+        try:
+            box, score = np.array(box, dtype=np.float64), float(score)
+        except (TypeError, ValueError):
+            raise ValueError(f"{path}: entry {i} has a non-numeric bbox or score") from None
+        if box.shape != (4,) or not np.all(np.isfinite(box)) or not math.isfinite(score):
+            raise ValueError(f"{path}: entry {i} needs a bbox of 4 finite numbers and a finite score")
+        if det.get("category_id", category_id) != category_id or score < score_threshold:
+            continue
+        if det["image_id"] in found:
+            found[det["image_id"]].append((box, score))
+    return [dataclasses.replace(r, det_boxes=np.array([b for b, _ in found[r.image_id]]).reshape(-1, 4),
+                                det_scores=np.array([s for _, s in found[r.image_id]]))
+            for r in records]
+
+
+def labelled_counts(record: ImageRecord) -> np.ndarray:
+    """Labelled joints (v > 0 on a joint the dataset annotates) of each person: (N,) int."""
+    return np.sum((record.keypoints[..., 2] > 0) & record.labelled[None], axis=1)
+
+
+def training_persons(record: ImageRecord, min_keypoints: int = 1) -> np.ndarray:
+    """Indices (K,) of the persons with at least min_keypoints labelled joints: the training samples."""
+    return np.flatnonzero(labelled_counts(record) >= min_keypoints)
+
+
+def load_keypoint_dataset(kind: str, ann_file: str | Path, image_dir: str | Path, det_file: str | Path | None = None,
+                          min_keypoints: int = 1, skip_crowd: bool = True,
+                          det_score_threshold: float = 0.0) -> list[ImageRecord]:
+    """Records of a keypoint dataset of this kind ("coco_wholebody", "coco23", "crowdpose").
+
+    Images without any person of at least min_keypoints labelled joints are dropped (min_keypoints
+    <= 0 keeps every image, as evaluation needs). Each kept record still holds every non-crowd person;
+    :func:`training_persons` selects the samples. det_file adds detector boxes (:func:`load_detections`).
+    """
+    loaders = {"coco_wholebody": load_coco_wholebody, "coco23": load_coco23, "crowdpose": load_crowdpose}
+    if kind not in loaders:
+        raise ValueError(f"unknown keypoint dataset kind {kind!r}; expected one of {', '.join(KINDS)}")
+    records = loaders[kind](ann_file, image_dir, skip_crowd=skip_crowd)
+    if min_keypoints > 0:
+        records = [r for r in records if len(training_persons(r, min_keypoints))]
+    if det_file is not None:
+        records = load_detections(det_file, records, score_threshold=det_score_threshold)
+    return records
+
+
+# --- writing ----------------------------------------------------------------------------------------
+
+def coco23_categories() -> list[dict]:
+    """The COCO "categories" list of COCO-23: person, the 23 keypoint names, LIMBS as 1-based skeleton."""
+    return [{"supercategory": "person", "id": 1, "name": "person", "keypoints": list(COCO23_NAMES),
+             "skeleton": [[a + 1, b + 1] for a, b in LIMBS]}]
+
+
+def coco23_document(records: list[ImageRecord], image_root: str | Path | None = None,
+                    info: dict | None = None) -> dict:
+    """The COCO-23 annotation document of records; file_name is relative to image_root, else the base name."""
+    images, annotations = [], []
+    for record in records:
+        name = _file_name(record, image_root)
+        images.append({"id": record.image_id, "file_name": name, "width": record.width, "height": record.height})
+        for kps, box, area in zip(record.keypoints, record.boxes, record.areas):
+            flat = [v for x, y, vis in kps.tolist() for v in (x, y, int(vis))]
+            annotations.append({"id": len(annotations) + 1, "image_id": record.image_id, "category_id": 1,
+                                "iscrowd": 0, "num_keypoints": int(np.sum(kps[:, 2] > 0)), "keypoints": flat,
+                                "bbox": box.tolist(), "area": float(area)})
+    return {"info": dict(info or {}), "categories": coco23_categories(), "images": images,
+            "annotations": annotations}
+
+
+def _file_name(record: ImageRecord, image_root: str | Path | None) -> str:
+    """The file_name of a record: its path relative to image_root, else its base name."""
+    if image_root is None:
+        return record.file.name
+    try:
+        return record.file.relative_to(image_root).as_posix()
+    except ValueError:
+        raise ValueError(f"image id {record.image_id}: {record.file} is not inside {image_root}") from None
+
+
+def write_coco_keypoints(path: str | Path, records: list[ImageRecord], image_root: str | Path | None = None,
+                         info: dict | None = None) -> None:
+    """Write records as a COCO-23 annotation file (atomic), readable by :func:`load_coco23`.
+
+    Annotation ids are 1..N in record order. The file states all 23 joints as annotated; a record's
+    ``labelled`` mask is not stored.
+    """
+    atomic_write_text(path, json.dumps(coco23_document(records, image_root, info)))

@@ -1,0 +1,67 @@
+"""Pictures over time: the scrubbable HTML viewer and the ground trajectories PNG of a sequence.
+
+``python -m evaluation.pictures.sequence_view <run dir>/poses3d.json <cameras> [-o out.html] [--png traj.png]``
+(any calibration ``data.geometry.calibration.load_rig`` reads); eval.py writes both into
+``<run dir>/pictures/`` with ``vis_sequence=true``. Frames are (frame, poses (P, 23, 4), ids (P,) or None)
+tuples, ids None meaning tracking off (the index in the frame stands for the id).
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Sequence
+
+from data.formats.poses_io import read_poses3d_frames
+from evaluation.pictures.sequence_html import DEFAULT_MAX_MB, sequence_html, write_sequence_html
+from evaluation.pictures.vis_trajectories import plot_trajectories, trajectories_figure
+from data.geometry.calibration import CalibrationError, load_rig
+from data.geometry.camera import Rig
+from reconstruction.pipeline import FrameResult
+
+__all__ = ["write_sequence_html", "sequence_html", "plot_trajectories", "trajectories_figure",
+           "save_sequence_pictures", "main"]
+
+HTML_NAME = "sequence.html"
+PNG_NAME = "trajectories.png"
+FILE_ID_NOTE = ("ids as written in {name}: track ids when the run tracked, else each person's index in its "
+                "frame")
+
+
+def save_sequence_pictures(out_dir: str | Path, results: Sequence[FrameResult], rig: Rig, title: str = "sequence",
+                           max_mb: float = DEFAULT_MAX_MB) -> list[Path]:
+    """sequence.html and trajectories.png of an eval.py run's results into out_dir -> their paths."""
+    frames = [(r.frame, r.poses3d, r.ids) for r in results]
+    out_dir = Path(out_dir)
+    return [write_sequence_html(out_dir / HTML_NAME, frames, rig, title, max_mb),
+            plot_trajectories(out_dir / PNG_NAME, frames, rig)]
+
+
+def main(argv: list[str] | None = None) -> list[Path]:
+    """Command line: the viewer (and with --png the trajectories) of a poses3d.json -> the written paths."""
+    parser = argparse.ArgumentParser(prog="python -m evaluation.pictures.sequence_view", description=__doc__.split("\n")[0])
+    parser.add_argument("poses3d", type=Path, help="poses3d.json of an eval.py run")
+    parser.add_argument("cameras", type=Path, help="the calibration (cameras.json or any format load_rig reads)")
+    parser.add_argument("-o", "--output", type=Path, help=f"HTML file (default: {HTML_NAME} beside poses3d)")
+    parser.add_argument("--png", type=Path, help="also write the ground trajectories to this PNG")
+    parser.add_argument("--max-mb", type=float, default=DEFAULT_MAX_MB,
+                        help="above this page size, show every k-th frame (default %(default)s)")
+    parser.add_argument("--title", help="page title (default: the poses3d path)")
+    args = parser.parse_args(argv)
+    if not args.max_mb > 0:
+        parser.error(f"--max-mb must be > 0, got {args.max_mb}")
+    try:
+        frames = read_poses3d_frames(args.poses3d)
+        rig = load_rig(args.cameras)
+    except (OSError, ValueError, KeyError, TypeError, CalibrationError) as err:
+        raise SystemExit(f"error: {err}") from None
+    output = args.output or args.poses3d.with_name(HTML_NAME)
+    note = FILE_ID_NOTE.format(name=args.poses3d.name)
+    paths = [write_sequence_html(output, frames, rig, args.title or str(args.poses3d), args.max_mb, note)]
+    if args.png:
+        paths.append(plot_trajectories(args.png, frames, rig))
+    print("Wrote " + ", ".join(str(p) for p in paths))
+    return paths
+
+
+if __name__ == "__main__":
+    main()

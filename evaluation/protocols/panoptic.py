@@ -1,0 +1,317 @@
+"""CMU Panoptic protocols: VoxelPose's AP / recall / MPJPE, and the paper's root-aligned MPJPE and PCP.
+
+All three work on the 15 Panoptic joints (the first 15 of coco19, metres, column 3 = validity or
+confidence): 0 neck, 1 nose, 2 mid-hip, 3 l-shoulder, 4 l-elbow, 5 l-wrist, 6 l-hip, 7 l-knee,
+8 l-ankle, 9 r-shoulder, 10 r-elbow, 11 r-wrist, 12 r-hip, 13 r-knee, 14 r-ankle. COCO-23 predictions
+are mapped with :func:`coco23_to_panoptic15`; the ground truth is best taken as stored (the loader keeps
+it in ``Sequence.meta["gt_panoptic15"]``), whose neck is within ~1.5 cm of the mid-shoulders.
+
+VoxelPose AP (Tu et al., ECCV 2020, ``lib/dataset/panoptic.py: evaluate``), reproduced here:
+- GT persons whose mid-hip (root) is invalid are not evaluated (VoxelPose skips them when loading);
+  frames without GT persons are skipped with their predictions.
+- Each prediction is assigned to the GT person of its frame with the smallest MPJPE over the
+  GT-valid joints (here: valid in both, as our predictions can miss joints; VoxelPose's never do).
+- Over the whole sequence, predictions sorted by score (descending): a true positive at threshold t
+  when its MPJPE < t and its GT person was not taken by a higher-scored one, else a false positive.
+- AP = area under the precision-recall curve with precision made monotone from the right (VOC):
+  sum over true positives of (1 / #GT) x interpolated precision there; t = 25, 50, ..., 150 mm.
+  VoxelPose adds 1e-5 to the denominators, so its perfect AP reads 99.999; ours reads 100.
+- recall@t: share of GT persons taken at t; recall@500 mm: share of GT persons that are the nearest
+  GT of some prediction within 500 mm (no score order, no one-to-one).
+- MPJPE: mean over the true positives at 500 mm (in score order) of their MPJPE.
+
+Root-aligned MPJPE (paper Table 4; the paper does not state the protocol, this is our reading): each GT
+person is paired one-to-one with a prediction by Hungarian matching on mean joint distance (pairs
+farther than ``max_dist_m`` unpaired); both poses are translated to put the mean of their two hips at
+the origin (not Panoptic's own mid-hip joint, which our COCO-23 predictions lack: up to centimetres
+apart, that offset would be added to every joint);
+13 joints compared: nose ("Head"), shoulders, elbows, wrists, hips, knees and ankles ("Foot": coco19
+has no feet). Reported per group, over the 13 joints, and as the mean of the 7 groups (the paper's
+"Average" 50.0 is 49.9 as the mean of its groups, 50.3 over 13 joints).
+
+PCP (paper Table 5) on the same pairs, absolute coordinates, alpha = 0.5: a part is correct when the
+mean of its two end-point errors is at most alpha x its GT length. Parts: head = neck -> nose (coco19
+has no head top), torso = neck -> mid-hip, upper arms = shoulder -> elbow, lower arms = elbow -> wrist,
+upper legs = hip -> knee, lower legs = knee -> ankle. Parts with an invalid GT end are not counted; a
+missing predicted end or an unpaired GT person makes the part wrong. The average is the mean of the 6
+part groups (the paper's 91.3 is exactly that).
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from data.keypoints import JOINT_INDEX
+from evaluation.association import match_to_ground_truth
+from evaluation.mpjpe import joint_errors
+from evaluation.report import format_table
+
+if TYPE_CHECKING:
+    from data.multiview import Frame
+    from reconstruction.pipeline import FrameResult
+
+PANOPTIC15_NAMES: tuple[str, ...] = (
+    "neck", "nose", "mid_hip", "left_shoulder", "left_elbow", "left_wrist", "left_hip", "left_knee",
+    "left_ankle", "right_shoulder", "right_elbow", "right_wrist", "right_hip", "right_knee", "right_ankle",
+)
+NECK, NOSE, MID_HIP = 0, 1, 2
+ROOT = (6, 12)  # root-aligned MPJPE: mean of left and right hip, the same construction on both sides
+AP_THRESHOLDS_MM: tuple[int, ...] = (25, 50, 75, 100, 125, 150)
+RECALL_THRESHOLD_MM = 500
+# Table 4 joint groups (Panoptic-15 indices); "foot" is the ankle.
+MPJPE_GROUPS: dict[str, tuple[int, ...]] = {
+    "head": (1,), "shoulder": (3, 9), "elbow": (4, 10), "wrist": (5, 11), "hip": (6, 12),
+    "knee": (7, 13), "foot": (8, 14),
+}
+# Table 5 parts (Panoptic-15 joint pairs).
+PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {
+    "head": ((0, 1),), "torso": ((0, 2),), "upper_arms": ((3, 4), (9, 10)), "lower_arms": ((4, 5), (10, 11)),
+    "upper_legs": ((6, 7), (12, 13)), "lower_legs": ((7, 8), (13, 14)),
+}
+
+
+def coco23_to_panoptic15(poses: np.ndarray) -> np.ndarray:
+    """COCO-23 poses to the 15 Panoptic joints: (..., 23, 4) -> (..., 15, 4).
+
+    Joints other than neck and mid-hip are copied by name. Neck = mean of the two shoulders and
+    mid-hip = mean of the two hips, valid (column 3 = the lower of the two) only when both are.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    out = np.zeros(poses.shape[:-2] + (15, poses.shape[-1]))
+    for j, name in enumerate(PANOPTIC15_NAMES):
+        if name in JOINT_INDEX:
+            out[..., j, :] = poses[..., JOINT_INDEX[name], :]
+    for j, (a, b) in ((NECK, ("left_shoulder", "right_shoulder")), (MID_HIP, ("left_hip", "right_hip"))):
+        pa, pb = poses[..., JOINT_INDEX[a], :], poses[..., JOINT_INDEX[b], :]
+        both = (pa[..., 3] > 0) & (pb[..., 3] > 0)
+        out[..., j, :3] = np.where(both[..., None], (pa[..., :3] + pb[..., :3]) / 2, 0.0)
+        out[..., j, 3] = np.where(both, np.minimum(pa[..., 3], pb[..., 3]), 0.0)
+    return out
+
+
+def pairwise_mpjpe(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """MPJPE (m) of every prediction to every GT person over joints valid in both: (P, J, 4), (G, J, 4) -> (P, G).
+
+    inf where a pair shares no valid joint.
+    """
+    pred, gt = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
+    dist = np.linalg.norm(pred[:, None, :, :3] - gt[None, :, :, :3], axis=-1)
+    both = (pred[:, None, :, 3] > 0) & (gt[None, :, :, 3] > 0)
+    count = both.sum(-1)
+    return np.where(count > 0, np.where(both, dist, 0.0).sum(-1) / np.maximum(count, 1), np.inf)
+
+
+def average_precision(scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, num_gt: int,
+                      threshold: float) -> tuple[float, float]:
+    """VoxelPose AP and recall (fractions) at one threshold: scores, errors, gt_index (N,) -> (ap, recall).
+
+    errors are each prediction's MPJPE to its nearest GT, whose sequence-wide index is gt_index.
+    """
+    if num_gt == 0:
+        return float("nan"), float("nan")
+    order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
+    taken: set[int] = set()
+    tp = np.zeros(len(order))
+    for rank, i in enumerate(order):
+        if errors[i] < threshold and int(gt_index[i]) not in taken:
+            tp[rank] = 1.0
+            taken.add(int(gt_index[i]))
+    cum_tp = np.cumsum(tp)
+    precision = cum_tp / np.arange(1, len(order) + 1)
+    envelope = np.maximum.accumulate(precision[::-1])[::-1]
+    return float(np.sum(tp * envelope) / num_gt), float(cum_tp[-1] / num_gt) if len(order) else 0.0
+
+
+class PanopticAPEvaluator:
+    """VoxelPose's Panoptic AP protocol (module docstring), accumulated frame by frame."""
+
+    def __init__(self) -> None:
+        self.scores: list[float] = []
+        self.errors: list[float] = []
+        self.gt_index: list[int] = []
+        self.num_gt = 0
+        self.num_pred = 0
+
+    def update(self, pred: np.ndarray, gt: np.ndarray, scores: np.ndarray | None = None) -> None:
+        """Add a frame: pred (P, 15, 4), gt (G, 15, 4); scores (P,), default the mean of pred[..., 3]."""
+        pred, gt = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
+        scores = pred[..., 3].mean(axis=-1) if scores is None else np.asarray(scores, dtype=np.float64)
+        if len(scores) != len(pred):
+            raise ValueError(f"{len(scores)} scores for {len(pred)} predictions")
+        gt = gt[gt[:, MID_HIP, 3] > 0]
+        keep = np.any(pred[..., 3] > 0, axis=-1)
+        pred, scores = pred[keep], scores[keep]
+        if len(gt) == 0:
+            return
+        self.num_pred += len(pred)
+        if len(pred):
+            dist = pairwise_mpjpe(pred, gt)
+            nearest = np.argmin(dist, axis=1)
+            self.errors += (1000.0 * dist[np.arange(len(pred)), nearest]).tolist()
+            self.gt_index += (self.num_gt + nearest).tolist()
+            self.scores += scores.tolist()
+        self.num_gt += len(gt)
+
+    def summary(self) -> dict[str, float]:
+        """ap@<t> and recall@<t> (%), mAP, mAR, recall@500 (%), mpjpe_mm, num_gt, num_pred."""
+        scores, errors, gt_index = (np.array(x) for x in (self.scores, self.errors, self.gt_index))
+        out: dict[str, float] = {}
+        for t in AP_THRESHOLDS_MM:
+            ap, recall = average_precision(scores, errors, gt_index, self.num_gt, t)
+            out[f"ap@{t}"], out[f"recall@{t}"] = 100.0 * ap, 100.0 * recall
+        out["mAP"] = float(np.mean([out[f"ap@{t}"] for t in AP_THRESHOLDS_MM]))
+        out["mAR"] = float(np.mean([out[f"recall@{t}"] for t in AP_THRESHOLDS_MM]))
+        near = np.unique(gt_index[errors < RECALL_THRESHOLD_MM]) if len(errors) else []
+        out[f"recall@{RECALL_THRESHOLD_MM}"] = 100.0 * len(near) / self.num_gt if self.num_gt else float("nan")
+        out["mpjpe_mm"] = _true_positive_mpjpe(scores, errors, gt_index, RECALL_THRESHOLD_MM)
+        out.update(num_gt=self.num_gt, num_pred=self.num_pred)
+        return out
+
+
+def _true_positive_mpjpe(scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, threshold: float) -> float:
+    """Mean MPJPE (mm) of the true positives at ``threshold`` in score order: (N,) x 3 -> scalar, NaN if none."""
+    taken, kept = set(), []
+    for i in np.argsort(-scores, kind="stable"):
+        if errors[i] < threshold and int(gt_index[i]) not in taken:
+            taken.add(int(gt_index[i]))
+            kept.append(errors[i])
+    return float(np.mean(kept)) if kept else float("nan")
+
+
+class PanopticPoseEvaluator:
+    """Root-aligned 13-joint MPJPE and PCP by part on Hungarian-paired persons (module docstring)."""
+
+    def __init__(self, max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
+        self.max_dist_m = max_dist_m
+        self.alpha = alpha
+        self.errors: list[np.ndarray] = []
+        self.parts: list[np.ndarray] = []
+        self.num_gt = 0
+        self.num_matched = 0
+
+    def update(self, pred: np.ndarray, gt: np.ndarray) -> None:
+        """Add a frame: pred (P, 15, 4), gt (G, 15, 4)."""
+        pred, gt = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
+        pairs = match_to_ground_truth(pred, gt, self.max_dist_m)
+        self.num_gt += len(gt)
+        self.num_matched += len(pairs)
+        self.errors.append(joint_errors(pred[pairs[:, 0]], gt[pairs[:, 1]], root=ROOT))
+        # NaN = part not evaluable (invalid GT end); unpaired GT persons keep their parts wrong.
+        parts = part_correct(np.zeros_like(gt), gt, self.alpha)
+        parts[pairs[:, 1]] = part_correct(pred[pairs[:, 0]], gt[pairs[:, 1]], self.alpha)
+        self.parts.append(parts)
+
+    def summary(self) -> dict[str, float]:
+        """root_mpjpe_<group>_mm, root_mpjpe_13_mm, root_mpjpe_average_mm, pcp_<part>, pcp_average (%), counts."""
+        err = 1000.0 * np.concatenate(self.errors) if self.errors else np.zeros((0, 15))
+        out: dict[str, float] = {}
+        for name, cols in MPJPE_GROUPS.items():
+            out[f"root_mpjpe_{name}_mm"] = _nanmean(err[:, list(cols)])
+        out["root_mpjpe_13_mm"] = _nanmean(err[:, [j for cols in MPJPE_GROUPS.values() for j in cols]])
+        out["root_mpjpe_average_mm"] = float(np.mean([out[f"root_mpjpe_{g}_mm"] for g in MPJPE_GROUPS]))
+        parts = np.concatenate(self.parts) if self.parts else np.zeros((0, _NUM_PARTS))
+        for i, name in enumerate(PCP_PARTS):
+            out[f"pcp_{name}"] = 100.0 * _nanmean(parts[:, _PART_GROUP == i])
+        out["pcp_average"] = float(np.mean([out[f"pcp_{p}"] for p in PCP_PARTS]))
+        out.update(num_gt=self.num_gt, num_matched=self.num_matched)
+        return out
+
+
+_PART_PAIRS = np.array([pair for pairs in PCP_PARTS.values() for pair in pairs])
+_PART_GROUP = np.array([i for i, pairs in enumerate(PCP_PARTS.values()) for _ in pairs])
+_NUM_PARTS = len(_PART_PAIRS)
+
+
+def part_correct(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.ndarray:
+    """PCP of the 10 parts of paired poses: (K, 15, 4), (K, 15, 4) -> (K, 10) of 1 / 0 / NaN (not evaluable)."""
+    a, b = _PART_PAIRS[:, 0], _PART_PAIRS[:, 1]
+    err = (np.linalg.norm(pred[:, a, :3] - gt[:, a, :3], axis=-1)
+           + np.linalg.norm(pred[:, b, :3] - gt[:, b, :3], axis=-1)) / 2
+    length = np.linalg.norm(gt[:, a, :3] - gt[:, b, :3], axis=-1)
+    correct = (err <= alpha * length) & (pred[:, a, 3] > 0) & (pred[:, b, 3] > 0)
+    return np.where((gt[:, a, 3] > 0) & (gt[:, b, 3] > 0), correct.astype(np.float64), np.nan)
+
+
+def _nanmean(values: np.ndarray) -> float:
+    """Mean of the finite values, NaN when there is none."""
+    values = np.asarray(values, dtype=np.float64)
+    return float(np.nanmean(values)) if np.any(np.isfinite(values)) else float("nan")
+
+
+class PanopticEvaluator:
+    """Both Panoptic protocols at once on COCO-23 predictions; update per frame, then summary()."""
+
+    def __init__(self, max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
+        self.ap = PanopticAPEvaluator()
+        self.pose = PanopticPoseEvaluator(max_dist_m, alpha)
+
+    def update(self, pred23: np.ndarray, gt15: np.ndarray, scores: np.ndarray | None = None) -> None:
+        """Add a frame: pred23 (P, 23, 4) COCO-23 predictions, gt15 (G, 15, 4), scores (P,) or None."""
+        pred15 = coco23_to_panoptic15(pred23)
+        self.ap.update(pred15, gt15, scores)
+        self.pose.update(pred15, gt15)
+
+    def summary(self) -> dict[str, float]:
+        """The keys of PanopticAPEvaluator.summary, and of PanopticPoseEvaluator.summary under 'pose_' counts."""
+        pose = self.pose.summary()
+        pose["pose_num_gt"], pose["pose_num_matched"] = pose.pop("num_gt"), pose.pop("num_matched")
+        return {**self.ap.summary(), **pose}
+
+
+def format_panoptic_report(summary: dict[str, float]) -> str:
+    """Console tables of a summary (either evaluator's keys, or both), each metric under its protocol name."""
+    lines = []
+    if "mAP" in summary:
+        lines += ["VoxelPose Panoptic protocol (15 joints; AP/recall over the sequence, prediction -> nearest "
+                  "GT by MPJPE, score-ordered, TP if MPJPE < t and GT not yet taken)", "",
+                  format_table(["", *(f"@{t}mm" for t in AP_THRESHOLDS_MM), "mean"], [
+                      ["AP (%)", *(summary[f"ap@{t}"] for t in AP_THRESHOLDS_MM), summary["mAP"]],
+                      ["recall (%)", *(summary[f"recall@{t}"] for t in AP_THRESHOLDS_MM), summary["mAR"]]]), "",
+                  format_table(["metric", "value"], [
+                      [f"recall@{RECALL_THRESHOLD_MM}mm (%)", summary[f"recall@{RECALL_THRESHOLD_MM}"]],
+                      [f"MPJPE of TPs at {RECALL_THRESHOLD_MM}mm, absolute (mm)", summary["mpjpe_mm"]],
+                      ["GT persons / predictions", f"{summary['num_gt']} / {summary['num_pred']}"]]), ""]
+    if "root_mpjpe_13_mm" in summary:
+        groups = list(MPJPE_GROUPS)
+        lines += ["Paper Table 4 protocol: root-aligned MPJPE (mm, root = mean of the hips, Hungarian-paired persons; "
+                  "head = nose, foot = ankle)", "",
+                  format_table(["average of groups", "13 joints", *groups],
+                               [[summary["root_mpjpe_average_mm"], summary["root_mpjpe_13_mm"],
+                                 *(summary[f"root_mpjpe_{g}_mm"] for g in groups)]]), "",
+                  "Paper Table 5 protocol: PCP (%), alpha 0.5, absolute; head = neck->nose, torso = neck->mid-hip", "",
+                  format_table(["average", *PCP_PARTS], [[summary["pcp_average"],
+                                                         *(summary[f"pcp_{p}"] for p in PCP_PARTS)]])]
+    return "\n".join(lines)
+
+
+class PanopticProtocol:
+    """The Panoptic protocols as a dataset protocol (evaluation/protocols/base.py) for eval.py.
+
+    ``gt15`` maps a frame index to its stored Panoptic-15 ground truth (G, 15, 4) (the loader's
+    ``meta["gt_panoptic15"]``); frames without an entry are not scored. Each frame's predictions are
+    ``result.poses3d`` (P, 23, 4), scored by the mean confidence of their 15 mapped joints.
+    """
+
+    name = "panoptic"
+
+    def __init__(self, gt15: dict[int, np.ndarray], max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
+        self.gt15 = gt15
+        self.evaluator = PanopticEvaluator(max_dist_m, alpha)
+        self.frames = 0
+
+    def update(self, frame: Frame, result: FrameResult) -> None:
+        """Score one frame: result.poses3d (P, 23, 4) against gt15[frame.index] (G, 15, 4)."""
+        gt = self.gt15.get(frame.index)
+        if gt is None:
+            return
+        self.evaluator.update(result.poses3d, gt)
+        self.frames += 1
+
+    def summary(self) -> dict[str, float]:
+        """PanopticEvaluator.summary() plus the number of frames scored."""
+        return {**self.evaluator.summary(), "frames": self.frames}
+
+    def report(self) -> str:
+        """The console tables of :func:`format_panoptic_report`."""
+        return format_panoptic_report(self.summary())

@@ -1,0 +1,231 @@
+"""The paper's Table 1 metric: COCO keypoint AP/AR of reconstructed 3D poses reprojected into every view.
+
+Protocol (our reading of the paper's Sec. 4, which gives no more detail than "COCO AP of the
+reprojections"), for any sequence whose frames carry 3D ground truth:
+- One COCO image per (frame, camera). Only frames with ground truth are scored.
+- Ground truth of a view: the noise-free projections (with distortion, ``Camera.project``) of the
+  frame's GT 3D poses. A joint is labelled (v = 2) when it is valid in 3D, in front of the camera and
+  inside the image; joints hidden behind other bodies stay labelled, as COCO labels occluded joints
+  (COCO writes v = 1 for them; pycocotools only tests v > 0, so the two are the same to the metric).
+  A GT person is annotated in a view when at least ``min_joints`` of its joints are labelled there.
+- GT area (the OKS scale and the medium / large split): the area of the box around the person's
+  projected joints (valid, in front of the camera and inside its calibrated field of view), clipped
+  to the image: the visible part of the person's extent, as COCO's segment areas are. It is a box
+  area, not a segment area, so the OKS scale is somewhat looser than COCO's for the same person.
+  The GT bbox is the same box unclipped: pycocotools uses it only for a person without a labelled
+  joint in a subset (e.g. feet outside the image, in the foot subset), whom it ignores together with
+  the detection that falls on that box, so a truncated person is neither a hit nor a false positive.
+- Predictions of a view: every reconstructed person (``result.poses3d`` (P, 23, 4)) projected the same
+  way; a person is a detection in a view when at least ``min_joints`` of its joints (confidence > 0)
+  project inside the image. Keypoint x, y: the projection (0, 0 for a joint that is missing or outside
+  the camera's field of view); keypoint score: the 3D confidence where the joint falls inside the
+  image, else 0. The detection score is the mean confidence of its 23 joints; its area (used only to
+  ignore unmatched detections outside an area range) is the same clipped box area as the GT's.
+- In a subset, a detection without a scored joint (none of its subset joints inside the image) is
+  left out, as a GT person without a labelled joint there is ignored: a person whose feet are outside
+  the image is not a foot detection in that view.
+- pycocotools OKS AP/AR with the COCO-23 sigmas, on all 23 joints and on the body (17) and foot (6)
+  subsets (as data/pose2d/coco_eval.py: the subset's joints and sigmas as the whole skeleton, the
+  person's area kept). COCO keeps at most 20 detections per image; crowded views hold more people
+  (up to 40 in a view of the Wildtrack crowd), so ``max_dets`` (default 100) raises that limit; max_dets = 20
+  gives COCO's numbers exactly.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+from typing import TYPE_CHECKING
+
+import numpy as np
+from pycocotools.coco import COCO
+from pycocotools.cocoeval import COCOeval
+
+from data.keypoints import NUM_JOINTS, OKS_SIGMAS
+from data.pose2d.coco_eval import STAT_NAMES, SUBSET_JOINTS
+from evaluation.report import format_table
+from data.geometry.camera import Camera, Rig
+
+if TYPE_CHECKING:
+    from data.multiview import Frame
+    from reconstruction.pipeline import FrameResult
+
+COCO_MAX_DETS = 20
+_CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
+# Stat name -> (AP or AR, OKS threshold or None = mean over .50:.05:.95, area range label).
+_STATS = {"AP": ("AP", None, "all"), "AP50": ("AP", 0.5, "all"), "AP75": ("AP", 0.75, "all"),
+          "APm": ("AP", None, "medium"), "APl": ("AP", None, "large"), "AR": ("AR", None, "all"),
+          "AR50": ("AR", 0.5, "all"), "AR75": ("AR", 0.75, "all"), "ARm": ("AR", None, "medium"),
+          "ARl": ("AR", None, "large")}
+
+
+def project_poses(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Poses (P, 23, 4) (x, y, z m, confidence) in one camera -> keypoints (P, 23, 3), in_image (P, 23),
+    boxes (P, 4), areas (P,).
+
+    keypoints: distorted pixels of the joints that are valid, in front of the camera and inside its
+    field of view (else 0, 0), and their confidence where they fall inside the image (else 0);
+    in_image: the valid joints that fall inside the image; boxes: x, y, w, h around the projected
+    joints; areas: of that box clipped to the image (0 when no joint projects).
+    """
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
+    valid = (poses[..., 3] > 0) & np.all(np.isfinite(poses[..., :3]), axis=-1)
+    xyz = np.where(valid[..., None], poses[..., :3], 0.0)
+    projectable = valid & camera.in_view(xyz, margin=np.inf)
+    uv = np.where(projectable[..., None], camera.project(xyz), 0.0)
+    w, h = camera.size
+    in_image = projectable & (uv[..., 0] >= 0) & (uv[..., 0] <= w - 1) & (uv[..., 1] >= 0) & (uv[..., 1] <= h - 1)
+    keypoints = np.concatenate([uv, np.where(in_image, poses[..., 3], 0.0)[..., None]], axis=-1)
+    lo = np.where(projectable[..., None], uv, np.inf).min(axis=1)
+    hi = np.where(projectable[..., None], uv, -np.inf).max(axis=1)
+    seen = projectable.any(axis=1)[:, None]
+    boxes = np.where(seen, np.concatenate([lo, hi - lo], axis=-1), 0.0)
+    limit = np.array([w - 1, h - 1], dtype=np.float64)
+    clipped = np.where(seen, np.clip(hi, 0, limit) - np.clip(lo, 0, limit), 0.0)
+    return keypoints, in_image, boxes, np.prod(clipped, axis=1)
+
+
+def view_ground_truth(camera: Camera, gt_poses: np.ndarray, min_joints: int = 1) -> list[dict]:
+    """COCO annotations of GT poses (G, 23, 4) in one view: keypoints (23, 3) (v = 2 where labelled), bbox, area."""
+    keypoints, in_image, boxes, areas = project_poses(camera, gt_poses)
+    labels = np.where(in_image[..., None], np.concatenate([keypoints[..., :2], np.full(in_image.shape + (1,), 2.0)],
+                                                          axis=-1), 0.0)
+    return [{"keypoints": kp, "bbox": box, "area": float(a)}
+            for kp, labelled, box, a in zip(labels, in_image, boxes, areas) if labelled.sum() >= min_joints]
+
+
+def view_predictions(camera: Camera, poses3d: np.ndarray, min_joints: int = 1) -> list[dict]:
+    """COCO detections of 3D poses (P, 23, 4) in one view: keypoints (23, 3), score (mean confidence), bbox, area."""
+    poses3d = np.asarray(poses3d, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
+    keypoints, in_image, boxes, areas = project_poses(camera, poses3d)
+    scores = np.where(poses3d[..., 3] > 0, poses3d[..., 3], 0.0).mean(axis=1)
+    return [{"keypoints": kp, "score": float(s), "bbox": box, "area": float(a)}
+            for kp, visible, s, box, a in zip(keypoints, in_image, scores, boxes, areas) if visible.sum() >= min_joints]
+
+
+def coco_keypoint_stats(image_ids: list[int], gt: list[dict], predictions: list[dict], subset: str = "all",
+                        max_dets: int = 100) -> dict[str, float]:
+    """pycocotools OKS AP/AR (fractions, STAT_NAMES; -1 = nothing to average) with max_dets per image.
+
+    gt: {image_id, keypoints (23, 3), bbox (4,), area}; predictions: {image_id, keypoints (23, 3), score,
+    area}. The GT bbox is the region pycocotools compares detections with when a GT person has no
+    labelled joint in the subset (such a person is ignored, and so is a detection that matches it).
+    Same rules as data.pose2d.coco_eval.evaluate_keypoints (subset joints and sigmas as the skeleton),
+    except that the detections kept per image is a parameter (COCO: 20) and a detection without a
+    keypoint score > 0 in the subset is left out (as a GT person without a labelled joint is ignored).
+    """
+    if subset not in SUBSET_JOINTS:
+        raise ValueError(f"subset must be one of {sorted(SUBSET_JOINTS)}, got {subset!r}")
+    joints = np.array(SUBSET_JOINTS[subset])
+    images = [{"id": int(i)} for i in image_ids]
+    gt_anns = [_annotation(k, a, joints) for k, a in enumerate(gt)]
+    dt_anns = [{**_annotation(k, d, joints), "score": float(d["score"])} for k, d in enumerate(predictions)]
+    dt_anns = [d for d in dt_anns if d["num_keypoints"] > 0]
+    with contextlib.redirect_stdout(io.StringIO()):
+        evaluator = COCOeval(_coco(images, gt_anns), _coco(images, dt_anns), "keypoints")
+        evaluator.params.kpt_oks_sigmas = OKS_SIGMAS[joints]
+        evaluator.params.imgIds = [img["id"] for img in images]
+        evaluator.params.maxDets = [int(max_dets)]
+        evaluator.evaluate()
+        evaluator.accumulate()
+    return _stats(evaluator)
+
+
+def _annotation(k: int, entry: dict, joints: np.ndarray) -> dict:
+    """A pycocotools annotation of the subset's joints, num_keypoints counted, bbox and area as given."""
+    kps = np.asarray(entry["keypoints"], dtype=np.float64).reshape(NUM_JOINTS, 3)[joints]
+    bbox = [float(v) for v in entry.get("bbox", (0.0, 0.0, 0.0, 0.0))]
+    return {"id": k + 1, "image_id": int(entry["image_id"]), "category_id": 1, "iscrowd": 0,
+            "keypoints": kps.ravel().tolist(), "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0)),
+            "area": float(entry["area"]), "bbox": bbox}
+
+
+def _coco(images: list[dict], annotations: list[dict]) -> COCO:
+    """An in-memory pycocotools COCO object."""
+    coco = COCO()
+    coco.dataset = {"images": images, "annotations": annotations, "categories": _CATEGORIES}
+    coco.createIndex()
+    return coco
+
+
+def _stats(evaluator: COCOeval) -> dict[str, float]:
+    """The ten keypoint stats of an accumulated COCOeval with one maxDets value, as pycocotools' summarize."""
+    p = evaluator.params
+    out = {}
+    for name in STAT_NAMES:
+        kind, threshold, area = _STATS[name]
+        values = evaluator.eval["precision" if kind == "AP" else "recall"]  # (T, R, K, A, M) / (T, K, A, M)
+        if threshold is not None:
+            values = values[np.flatnonzero(np.isclose(p.iouThrs, threshold))]
+        values = values[..., p.areaRngLbl.index(area), 0]
+        out[name] = float(np.mean(values[values > -1])) if np.any(values > -1) else -1.0
+    return out
+
+
+class ReprojectionCOCOProtocol:
+    """COCO AP/AR of reprojected 3D poses (module docstring) as a dataset protocol for eval.py."""
+
+    name = "reprojection_coco"
+
+    def __init__(self, rig: Rig, min_joints: int = 1, max_dets: int = 100,
+                 subsets: tuple[str, ...] = ("all", "body", "foot")) -> None:
+        if int(min_joints) < 1 or int(max_dets) < 1:
+            raise ValueError(f"reprojection COCO: min_joints ({min_joints}) and max_dets ({max_dets}) must be >= 1")
+        unknown = [s for s in subsets if s not in SUBSET_JOINTS]
+        if unknown:
+            raise ValueError(f"reprojection COCO: unknown subset {unknown[0]!r}, expected some of {list(SUBSET_JOINTS)}")
+        self.rig, self.min_joints, self.max_dets, self.subsets = rig, int(min_joints), int(max_dets), tuple(subsets)
+        self.image_ids: list[int] = []
+        self.gt: list[dict] = []
+        self.predictions: list[dict] = []
+        self.frames_without_gt = 0
+        self._summary: dict | None = None  # pycocotools runs once per state, for summary() and report()
+
+    def update(self, frame: Frame, result: FrameResult) -> None:
+        """Add one COCO image per camera: GT from frame.gt_poses (G, 23, 4), detections from result.poses3d."""
+        self._summary = None
+        if frame.gt_poses is None:
+            self.frames_without_gt += 1
+            return
+        for camera in self.rig:
+            image_id = len(self.image_ids) + 1
+            self.image_ids.append(image_id)
+            self.gt += [{**a, "image_id": image_id} for a in view_ground_truth(camera, frame.gt_poses, self.min_joints)]
+            self.predictions += [{**d, "image_id": image_id}
+                                 for d in view_predictions(camera, result.poses3d, self.min_joints)]
+
+    def summary(self) -> dict:
+        """{subset: {stat: % or None}} for every subset, and the counts and settings."""
+        if self._summary is not None:
+            return self._summary
+        out: dict = {}
+        for subset in self.subsets:
+            stats = coco_keypoint_stats(self.image_ids, self.gt, self.predictions, subset, self.max_dets)
+            out[subset] = {k: (100.0 * v if v >= 0 else None) for k, v in stats.items()}
+        per_image = np.bincount([a["image_id"] for a in self.gt], minlength=len(self.image_ids) + 1)
+        out.update(images=len(self.image_ids), gt_persons=len(self.gt), predictions=len(self.predictions),
+                   max_gt_per_image=int(per_image.max()), max_dets=self.max_dets, min_joints=self.min_joints,
+                   frames_without_gt=self.frames_without_gt)
+        self._summary = out
+        return out
+
+    def report(self) -> str:
+        """The protocol name, the AP/AR table of every subset and the counts."""
+        return format_reprojection_report(self.summary())
+
+
+def format_reprojection_report(summary: dict) -> str:
+    """Console table of a ReprojectionCOCOProtocol summary, under its protocol name."""
+    subsets = [s for s in SUBSET_JOINTS if s in summary]
+    rows = [[s, *("-" if summary[s][k] is None else summary[s][k] for k in STAT_NAMES)] for s in subsets]
+    capped = summary["max_gt_per_image"] > summary["max_dets"]
+    return "\n".join([
+        "reprojection_coco (paper Table 1 protocol): COCO keypoint AP/AR (%) of the 3D poses reprojected into every view "
+        "(with distortion) against the noise-free projections of the GT poses; OKS with the COCO-23 "
+        "sigmas; one image per (frame, camera); GT area = projected GT box clipped to the image; "
+        f"score = mean joint confidence; persons with >= {summary['min_joints']} joints in the image; "
+        f"up to {summary['max_dets']} detections per image (COCO: {COCO_MAX_DETS})", "",
+        format_table(["subset", *STAT_NAMES], rows), "",
+        f"{summary['images']} images, {summary['gt_persons']} GT persons (at most {summary['max_gt_per_image']} "
+        f"in one image), {summary['predictions']} reprojected predictions"
+        + (f"; WARNING: more GT persons in an image than max_dets={summary['max_dets']}, recall is capped"
+           if capped else "")])

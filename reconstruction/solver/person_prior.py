@@ -1,0 +1,149 @@
+"""What the MAP learns about each person from the MLE before it applies the bone prior.
+
+Two estimates, both from the maximum-likelihood joints X (P, J, 3) of a frame:
+
+- **Noise scale** (:func:`noise_scale`): the 2D sigma model (``joint_sigma``) gives each joint's relative
+  uncertainty, but not how good the detector really is on this person. After the MLE, the squared
+  reprojection residuals of a joint seen in n >= 2 views (in model sigmas) follow s^2 chi^2(2n - 3), s the
+  person's true noise over the model's. s is estimated robustly: the median over joints of
+  RSS_j / median(chi^2(2 n_j - 3)). It is the a-posteriori variance factor of photogrammetry, made robust
+  to the outlier joints of real detectors. On exact 2D s -> 0, so the likelihood dominates and the MAP
+  returns the triangulated points; on noisy 2D it weighs the prior as much as the data deserve.
+
+- **Person's own bone lengths** (:func:`person_bone_lengths`), the hierarchical prior in closed form:
+  bone l of a person is b_l = b_ref_l (1 + s_h z + s_g d_g(l)), z ~ N(0, 1) the person's stature
+  (``STATURE_SD``), d_g ~ N(0, 1) the proportion of the bone's group g (left and right share one:
+  bodies are nearly symmetric; ``PROPORTION_SD``), and the MLE measures n_l = b_l + e_l with
+  e_l ~ N(0, v_l + tie^2), v_l from the MLE covariance of the bone's two ends and tie the slack of
+  keypoint placement. The posterior of (z, d) is Gaussian (a (1 + G)-dimensional linear solve per person);
+  it gives each bone's posterior mean and variance. The MAP then pulls |Q_a - Q_b| towards that mean
+  with sigma sqrt(var + tie^2). An accurately observed person keeps their own proportions (tiny v_l,
+  posterior = their measurement); a poorly observed one borrows from the population, scaled to their
+  stature as measured by their other bones. This two-stage (empirical Bayes) form replaces bone length
+  unknowns in the solver: the solve keeps its per-bone structure and its speed.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import chi2
+
+from data.bone_lengths import BONE_NAMES
+from reconstruction.solver.block_solver import inverse_3x3
+from reconstruction.solver.map_estimation import EPS_DEPTH
+
+STATURE_SD = 0.053          # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
+PROPORTION_SD = 0.02        # relative SD of one bone group's length given the stature (left = right)
+OUTLIER_SD = 3.0            # a bone measured this many SD from its posterior is dropped and the posterior redone
+_CHI2_MEDIANS = np.concatenate([[np.nan], chi2.median(np.arange(1, 64))])
+
+
+def chi2_medians(dof: np.ndarray) -> np.ndarray:
+    """Median of chi^2 for each entry's degrees of freedom (NaN for 0): int array -> float array."""
+    return _CHI2_MEDIANS[np.clip(dof, 0, len(_CHI2_MEDIANS) - 1)]
+
+
+def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (V, P, J, 2) and clamped depths (V, P, J) of joints (P, J, 3) in views (V, 3, 4)."""
+    P, J, _ = X.shape
+    hom = (proj[:, :, :3] @ X.reshape(-1, 3).T + proj[:, :, 3:]).reshape(len(proj), 3, P, J)
+    z = np.maximum(hom[:, 2], EPS_DEPTH)
+    return np.stack([hom[:, 0] / z, hom[:, 1] / z], axis=-1), z
+
+
+def joint_information(X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray) -> np.ndarray:
+    """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3)."""
+    xy, z = project(X, proj)
+    M = proj[:, :, :3]
+    info = np.zeros(X.shape[:2] + (3, 3))
+    for k in range(2):       # d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint
+        rows = (M[:, None, None, k, :] - xy[..., k, None] * M[:, None, None, 2, :]) * (inv_sigma / z)[..., None]
+        info += np.sum(rows[..., :, None] * rows[..., None, :], axis=0)
+    return info
+
+
+def noise_scale(X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray,
+                floor: float = 0.01) -> np.ndarray:
+    """Each person's 2D noise over the sigma model, robustly from MLE residuals: (P, J, 3), (V, P, J, 2),
+    (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views."""
+    xy, _ = project(X, proj)
+    seen = inv_sigma > 0
+    r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma ** 2, 0.0)       # (V, P, J)
+    rss, views = r2.sum(axis=0), seen.sum(axis=0)                                     # (P, J)
+    ok = views >= 2
+    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)  # valid first
+    n = ok.sum(axis=1)
+    rows = np.arange(len(X))
+    a = ratio[rows, np.maximum(n - 1, 0) // 2]
+    b = ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
+    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
+    out = np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0)
+    return np.maximum(out, floor)
+
+
+def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:
+    """Group index of every bone, left and right of one bone sharing a group: (L,) int."""
+    keys = [n.removeprefix("left_").removeprefix("right_") for n in names]
+    order = {k: g for g, k in enumerate(dict.fromkeys(keys))}
+    return np.array([order[k] for k in keys], dtype=np.int64)
+
+
+def bone_variances(X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Bone lengths (P, L) of X (P, J, 3) and their variances (P, L) from the joints' information (P, J, 3, 3)
+    (in the units of the actual noise); inf where an end is not ``measured`` (P, J) bool or not fixed in
+    every direction."""
+    a, b = pairs[:, 0], pairs[:, 1]
+    d = X[:, a] - X[:, b]
+    n = np.linalg.norm(d, axis=-1)
+    u = d / np.maximum(n, 1e-12)[..., None]
+    info = np.nan_to_num(info)
+    inv, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
+    trace = np.trace(info, axis1=-2, axis2=-1)
+    det = np.linalg.det(info)
+    # a joint is measured only where every direction is: two nearly parallel rays leave its depth free
+    good = measured & (det > 1e-9 * (trace / 3) ** 3) & (trace > 0)
+    cov = np.where(good[..., None, None], np.moveaxis(inv, (0, 1), (-2, -1)), 0.0)
+    ok = good[:, a] & good[:, b]
+    var = np.sum(u[..., :, None] * (cov[:, a] + cov[:, b]) * u[..., None, :], axis=(-2, -1))
+    return n, np.where(ok, var, np.inf)
+
+
+def proportion_sds(bone_ref: np.ndarray, bone_std: np.ndarray, placement_sd: float, stature_sd: float = STATURE_SD
+                   ) -> np.ndarray:
+    """Relative SD of each bone given the stature, from a table's population SDs: (L,), (L,) -> (L,).
+
+    The table's variance is stature + proportion + keypoint placement (``placement_sd``, m); what the
+    stature and the placement leave of it is the proportion's (0 where nothing is left). The default
+    table (data/bone_lengths.py) gives about 2 %.
+    """
+    rest = np.asarray(bone_std, dtype=np.float64) ** 2 - placement_sd ** 2 - (stature_sd * np.asarray(bone_ref)) ** 2
+    return np.sqrt(np.maximum(rest, 0.0)) / np.maximum(bone_ref, 1e-9)
+
+
+def person_bone_lengths(lengths: np.ndarray, variances: np.ndarray, bone_ref: np.ndarray, proportion_sd: np.ndarray,
+                        tie_sd: float, groups: np.ndarray, stature_sd: float = STATURE_SD
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Posterior mean and SD of each person's bones (see the module docstring): measured lengths (P, L), their
+    variances (P, L) (inf = unmeasured), population means (L,), relative proportion SDs (L,), tie SD (m),
+    groups (L,) -> (P, L), (P, L)."""
+    P, L = lengths.shape
+    G = int(groups.max()) + 1 if L else 0
+    A = np.zeros((L, 1 + G))
+    A[:, 0] = bone_ref * stature_sd
+    A[np.arange(L), 1 + groups] = bone_ref * proportion_sd
+    y = lengths - bone_ref
+    use = np.isfinite(variances) & np.isfinite(lengths)
+    for _ in range(2):                                    # once, then without the outlying bones
+        noise = np.where(use, variances, 0.0) + tie_sd ** 2
+        w = np.where(use, 1.0 / noise, 0.0)                                                  # (P, L)
+        precision = np.eye(1 + G) + (A.T[None] * w[:, None, :]) @ A                        # (P, 1 + G, 1 + G)
+        cov = np.linalg.inv(precision)
+        theta = (cov @ (A.T @ (w * np.where(use, y, 0.0)).T).T[..., None])[..., 0]          # (P, 1 + G)
+        mean = bone_ref + theta @ A.T
+        var = np.sum((A[None] @ cov) * A[None], axis=-1)                                   # (P, L)
+        z = np.abs(np.where(use, lengths, mean) - mean) / np.sqrt(noise + var)
+        outlier = use & (z > OUTLIER_SD)
+        if not outlier.any():
+            break
+        use = use & ~outlier
+    return mean, np.sqrt(var)
