@@ -5,6 +5,7 @@ Builds the dataset's sequence, matches persons across views, reconstructs them i
 metrics with their protocol and the time of each stage, and writes poses3d.json, metrics.json and the
 printed report (report.txt) into the Hydra run directory.
 """
+
 from __future__ import annotations
 
 import json
@@ -20,25 +21,27 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 from omegaconf.errors import MissingMandatoryValue
 
-from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
 from data.config_checks import ConfigError, check_bool, check_int, check_number
+from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
+from data.formats.poses2d_io import Poses2DError
 from data.formats.poses_io import write_poses3d
-from run_folders import register_resolvers
+from data.geometry.calibration import CalibrationError
+from data.geometry.check_rig import RigWarning
+from evaluation.pictures.sequence_view import save_sequence_pictures
+from evaluation.pictures.visualize import save_run_pictures
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
-from evaluation.pictures.sequence_view import save_sequence_pictures
-from evaluation.pictures.visualize import save_run_pictures
-from data.formats.poses2d_io import Poses2DError
-from data.geometry.calibration import CalibrationError
-from data.geometry.check_rig import RigWarning
 from reconstruction.pipeline import MultiViewPipeline
+from run_folders import register_resolvers
 
-PROTOCOL = ("absolute MPJPE (mm, no root alignment) over all frames; each GT person matched one-to-one "
-            "to a prediction by Hungarian on mean joint distance (unmatched beyond {max_dist_m} m); "
-            "PCP alpha={alpha} on the 10 Shelf parts of Shelf-14 built from COCO-23, unmatched GT "
-            "persons count all parts wrong; matching precision/recall over pairs of detections placed "
-            "in one person, against ground-truth identities")
+PROTOCOL = (
+    "absolute MPJPE (mm, no root alignment) over all frames; each GT person matched one-to-one "
+    "to a prediction by Hungarian on mean joint distance (unmatched beyond {max_dist_m} m); "
+    "PCP alpha={alpha} on the 10 Shelf parts of Shelf-14 built from COCO-23, unmatched GT "
+    "persons count all parts wrong; matching precision/recall over pairs of detections placed "
+    "in one person, against ground-truth identities"
+)
 
 
 def check_config(cfg: DictConfig) -> None:
@@ -59,18 +62,20 @@ def check_sequence(cfg: DictConfig, sequence) -> None:
     numbers = [f.index for f in sequence.frames]
     back = next((i for i in range(1, len(numbers)) if numbers[i] <= numbers[i - 1]), None)
     if cfg.tracking.get("_target_") and back is not None:
-        raise ConfigError(f"dataset.frames: frame {numbers[back]} comes after frame {numbers[back - 1]}; tracking needs "
-                          "increasing frame numbers (sort or de-duplicate the frames, or tracking=off)")
+        raise ConfigError(
+            f"dataset.frames: frame {numbers[back]} comes after frame {numbers[back - 1]}; tracking needs "
+            "increasing frame numbers (sort or de-duplicate the frames, or tracking=off)"
+        )
 
 
 def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     """Evaluate the configured dataset, matcher and reconstruction; write outputs and report.txt into out_dir."""
     check_config(cfg)
     t0 = time.perf_counter()
-    sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))   # protocols: evaluation/protocols
+    sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))  # protocols: evaluation/protocols
     t_data = time.perf_counter() - t0
     check_sequence(cfg, sequence)
-    tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None   # tracking=off: none
+    tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None  # tracking=off: none
     pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
     stage_s = sequence.meta.get("stage_seconds", {})  # e.g. 2D grouping done while loading
@@ -78,30 +83,51 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
 
     frames = ((r.frame, r.poses3d, r.assignment, r.ids) for r in report.results)
     write_poses3d(out_dir / cfg.output, frames, sequence.rig.names)
-    atomic_write_text(out_dir / cfg.metrics_file, json.dumps(
-        {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped),
-         "unmatched": dict(report.unmatched), "timings_s": report.timings}, indent=2))
+    atomic_write_text(
+        out_dir / cfg.metrics_file,
+        json.dumps(
+            {
+                "metrics": report.metrics,
+                **report.protocols,
+                "skipped": dict(report.skipped),
+                "unmatched": dict(report.unmatched),
+                "timings_s": report.timings,
+            },
+            indent=2,
+        ),
+    )
     for protocol in sequence.protocols:
-        if hasattr(protocol, "write"):      # e.g. the Shelf-14 predictions that were scored
+        if hasattr(protocol, "write"):  # e.g. the Shelf-14 predictions that were scored
             protocol.write(out_dir)
-    text = (f"{sequence.meta.get('description', 'dataset')}: {len(sequence.frames)} frames, "
-            f"{len(sequence.rig)} cameras\n{format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation))}")
+    text = (
+        f"{sequence.meta.get('description', 'dataset')}: {len(sequence.frames)} frames, "
+        f"{len(sequence.rig)} cameras\n{format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation))}"
+    )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
     print(f"\n{text}\n\nWrote {out_dir / cfg.output}, {cfg.metrics_file} and {cfg.report_file}")
     if cfg.vis:
         try:
-            pictures = save_run_pictures(out_dir / cfg.vis_dir, sequence, report.results, cfg.vis_frame,
-                                         cfg.vis_images, cfg.vis_pattern, pipeline.matcher)
-        except ValueError as err:   # e.g. vis_frame was skipped: the report above stands, the pictures are missing
-            raise ConfigError(f"vis_frame={cfg.vis_frame}: {err}; no pictures drawn (the outputs and the report "
-                              "above are written)") from None
+            pictures = save_run_pictures(
+                out_dir / cfg.vis_dir,
+                sequence,
+                report.results,
+                cfg.vis_frame,
+                cfg.vis_images,
+                cfg.vis_pattern,
+                pipeline.matcher,
+            )
+        except ValueError as err:  # e.g. vis_frame was skipped: the report above stands, the pictures are missing
+            raise ConfigError(
+                f"vis_frame={cfg.vis_frame}: {err}; no pictures drawn (the outputs and the report above are written)"
+            ) from None
         print("Pictures: " + ", ".join(str(p) for p in pictures))
     if cfg.vis_sequence and not report.results:
         print("Pictures over time: none, no frame was reconstructed")
     elif cfg.vis_sequence:
         title = f"{sequence.meta.get('description', 'dataset')}: {out_dir.name}"
-        pictures = save_sequence_pictures(out_dir / cfg.vis_dir, report.results, sequence.rig, title,
-                                          cfg.vis_sequence_max_mb)
+        pictures = save_sequence_pictures(
+            out_dir / cfg.vis_dir, report.results, sequence.rig, title, cfg.vis_sequence_max_mb
+        )
         print("Pictures over time: " + ", ".join(str(p) for p in pictures))
     return report
 
@@ -123,11 +149,15 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
         metrics = evaluate_checkpoint(cfg, out_dir)
     except (FileNotFoundError, ValueError) as err:
         raise SystemExit(f"error: {err}") from None
-    text = (f"{cfg.checkpoint} ({cfg.pose2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person "
-            "area\n" + "\n".join(f"  {k:8s} {v:.4f}" + _why_missing(k, v) for k, v in metrics.items()))
+    text = (
+        f"{cfg.checkpoint} ({cfg.pose2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person "
+        "area\n" + "\n".join(f"  {k:8s} {v:.4f}" + _why_missing(k, v) for k, v in metrics.items())
+    )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
-    print(f"{text}\n\nWrote {out_dir / cfg.pose2d.output}, {cfg.pose2d.results_file}, {cfg.metrics_file} and "
-          f"{cfg.report_file}")
+    print(
+        f"{text}\n\nWrote {out_dir / cfg.pose2d.output}, {cfg.pose2d.results_file}, {cfg.metrics_file} and "
+        f"{cfg.report_file}"
+    )
     return metrics
 
 
@@ -153,8 +183,10 @@ def main(cfg: DictConfig) -> dict:
     try:
         return run(cfg, out_dir).metrics
     except MissingMandatoryValue as err:  # e.g. dataset=files without dataset.cameras=...
-        raise SystemExit(f"error: {err.full_key} is not set: give it on the command line "
-                         f"({err.full_key}=...; see configs/{err.full_key.split('.')[0]}/)") from None
+        raise SystemExit(
+            f"error: {err.full_key} is not set: give it on the command line "
+            f"({err.full_key}=...; see configs/{err.full_key.split('.')[0]}/)"
+        ) from None
     except ConfigError as err:
         raise SystemExit(f"error: {err}") from None
     except (CalibrationError, Poses2DError, InstantiationException) as err:
@@ -164,7 +196,7 @@ def main(cfg: DictConfig) -> dict:
         raise
 
 
-register_resolvers()      # ${run_id:} in the run folder names, before hydra.main composes the config
+register_resolvers()  # ${run_id:} in the run folder names, before hydra.main composes the config
 
 if __name__ == "__main__":
     exit_on_sigterm()

@@ -12,6 +12,7 @@
   written as ``.hydra.incomplete/`` and replaces ``.hydra/`` only when the run completes: a run killed
   part-way never leaves a ``.hydra/`` that describes it beside the earlier run's outputs.
 """
+
 from __future__ import annotations
 
 import os
@@ -27,8 +28,8 @@ from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 
 from data.formats.atomic_io import is_stale, is_temporary
 
-STAGING_SUFFIX = ".incomplete"   # <output_subdir>.incomplete: the config of a run that has not completed
-SHOWN_FILES = 3                  # files named in the refusal message
+STAGING_SUFFIX = ".incomplete"  # <output_subdir>.incomplete: the config of a run that has not completed
+SHOWN_FILES = 3  # files named in the refusal message
 
 
 @lru_cache(maxsize=1)
@@ -72,8 +73,10 @@ def check_folder(folder: Path, config: DictConfig, key: str) -> bool:
     files = other_runs_files(folder, f"{config.hydra.job.name}.log") if folder.is_dir() else []
     if files and not overwrite:
         shown = ", ".join(files) + (", ..." if len(files) >= SHOWN_FILES else "")
-        raise SystemExit(f"error: {folder} already holds the files of another run ({shown}); "
-                         f"choose a new folder ({key}=...) or pass overwrite=true to write into it")
+        raise SystemExit(
+            f"error: {folder} already holds the files of another run ({shown}); "
+            f"choose a new folder ({key}=...) or pass overwrite=true to write into it"
+        )
     return bool(files)
 
 
@@ -81,7 +84,7 @@ class RunFolderGuard(Callback):
     """Hydra callback: refuse a run folder that holds another run, stage ``.hydra/`` when overwriting."""
 
     def __init__(self) -> None:
-        self.staged: tuple[Path, Path] | None = None   # (.hydra.incomplete, .hydra) of an overwriting run
+        self.staged: tuple[Path, Path] | None = None  # (.hydra.incomplete, .hydra) of an overwriting run
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
         """Check hydra.run.dir before Hydra writes into it (rank 0 of a torchrun job; the others write no .hydra/)."""
@@ -94,7 +97,7 @@ class RunFolderGuard(Callback):
         occupied = check_folder(folder, config, "hydra.run.dir")
         if occupied and subdir is not None and (folder / subdir).exists():
             staging = f"{subdir}{STAGING_SUFFIX}"
-            shutil.rmtree(folder / staging, ignore_errors=True)     # left by an earlier killed run
+            shutil.rmtree(folder / staging, ignore_errors=True)  # left by an earlier killed run
             with read_write(config.hydra), open_dict(config.hydra):
                 config.hydra.output_subdir = staging
             self.staged = (folder / staging, folder / subdir)

@@ -3,6 +3,7 @@
 See configs/train.yaml for the commands (experiments, sweeps, resume, torchrun). The loop pieces live in
 models/training.py; this file wires them: data, model, optimizer, resume, epochs, validation, checkpoints.
 """
+
 from __future__ import annotations
 
 import json
@@ -21,16 +22,31 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 
-from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
-from run_folders import register_resolvers
-from data.pose2d.topdown_dataset import EpochSampler
-from data.pose2d.coco_eval import write_coco_results
 from data.config_checks import ConfigError
+from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
+from data.pose2d.coco_eval import write_coco_results
+from data.pose2d.topdown_dataset import EpochSampler
 from models.checkpoint_io import CheckpointError, read_checkpoint
 from models.resume import resume_config
-from models.training import (TrainState, build_codec, build_dataset, build_loader, build_loss, build_model,
-                             build_optimizer, build_scheduler, check_train_config, load_checkpoint, save_checkpoint,
-                             save_weights, seed_everything, setup_distributed, train_one_epoch, validate)
+from models.training import (
+    TrainState,
+    build_codec,
+    build_dataset,
+    build_loader,
+    build_loss,
+    build_model,
+    build_optimizer,
+    build_scheduler,
+    check_train_config,
+    load_checkpoint,
+    save_checkpoint,
+    save_weights,
+    seed_everything,
+    setup_distributed,
+    train_one_epoch,
+    validate,
+)
+from run_folders import register_resolvers
 
 log = logging.getLogger(__name__)
 
@@ -40,8 +56,7 @@ def _reached(state: TrainState, max_steps: int | None) -> bool:
     return max_steps is not None and state.global_step >= max_steps
 
 
-def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None
-        ) -> dict:
+def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None) -> dict:
     """Train (or resume) per cfg into run_dir -> {"losses": {global step: loss}, "metrics": last validation
     metrics, "state": final TrainState}. Only rank 0 validates, logs and saves.
 
@@ -62,8 +77,9 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
         raise ValueError(f"{cfg.data.train.ann_file}: no training person")
     sampler = EpochSampler(len(train_set), trainer.seed, shuffle=True, rank=rank, world_size=world)
     train_loader = build_loader(train_set, trainer.batch_size, trainer.num_workers, sampler, device)
-    val_loader = build_loader(val_set, trainer.val_batch_size, trainer.num_workers,
-                              EpochSampler(len(val_set), shuffle=False), device)
+    val_loader = build_loader(
+        val_set, trainer.val_batch_size, trainer.num_workers, EpochSampler(len(val_set), shuffle=False), device
+    )
     model = build_model(cfg).to(device)
     loss_fn, optimizer = build_loss(cfg), build_optimizer(cfg, model)
     scheduler = build_scheduler(cfg, optimizer)
@@ -71,24 +87,46 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     net = DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None) if world > 1 else model
     writer = SummaryWriter(str(run_dir)) if rank == 0 else None
     config = OmegaConf.to_container(cfg, resolve=True)
-    log.info("%d training crops, %d validation crops, device %s x %d, from epoch %d step %d", len(train_set),
-             len(val_set), device, world, state.epoch, state.global_step)
+    log.info(
+        "%d training crops, %d validation crops, device %s x %d, from epoch %d step %d",
+        len(train_set),
+        len(val_set),
+        device,
+        world,
+        state.epoch,
+        state.global_step,
+    )
     losses: dict[int, float] = {}
     metrics: dict[str, float] = {}
     while state.epoch < trainer.epochs and not _reached(state, trainer.max_steps):
         train_set.set_epoch(state.epoch)
         sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
         remaining, first_step = len(train_loader), state.global_step + 1
-        epoch_losses = train_one_epoch(net, train_loader, loss_fn, optimizer, device, state, trainer.max_steps,
-                                       writer, trainer.log_every, trainer.progress and rank == 0)
+        epoch_losses = train_one_epoch(
+            net,
+            train_loader,
+            loss_fn,
+            optimizer,
+            device,
+            state,
+            trainer.max_steps,
+            writer,
+            trainer.log_every,
+            trainer.progress and rank == 0,
+        )
         losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
         finished = len(epoch_losses) == remaining
         if finished:
             scheduler.step()
             state.epoch, state.step_in_epoch = state.epoch + 1, 0
-        log.info("epoch %d%s: mean loss %.6g over %d steps (global step %d)", state.epoch - finished,
-                 "" if finished else " (stopped)", np.mean(epoch_losses) if epoch_losses else np.nan,
-                 len(epoch_losses), state.global_step)
+        log.info(
+            "epoch %d%s: mean loss %.6g over %d steps (global step %d)",
+            state.epoch - finished,
+            "" if finished else " (stopped)",
+            np.mean(epoch_losses) if epoch_losses else np.nan,
+            len(epoch_losses),
+            state.global_step,
+        )
         last = state.epoch >= trainer.epochs or _reached(state, trainer.max_steps)
         if rank == 0:
             if last or (finished and state.epoch % trainer.val_every == 0):
@@ -103,27 +141,50 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     return {"losses": losses, "metrics": metrics, "state": state}
 
 
-def _validate(cfg: DictConfig, model: nn.Module, loader: DataLoader, loss_fn: nn.Module, device: torch.device,
-              writer: SummaryWriter, state: TrainState, run_dir: Path) -> dict[str, float]:
+def _validate(
+    cfg: DictConfig,
+    model: nn.Module,
+    loader: DataLoader,
+    loss_fn: nn.Module,
+    device: torch.device,
+    writer: SummaryWriter,
+    state: TrainState,
+    run_dir: Path,
+) -> dict[str, float]:
     """Validate, log to TensorBoard, write the predictions JSON -> the metrics."""
     dataset = loader.dataset
-    result = validate(model, loader, dataset.codec, dataset.records, loss_fn, device, cfg.trainer.grid_images,
-                      cfg.trainer.progress)
+    result = validate(
+        model, loader, dataset.codec, dataset.records, loss_fn, device, cfg.trainer.grid_images, cfg.trainer.progress
+    )
     for key, value in result.metrics.items():
         writer.add_scalar(f"val/{key}", value, state.global_step)
     if result.grid is not None:
         writer.add_image("val/heatmaps", result.grid, state.global_step, dataformats="HWC")
     writer.flush()
     write_coco_results(run_dir / cfg.predictions_file, result.predictions)
-    atomic_write_text(run_dir / "metrics.json", json.dumps(  # the latest validation, for sweep tables
-        {"metrics": result.metrics, "step": state.global_step, "epoch": state.epoch}, indent=2))
-    log.info("validation at step %d: %s", state.global_step,
-             ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items()))
+    atomic_write_text(
+        run_dir / "metrics.json",
+        json.dumps(  # the latest validation, for sweep tables
+            {"metrics": result.metrics, "step": state.global_step, "epoch": state.epoch}, indent=2
+        ),
+    )
+    log.info(
+        "validation at step %d: %s", state.global_step, ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items())
+    )
     return result.metrics
 
 
-def _save(cfg: DictConfig, run_dir: Path, model: nn.Module, optimizer: torch.optim.Optimizer, scheduler: Any,
-          state: TrainState, config: dict, metrics: dict[str, float], choices: dict[str, str] | None) -> None:
+def _save(
+    cfg: DictConfig,
+    run_dir: Path,
+    model: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    scheduler: Any,
+    state: TrainState,
+    config: dict,
+    metrics: dict[str, float],
+    choices: dict[str, str] | None,
+) -> None:
     """Write checkpoints/last.ckpt, and the weights to best.pth when the latest validation beat the best AP
     (all joints)."""
     folder = run_dir / cfg.checkpoint_dir
@@ -153,7 +214,8 @@ def main(cfg: DictConfig) -> dict:
     except (FileNotFoundError, ConfigError, CheckpointError) as err:
         raise SystemExit(f"error: {err}") from None
 
-register_resolvers()      # ${run_id:} in the run folder names, before hydra.main composes the config
+
+register_resolvers()  # ${run_id:} in the run folder names, before hydra.main composes the config
 
 if __name__ == "__main__":
     exit_on_sigterm()

@@ -11,6 +11,7 @@ Panoptic (coco19) adds the face bones; neither has feet. Bones without samples k
 the written table is loaded (``data.bone_lengths.resolve_bone_table``). Samples from every frame are
 pooled, so the SD mixes the spread between persons with annotation noise.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from data.formats.atomic_io import atomic_write_text
 from data.bone_lengths import BONE_MEAN, BONE_NAMES, BONE_STD, bone_table_dict, estimate_bone_table
-from data.keypoints import PANOPTIC19_TO_COCO23, SHELF14_TO_COCO23, to_coco23
+from data.formats.atomic_io import atomic_write_text
 from data.formats.fourd_skeletons import load_4dassoc_skeletons
-from evaluation.report import format_table
 from data.geometry.calibration import panoptic_world_to_ours
+from data.keypoints import PANOPTIC19_TO_COCO23, SHELF14_TO_COCO23, to_coco23
+from evaluation.report import format_table
 
 DEFAULT_SHELF = Path("../shared/data/shelf/4d_association/gt.txt")
 
@@ -53,8 +54,10 @@ def panoptic_poses(folder: str | Path, min_confidence: float = 0.1) -> np.ndarra
 
 def table_rows(mean: np.ndarray, std: np.ndarray, count: np.ndarray) -> list[list[object]]:
     """Rows bone, default mean/SD (cm), estimated mean/SD (cm), samples: (L,) x 3 -> L rows."""
-    return [[name, 100 * BONE_MEAN[i], 100 * BONE_STD[i], 100 * mean[i], 100 * std[i], int(count[i])]
-            for i, name in enumerate(BONE_NAMES)]
+    return [
+        [name, 100 * BONE_MEAN[i], 100 * BONE_STD[i], 100 * mean[i], 100 * std[i], int(count[i])]
+        for i, name in enumerate(BONE_NAMES)
+    ]
 
 
 def write_json(doc: dict, path: Path) -> None:
@@ -65,10 +68,19 @@ def write_json(doc: dict, path: Path) -> None:
 def main(argv: list[str] | None = None) -> None:
     """Parse arguments, estimate, print the table, optionally write the JSON."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--shelf", type=Path, default=None,
-                        help=f"4D Association gt.txt (default {DEFAULT_SHELF} when no --panoptic is given)")
-    parser.add_argument("--panoptic", type=Path, nargs="*", default=[],
-                        help="folders of Panoptic hdPose3d_stage1_coco19 body3DScene_*.json files")
+    parser.add_argument(
+        "--shelf",
+        type=Path,
+        default=None,
+        help=f"4D Association gt.txt (default {DEFAULT_SHELF} when no --panoptic is given)",
+    )
+    parser.add_argument(
+        "--panoptic",
+        type=Path,
+        nargs="*",
+        default=[],
+        help="folders of Panoptic hdPose3d_stage1_coco19 body3DScene_*.json files",
+    )
     parser.add_argument("--panoptic-min-confidence", type=float, default=0.1)
     parser.add_argument("--min-count", type=int, default=10, help="bones with fewer samples are not written")
     parser.add_argument("--output", type=Path, default=None, help="write a bone_table JSON here")
@@ -87,8 +99,9 @@ def main(argv: list[str] | None = None) -> None:
     print(format_table(["bone", "default cm", "SD", "estimated cm", "SD", "n"], table_rows(mean, std, count)))
     if args.output is not None:
         keep = count >= args.min_count
-        doc = bone_table_dict(np.where(keep, mean, np.nan), std, count,
-                              source="benchmarks/fit_bone_lengths.py from " + "; ".join(sources))
+        doc = bone_table_dict(
+            np.where(keep, mean, np.nan), std, count, source="benchmarks/fit_bone_lengths.py from " + "; ".join(sources)
+        )
         write_json(doc, args.output)
         print(f"wrote {len(doc['bones'])} bones to {args.output}")
 

@@ -18,6 +18,7 @@ right swaps and grouping mistakes (a few percent of the joints, errors of 50+ px
 The script prints the binned table, the fit, and the model of configs/matching/evidence.yaml and
 configs/reconstruction/mle_map.yaml beside it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,11 +27,11 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from data.keypoints import COCO23_TO_SHELF14_LIMBS
 from data.datasets.shelf import load_shelf
-from models.paf_grouping import group_view
-from evaluation.report import format_table
+from data.keypoints import COCO23_TO_SHELF14_LIMBS
 from evaluation.protocols.shelf import load_actors_gt
+from evaluation.report import format_table
+from models.paf_grouping import group_view
 
 RAYLEIGH_MEDIAN = float(np.sqrt(2 * np.log(2)))
 SCORE_BINS = (0.2, 0.4, 0.55, 0.7, 0.8, 0.9, 1.01)
@@ -49,10 +50,10 @@ def joint_errors(root: Path, frames: str | None, max_px: float) -> tuple[np.ndar
         for camera, view in zip(seq.rig, frame.views):
             if not len(view) or not actors:
                 continue
-            truth = np.stack([camera.project(pose[:12, :3]) for pose in actors.values()])      # (A, 12, 2)
-            kp = view.keypoints[:, COCO23_TO_SHELF14_LIMBS]                                    # (N, 12, 3)
+            truth = np.stack([camera.project(pose[:12, :3]) for pose in actors.values()])  # (A, 12, 2)
+            kp = view.keypoints[:, COCO23_TO_SHELF14_LIMBS]  # (N, 12, 3)
             seen = kp[..., 2] > 0
-            dist = np.linalg.norm(kp[:, None, :, :2] - truth[None], axis=-1)                   # (N, A, 12)
+            dist = np.linalg.norm(kp[:, None, :, :2] - truth[None], axis=-1)  # (N, A, 12)
             median = np.array([[np.median(d[s]) if s.any() else np.inf for d in row] for row, s in zip(dist, seen)])
             for n in range(len(view)):
                 a = int(np.argmin(median[n]))
@@ -72,15 +73,22 @@ def binned_sigmas(errors: np.ndarray, scores: np.ndarray, sizes: np.ndarray) -> 
         for b0, b1 in zip(SIZE_BINS[:-1], SIZE_BINS[1:]):
             hit = (scores >= s0) & (scores < s1) & (sizes >= b0) & (sizes < b1)
             if hit.sum() >= MIN_BIN:
-                out.append((float(scores[hit].mean()), float(sizes[hit].mean()),
-                            float(np.median(errors[hit])) / RAYLEIGH_MEDIAN, int(hit.sum())))
+                out.append(
+                    (
+                        float(scores[hit].mean()),
+                        float(sizes[hit].mean()),
+                        float(np.median(errors[hit])) / RAYLEIGH_MEDIAN,
+                        int(hit.sum()),
+                    )
+                )
     return out
 
 
-def model_sigma(score: np.ndarray, size: np.ndarray, sigma_px: float, c: float, k: float,
-                sigma_min: float) -> np.ndarray:
+def model_sigma(
+    score: np.ndarray, size: np.ndarray, sigma_px: float, c: float, k: float, sigma_min: float
+) -> np.ndarray:
     """The sigma model at scores and box sizes: (K,), (K,) -> (K,) px."""
-    return np.maximum(sigma_min, np.hypot(sigma_px, c * size) / score ** k)
+    return np.maximum(sigma_min, np.hypot(sigma_px, c * size) / score**k)
 
 
 def fit(bins: list[tuple[float, float, float, int]], sigma_min: float) -> tuple[float, float, float]:
@@ -106,14 +114,32 @@ def main(argv: list[str] | None = None) -> tuple[float, float, float]:
     errors, scores, sizes = joint_errors(args.root, args.frames, args.max_px)
     bins = binned_sigmas(errors, scores, sizes)
     sigma_px, c, k = fit(bins, args.sigma_min)
-    rows = [[f"{s:.2f}", f"{b:.0f}", n, sig, float(model_sigma(s, b, sigma_px, c, k, args.sigma_min)),
-             max(1.0, 0.02 * b / s)] for s, b, sig, n in bins]
-    print(f"Shelf OpenPose limb joints matched to the projected actorsGT.mat: {len(errors)} joints; "
-          f"median error {np.median(errors):.2f} px, {100 * np.mean(errors > 30):.1f} % beyond 30 px")
-    print(format_table(["score", "box size (px)", "joints", "sigma measured (px)", "fit", "c=0.02, k=1 (before)"],
-                       rows, floatfmt=".2f"))
-    print(f"\nfit: sigma = max({args.sigma_min:g}, sqrt({sigma_px:.2f}^2 + ({c:.4f} sqrt(w h))^2) / score ** {k:.2f}) px"
-          "  (keys sigma_px, c, score_power of configs/matching/evidence.yaml and configs/reconstruction/*.yaml)")
+    rows = [
+        [
+            f"{s:.2f}",
+            f"{b:.0f}",
+            n,
+            sig,
+            float(model_sigma(s, b, sigma_px, c, k, args.sigma_min)),
+            max(1.0, 0.02 * b / s),
+        ]
+        for s, b, sig, n in bins
+    ]
+    print(
+        f"Shelf OpenPose limb joints matched to the projected actorsGT.mat: {len(errors)} joints; "
+        f"median error {np.median(errors):.2f} px, {100 * np.mean(errors > 30):.1f} % beyond 30 px"
+    )
+    print(
+        format_table(
+            ["score", "box size (px)", "joints", "sigma measured (px)", "fit", "c=0.02, k=1 (before)"],
+            rows,
+            floatfmt=".2f",
+        )
+    )
+    print(
+        f"\nfit: sigma = max({args.sigma_min:g}, sqrt({sigma_px:.2f}^2 + ({c:.4f} sqrt(w h))^2) / score ** {k:.2f}) px"
+        "  (keys sigma_px, c, score_power of configs/matching/evidence.yaml and configs/reconstruction/*.yaml)"
+    )
     return sigma_px, c, k
 
 

@@ -7,6 +7,7 @@ metrics. A metric is a key of metrics.json's "metrics", or ``<stage>_ms``: the s
 "timings_s" per frame (frames = ``dataset.num_frames`` of ``<run>/.hydra/config.yaml``) in milliseconds.
 A run lacking a metric shows "-".
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,13 +33,20 @@ METRIC_COLUMNS = {
     "reprojection_max_px": ("reproj. max (px)", 1.0, ".1f"),
     "reprojection_var_px2": ("reproj. var (px^2)", 1.0, ".1f"),
 }
-DEFAULT_METRICS = ["matching_precision", "matching_recall", "matching_recovered_share", "mpjpe_mm", "pcp_average",
-                   "matching_ms"]
+DEFAULT_METRICS = [
+    "matching_precision",
+    "matching_recall",
+    "matching_recovered_share",
+    "mpjpe_mm",
+    "pcp_average",
+    "matching_ms",
+]
 
 
 @dataclass
 class Run:
     """One run directory of a sweep: its overrides, metrics, stage timings and frame count."""
+
     name: str
     overrides: dict[str, str]
     metrics: dict[str, float]
@@ -97,8 +105,9 @@ def metric_header(name: str) -> str:
     return f"{name[:-3]} ms/frame" if name.endswith("_ms") else name
 
 
-def sweep_table(sweep_dirs: Path | Sequence[Path], metrics: Sequence[str] = DEFAULT_METRICS
-                ) -> tuple[list[str], list[list[str]]]:
+def sweep_table(
+    sweep_dirs: Path | Sequence[Path], metrics: Sequence[str] = DEFAULT_METRICS
+) -> tuple[list[str], list[list[str]]]:
     """Headers and rows (one per run, sorted by the swept keys) of one or several sweep directories."""
     dirs = [Path(sweep_dirs)] if isinstance(sweep_dirs, (str, Path)) else [Path(d) for d in sweep_dirs]
     runs = [load_run(p.parent) for d in dirs for p in sorted(d.glob("*/metrics.json"))]
@@ -115,8 +124,11 @@ def main(argv: Sequence[str] | None = None) -> str:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sweep_dir", type=Path, nargs="+", help="Hydra multirun folders (hydra.sweep.dir)")
     parser.add_argument("--out", type=Path, help="also write the table to this markdown file")
-    parser.add_argument("--metrics", default=",".join(DEFAULT_METRICS),
-                        help="comma-separated metrics.json keys or <stage>_ms (default: %(default)s)")
+    parser.add_argument(
+        "--metrics",
+        default=",".join(DEFAULT_METRICS),
+        help="comma-separated metrics.json keys or <stage>_ms (default: %(default)s)",
+    )
     args = parser.parse_args(argv)
     table = format_table(*sweep_table(args.sweep_dir, [m for m in args.metrics.split(",") if m]))
     print(table)

@@ -18,6 +18,7 @@ Precision / recall are over cross-view detection pairs and "pure+complete" is th
 recovered exactly (evaluation.correspondence); ms is the matcher call only (time.perf_counter).
 BLAS / OpenMP are pinned to one thread before numpy is imported: the timings are per core.
 """
+
 from __future__ import annotations
 
 import os
@@ -34,16 +35,22 @@ from typing import Callable  # noqa: E402
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+from data.formats.atomic_io import atomic_write_text  # noqa: E402
+from data.geometry.calibration import load_wildtrack, load_wildtrack_positions  # noqa: E402
+from data.geometry.camera import Rig  # noqa: E402
 from data.keypoints import FOOT_JOINTS  # noqa: E402
 from data.multiview import ViewDetections  # noqa: E402
-from data.formats.atomic_io import atomic_write_text  # noqa: E402
 from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts  # noqa: E402
 from evaluation.report import format_table  # noqa: E402
-from data.geometry.calibration import load_wildtrack, load_wildtrack_positions  # noqa: E402
-from data.geometry.camera import Rig  # noqa: E402
-from reconstruction.matching import (EpipolarMatcher, EvidenceMatcher, FeetEpipolarMatcher, FeetMatcher,  # noqa: E402
-                                     OracleMatcher, RansacMatcher)
+from reconstruction.matching import (  # noqa: E402
+    EpipolarMatcher,
+    EvidenceMatcher,
+    FeetEpipolarMatcher,
+    FeetMatcher,
+    OracleMatcher,
+    RansacMatcher,
+)
 
 MATCHERS = ("evidence", "feet", "feet_distinct", "feet_epipolar", "epipolar", "ransac", "oracle")
 FEET_DISTINCT = {"pixel_sigma": 5.0, "margin": 4.0}  # the keys of configs/matching/feet_distinct.yaml
@@ -69,9 +76,15 @@ def parse_kv(text: str) -> dict[str, object]:
 
 def make_matchers(feet_kwargs: dict[str, object]) -> dict[str, Callable]:
     """Fresh matchers with their default settings (feet and feet_distinct with feet_kwargs on top)."""
-    return {"evidence": EvidenceMatcher(), "feet": FeetMatcher(**feet_kwargs), "feet_distinct": FeetMatcher(**{**FEET_DISTINCT, **feet_kwargs}),
-            "feet_epipolar": FeetEpipolarMatcher(), "epipolar": EpipolarMatcher(),
-            "ransac": RansacMatcher(), "oracle": OracleMatcher()}
+    return {
+        "evidence": EvidenceMatcher(),
+        "feet": FeetMatcher(**feet_kwargs),
+        "feet_distinct": FeetMatcher(**{**FEET_DISTINCT, **feet_kwargs}),
+        "feet_epipolar": FeetEpipolarMatcher(),
+        "epipolar": EpipolarMatcher(),
+        "ransac": RansacMatcher(),
+        "oracle": OracleMatcher(),
+    }
 
 
 def hide_feet(views: list[ViewDetections], fraction: float, rng: np.random.Generator) -> list[ViewDetections]:
@@ -113,20 +126,32 @@ def wildtrack_table(args: argparse.Namespace) -> str:
     root = Path(args.data) / "wildtrack"
     rig = load_wildtrack(root)
     positions = load_wildtrack_positions(root / "gt_positions_mvdet.txt")
-    chosen = sorted(positions)[:args.frames]
+    chosen = sorted(positions)[: args.frames]
     rows = []
     for noise in tqdm((5.0, 2.0, 10.0), desc="wildtrack"):
         frames = []
         for k, f in enumerate(chosen):
-            cfg = SyntheticConfig(seed=args.seed + k, positions=[positions[f]], area=WILDTRACK_AREA,
-                                  min_spacing_m=0.0, rig=str(root), rig_format="wildtrack", noise_px=noise,
-                                  noise_depth_exponent=args.noise_depth_exponent)
+            cfg = SyntheticConfig(
+                seed=args.seed + k,
+                positions=[positions[f]],
+                area=WILDTRACK_AREA,
+                min_spacing_m=0.0,
+                rig=str(root),
+                rig_format="wildtrack",
+                noise_px=noise,
+                noise_depth_exponent=args.noise_depth_exponent,
+            )
             frames.append(generate_sequence(cfg, rig=rig).frames[0].views)
         people = np.mean([len(positions[f]) for f in chosen])
-        rows += setting_rows(f"{noise:g} px, {len(chosen)} frames, {people:.1f} people", frames, rig,
-                             args.feet_kwargs, {})
-    return ("### (a) Wildtrack rig (7 cameras), synthetic bodies at annotated positions, occlusion on\n\n"
-            + NOISE_NOTE.format(exponent=args.noise_depth_exponent) + "\n\n" + format_table(HEADERS, rows))
+        rows += setting_rows(
+            f"{noise:g} px, {len(chosen)} frames, {people:.1f} people", frames, rig, args.feet_kwargs, {}
+        )
+    return (
+        "### (a) Wildtrack rig (7 cameras), synthetic bodies at annotated positions, occlusion on\n\n"
+        + NOISE_NOTE.format(exponent=args.noise_depth_exponent)
+        + "\n\n"
+        + format_table(HEADERS, rows)
+    )
 
 
 def density_table(args: argparse.Namespace) -> str:
@@ -135,17 +160,32 @@ def density_table(args: argparse.Namespace) -> str:
     settings = [(n, noise, hidden) for n in (10, 20, 40, 80) for noise in (2.0, 5.0, 10.0) for hidden in (0.0, 0.3)]
     rows = []
     for n, noise, hidden in tqdm(settings, desc="density sweep"):
-        cfg = SyntheticConfig(seed=args.seed + n, num_frames=args.sweep_frames, num_persons=n, area=SWEEP_AREA,
-                              num_cameras=5, noise_px=noise, noise_depth_exponent=args.noise_depth_exponent)
+        cfg = SyntheticConfig(
+            seed=args.seed + n,
+            num_frames=args.sweep_frames,
+            num_persons=n,
+            area=SWEEP_AREA,
+            num_cameras=5,
+            noise_px=noise,
+            noise_depth_exponent=args.noise_depth_exponent,
+        )
         seq = generate_sequence(cfg)
         rng = np.random.default_rng([args.seed, n, int(noise), int(100 * hidden)])
         frames = [hide_feet(fr.views, hidden, rng) for fr in seq.frames]
-        skip = {"ransac": f"skipped (> {args.skip_ransac_above} people)"} \
-            if n > args.skip_ransac_above and not args.all else {}
+        skip = (
+            {"ransac": f"skipped (> {args.skip_ransac_above} people)"}
+            if n > args.skip_ransac_above and not args.all
+            else {}
+        )
         label = f"{n} p ({n / area_m2:.2f}/m2), {noise:g} px, feet hidden {100 * hidden:.0f}%"
         rows += setting_rows(label, frames, seq.rig, args.feet_kwargs, skip)
-    return (f"### (b) Density sweep: 5-camera ring, fixed area {area_m2:.0f} m2, "
-            f"{args.sweep_frames} frames per setting\n\n" + NOISE_NOTE.format(exponent=args.noise_depth_exponent) + "\n\n" + format_table(HEADERS, rows))
+    return (
+        f"### (b) Density sweep: 5-camera ring, fixed area {area_m2:.0f} m2, "
+        f"{args.sweep_frames} frames per setting\n\n"
+        + NOISE_NOTE.format(exponent=args.noise_depth_exponent)
+        + "\n\n"
+        + format_table(HEADERS, rows)
+    )
 
 
 def median_ms(matcher: Callable, frames: Frames, rig: Rig, repeats: int) -> float:
@@ -164,11 +204,17 @@ def median_ms(matcher: Callable, frames: Frames, rig: Rig, repeats: int) -> floa
 def timing_table(args: argparse.Namespace) -> tuple[str, tuple[float, float]]:
     """Section (c): ms per frame vs people (7 views) and vs views (20 people); also evidence and feet ms at 100 x 7."""
     settings = [(n, 7) for n in (5, 10, 20, 50, 100)] + [(20, v) for v in (2, 4, 6, 8)]
-    ransac_max = 10 ** 9 if args.all else (20 if args.quick else 50)
+    ransac_max = 10**9 if args.all else (20 if args.quick else 50)
     rows, feet_100 = [], (float("nan"), float("nan"))
     for n, v in tqdm(settings, desc="timing"):
-        cfg = SyntheticConfig(seed=args.seed + 7 * n + v, num_frames=args.timing_frames, num_persons=n,
-                              density=0.5, num_cameras=v, noise_px=2.0)
+        cfg = SyntheticConfig(
+            seed=args.seed + 7 * n + v,
+            num_frames=args.timing_frames,
+            num_persons=n,
+            density=0.5,
+            num_cameras=v,
+            noise_px=2.0,
+        )
         seq = generate_sequence(cfg)
         frames = [fr.views for fr in seq.frames]
         dets = np.mean([len(d) for views in frames for d in views])
@@ -179,12 +225,14 @@ def timing_table(args: argparse.Namespace) -> tuple[str, tuple[float, float]]:
                 continue
             row.append(median_ms(matcher, frames, seq.rig, 1 if name == "ransac" else args.repeats))
         if (n, v) == (100, 7):
-            feet_100 = (row[3], row[4])          # evidence, feet
+            feet_100 = (row[3], row[4])  # evidence, feet
         rows.append(row)
     headers = ("people", "views", "detections / view", *(f"{m} ms" for m in MATCHERS))
-    text = (f"### (c) Matching time per frame (ms, one core), ring rig, 0.5 people/m2, median over "
-            f"{args.timing_frames} frames x {args.repeats} repeats (ransac 1)\n\n"
-            + format_table(headers, rows, floatfmt=".2f"))
+    text = (
+        f"### (c) Matching time per frame (ms, one core), ring rig, 0.5 people/m2, median over "
+        f"{args.timing_frames} frames x {args.repeats} repeats (ransac 1)\n\n"
+        + format_table(headers, rows, floatfmt=".2f")
+    )
     return text, feet_100
 
 
@@ -198,9 +246,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--skip-ransac-above", type=int, default=40, help="density sweep: no ransac above this many people")
     p.add_argument("--all", action="store_true", help="run ransac everywhere")
-    p.add_argument("--feet-args", default="", help="FeetMatcher keyword arguments of the feet and feet_distinct rows, e.g. k1=1,gate=0.8")
-    p.add_argument("--noise-depth-exponent", type=float, default=1.0,
-                   help="2D noise SD = px * (depth / 5 m) ** this (data.synthetic); 0 = same pixels at every depth")
+    p.add_argument(
+        "--feet-args",
+        default="",
+        help="FeetMatcher keyword arguments of the feet and feet_distinct rows, e.g. k1=1,gate=0.8",
+    )
+    p.add_argument(
+        "--noise-depth-exponent",
+        type=float,
+        default=1.0,
+        help="2D noise SD = px * (depth / 5 m) ** this (data.synthetic); 0 = same pixels at every depth",
+    )
     p.add_argument("--sections", default="abc", help="which sections to run, e.g. 'a' or 'bc'")
     args = p.parse_args(argv)
     args.frames = args.frames if args.frames is not None else (3 if args.quick else 20)
@@ -214,17 +270,22 @@ def main(argv: list[str] | None = None) -> None:
     """Run the chosen sections, print the tables and write them to --out."""
     args = parse_args(argv)
     start = time.perf_counter()
-    parts = [f"## Matching benchmark (seed {args.seed}{', quick' if args.quick else ''}"
-             f"{', feet ' + args.feet_args if args.feet_args else ''})"]
+    parts = [
+        f"## Matching benchmark (seed {args.seed}{', quick' if args.quick else ''}"
+        f"{', feet ' + args.feet_args if args.feet_args else ''})"
+    ]
     if "a" in args.sections:
         parts.append(wildtrack_table(args))
     if "b" in args.sections:
         parts.append(density_table(args))
     if "c" in args.sections:
         text, feet_100 = timing_table(args)
-        parts += [text, f"Matching, 100 people in 7 views, ms per frame on one core: evidence (the default) "
-                        f"{feet_100[0]:.2f}, feet {feet_100[1]:.2f} (ratio {feet_100[0] / feet_100[1]:.2f}); "
-                        f"feet target <= {TARGET_MS:g} ms, ratio measured / target = {feet_100[1] / TARGET_MS:.2f}"]
+        parts += [
+            text,
+            f"Matching, 100 people in 7 views, ms per frame on one core: evidence (the default) "
+            f"{feet_100[0]:.2f}, feet {feet_100[1]:.2f} (ratio {feet_100[0] / feet_100[1]:.2f}); "
+            f"feet target <= {TARGET_MS:g} ms, ratio measured / target = {feet_100[1] / TARGET_MS:.2f}",
+        ]
     parts.append(f"Total wall time {time.perf_counter() - start:.0f} s.")
     text = "\n\n".join(parts) + "\n"
     print(text)

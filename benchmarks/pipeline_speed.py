@@ -9,6 +9,7 @@ earlier Shelf default (``matching=feet_epipolar reconstruction=paper``). Each pi
 (compiled kernels loaded), then every configuration runs all frames ``--repeats`` times in turn; the
 table holds the median ms per frame and the ratio to each earlier configuration.
 """
+
 from __future__ import annotations
 
 import os
@@ -27,15 +28,24 @@ from evaluation.report import format_table  # noqa: E402
 from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
-CONFIGS = {"default": [], "paper": ["matching=feet_paper", "reconstruction=paper"],
-           "earlier Shelf default": ["matching=feet_epipolar", "reconstruction=paper"]}
+CONFIGS = {
+    "default": [],
+    "paper": ["matching=feet_paper", "reconstruction=paper"],
+    "earlier Shelf default": ["matching=feet_epipolar", "reconstruction=paper"],
+}
 
 
 def settings(data: str) -> dict[str, list[str]]:
     """Setting label -> dataset overrides."""
-    return {"Shelf 300-399": ["dataset=shelf", f"dataset.root={data}/shelf", "dataset.frames=0:100"],
-            "100 people x 7 ring views": ["dataset.num_persons=100", "dataset.num_cameras=7", "dataset.density=0.5",
-                                          "dataset.num_frames=4"]}
+    return {
+        "Shelf 300-399": ["dataset=shelf", f"dataset.root={data}/shelf", "dataset.frames=0:100"],
+        "100 people x 7 ring views": [
+            "dataset.num_persons=100",
+            "dataset.num_cameras=7",
+            "dataset.density=0.5",
+            "dataset.num_frames=4",
+        ],
+    }
 
 
 def time_setting(overrides: list[str], repeats: int) -> dict[str, tuple[float, float]]:
@@ -70,8 +80,11 @@ def main(argv: list[str] | None = None) -> str:
             total = {k: m + r for k, (m, r) in times.items()}
             for name, (m, r) in times.items():
                 rows.append([label, name, m, r, total[name], total["default"] / total[name]])
-    text = format_table(["setting", "configuration", "matching ms", "reconstruction ms", "total ms",
-                         "default / this"], rows, floatfmt=".2f")
+    text = format_table(
+        ["setting", "configuration", "matching ms", "reconstruction ms", "total ms", "default / this"],
+        rows,
+        floatfmt=".2f",
+    )
     print(text)
     return text
 

@@ -25,6 +25,7 @@ precision / recall against GT identities; absolute MPJPE (mm, GT-matched, no roo
 valid in both); PCP (%, alpha 0.5; Shelf: the strict Shelf protocol averaged over actors 1-3);
 ms / frame = matching + reconstruction + tracking (Shelf: + PAF grouping), one BLAS thread.
 """
+
 from __future__ import annotations
 
 import os
@@ -57,12 +58,27 @@ ROWS = {
     "epipolar + mle_map": ["matching=epipolar", "reconstruction=mle_map", "tracking=off"],
     "oracle + vanilla": ["matching=oracle", "reconstruction=vanilla", "tracking=off"],
 }
-ROW_KEYS = {"default": "default", "untracked": "default, tracking off", "paper": "paper",
-            "epipolar_vanilla": "epipolar + vanilla", "epipolar_mle_map": "epipolar + mle_map",
-            "oracle": "oracle + vanilla"}
+ROW_KEYS = {
+    "default": "default",
+    "untracked": "default, tracking off",
+    "paper": "paper",
+    "epipolar_vanilla": "epipolar + vanilla",
+    "epipolar_mle_map": "epipolar + mle_map",
+    "oracle": "oracle + vanilla",
+}
 CROWD_SIZES = (10, 50, 100, 200, 400)
-HEADERS = ("dev set", "configuration", "found (%)", "found of >=2 views (%)", "false pos.", "pair P (%)",
-           "pair R (%)", "MPJPE (mm)", "PCP (%)", "ms / frame")
+HEADERS = (
+    "dev set",
+    "configuration",
+    "found (%)",
+    "found of >=2 views (%)",
+    "false pos.",
+    "pair P (%)",
+    "pair R (%)",
+    "MPJPE (mm)",
+    "PCP (%)",
+    "ms / frame",
+)
 
 
 def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[str]]:
@@ -76,17 +92,28 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
         for seq in ("160906_band1", "160906_band2"):
             for noise in (0, 2, 5):
                 sets[f"Panoptic {seq[-5:]} {noise} px"] = [
-                    "dataset=panoptic", f"dataset.root={data}/panoptic_seq", f"dataset.sequence={seq}",
-                    f"dataset.noise_px={noise}"]
+                    "dataset=panoptic",
+                    f"dataset.root={data}/panoptic_seq",
+                    f"dataset.sequence={seq}",
+                    f"dataset.noise_px={noise}",
+                ]
     if "wildtrack" in names:
         sets["Wildtrack 5 px"] = ["dataset=wildtrack", f"dataset.root={data}/wildtrack"]
     if "timing" in names:
-        sets["ring 100 people x 7 views"] = ["dataset=synthetic", "dataset.num_persons=100", "dataset.num_cameras=7",
-                                             "dataset.density=0.5", "dataset.num_frames=3"]
+        sets["ring 100 people x 7 views"] = [
+            "dataset=synthetic",
+            "dataset.num_persons=100",
+            "dataset.num_cameras=7",
+            "dataset.density=0.5",
+            "dataset.num_frames=3",
+        ]
     if "crowd" in names:
         for n in CROWD_SIZES:
-            sets[f"crowd {n} people"] = ["dataset=crowd", f"dataset.num_persons={n}",
-                                         f"dataset.num_frames={crowd_frames}"]
+            sets[f"crowd {n} people"] = [
+                "dataset=crowd",
+                f"dataset.num_persons={n}",
+                f"dataset.num_frames={crowd_frames}",
+            ]
     return sets
 
 
@@ -110,16 +137,30 @@ def run_row(sequence, cfg) -> list:
     pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), progress=False)
     m, frames = report.metrics, max(len(sequence.frames), 1)
-    ms = 1e3 * (sum(report.timings.get(k, 0.0) for k in ("matching", "reconstruction", "tracking"))
-                + sequence.meta.get("stage_seconds", {}).get("grouping", 0.0)) / frames
+    ms = (
+        1e3
+        * (
+            sum(report.timings.get(k, 0.0) for k in ("matching", "reconstruction", "tracking"))
+            + sequence.meta.get("stage_seconds", {}).get("grouping", 0.0)
+        )
+        / frames
+    )
     if "shelf" in report.protocols:
         shelf = report.protocols["shelf"]
         return ["-", "-", "-", "-", "-", "-", shelf["ours"]["strict"]["average"]["average"], ms]
     seen, _ = detectable_persons(sequence)
     found = m.get("num_matched", 0)
     pct = lambda k: 100.0 * m[k] if k in m else "-"  # noqa: E731
-    return [m.get("recall", "-"), 100.0 * found / seen if seen else "-", m.get("num_pred", 0) - found,
-            pct("matching_precision"), pct("matching_recall"), m.get("mpjpe_mm", "-"), m.get("pcp_average", "-"), ms]
+    return [
+        m.get("recall", "-"),
+        100.0 * found / seen if seen else "-",
+        m.get("num_pred", 0) - found,
+        pct("matching_precision"),
+        pct("matching_recall"),
+        m.get("mpjpe_mm", "-"),
+        m.get("pcp_average", "-"),
+        ms,
+    ]
 
 
 def main(argv: list[str] | None = None) -> list[list]:
@@ -136,8 +177,9 @@ def main(argv: list[str] | None = None) -> list[list]:
     table = []
     t_start = time.perf_counter()
     with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
-        chosen = {k: v for k, v in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items()
-                  if args.match in k}
+        chosen = {
+            k: v for k, v in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items() if args.match in k
+        }
         for label, dataset in tqdm(chosen.items(), desc="dev sets"):
             base = compose(config_name="eval", overrides=dataset)
             sequence = instantiate(base.dataset, _convert_="all")

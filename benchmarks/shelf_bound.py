@@ -16,6 +16,7 @@ No reconstruction that picks among these detections frame by frame, however robu
 second bound; temporal evidence (tracking) or a better 2D detector can. Protocol: strict Shelf PCP,
 alpha 0.5, mean of actors 1-3 (evaluation/protocols/shelf.py).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,17 +28,17 @@ from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 from tqdm import tqdm
 
+from data.geometry.camera import Rig
+from data.geometry.triangulation import triangulate_dlt
 from data.keypoints import COCO23_TO_SHELF14_LIMBS, coco23_to_shelf14, with_mid_hip
 from evaluation.pcp import correct_parts
-from evaluation.report import format_table
 from evaluation.protocols import attach_protocols
 from evaluation.protocols.shelf import AVERAGED_ACTOR_IDS, coco23_predictions_to_shelf15, select_prediction
-from data.geometry.camera import Rig
+from evaluation.report import format_table
 from reconstruction.pipeline import MultiViewPipeline
-from data.geometry.triangulation import triangulate_dlt
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
-HEAD = (12, 13)                 # Shelf-14 head bottom, head top
+HEAD = (12, 13)  # Shelf-14 head bottom, head top
 METHODS = ("pipeline", "view-subset oracle", "matching + view-subset oracle")
 
 
@@ -114,15 +115,19 @@ def run(overrides: list[str], max_px: float) -> dict[str, dict[int, list[np.ndar
             gt = gt[:, :3]
             best, _ = select_prediction(pred, gt)
             own = pred[best] if best >= 0 else np.full((15, 3), np.nan)
-            mine = matched_detections(frame.views, result.assignment[best]) if best >= 0 else np.zeros((len(rig), 23, 3))
-            poses = {"pipeline": own,
-                     "view-subset oracle": oracle_pose(own, subset_poses(mine, rig), gt),
-                     "matching + view-subset oracle": oracle_pose(
-                         own, subset_poses(nearest_detections(frame.views, rig, gt, max_px), rig), gt)}
+            mine = (
+                matched_detections(frame.views, result.assignment[best]) if best >= 0 else np.zeros((len(rig), 23, 3))
+            )
+            poses = {
+                "pipeline": own,
+                "view-subset oracle": oracle_pose(own, subset_poses(mine, rig), gt),
+                "matching + view-subset oracle": oracle_pose(
+                    own, subset_poses(nearest_detections(frame.views, rig, gt, max_px), rig), gt
+                ),
+            }
             for method, pose in poses.items():
                 rows[method][actor].append(correct_parts(pose[None], gt[None])[0])
     return rows
-
 
 
 def main(argv: list[str] | None = None) -> list[list]:
@@ -130,7 +135,9 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", default="../shared/data")
     parser.add_argument("--max-px", type=float, default=40.0, help="a view's nearest detection must be this close")
-    parser.add_argument("overrides", nargs="*", help="Hydra overrides of configs/eval.yaml (e.g. dataset.drop_feet=true)")
+    parser.add_argument(
+        "overrides", nargs="*", help="Hydra overrides of configs/eval.yaml (e.g. dataset.drop_feet=true)"
+    )
     args = parser.parse_args(argv)
     overrides = ["dataset=shelf", f"dataset.root={args.data}/shelf", *args.overrides]
     rows = run(overrides, args.max_px)

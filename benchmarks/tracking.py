@@ -11,6 +11,7 @@ and off, and the tracker's ms per frame, the whole pipeline's (matching + recons
 with tracking on and off, and what tracking adds (the tracker, the joints' variances and the skeleton
 look-up inside the MAP), one core.
 """
+
 from __future__ import annotations
 
 import os
@@ -31,8 +32,18 @@ from evaluation.sequence_eval import evaluate_sequence  # noqa: E402
 from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
-HEADERS = ("set", "ID switches (per 100)", "IDF1-like (%)", "fragmentations", "MPJPE / PCP on", "MPJPE / PCP off",
-           "tracker ms / frame", "pipeline ms / frame on", "off", "tracking adds ms")
+HEADERS = (
+    "set",
+    "ID switches (per 100)",
+    "IDF1-like (%)",
+    "fragmentations",
+    "MPJPE / PCP on",
+    "MPJPE / PCP off",
+    "tracker ms / frame",
+    "pipeline ms / frame on",
+    "off",
+    "tracking adds ms",
+)
 
 
 def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[str]]:
@@ -42,12 +53,19 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
         sets["Shelf (PCP)"] = ["dataset=shelf", f"dataset.root={data}/shelf"]
     if "panoptic" in names:
         for seq in ("160906_band1", "160906_band2"):
-            sets[f"Panoptic {seq[-5:]} 5 px"] = ["dataset=panoptic", f"dataset.root={data}/panoptic_seq",
-                                                 f"dataset.sequence={seq}", "dataset.noise_px=5"]
+            sets[f"Panoptic {seq[-5:]} 5 px"] = [
+                "dataset=panoptic",
+                f"dataset.root={data}/panoptic_seq",
+                f"dataset.sequence={seq}",
+                "dataset.noise_px=5",
+            ]
     if "crowd" in names:
         for n in (10, 100):
             sets[f"crowd {n} people, {crowd_frames} frames"] = [
-                "dataset=crowd", f"dataset.num_persons={n}", f"dataset.num_frames={crowd_frames}"]
+                "dataset=crowd",
+                f"dataset.num_persons={n}",
+                f"dataset.num_frames={crowd_frames}",
+            ]
     return sets
 
 
@@ -60,8 +78,12 @@ def run(sequence, cfg) -> tuple[dict, dict, float, float]:
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), progress=False)
     n = max(len(sequence.frames), 1)
     total = sum(report.timings.get(k, 0.0) for k in ("matching", "reconstruction", "tracking"))
-    return (report.metrics, report.protocols.get("shelf", {}), 1e3 * report.timings.get("tracking", 0.0) / n,
-            1e3 * total / n)
+    return (
+        report.metrics,
+        report.protocols.get("shelf", {}),
+        1e3 * report.timings.get("tracking", 0.0) / n,
+        1e3 * total / n,
+    )
 
 
 def main(argv: list[str] | None = None) -> list[list]:
@@ -79,12 +101,26 @@ def main(argv: list[str] | None = None) -> list[list]:
             off, shelf_off, _, ms_off = run(sequence, compose("eval", overrides=[*overrides, "tracking=off"]))
             if shelf_on:
                 ident = shelf_on["tracking"]
-                quality = [shelf_on["ours"]["strict"]["average"]["average"], shelf_off["ours"]["strict"]["average"]["average"]]
+                quality = [
+                    shelf_on["ours"]["strict"]["average"]["average"],
+                    shelf_off["ours"]["strict"]["average"]["average"],
+                ]
             else:
-                ident = {k[len("tracking_"):]: v for k, v in on.items() if k.startswith("tracking_")}
+                ident = {k[len("tracking_") :]: v for k, v in on.items() if k.startswith("tracking_")}
                 quality = [on["mpjpe_mm"], off["mpjpe_mm"]]
-            rows.append([label, f"{ident['id_switches']} ({ident['id_switches_per_100']:.2f})", ident["idf1_like"],
-                         ident["fragmentations"], *quality, ms_track, ms_on, ms_off, ms_on - ms_off])
+            rows.append(
+                [
+                    label,
+                    f"{ident['id_switches']} ({ident['id_switches_per_100']:.2f})",
+                    ident["idf1_like"],
+                    ident["fragmentations"],
+                    *quality,
+                    ms_track,
+                    ms_on,
+                    ms_off,
+                    ms_on - ms_off,
+                ]
+            )
     print("Tracking (tracking=on) beside tracking=off; one core; identity metrics against persistent GT ids")
     print(format_table(HEADERS, rows, floatfmt=".2f"))
     return rows

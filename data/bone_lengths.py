@@ -16,6 +16,7 @@ prior that the 2D keypoints cannot honour. Real keypoint conventions differ from
 centres (e.g. COCO hips sit wider and higher); re-estimate the table from a dataset's ground truth
 with ``benchmarks/fit_bone_lengths.py`` and point the ``bone_table`` config key at the JSON it writes.
 """
+
 from __future__ import annotations
 
 import json
@@ -32,33 +33,58 @@ ABSOLUTE_SD_M = 0.010
 
 # Mean bone length (m) of the 1.70 m mean body, in the order of keypoints.BONES.
 _MEAN_M: Mapping[str, float] = {
-    "shoulders": 0.3740, "hips": 0.1870,
-    "left_torso": 0.4984, "right_torso": 0.4984,
-    "left_upper_arm": 0.3162, "right_upper_arm": 0.3162,
-    "left_forearm": 0.2482, "right_forearm": 0.2482,
-    "left_thigh": 0.4165, "right_thigh": 0.4165,
-    "left_shin": 0.4182, "right_shin": 0.4182,
-    "left_nose_eye": 0.0556, "right_nose_eye": 0.0556,
-    "left_eye_ear": 0.0900, "right_eye_ear": 0.0900,
-    "left_ankle_heel": 0.0788, "right_ankle_heel": 0.0788,
-    "left_ankle_big_toe": 0.2233, "right_ankle_big_toe": 0.2233,
-    "left_toes": 0.0802, "right_toes": 0.0802,
-    "left_heel_big_toe": 0.2556, "right_heel_big_toe": 0.2556,
+    "shoulders": 0.3740,
+    "hips": 0.1870,
+    "left_torso": 0.4984,
+    "right_torso": 0.4984,
+    "left_upper_arm": 0.3162,
+    "right_upper_arm": 0.3162,
+    "left_forearm": 0.2482,
+    "right_forearm": 0.2482,
+    "left_thigh": 0.4165,
+    "right_thigh": 0.4165,
+    "left_shin": 0.4182,
+    "right_shin": 0.4182,
+    "left_nose_eye": 0.0556,
+    "right_nose_eye": 0.0556,
+    "left_eye_ear": 0.0900,
+    "right_eye_ear": 0.0900,
+    "left_ankle_heel": 0.0788,
+    "right_ankle_heel": 0.0788,
+    "left_ankle_big_toe": 0.2233,
+    "right_ankle_big_toe": 0.2233,
+    "left_toes": 0.0802,
+    "right_toes": 0.0802,
+    "left_heel_big_toe": 0.2556,
+    "right_heel_big_toe": 0.2556,
 }
 
 # The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up,
 # lowest sole point at z = 0, COCO-23 order, rounded to 1 mm. Used to initialise unseen joints.
 _MEAN_POSE_M = (
-    (0.111, 0.000, 1.559), (0.085, 0.032, 1.597), (0.085, -0.032, 1.597),       # nose, eyes
-    (0.009, 0.072, 1.571), (0.009, -0.072, 1.571),                              # ears
-    (0.000, 0.187, 1.389), (0.000, -0.187, 1.389),                              # shoulders
-    (0.000, 0.231, 1.076), (0.000, -0.231, 1.076),                              # elbows
-    (0.052, 0.265, 0.836), (0.052, -0.265, 0.836),                              # wrists
-    (0.000, 0.093, 0.900), (0.000, -0.093, 0.900),                              # hips
-    (0.000, 0.109, 0.484), (0.000, -0.109, 0.484),                              # knees
-    (-0.022, 0.124, 0.066), (-0.022, -0.124, 0.066),                            # ankles
-    (0.191, 0.129, 0.000), (0.142, 0.192, 0.000), (-0.064, 0.120, 0.000),       # left toes, heel
-    (0.191, -0.129, 0.000), (0.142, -0.192, 0.000), (-0.064, -0.120, 0.000),    # right toes, heel
+    (0.111, 0.000, 1.559),
+    (0.085, 0.032, 1.597),
+    (0.085, -0.032, 1.597),  # nose, eyes
+    (0.009, 0.072, 1.571),
+    (0.009, -0.072, 1.571),  # ears
+    (0.000, 0.187, 1.389),
+    (0.000, -0.187, 1.389),  # shoulders
+    (0.000, 0.231, 1.076),
+    (0.000, -0.231, 1.076),  # elbows
+    (0.052, 0.265, 0.836),
+    (0.052, -0.265, 0.836),  # wrists
+    (0.000, 0.093, 0.900),
+    (0.000, -0.093, 0.900),  # hips
+    (0.000, 0.109, 0.484),
+    (0.000, -0.109, 0.484),  # knees
+    (-0.022, 0.124, 0.066),
+    (-0.022, -0.124, 0.066),  # ankles
+    (0.191, 0.129, 0.000),
+    (0.142, 0.192, 0.000),
+    (-0.064, 0.120, 0.000),  # left toes, heel
+    (0.191, -0.129, 0.000),
+    (0.142, -0.192, 0.000),
+    (-0.064, -0.120, 0.000),  # right toes, heel
 )
 
 
@@ -70,10 +96,10 @@ def _frozen(values: Any, dtype: Any = np.float64) -> np.ndarray:
 
 
 BONE_NAMES: tuple[str, ...] = tuple(BONES)
-BONE_PAIRS = _frozen([BONES[n] for n in BONE_NAMES], np.int64)                         # (L, 2)
-BONE_MEAN = _frozen([_MEAN_M[n] for n in BONE_NAMES])                                  # (L,)
-BONE_STD = _frozen(np.sqrt((RELATIVE_SD * BONE_MEAN) ** 2 + ABSOLUTE_SD_M ** 2))        # (L,)
-MEAN_POSE = _frozen(_MEAN_POSE_M)                                                      # (J, 3)
+BONE_PAIRS = _frozen([BONES[n] for n in BONE_NAMES], np.int64)  # (L, 2)
+BONE_MEAN = _frozen([_MEAN_M[n] for n in BONE_NAMES])  # (L,)
+BONE_STD = _frozen(np.sqrt((RELATIVE_SD * BONE_MEAN) ** 2 + ABSOLUTE_SD_M**2))  # (L,)
+MEAN_POSE = _frozen(_MEAN_POSE_M)  # (J, 3)
 
 
 def bone_lengths(poses: np.ndarray) -> np.ndarray:
@@ -99,8 +125,7 @@ def estimate_bone_table(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     return mean, std, count
 
 
-def bone_table_dict(mean: np.ndarray, std: np.ndarray, count: np.ndarray | None = None,
-                    source: str = "") -> dict:
+def bone_table_dict(mean: np.ndarray, std: np.ndarray, count: np.ndarray | None = None, source: str = "") -> dict:
     """The JSON document of a bone table, bones without a finite mean and SD left out: (L,) x 3 -> dict."""
     bones = {}
     for i, name in enumerate(BONE_NAMES):

@@ -1,5 +1,6 @@
 """Type and range checks of Hydra config values for the entry points: a bad value stops the run with one
 line that names the key (``trainer.batch_size=0: must be an integer >= 1``), before any work is done."""
+
 from __future__ import annotations
 
 import math

@@ -1,4 +1,5 @@
 """In-memory containers of multi-view frames: what every dataset loader yields to the pipeline."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -1,4 +1,5 @@
 """Associating predicted 3D persons with ground-truth persons for the 3D metrics."""
+
 from __future__ import annotations
 
 import numpy as np

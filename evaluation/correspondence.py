@@ -5,6 +5,7 @@ have the same ground-truth id >= 0. The ground-truth pairs are the pairs of dete
 views sharing an id >= 0. A ground-truth person (an id seen in >= 2 views) is recovered when one
 predicted person holds all and only their detections (pure and complete).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -45,10 +46,16 @@ class CorrespondenceCounts:
 
     def as_dict(self) -> dict[str, float]:
         """Counts and ratios, for reports."""
-        return {"predicted_pairs": self.predicted_pairs, "correct_pairs": self.correct_pairs,
-                "true_pairs": self.true_pairs, "persons": self.persons,
-                "persons_recovered": self.persons_recovered, "precision": self.precision,
-                "recall": self.recall, "recovered_share": self.recovered_share}
+        return {
+            "predicted_pairs": self.predicted_pairs,
+            "correct_pairs": self.correct_pairs,
+            "true_pairs": self.true_pairs,
+            "persons": self.persons,
+            "persons_recovered": self.persons_recovered,
+            "precision": self.precision,
+            "recall": self.recall,
+            "recovered_share": self.recovered_share,
+        }
 
 
 def _validate(assignment: np.ndarray, person_ids: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -86,10 +93,13 @@ def correspondence_counts(assignment: np.ndarray, person_ids: list[np.ndarray]) 
 
     all_ids = np.concatenate(ids) if V else np.zeros(0, np.int64)
     gt = np.unique(all_ids[all_ids >= 0])
-    per_view = np.stack([np.sum(ids[v][None, :] == gt[:, None], axis=1) for v in range(V)], 1) \
-        if V else np.zeros((0, 0), np.int64)
+    per_view = (
+        np.stack([np.sum(ids[v][None, :] == gt[:, None], axis=1) for v in range(V)], 1)
+        if V
+        else np.zeros((0, 0), np.int64)
+    )
     total = per_view.sum(axis=1)
-    true_pairs = int(((total ** 2 - np.sum(per_view ** 2, axis=1)) // 2).sum())
+    true_pairs = int(((total**2 - np.sum(per_view**2, axis=1)) // 2).sum())
     persons = gt[np.sum(per_view > 0, axis=1) >= 2]
     total_of = dict(zip(gt.tolist(), total.tolist()))
 

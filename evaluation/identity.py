@@ -9,6 +9,7 @@ track id of that prediction recorded. Then, per ground-truth person over the seq
   often, over all its person-frames (unmatched frames count against it);
 - fragmentations: times its matched run is interrupted by unmatched frames and resumed (MOT Frag).
 """
+
 from __future__ import annotations
 
 from collections import Counter, defaultdict
@@ -23,7 +24,7 @@ class IdentityEvaluator:
 
     def __init__(self, max_dist_m: float = 0.5) -> None:
         self.max_dist_m = max_dist_m
-        self.history: dict[int, list[int]] = defaultdict(list)     # GT id -> track id per frame (-1 unmatched)
+        self.history: dict[int, list[int]] = defaultdict(list)  # GT id -> track id per frame (-1 unmatched)
 
     def update(self, pred: np.ndarray, ids: np.ndarray, gt: np.ndarray, gt_ids: np.ndarray) -> None:
         """One frame: predictions (P, J, 4) with track ids (P,), ground truth (G, J, 4) with ids (G,)."""
@@ -50,6 +51,10 @@ class IdentityEvaluator:
             switches += sum(a != b for a, b in zip(matched, matched[1:]))
             runs = np.diff(np.r_[0, np.asarray(tracks) >= 0, 0].astype(int))
             fragments += max(int(np.sum(runs == 1)) - 1, 0)
-        return {"id_switches": switches, "id_switches_per_100": 100.0 * switches / max(total, 1),
-                "idf1_like": 100.0 * kept / max(total, 1), "fragmentations": fragments,
-                "gt_person_frames": total}
+        return {
+            "id_switches": switches,
+            "id_switches_per_100": 100.0 * switches / max(total, 1),
+            "idf1_like": 100.0 * kept / max(total, 1),
+            "fragmentations": fragments,
+            "gt_person_frames": total,
+        }

@@ -1,4 +1,5 @@
 """Mean per-joint position error."""
+
 from __future__ import annotations
 
 import numpy as np

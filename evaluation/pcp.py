@@ -1,4 +1,5 @@
 """Percentage of correct parts (PCP) on the 10 parts of the Shelf/Campus protocol."""
+
 from __future__ import annotations
 
 import numpy as np

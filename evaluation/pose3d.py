@@ -1,4 +1,5 @@
 """Sequence-level 3D pose metrics: absolute MPJPE by joint group and Shelf-protocol PCP."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -54,9 +55,13 @@ class Pose3DEvaluator:
         parts = np.concatenate(self.parts) if self.parts else np.zeros((0, len(PART_JOINTS)), bool)
         valid = np.concatenate(self.parts_valid) if self.parts_valid else parts.copy()
         out.update({f"pcp_{k}": v for k, v in pcp_by_part(parts, valid).items()})
-        out.update(num_gt=self.num_gt, num_pred=self.num_pred, num_matched=self.num_matched,
-                   recall=100.0 * self.num_matched / max(self.num_gt, 1),
-                   precision=100.0 * self.num_matched / max(self.num_pred, 1))
+        out.update(
+            num_gt=self.num_gt,
+            num_pred=self.num_pred,
+            num_matched=self.num_matched,
+            recall=100.0 * self.num_matched / max(self.num_gt, 1),
+            precision=100.0 * self.num_matched / max(self.num_pred, 1),
+        )
         return out
 
 

@@ -1,4 +1,5 @@
 """Plain-text tables for the console and markdown files."""
+
 from __future__ import annotations
 
 from typing import Sequence

@@ -4,14 +4,15 @@ Every reconstructed joint (confidence > 0) is projected into every view where it
 score > 0 and compared, in undistorted pixels, with either the 2D detection (what the solver fits)
 or, where ground truth is known, the noise-free projection of the ground-truth 3D joint.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-from data.multiview import ViewDetections
 from data.geometry.camera import Rig
-from reconstruction.pipeline import gather_views
 from data.geometry.triangulation import reprojection_error
+from data.multiview import ViewDetections
+from reconstruction.pipeline import gather_views
 
 
 def reprojection_stats(errors: np.ndarray) -> dict[str, float]:
@@ -21,12 +22,22 @@ def reprojection_stats(errors: np.ndarray) -> dict[str, float]:
     if err.size == 0:
         nan = float("nan")
         return {"mean": nan, "min": nan, "max": nan, "var": nan, "count": 0}
-    return {"mean": float(err.mean()), "min": float(err.min()), "max": float(err.max()),
-            "var": float(err.var()), "count": int(err.size)}
+    return {
+        "mean": float(err.mean()),
+        "min": float(err.min()),
+        "max": float(err.max()),
+        "var": float(err.var()),
+        "count": int(err.size),
+    }
 
 
-def frame_reprojection_errors(poses3d: np.ndarray, assignment: np.ndarray, views: list[ViewDetections],
-                              rig: Rig, gt_points3d: np.ndarray | None = None) -> np.ndarray:
+def frame_reprojection_errors(
+    poses3d: np.ndarray,
+    assignment: np.ndarray,
+    views: list[ViewDetections],
+    rig: Rig,
+    gt_points3d: np.ndarray | None = None,
+) -> np.ndarray:
     """Pixel errors of one frame: (P, J, 4), (P, V), V views [, GT (P, J, 3|4) per person] -> (V, P, J).
 
     Against the 2D detections, or with gt_points3d against the undistorted projections of the

@@ -1,4 +1,5 @@
 """Run the multi-view pipeline over a sequence and report metrics, skipped frames and timings."""
+
 from __future__ import annotations
 
 import time
@@ -11,11 +12,11 @@ from tqdm import tqdm
 from data.keypoints import JOINT_GROUPS
 from data.multiview import Sequence
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts
+from evaluation.identity import IdentityEvaluator
 from evaluation.pcp import PART_NAMES
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
 from evaluation.report import format_table
-from evaluation.identity import IdentityEvaluator
 from evaluation.reprojection import frame_reprojection_errors, reprojection_stats
 from reconstruction.pipeline import FrameResult, MultiViewPipeline
 
@@ -35,14 +36,15 @@ class SequenceReport:
     protocol_reports: list[str] = field(default_factory=list)
 
 
-def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator: Pose3DEvaluator,
-                      progress: bool = True) -> SequenceReport:
+def evaluate_sequence(
+    sequence: Sequence, pipeline: MultiViewPipeline, evaluator: Pose3DEvaluator, progress: bool = True
+) -> SequenceReport:
     """Reconstruct every frame, score it against ground truth where there is some.
 
     Every sequence also gets the statistics of the reprojection error of the reconstructed joints
     against the 2D detections they were fitted to (the paper's Table 3; ``reprojection_*`` metrics).
     """
-    attach_protocols(sequence)   # the dataset's own protocols (meta["protocol_inputs"]), unless attached already
+    attach_protocols(sequence)  # the dataset's own protocols (meta["protocol_inputs"]), unless attached already
     results, skipped, pairs, reprojection = [], Counter(), CorrespondenceCounts(), []
     has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
     identities = IdentityEvaluator(evaluator.max_dist_m) if _tracks_identities(sequence, pipeline) else None
@@ -62,8 +64,9 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
         for protocol in sequence.protocols:
             protocol.update(frame, result)
         if len(result.poses3d):
-            reprojection.append(frame_reprojection_errors(result.poses3d, result.assignment, frame.views,
-                                                          sequence.rig).ravel())
+            reprojection.append(
+                frame_reprojection_errors(result.poses3d, result.assignment, frame.views, sequence.rig).ravel()
+            )
         t_eval += time.perf_counter() - t0
     has_gt = any(f.gt_poses is not None for f in sequence.frames)
     metrics = evaluator.summary() if has_gt else {}
@@ -83,8 +86,11 @@ def evaluate_sequence(sequence: Sequence, pipeline: MultiViewPipeline, evaluator
 
 def _tracks_identities(sequence: Sequence, pipeline: MultiViewPipeline) -> bool:
     """Whether identity metrics apply: a tracker runs and the sequence's GT ids persist across frames."""
-    return (getattr(pipeline, "tracker", None) is not None and bool(sequence.meta.get("persistent_ids"))
-            and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None))
+    return (
+        getattr(pipeline, "tracker", None) is not None
+        and bool(sequence.meta.get("persistent_ids"))
+        and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None)
+    )
 
 
 def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str:
@@ -92,28 +98,49 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
     m = report.metrics
     lines = []
     if "mpjpe_mm" in m:
-        lines += [f"Protocol: {protocol}", "",
-                  format_table(["metric", "value"], [
-                      ["MPJPE all 23 joints (mm)", m["mpjpe_mm"]], ["MPJPE body 17 joints (mm)", m["mpjpe_body_mm"]],
-                      ["PCP average (%)", m["pcp_average"]], ["GT persons recalled (%)", m["recall"]],
-                      ["predictions matched to GT (%)", m["precision"]],
-                      ["GT persons / predictions", f"{m['num_gt']} / {m['num_pred']}"],
-                      *_matching_rows(m), *_tracking_rows(m)]), "",
-                  format_table(["MPJPE (mm)", *JOINT_GROUPS], [["", *(m[f"mpjpe_{g}_mm"] for g in JOINT_GROUPS)]]),
-                  "", format_table(["PCP (%)", *PART_NAMES], [["", *(m[f"pcp_{p}"] for p in PART_NAMES)]]), ""]
+        lines += [
+            f"Protocol: {protocol}",
+            "",
+            format_table(
+                ["metric", "value"],
+                [
+                    ["MPJPE all 23 joints (mm)", m["mpjpe_mm"]],
+                    ["MPJPE body 17 joints (mm)", m["mpjpe_body_mm"]],
+                    ["PCP average (%)", m["pcp_average"]],
+                    ["GT persons recalled (%)", m["recall"]],
+                    ["predictions matched to GT (%)", m["precision"]],
+                    ["GT persons / predictions", f"{m['num_gt']} / {m['num_pred']}"],
+                    *_matching_rows(m),
+                    *_tracking_rows(m),
+                ],
+            ),
+            "",
+            format_table(["MPJPE (mm)", *JOINT_GROUPS], [["", *(m[f"mpjpe_{g}_mm"] for g in JOINT_GROUPS)]]),
+            "",
+            format_table(["PCP (%)", *PART_NAMES], [["", *(m[f"pcp_{p}"] for p in PART_NAMES)]]),
+            "",
+        ]
     if "reprojection_mean_px" in m:
-        lines += ["Reprojection error of the reconstructed joints against the 2D detections (undistorted px, "
-                  "every joint with score > 0 in every view; paper Table 3): mean {:.2f}, min {:.3f}, max {:.1f}, "
-                  "variance {:.2f} px^2".format(m["reprojection_mean_px"], m["reprojection_min_px"],
-                                               m["reprojection_max_px"], m["reprojection_var_px2"]), ""]
+        lines += [
+            "Reprojection error of the reconstructed joints against the 2D detections (undistorted px, "
+            "every joint with score > 0 in every view; paper Table 3): mean {:.2f}, min {:.3f}, max {:.1f}, "
+            "variance {:.2f} px^2".format(
+                m["reprojection_mean_px"], m["reprojection_min_px"], m["reprojection_max_px"], m["reprojection_var_px2"]
+            ),
+            "",
+        ]
     for text in report.protocol_reports:
         lines += [text, ""]
     if report.unmatched:
-        lines.append("Detections left unmatched by the matcher: "
-                     + ", ".join(f"{n} {why}" for why, n in sorted(report.unmatched.items())))
+        lines.append(
+            "Detections left unmatched by the matcher: "
+            + ", ".join(f"{n} {why}" for why, n in sorted(report.unmatched.items()))
+        )
     skipped = sum(report.skipped.values())
-    lines.append(f"Frames: {num_frames} evaluated, {skipped} skipped"
-                 + "".join(f"; {n} {why}" for why, n in report.skipped.items()))
+    lines.append(
+        f"Frames: {num_frames} evaluated, {skipped} skipped"
+        + "".join(f"; {n} {why}" for why, n in report.skipped.items())
+    )
     per_frame = [[stage, 1000.0 * sec / max(num_frames, 1), sec] for stage, sec in report.timings.items()]
     lines += ["", format_table(["stage", "ms / frame", "total s"], per_frame, floatfmt=".2f")]
     return "\n".join(lines)
@@ -123,16 +150,22 @@ def _matching_rows(m: dict[str, float]) -> list[list[object]]:
     """Report rows of the correspondence metrics, when ground-truth identities were known."""
     if "matching_precision" not in m:
         return []
-    return [["matching precision, pairs (%)", 100.0 * m["matching_precision"]],
-            ["matching recall, pairs (%)", 100.0 * m["matching_recall"]],
-            ["GT persons matched pure and complete (%)", 100.0 * m["matching_recovered_share"]]]
+    return [
+        ["matching precision, pairs (%)", 100.0 * m["matching_precision"]],
+        ["matching recall, pairs (%)", 100.0 * m["matching_recall"]],
+        ["GT persons matched pure and complete (%)", 100.0 * m["matching_recovered_share"]],
+    ]
 
 
 def _tracking_rows(m: dict[str, float]) -> list[list[object]]:
     """Report rows of the identity metrics (tracking on, persistent ground-truth ids)."""
     if "tracking_id_switches" not in m:
         return []
-    return [["identity switches (per 100 GT person-frames)",
-             f"{m['tracking_id_switches']} ({m['tracking_id_switches_per_100']:.2f})"],
-            ["GT person-frames with their most frequent track id (%)", m["tracking_idf1_like"]],
-            ["track fragmentations", m["tracking_fragmentations"]]]
+    return [
+        [
+            "identity switches (per 100 GT person-frames)",
+            f"{m['tracking_id_switches']} ({m['tracking_id_switches_per_100']:.2f})",
+        ],
+        ["GT person-frames with their most frequent track id (%)", m["tracking_idf1_like"]],
+        ["track fragmentations", m["tracking_fragmentations"]],
+    ]

@@ -12,6 +12,7 @@ clamped to half a pixel. This is the Taylor (Newton) step on the log heatmap wit
 (DARK, Zhang et al. CVPR 2020) and is exact for an axis-aligned Gaussian peak. A peak on the heatmap
 border, or one that is not strictly concave in the log along an axis, is not moved along that axis.
 """
+
 from __future__ import annotations
 
 from typing import Sequence
@@ -23,8 +24,9 @@ import torch.nn.functional as F
 _LOG_EPS = 1e-10
 
 
-def find_candidates(heatmaps: torch.Tensor | np.ndarray, threshold: float = 0.1, top_m: int = 3,
-                    nms_kernel: int = 3) -> tuple[np.ndarray, np.ndarray]:
+def find_candidates(
+    heatmaps: torch.Tensor | np.ndarray, threshold: float = 0.1, top_m: int = 3, nms_kernel: int = 3
+) -> tuple[np.ndarray, np.ndarray]:
     """Top-M local maxima per channel: heatmaps (B, J, h, w) -> xy (B, J, M, 2) heatmap px, scores (B, J, M).
 
     A candidate is a pixel equal to the maximum of its ``nms_kernel`` neighbourhood and above
@@ -57,8 +59,9 @@ def find_candidates(heatmaps: torch.Tensor | np.ndarray, threshold: float = 0.1,
     return xy_np, scores_np
 
 
-def _parabola_offset(log_hm: torch.Tensor, rows: torch.Tensor, cols: torch.Tensor, w: int,
-                     axis_len: int, along_x: bool) -> torch.Tensor:
+def _parabola_offset(
+    log_hm: torch.Tensor, rows: torch.Tensor, cols: torch.Tensor, w: int, axis_len: int, along_x: bool
+) -> torch.Tensor:
     """Vertex offset of the log-parabola through a peak and its two neighbours along one axis: (B, J, K)."""
     pos = cols if along_x else rows
 
@@ -75,8 +78,7 @@ def _parabola_offset(log_hm: torch.Tensor, rows: torch.Tensor, cols: torch.Tenso
     return torch.where(inside, offset, torch.zeros_like(offset))
 
 
-def candidates_to_image(xy: np.ndarray, inverse_affines: np.ndarray,
-                        stride: float | Sequence[float]) -> np.ndarray:
+def candidates_to_image(xy: np.ndarray, inverse_affines: np.ndarray, stride: float | Sequence[float]) -> np.ndarray:
     """Heatmap pixels to image pixels: xy (B, J, M, 2), inverse_affines (B, 2, 3) -> (B, J, M, 2).
 
     ``stride`` is the input-to-heatmap size ratio (a number, or (sx, sy)); ``inverse_affines[b]`` maps

@@ -10,6 +10,7 @@ checksum) are still read, with a warning: nothing can be checked but their keys.
 
 The payload is unpickled in full (it holds numpy and python RNG states): load only checkpoints you trust.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -25,10 +26,11 @@ from data.formats.atomic_io import atomic_open
 log = logging.getLogger(__name__)
 
 FORMAT = "multiview-crowd-pose/train-checkpoint"
-VERSION = 2                    # 1: the plain state dict written before the envelope
-KEYS = {"resume": ("model", "optimizer", "scheduler", "epoch", "step_in_epoch", "global_step", "best_ap", "rng",
-                   "config"),
-        "weights": ("model", "epoch", "global_step", "config")}
+VERSION = 2  # 1: the plain state dict written before the envelope
+KEYS = {
+    "resume": ("model", "optimizer", "scheduler", "epoch", "step_in_epoch", "global_step", "best_ap", "rng", "config"),
+    "weights": ("model", "epoch", "global_step", "config"),
+}
 ENVELOPE_KEYS = ("format", "version", "kind", "sha256", "payload")
 
 
@@ -47,8 +49,16 @@ def write_checkpoint(state: dict, path: str | Path, kind: str) -> None:
     buffer = io.BytesIO()
     torch.save(state, buffer)
     payload = buffer.getvalue()
-    atomic_torch_save({"format": FORMAT, "version": VERSION, "kind": kind, "sha256": hashlib.sha256(payload).hexdigest(),
-                       "payload": torch.frombuffer(bytearray(payload), dtype=torch.uint8)}, path)
+    atomic_torch_save(
+        {
+            "format": FORMAT,
+            "version": VERSION,
+            "kind": kind,
+            "sha256": hashlib.sha256(payload).hexdigest(),
+            "payload": torch.frombuffer(bytearray(payload), dtype=torch.uint8),
+        },
+        path,
+    )
 
 
 def _load(source: str | Path | io.BytesIO, path: Path, what: str) -> Any:
@@ -57,8 +67,10 @@ def _load(source: str | Path | io.BytesIO, path: Path, what: str) -> Any:
         return torch.load(source, map_location="cpu", weights_only=False)
     except Exception as err:  # truncated zip, random bytes, bad pickle: torch raises many kinds
         reason = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise CheckpointError(f"{path}: {what} cannot be read ({reason[:120]}); the file is truncated, corrupted "
-                              "or not a train.py checkpoint") from None
+        raise CheckpointError(
+            f"{path}: {what} cannot be read ({reason[:120]}); the file is truncated, corrupted "
+            "or not a train.py checkpoint"
+        ) from None
 
 
 def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
@@ -68,16 +80,18 @@ def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
         if missing:
             raise CheckpointError(f"{path}: checkpoint envelope lacks {', '.join(missing)}")
         if not isinstance(outer["version"], int) or outer["version"] > VERSION:
-            raise CheckpointError(f"{path}: checkpoint format version {outer['version']!r}; this code reads up to "
-                                  f"{VERSION}")
+            raise CheckpointError(
+                f"{path}: checkpoint format version {outer['version']!r}; this code reads up to {VERSION}"
+            )
         payload = outer["payload"].numpy().tobytes() if isinstance(outer["payload"], torch.Tensor) else None
         if payload is None or hashlib.sha256(payload).hexdigest() != outer["sha256"]:
             raise CheckpointError(f"{path}: checksum mismatch, the file is corrupted")
         state = _load(io.BytesIO(payload), path, "the checked payload")
         return state, outer["kind"]
     if isinstance(outer, dict) and "model" in outer and "config" in outer:
-        log.warning("%s: checkpoint written before format version %d: no checksum to verify, loaded unchecked",
-                    path, VERSION)
+        log.warning(
+            "%s: checkpoint written before format version %d: no checksum to verify, loaded unchecked", path, VERSION
+        )
         return outer, "resume" if "optimizer" in outer else "weights"
     raise CheckpointError(f"{path}: not a train.py checkpoint")
 
@@ -96,8 +110,9 @@ def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
     if not isinstance(state, dict):
         raise CheckpointError(f"{path}: the checked payload is not a state dict")
     if kind == "resume" and found != "resume":
-        raise CheckpointError(f"{path}: holds model weights only (like best.pth); resume needs the run's "
-                              "checkpoints/last.ckpt")
+        raise CheckpointError(
+            f"{path}: holds model weights only (like best.pth); resume needs the run's checkpoints/last.ckpt"
+        )
     missing = [k for k in KEYS.get(found, ()) if k not in state]
     if found not in KEYS or missing:
         raise CheckpointError(f"{path}: {found!r} checkpoint lacks {', '.join(missing) or 'a known kind'}")

@@ -5,6 +5,7 @@ channels with its conv and quarters them with its shuffle (out = 2 * in before t
 ResNet-50+ this is AlphaPose's 2048 -> 512 -> DUC(512, 1024) -> 256 -> DUC(256, 512) -> 128; for
 ResNet-18/34 it is 512 -> 128 -> DUC(128, 256) -> 64 -> DUC(64, 128) -> 32. Output stride 4.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -33,8 +34,9 @@ class DUC(nn.Module):
 class FastPose(nn.Module):
     """Single-person pose network: (B, 3, H, W) crops -> (B, num_joints, H/4, W/4) heatmaps."""
 
-    def __init__(self, depth: int = 50, num_joints: int = NUM_JOINTS, se: bool = False,
-                 pretrained: str | Path | None = None) -> None:
+    def __init__(
+        self, depth: int = 50, num_joints: int = NUM_JOINTS, se: bool = False, pretrained: str | Path | None = None
+    ) -> None:
         super().__init__()
         self.preact = ResNet(depth, se=se)
         if pretrained:

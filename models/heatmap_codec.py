@@ -6,14 +6,15 @@ same extent as an input of width W and ``x_hm = (x_in + 0.5) * w / W - 0.5``; a 
 thus sits at the centre of input pixels 4i .. 4i + 3, and a flip x -> W - 1 - x of the input is exactly
 x -> w - 1 - x of the heatmap (flipped targets are mirrored targets, to float precision).
 """
+
 from __future__ import annotations
 
 import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter
 
-from data.pose2d.crop_transforms import transform_points
 from data.keypoints import NUM_JOINTS
+from data.pose2d.crop_transforms import transform_points
 
 _LOG_EPS = 1e-10
 
@@ -25,8 +26,13 @@ class MultiModalHeatmapCodec:
     attention factor of the other persons' joints (mu = 0: the plain single-person target).
     """
 
-    def __init__(self, input_size: tuple[int, int] = (192, 256), heatmap_size: tuple[int, int] = (48, 64),
-                 sigma: float = 2.0, mu: float = 0.5) -> None:
+    def __init__(
+        self,
+        input_size: tuple[int, int] = (192, 256),
+        heatmap_size: tuple[int, int] = (48, 64),
+        sigma: float = 2.0,
+        mu: float = 0.5,
+    ) -> None:
         self.input_size = (int(input_size[0]), int(input_size[1]))
         self.heatmap_size = (int(heatmap_size[0]), int(heatmap_size[1]))
         self.sigma = float(sigma)
@@ -56,12 +62,11 @@ class MultiModalHeatmapCodec:
         centres = self.input_to_heatmap(points)
         w, h = self.heatmap_size
         xs, ys = np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)
-        gx = np.exp(-(xs - centres[..., 0:1]) ** 2 / (2 * self.sigma ** 2))
-        gy = np.exp(-(ys - centres[..., 1:2]) ** 2 / (2 * self.sigma ** 2))
+        gx = np.exp(-((xs - centres[..., 0:1]) ** 2) / (2 * self.sigma**2))
+        gy = np.exp(-((ys - centres[..., 1:2]) ** 2) / (2 * self.sigma**2))
         return gy[..., :, None] * gx[..., None, :]
 
-    def encode(self, own: np.ndarray, others: np.ndarray, labelled: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def encode(self, own: np.ndarray, others: np.ndarray, labelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Target (23, h, w) float32 = T + mu C and weight (23,) float32 from crop-input keypoints.
 
         own (23, 3) and others (M, 23, 3) are x, y, v in crop-input pixels; labelled (23,) marks the joints
@@ -89,8 +94,9 @@ class MultiModalHeatmapCodec:
         weight = own_present | others_present.any(axis=0)
         return target.astype(np.float32), weight.astype(np.float32)
 
-    def encode_crop(self, keypoints_all: np.ndarray, own_index: int, affine: np.ndarray,
-                    labelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def encode_crop(
+        self, keypoints_all: np.ndarray, own_index: int, affine: np.ndarray, labelled: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Encode person ``own_index`` of an image: keypoints_all (N, 23, 3) in image pixels, affine (2, 3)
         image -> crop input (data.pose2d.crop_transforms.crop_affine) -> target (23, h, w), weight (23,)."""
         keypoints = np.array(keypoints_all, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
@@ -100,8 +106,7 @@ class MultiModalHeatmapCodec:
 
     # --- decoding ----------------------------------------------------------------------------------
 
-    def decode(self, heatmaps: np.ndarray | torch.Tensor, modulate: bool = True
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def decode(self, heatmaps: np.ndarray | torch.Tensor, modulate: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Heatmaps (..., 23, h, w) -> keypoints (..., 23, 2) in crop-input pixels, scores (..., 23).
 
         The score is the heatmap maximum; the position is the argmax refined by one Newton step on the
@@ -150,9 +155,10 @@ def _newton_offsets(log_maps: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.
     dy = np.where(ok_y, (log_maps[k, yp, px] - log_maps[k, ym, px]) / 2, 0.0)
     dxx = np.where(ok_x, log_maps[k, py, xp] - 2 * centre + log_maps[k, py, xm], -1.0)
     dyy = np.where(ok_y, log_maps[k, yp, px] - 2 * centre + log_maps[k, ym, px], -1.0)
-    dxy = np.where(ok_x & ok_y, (log_maps[k, yp, xp] - log_maps[k, yp, xm]
-                                 - log_maps[k, ym, xp] + log_maps[k, ym, xm]) / 4, 0.0)
-    det = dxx * dyy - dxy ** 2
+    dxy = np.where(
+        ok_x & ok_y, (log_maps[k, yp, xp] - log_maps[k, yp, xm] - log_maps[k, ym, xp] + log_maps[k, ym, xm]) / 4, 0.0
+    )
+    det = dxx * dyy - dxy**2
     concave = (dxx < 0) & (det > 0)
     safe_det = np.where(concave, det, 1.0)
     off_x = -(dyy * dx - dxy * dy) / safe_det

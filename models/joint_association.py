@@ -19,6 +19,7 @@ score 0, as CrowdPose keeps only matched joints; the position is kept because CO
 coordinates of every predicted keypoint, whatever its score. A person with no candidate gets (0, 0, 0).
 Exact ties between matchings are broken by scipy, i.e. by person order.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -30,8 +31,9 @@ from scipy.spatial.distance import cdist
 from data.keypoints import NUM_JOINTS, OKS_SIGMAS
 
 
-def associate_joints(xy: np.ndarray, scores: np.ndarray, boxes: np.ndarray, dist_thresh: float = 1.0,
-                     sigmas: np.ndarray | None = None) -> np.ndarray:
+def associate_joints(
+    xy: np.ndarray, scores: np.ndarray, boxes: np.ndarray, dist_thresh: float = 1.0, sigmas: np.ndarray | None = None
+) -> np.ndarray:
     """Associate joint candidates to persons: xy (P, J, M, 2) image px, scores (P, J, M), boxes (P, 4) xywh
     -> keypoints (P, J, 3) x, y, score.
 

@@ -1,4 +1,5 @@
 """Eq. 1 of the paper: the body/foot weighted heatmap MSE."""
+
 from __future__ import annotations
 
 import torch
@@ -21,12 +22,12 @@ class WeightedHeatmapLoss(nn.Module):
         super().__init__()
         self.foot_weight = float(foot_weight)
 
-    def forward(self, pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor
-                ) -> dict[str, torch.Tensor]:
+    def forward(self, pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> dict[str, torch.Tensor]:
         """pred, target (B, 23, h, w), weight (B, 23) -> {"loss", "body", "foot"} scalar tensors."""
         if pred.shape != target.shape or pred.ndim != 4 or pred.shape[1] != NUM_JOINTS:
-            raise ValueError(f"pred {tuple(pred.shape)} and target {tuple(target.shape)} must both be "
-                             f"(B, {NUM_JOINTS}, h, w)")
+            raise ValueError(
+                f"pred {tuple(pred.shape)} and target {tuple(target.shape)} must both be (B, {NUM_JOINTS}, h, w)"
+            )
         if weight.shape != pred.shape[:2]:
             raise ValueError(f"weight {tuple(weight.shape)} must be (B, {NUM_JOINTS})")
         channel_mse = ((pred - target) ** 2).mean(dim=(2, 3)) * weight.to(pred.dtype)

@@ -6,14 +6,15 @@ per joint slot): a connection extends the person holding one of its ends, joins 
 slots do not overlap, or starts a new person. Persons with too few joints or too low a mean joint
 score are dropped.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from data.formats.fourd_detections import BODY25_NUM_JOINTS, BODY25_PAF_LIMBS
+from data.formats.openpose_json import keypoints_to_view_detections
 from data.keypoints import BODY25_TO_COCO23, to_coco23
 from data.multiview import ViewDetections
-from data.formats.openpose_json import keypoints_to_view_detections
 
 
 def limb_connections(paf: np.ndarray, min_paf: float) -> np.ndarray:
@@ -70,9 +71,14 @@ class _Assembly:
         self.slots[gone][:] = -1
 
 
-def group_people(candidates: list[np.ndarray], pafs: list[np.ndarray],
-                 limbs: tuple[tuple[int, int], ...] = BODY25_PAF_LIMBS, min_paf: float = 0.05,
-                 min_joints: int = 8, min_mean_score: float = 0.4) -> np.ndarray:
+def group_people(
+    candidates: list[np.ndarray],
+    pafs: list[np.ndarray],
+    limbs: tuple[tuple[int, int], ...] = BODY25_PAF_LIMBS,
+    min_paf: float = 0.05,
+    min_joints: int = 8,
+    min_mean_score: float = 0.4,
+) -> np.ndarray:
     """Group joint candidates (J arrays (n_j, 3) x, y, score) by limb PAFs (L arrays (n_a, n_b)) -> (N, J, 3).
 
     min_paf: a connection needs a PAF score above this (OpenPose's inter-limb threshold, 0.05).
@@ -89,15 +95,16 @@ def group_people(candidates: list[np.ndarray], pafs: list[np.ndarray],
     assembly = _Assembly([len(c) for c in cands])
     for (a, b), paf in zip(limbs, pafs):
         if np.shape(paf) != (len(cands[a]), len(cands[b])):
-            raise ValueError(f"group_people: PAF of limb ({a}, {b}) has shape {np.shape(paf)}, "
-                             f"expected ({len(cands[a])}, {len(cands[b])})")
+            raise ValueError(
+                f"group_people: PAF of limb ({a}, {b}) has shape {np.shape(paf)}, "
+                f"expected ({len(cands[a])}, {len(cands[b])})"
+            )
         for i, j, _ in limb_connections(paf, min_paf):
             assembly.connect(a, int(i), b, int(j))
     return _persons(assembly.slots, cands, min_joints, min_mean_score)
 
 
-def _persons(slots: list[np.ndarray], cands: list[np.ndarray], min_joints: int,
-             min_mean_score: float) -> np.ndarray:
+def _persons(slots: list[np.ndarray], cands: list[np.ndarray], min_joints: int, min_mean_score: float) -> np.ndarray:
     """Fill the kept persons' keypoints: P slot arrays (J,) -> (N, J, 3)."""
     people = []
     for slot in slots:
@@ -122,12 +129,19 @@ def grouped_to_view_detections(persons: np.ndarray, margin: float = 0.1) -> View
     return keypoints_to_view_detections(to_coco23(persons, BODY25_TO_COCO23), margin)
 
 
-def group_view(candidates: list[np.ndarray], pafs: list[np.ndarray], min_paf: float = 0.05, min_joints: int = 8,
-               min_mean_score: float = 0.4, margin: float = 0.1) -> ViewDetections:
+def group_view(
+    candidates: list[np.ndarray],
+    pafs: list[np.ndarray],
+    min_paf: float = 0.05,
+    min_joints: int = 8,
+    min_mean_score: float = 0.4,
+    margin: float = 0.1,
+) -> ViewDetections:
     """One camera frame's BODY_25 candidates grouped into persons, as COCO-23 ViewDetections.
 
     :func:`group_people` then :func:`grouped_to_view_detections`; the grouper ``configs/dataset/shelf.yaml``
     gives :func:`data.datasets.shelf.load_shelf` (a dataset loader may not import this stage).
     """
-    return grouped_to_view_detections(group_people(candidates, pafs, min_paf=min_paf, min_joints=min_joints,
-                                                   min_mean_score=min_mean_score), margin)
+    return grouped_to_view_detections(
+        group_people(candidates, pafs, min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score), margin
+    )

@@ -5,6 +5,7 @@ with ``conv{1,2[,3]}``, ``bn{...}``, ``downsample.{0,1}``) so a torchvision Imag
 with ``load_pretrained``. The classifier (``avgpool``, ``fc``) is left out: the trunk returns the
 stride-32 feature map.
 """
+
 from __future__ import annotations
 
 import logging
@@ -57,8 +58,9 @@ class BasicBlock(nn.Module):
 
     expansion = 1
 
-    def __init__(self, cin: int, planes: int, stride: int = 1, downsample: nn.Module | None = None,
-                 se: bool = False) -> None:
+    def __init__(
+        self, cin: int, planes: int, stride: int = 1, downsample: nn.Module | None = None, se: bool = False
+    ) -> None:
         super().__init__()
         self.conv1 = _conv3x3(cin, planes, stride)
         self.bn1 = nn.BatchNorm2d(planes)
@@ -84,8 +86,9 @@ class Bottleneck(nn.Module):
 
     expansion = 4
 
-    def __init__(self, cin: int, planes: int, stride: int = 1, downsample: nn.Module | None = None,
-                 se: bool = False) -> None:
+    def __init__(
+        self, cin: int, planes: int, stride: int = 1, downsample: nn.Module | None = None, se: bool = False
+    ) -> None:
         super().__init__()
         self.conv1 = _conv1x1(cin, planes)
         self.bn1 = nn.BatchNorm2d(planes)
@@ -178,7 +181,8 @@ def load_pretrained(model: ResNet, path: str | Path) -> list[str]:
     unexpected = sorted(k for k in state if k not in own)
     wrong_shape = sorted(
         f"{k}: file {tuple(v.shape)} vs model {tuple(own[k].shape)}"
-        for k, v in state.items() if k in own and tuple(v.shape) != tuple(own[k].shape)
+        for k, v in state.items()
+        if k in own and tuple(v.shape) != tuple(own[k].shape)
     )
     if missing or unexpected or wrong_shape:
         raise ValueError(

@@ -6,6 +6,7 @@ accepted (repeating the original overrides is fine), one of the keys listed in `
 (train.yaml: the length of the run, logging, devices) is applied, any other (model, data, loss, optimizer,
 batch size, seed ...) stops the run with one line, because the checkpoint's state would not fit it.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -16,7 +17,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from data.config_checks import ConfigError
 
-RUN_KEYS = ("resume", "overwrite", "resume_may_change")   # of the resume command itself, never stored
+RUN_KEYS = ("resume", "overwrite", "resume_may_change")  # of the resume command itself, never stored
 
 
 def _plain(value: Any) -> Any:
@@ -24,16 +25,18 @@ def _plain(value: Any) -> Any:
     return OmegaConf.to_container(value, resolve=True) if isinstance(value, (DictConfig, ListConfig)) else value
 
 
-def _group_unchanged(key: str, cfg: DictConfig, stored: DictConfig, choices: dict[str, str],
-                     stored_choices: dict[str, str] | None) -> bool:
+def _group_unchanged(
+    key: str, cfg: DictConfig, stored: DictConfig, choices: dict[str, str], stored_choices: dict[str, str] | None
+) -> bool:
     """Whether a config-group override selects what the stored run used (by its recorded choice, else its node)."""
     if stored_choices is not None:
         return stored_choices.get(key) == choices.get(key)
     return key in stored and _plain(cfg.get(key)) == _plain(stored[key])
 
 
-def resume_config(cfg: DictConfig, checkpoint: dict, overrides: list[str], choices: dict[str, str],
-                  path: str | Path) -> DictConfig:
+def resume_config(
+    cfg: DictConfig, checkpoint: dict, overrides: list[str], choices: dict[str, str], path: str | Path
+) -> DictConfig:
     """The stored config of checkpoint (read from path) with the safe overrides of this command applied.
 
     cfg: the config Hydra composed for the resume command; overrides: its command-line overrides
@@ -58,8 +61,10 @@ def resume_config(cfg: DictConfig, checkpoint: dict, overrides: list[str], choic
             if key in safe:
                 updates[key] = new
                 continue
-        raise ConfigError(f"resume: {override.input_line} would change {key} ({old!r} in {path}); a resumed run keeps "
-                          f"its stored config, only {', '.join(sorted(safe))} may change")
+        raise ConfigError(
+            f"resume: {override.input_line} would change {key} ({old!r} in {path}); a resumed run keeps "
+            f"its stored config, only {', '.join(sorted(safe))} may change"
+        )
     merged = OmegaConf.merge(OmegaConf.create(_plain(cfg)), stored)
     for key, value in updates.items():
         OmegaConf.update(merged, key, value, merge=False)

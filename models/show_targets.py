@@ -5,6 +5,7 @@ a grid with one tile per training person: the crop the network sees, the own-joi
 channels, maximum over channels) in red, the other persons' term mu C in green (yellow where both meet),
 and the annotated own joints as white dots (feet: cyan).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -14,9 +15,9 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from data.keypoints import FOOT_JOINTS, NUM_JOINTS
 from data.pose2d.coco_keypoints import KINDS, load_keypoint_dataset
 from data.pose2d.crop_transforms import transform_points
-from data.keypoints import FOOT_JOINTS, NUM_JOINTS
 from data.pose2d.topdown_dataset import TopDownDataset, denormalize_image
 from models.heatmap_codec import MultiModalHeatmapCodec
 
@@ -41,13 +42,14 @@ def tile_grid(tiles: Sequence[np.ndarray], columns: int, gap: int = 2) -> np.nda
     tiles = list(tiles) + [blank] * (-len(tiles) % columns)
     rows = []
     for r in range(0, len(tiles), columns):
-        row = [np.pad(t, ((gap, gap), (gap, gap), (0, 0))) for t in tiles[r:r + columns]]
+        row = [np.pad(t, ((gap, gap), (gap, gap), (0, 0))) for t in tiles[r : r + columns]]
         rows.append(np.hstack(row))
     return np.vstack(rows)
 
 
-def target_parts(dataset: TopDownDataset, index: int, affine_inv: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def target_parts(
+    dataset: TopDownDataset, index: int, affine_inv: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Own targets T (23, h, w), others' mu C (23, h, w) and own crop keypoints (23, 3) of an unflipped
     training sample whose crop -> image affine is affine_inv (2, 3); T + mu C is the sample's target."""
     r, own = dataset.samples[index][:2]

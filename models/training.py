@@ -6,6 +6,7 @@ Exact resumption rests on three things: the sample order is a seeded permutation
 per (epoch, sample), and a checkpoint holds the model, optimizer, scheduler, the position (epoch, step in
 epoch, global step) and the torch / numpy / python RNG states.
 """
+
 from __future__ import annotations
 
 import logging
@@ -26,16 +27,16 @@ from torch.utils.data import DataLoader, Sampler
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
-from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.config_checks import ConfigError, check_bool, check_int, check_number, fail, is_int, value_of
+from data.pose2d.coco_eval import evaluate_keypoints
+from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.pose2d.crop_transforms import CropAugmentation, transform_points
 from data.pose2d.records import ImageRecord
-from models.show_targets import GREEN, RED, tile_grid, tint
 from data.pose2d.topdown_dataset import TopDownDataset, denormalize_image
-from data.pose2d.coco_eval import evaluate_keypoints
 from models.checkpoint_io import atomic_torch_save, read_checkpoint, write_checkpoint  # noqa: F401 (re-exported)
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss
+from models.show_targets import GREEN, RED, tile_grid, tint
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +65,7 @@ class Validation:
 
 
 # --- setup ------------------------------------------------------------------------------------------
+
 
 def seed_everything(seed: int) -> None:
     """Seed python, numpy and torch (all devices)."""
@@ -99,6 +101,7 @@ def _plain(value: Any) -> Any:
 
 # --- config checks --------------------------------------------------------------------------------
 
+
 def check_device(cfg: DictConfig, key: str) -> None:
     """cfg[key] names a device this machine has: auto, cpu, cuda, cuda:N (N < the CUDA device count)."""
     name = value_of(cfg, key)
@@ -126,11 +129,18 @@ def check_input_size(cfg: DictConfig, key: str = "data.input_size") -> None:
 def check_train_config(cfg: DictConfig) -> None:
     """Stop with one ConfigError naming the key when a trainer, data, loss or optimizer value is of the wrong
     type or range (before any data is read)."""
-    for key, minimum, nullable in (("trainer.epochs", 1, False), ("trainer.max_steps", 1, True),
-                                   ("trainer.batch_size", 1, False), ("trainer.val_batch_size", 1, False),
-                                   ("trainer.num_workers", 0, False), ("trainer.seed", 0, False),
-                                   ("trainer.threads", 1, True), ("trainer.log_every", 1, False),
-                                   ("trainer.val_every", 1, False), ("trainer.grid_images", 0, False)):
+    for key, minimum, nullable in (
+        ("trainer.epochs", 1, False),
+        ("trainer.max_steps", 1, True),
+        ("trainer.batch_size", 1, False),
+        ("trainer.val_batch_size", 1, False),
+        ("trainer.num_workers", 0, False),
+        ("trainer.seed", 0, False),
+        ("trainer.threads", 1, True),
+        ("trainer.log_every", 1, False),
+        ("trainer.val_every", 1, False),
+        ("trainer.grid_images", 0, False),
+    ):
         check_int(cfg, key, minimum, nullable)
     check_bool(cfg, "trainer.progress")
     check_device(cfg, "trainer.device")
@@ -142,6 +152,7 @@ def check_train_config(cfg: DictConfig) -> None:
 
 
 # --- builders ---------------------------------------------------------------------------------------
+
 
 def build_codec(cfg: DictConfig) -> MultiModalHeatmapCodec:
     """The target codec: input_size and sigma from cfg.data, heatmaps a quarter of the input, mu from cfg.loss."""
@@ -168,18 +179,34 @@ def build_dataset(cfg: DictConfig, codec: MultiModalHeatmapCodec, split: str) ->
     """The TopDownDataset of split 'train' (augmented) or 'val' (plain, det boxes if configured)."""
     data, train = cfg.data, split == "train"
     augment = CropAugmentation(**data.augment) if train and data.get("augment") else None
-    return TopDownDataset(build_records(data, split), codec, tuple(data.input_size), augment, train=train,
-                          min_keypoints=data.min_keypoints, use_det_boxes=data.use_det_boxes and not train,
-                          padding=data.padding, seed=cfg.trainer.seed, cache_size=data.cache_images)
+    return TopDownDataset(
+        build_records(data, split),
+        codec,
+        tuple(data.input_size),
+        augment,
+        train=train,
+        min_keypoints=data.min_keypoints,
+        use_det_boxes=data.use_det_boxes and not train,
+        padding=data.padding,
+        seed=cfg.trainer.seed,
+        cache_size=data.cache_images,
+    )
 
 
-def build_loader(dataset: TopDownDataset, batch_size: int, num_workers: int, sampler: Sampler,
-                 device: torch.device) -> DataLoader:
+def build_loader(
+    dataset: TopDownDataset, batch_size: int, num_workers: int, sampler: Sampler, device: torch.device
+) -> DataLoader:
     """A DataLoader over dataset in the sampler's order. Workers are not persistent: each epoch's workers
     copy the dataset after its set_epoch, so they draw that epoch's augmentation (their image caches last
     an epoch; with num_workers=0 the main process's cache lasts the run)."""
-    return DataLoader(dataset, batch_size=batch_size, sampler=sampler, num_workers=num_workers,
-                      pin_memory=device.type == "cuda", persistent_workers=False)
+    return DataLoader(
+        dataset,
+        batch_size=batch_size,
+        sampler=sampler,
+        num_workers=num_workers,
+        pin_memory=device.type == "cuda",
+        persistent_workers=False,
+    )
 
 
 def build_model(cfg: DictConfig) -> nn.Module:
@@ -204,9 +231,19 @@ def build_scheduler(cfg: DictConfig, optimizer: torch.optim.Optimizer) -> Any:
 
 # --- training ---------------------------------------------------------------------------------------
 
-def train_one_epoch(model: nn.Module, loader: DataLoader, loss_fn: nn.Module, optimizer: torch.optim.Optimizer,
-                    device: torch.device, state: TrainState, max_steps: int | None = None,
-                    writer: SummaryWriter | None = None, log_every: int = 50, progress: bool = False) -> list[float]:
+
+def train_one_epoch(
+    model: nn.Module,
+    loader: DataLoader,
+    loss_fn: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    device: torch.device,
+    state: TrainState,
+    max_steps: int | None = None,
+    writer: SummaryWriter | None = None,
+    log_every: int = 50,
+    progress: bool = False,
+) -> list[float]:
     """Train over the loader (the rest of state.epoch) until it ends or state.global_step reaches max_steps.
 
     Advances state.step_in_epoch and state.global_step; logs loss/body/foot and the learning rate to the
@@ -218,8 +255,11 @@ def train_one_epoch(model: nn.Module, loader: DataLoader, loss_fn: nn.Module, op
         return losses
     bar = tqdm(loader, desc=f"epoch {state.epoch}", disable=not progress, leave=False)
     for batch in bar:
-        out = loss_fn(model(batch["image"].to(device, non_blocking=True)),
-                      batch["target"].to(device, non_blocking=True), batch["weight"].to(device, non_blocking=True))
+        out = loss_fn(
+            model(batch["image"].to(device, non_blocking=True)),
+            batch["target"].to(device, non_blocking=True),
+            batch["weight"].to(device, non_blocking=True),
+        )
         optimizer.zero_grad(set_to_none=True)
         out["loss"].backward()
         optimizer.step()
@@ -238,6 +278,7 @@ def train_one_epoch(model: nn.Module, loader: DataLoader, loss_fn: nn.Module, op
 
 # --- validation -------------------------------------------------------------------------------------
 
+
 def decode_predictions(codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, batch: dict) -> list[dict]:
     """Heatmaps (B, 23, h, w) of a batch -> B predictions {image_id, keypoints (23, 3) x, y, score in image
     pixels, score = box score x mean keypoint score, bbox (4,)}; single peak per joint (codec.decode)."""
@@ -247,13 +288,20 @@ def decode_predictions(codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, ba
     out = []
     for i in range(len(points)):
         xy = transform_points(points[i], affine_inv[i])
-        out.append({"image_id": int(batch["image_id"][i]), "keypoints": np.column_stack([xy, scores[i]]),
-                    "score": float(box_scores[i] * scores[i].mean()), "bbox": batch["box"][i].numpy()})
+        out.append(
+            {
+                "image_id": int(batch["image_id"][i]),
+                "keypoints": np.column_stack([xy, scores[i]]),
+                "score": float(box_scores[i] * scores[i].mean()),
+                "bbox": batch["box"][i].numpy(),
+            }
+        )
     return out
 
 
-def heatmap_grid(images: torch.Tensor, targets: torch.Tensor, heatmaps: torch.Tensor, min_width: int = 192
-                 ) -> np.ndarray:
+def heatmap_grid(
+    images: torch.Tensor, targets: torch.Tensor, heatmaps: torch.Tensor, min_width: int = 192
+) -> np.ndarray:
     """Crops (N, 3, H, W) with target (N, 23, h, w) and predicted heatmaps overlaid (maximum over channels,
     target green, prediction red) -> RGB (rows, cols, 3) uint8, one [target | prediction] pair per crop;
     small crops are enlarged by an integer factor to at least min_width."""
@@ -268,8 +316,16 @@ def heatmap_grid(images: torch.Tensor, targets: torch.Tensor, heatmaps: torch.Te
 
 
 @torch.no_grad()
-def validate(model: nn.Module, loader: DataLoader, codec: MultiModalHeatmapCodec, records: list[ImageRecord],
-             loss_fn: nn.Module, device: torch.device, grid_images: int = 4, progress: bool = False) -> Validation:
+def validate(
+    model: nn.Module,
+    loader: DataLoader,
+    codec: MultiModalHeatmapCodec,
+    records: list[ImageRecord],
+    loss_fn: nn.Module,
+    device: torch.device,
+    grid_images: int = 4,
+    progress: bool = False,
+) -> Validation:
     """Loss and COCO OKS AP/AR (subsets all, body, foot) of the model on a plain (unshuffled) loader."""
     model.eval()
     predictions: list[dict] = []
@@ -292,6 +348,7 @@ def validate(model: nn.Module, loader: DataLoader, codec: MultiModalHeatmapCodec
 
 # --- checkpoints ------------------------------------------------------------------------------------
 
+
 def rng_states() -> dict:
     """The torch (CPU and CUDA), numpy and python RNG states."""
     states = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
@@ -309,24 +366,48 @@ def set_rng_states(states: dict) -> None:
         torch.cuda.set_rng_state_all(states["cuda"])
 
 
-def save_checkpoint(path: str | Path, model: nn.Module, optimizer: torch.optim.Optimizer, scheduler: Any,
-                    state: TrainState, config: dict, choices: dict[str, str] | None = None) -> None:
+def save_checkpoint(
+    path: str | Path,
+    model: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    scheduler: Any,
+    state: TrainState,
+    config: dict,
+    choices: dict[str, str] | None = None,
+) -> None:
     """Write model, optimizer, scheduler, position, RNG states, config and the config groups chosen (choices,
     None if unknown) to path atomically, checksummed (models/checkpoint_io.py)."""
-    write_checkpoint({"model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                      "scheduler": scheduler.state_dict(), **asdict(state), "rng": rng_states(),
-                      "config": config, "choices": choices}, path, "resume")
+    write_checkpoint(
+        {
+            "model": model.state_dict(),
+            "optimizer": optimizer.state_dict(),
+            "scheduler": scheduler.state_dict(),
+            **asdict(state),
+            "rng": rng_states(),
+            "config": config,
+            "choices": choices,
+        },
+        path,
+        "resume",
+    )
 
 
-def save_weights(path: str | Path, model: nn.Module, state: TrainState, metrics: dict[str, float],
-                 config: dict) -> None:
+def save_weights(
+    path: str | Path, model: nn.Module, state: TrainState, metrics: dict[str, float], config: dict
+) -> None:
     """Write the model weights with the position, validation metrics and config (no optimizer) atomically."""
-    write_checkpoint({"model": model.state_dict(), **asdict(state), "metrics": dict(metrics), "config": config},
-                     path, "weights")
+    write_checkpoint(
+        {"model": model.state_dict(), **asdict(state), "metrics": dict(metrics), "config": config}, path, "weights"
+    )
 
 
-def load_checkpoint(checkpoint: str | Path | dict, model: nn.Module, optimizer: torch.optim.Optimizer | None = None,
-                    scheduler: Any = None, restore_rng: bool = True) -> TrainState:
+def load_checkpoint(
+    checkpoint: str | Path | dict,
+    model: nn.Module,
+    optimizer: torch.optim.Optimizer | None = None,
+    scheduler: Any = None,
+    restore_rng: bool = True,
+) -> TrainState:
     """Load a :func:`save_checkpoint` file (a path, or what read_checkpoint returned) into model (and optimizer,
     scheduler, RNG states) -> its TrainState.
 

@@ -1,4 +1,5 @@
 """The multi-view pipeline of one frame: matching -> gathering -> reconstruction [-> tracking], with stage timings."""
+
 from __future__ import annotations
 
 import time
@@ -8,8 +9,8 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from data.multiview import Frame, ViewDetections
 from data.geometry.camera import Rig
+from data.multiview import Frame, ViewDetections
 
 Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
 Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
@@ -19,8 +20,13 @@ class Tracker(Protocol):
     """What the pipeline needs of a tracker (tracking.Tracker): frame number, poses (P, J, 4), per-joint
     variances (P, J) or None -> (ids (P,), poses (P, J, 4))."""
 
-    def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None,
-               bone_lengths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]: ...
+    def update(
+        self,
+        frame: int,
+        poses3d: np.ndarray,
+        variance: np.ndarray | None = None,
+        bone_lengths: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 def _of_frame(values: np.ndarray | None, persons: int) -> np.ndarray | None:
@@ -61,7 +67,9 @@ class MultiViewPipeline:
     """Match persons across views, reconstruct them, then (with a tracker) give them track ids; accumulates
     seconds per stage. One pipeline serves one sequence: a tracker expects increasing frame numbers."""
 
-    def __init__(self, rig: Rig, matcher: Matcher, reconstructor: Reconstructor, tracker: Tracker | None = None) -> None:
+    def __init__(
+        self, rig: Rig, matcher: Matcher, reconstructor: Reconstructor, tracker: Tracker | None = None
+    ) -> None:
         self.rig = rig
         self.matcher = matcher
         self.reconstructor = reconstructor
@@ -84,10 +92,12 @@ class MultiViewPipeline:
         assignment = self.matcher(frame.views, self.rig)
         t1 = time.perf_counter()
         poses2d, bboxes = gather_views(frame.views, assignment)
-        poses3d = self._reconstruct(frame.index, poses2d, bboxes) if len(assignment) else np.zeros((0, poses2d.shape[2], 4))
+        poses3d = (
+            self._reconstruct(frame.index, poses2d, bboxes) if len(assignment) else np.zeros((0, poses2d.shape[2], 4))
+        )
         t2 = time.perf_counter()
         ids = None
-        if self.tracker is not None:           # the reconstruction's joint variances and bones, where it has them
+        if self.tracker is not None:  # the reconstruction's joint variances and bones, where it has them
             variance = _of_frame(getattr(self.reconstructor, "last_joint_variance", None), len(poses3d))
             bones = _of_frame(getattr(self.reconstructor, "last_bone_lengths", None), len(poses3d))
             ids, poses3d = self.tracker.update(frame.index, poses3d, variance, bones)

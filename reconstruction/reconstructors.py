@@ -3,6 +3,7 @@
 poses2d (V, P, J, 3) are distorted pixels + score as detected (0 = missing); bboxes (V, P, 4) x, y,
 w, h. Each stage is configured from ``configs/reconstruction/*.yaml``.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,5 @@
 """Shared fixtures. Tests run from the repository root (pyproject.toml sets pythonpath)."""
+
 from __future__ import annotations
 
 import os

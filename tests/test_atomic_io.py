@@ -1,4 +1,5 @@
 """Atomic outputs: replaced whole or not at all, with the permissions a plain open() gives."""
+
 import os
 import signal
 import subprocess
@@ -50,12 +51,15 @@ def test_a_temporary_is_named_after_its_target_and_removed_on_keyboard_interrupt
 
 
 def test_sigterm_removes_the_temporary(tmp_path):
-    code = ("import time; from data.formats.atomic_io import atomic_open, exit_on_sigterm\n"
-            "exit_on_sigterm()\n"
-            f"with atomic_open({str(tmp_path / 'out.txt')!r}) as f:\n"
-            "    f.write('half'); f.flush(); print('writing', flush=True); time.sleep(60)\n")
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
-                            cwd=Path(__file__).resolve().parents[1])
+    code = (
+        "import time; from data.formats.atomic_io import atomic_open, exit_on_sigterm\n"
+        "exit_on_sigterm()\n"
+        f"with atomic_open({str(tmp_path / 'out.txt')!r}) as f:\n"
+        "    f.write('half'); f.flush(); print('writing', flush=True); time.sleep(60)\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1]
+    )
     assert proc.stdout.readline().strip() == "writing" and len(list(tmp_path.iterdir())) == 1
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=30) == 143
@@ -63,8 +67,9 @@ def test_sigterm_removes_the_temporary(tmp_path):
 
 
 def test_stale_temporaries_of_killed_writers_are_removed_and_live_ones_kept(tmp_path):
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
-                          text=True).stdout.strip()                    # a pid that has exited
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    ).stdout.strip()  # a pid that has exited
     host = _host()
     stale = tmp_path / f".out.txt.{host}.{dead}.abc123.tmp"
     live = tmp_path / f".out.txt.{host}.{os.getpid()}.def456.tmp"
@@ -72,5 +77,5 @@ def test_stale_temporaries_of_killed_writers_are_removed_and_live_ones_kept(tmp_
     for p in (stale, live, elsewhere):
         p.write_text("half")
     assert is_stale(stale) and not is_stale(live) and not is_stale(elsewhere)
-    atomic_write_text(tmp_path / "out.txt", "whole")                  # the next write of that target cleans up
+    atomic_write_text(tmp_path / "out.txt", "whole")  # the next write of that target cleans up
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["out.txt", live.name, elsewhere.name])

@@ -1,4 +1,5 @@
 """The joint-based matchers (the epipolar and RANSAC baselines of the paper's Table 6, and feet + epipolar) on hand-built scenes."""
+
 import inspect
 from pathlib import Path
 
@@ -11,9 +12,14 @@ from omegaconf import OmegaConf
 from data.keypoints import FLIP_PAIRS, NUM_JOINTS
 from evaluation.correspondence import correspondence_metrics
 from reconstruction.matching import EpipolarMatcher, FeetEpipolarMatcher, RansacMatcher
+from reconstruction.matching.epipolar import (
+    NO_COUNTERPART,
+    TOO_FEW_JOINTS,
+    epipolar_affinity,
+    fundamental_matrix,
+    undistorted_joints,
+)
 from reconstruction.matching.feet import NO_FOOT_JOINTS
-from reconstruction.matching.epipolar import (NO_COUNTERPART, TOO_FEW_JOINTS, epipolar_affinity,
-                                              fundamental_matrix, undistorted_joints)
 from tests.test_feet_matching import matched_id_sets, ring_rig, scene
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "matching"
@@ -22,9 +28,20 @@ MATCHERS = {"epipolar": EpipolarMatcher, "ransac": RansacMatcher, "feet_epipolar
 
 # A standing person facing +x, in metres: (forward, left, up) of the left-side and central joints;
 # the right side mirrors the left (FLIP_PAIRS).
-_LEFT_AND_CENTRE = {0: (0.10, 0.0, 1.62), 1: (0.08, 0.03, 1.66), 3: (0.0, 0.08, 1.63), 5: (0.0, 0.19, 1.42),
-                    7: (0.02, 0.24, 1.13), 9: (0.08, 0.25, 0.86), 11: (0.0, 0.10, 0.95), 13: (0.02, 0.11, 0.52),
-                    15: (0.0, 0.11, 0.09), 17: (0.17, 0.12, 0.02), 18: (0.15, 0.17, 0.02), 19: (-0.05, 0.11, 0.02)}
+_LEFT_AND_CENTRE = {
+    0: (0.10, 0.0, 1.62),
+    1: (0.08, 0.03, 1.66),
+    3: (0.0, 0.08, 1.63),
+    5: (0.0, 0.19, 1.42),
+    7: (0.02, 0.24, 1.13),
+    9: (0.08, 0.25, 0.86),
+    11: (0.0, 0.10, 0.95),
+    13: (0.02, 0.11, 0.52),
+    15: (0.0, 0.11, 0.09),
+    17: (0.17, 0.12, 0.02),
+    18: (0.15, 0.17, 0.02),
+    19: (-0.05, 0.11, 0.02),
+}
 
 
 def template() -> np.ndarray:
@@ -48,8 +65,10 @@ def crowd(n: int = 7, seed: int = 0) -> dict[int, np.ndarray]:
     """n skeletons on a 1.2 m grid around the origin, random jitter, heading and size."""
     rng = np.random.default_rng(seed)
     spots = [np.array([x, y]) for x in (-1.2, 0, 1.2) for y in (-1.2, 0, 1.2)]
-    return {i: skeleton(spots[i] + rng.uniform(-0.2, 0.2, 2), rng.uniform(0, 2 * np.pi), rng.uniform(0.9, 1.1))
-            for i in range(n)}
+    return {
+        i: skeleton(spots[i] + rng.uniform(-0.2, 0.2, 2), rng.uniform(0, 2 * np.pi), rng.uniform(0.9, 1.1))
+        for i in range(n)
+    }
 
 
 def ids_of(views) -> list[np.ndarray]:
@@ -86,8 +105,8 @@ def test_shuffling_detections_keeps_the_matched_identities(name):
 def test_person_seen_in_one_view_stays_unmatched_and_is_counted(name):
     rig = ring_rig(4)
     people = crowd(3)
-    people[10] = skeleton((2.2, 2.0), 0.3)      # only in view 0
-    people[11] = skeleton((-2.0, -2.4), 1.0)    # only in view 1
+    people[10] = skeleton((2.2, 2.0), 0.3)  # only in view 0
+    people[11] = skeleton((-2.0, -2.4), 1.0)  # only in view 1
     views = scene(rig, people, visible={10: [0], 11: [1]})
     matcher = MATCHERS[name]()
     a = matcher(views, rig)
@@ -95,7 +114,7 @@ def test_person_seen_in_one_view_stays_unmatched_and_is_counted(name):
     assert matched_id_sets(a, views) == {frozenset((v, i) for v in range(4)) for i in range(3)}
     assert matcher.last_unmatched_reasons == {NO_COUNTERPART: 2}
     assert matcher.unmatched_reasons == {NO_COUNTERPART: 4}
-    ungated = MATCHERS[name](gate=np.inf)(views, rig)   # the gate is what keeps them apart
+    ungated = MATCHERS[name](gate=np.inf)(views, rig)  # the gate is what keeps them apart
     assert frozenset({(0, 10), (1, 11)}) in matched_id_sets(ungated, views)
 
 
@@ -103,7 +122,7 @@ def test_person_seen_in_one_view_stays_unmatched_and_is_counted(name):
 def test_two_people_far_apart_are_never_merged(name):
     rig = ring_rig(5)
     people = {0: skeleton((2.0, 1.5), 0.5), 1: skeleton((-1.5, -2.0), 2.0)}
-    views = scene(rig, people, visible={0: [0, 1], 1: [2, 3]})   # only person-0/person-1 pairs across
+    views = scene(rig, people, visible={0: [0, 1], 1: [2, 3]})  # only person-0/person-1 pairs across
     a = MATCHERS[name]()(views, rig)
     assert matched_id_sets(a, views) == {frozenset({(0, 0), (1, 0)}), frozenset({(2, 1), (3, 1)})}
     merged = MATCHERS[name](gate=np.inf)(views, rig)
@@ -114,8 +133,8 @@ def test_two_people_far_apart_are_never_merged(name):
 def test_detection_with_too_few_joints_is_left_out_and_counted(name):
     rig = ring_rig(4)
     views = scene(rig, crowd(4))
-    views[2].keypoints[1, 2:, 2] = 0.0          # two joints left
-    views[3].keypoints[0, :, 2] = 0.15          # all below min_score
+    views[2].keypoints[1, 2:, 2] = 0.0  # two joints left
+    views[3].keypoints[0, :, 2] = 0.15  # all below min_score
     matcher = MATCHERS[name]()
     a = matcher(views, rig)
     found = matched_id_sets(a, views)
@@ -155,9 +174,9 @@ def test_fundamental_matrix_satisfies_the_epipolar_constraint():
         F = fundamental_matrix(rig[a], rig[b])
         xa = rig[a].undistort_points(rig[a].project(X))
         xb = rig[b].undistort_points(rig[b].project(X))
-        line = np.column_stack([xa, np.ones(40)]) @ F.T          # epipolar lines in view b
+        line = np.column_stack([xa, np.ones(40)]) @ F.T  # epipolar lines in view b
         residual = np.sum(line[:, :2] * xb, axis=1) + line[:, 2]
-        assert np.max(np.abs(residual) / np.hypot(line[:, 0], line[:, 1])) < 1e-6   # pixels
+        assert np.max(np.abs(residual) / np.hypot(line[:, 0], line[:, 1])) < 1e-6  # pixels
         assert abs(np.linalg.det(F)) < 1e-12 and np.linalg.norm(F) == pytest.approx(1.0)
 
 
@@ -218,7 +237,7 @@ def test_ransac_cost_is_zero_where_its_model_holds_and_the_outlier_share_with_ou
     matcher = RansacMatcher()
     clean = pair_cost(matcher, views, rig)
     assert np.diag(clean) == pytest.approx(0.0, abs=1e-4) and np.all(clean[[0, 1], [1, 0]] > 0.2)
-    corrupt = np.array([1, 4, 9, 15, 20])                        # 5 of 23 joints moved in view 1
+    corrupt = np.array([1, 4, 9, 15, 20])  # 5 of 23 joints moved in view 1
     F = fundamental_matrix(rig[0], rig[1])
     costs, affinities = [], []
     for shift in (200.0, 800.0):
@@ -227,8 +246,8 @@ def test_ransac_cost_is_zero_where_its_model_holds_and_the_outlier_share_with_ou
         costs.append(pair_cost(matcher, moved, rig)[0, 0])
         ja, jb = (undistorted_joints(moved[v], rig[v], 0.2) for v in (0, 1))
         affinities.append(epipolar_affinity(*ja, *jb, F)[0, 0])
-    assert costs == pytest.approx([5 / 23, 5 / 23], abs=1e-4)    # MSAC: outliers cost 1, exact inliers 0
-    assert affinities[1] > 3 * affinities[0] > 0                 # the epipolar mean follows the outliers
+    assert costs == pytest.approx([5 / 23, 5 / 23], abs=1e-4)  # MSAC: outliers cost 1, exact inliers 0
+    assert affinities[1] > 3 * affinities[0] > 0  # the epipolar mean follows the outliers
 
 
 def test_ransac_is_deterministic_for_a_seed_and_independent_of_detection_order():
@@ -238,10 +257,10 @@ def test_ransac_is_deterministic_for_a_seed_and_independent_of_detection_order()
     first = pair_cost(RansacMatcher(seed=3), views, rig)
     np.testing.assert_array_equal(first, pair_cost(RansacMatcher(seed=3), views, rig))
     matcher = RansacMatcher(seed=3)
-    matcher(scene(rig, crowd(4, seed=9)), rig)                   # an earlier frame changes nothing
+    matcher(scene(rig, crowd(4, seed=9)), rig)  # an earlier frame changes nothing
     np.testing.assert_array_equal(first, pair_cost(matcher, views, rig))
     shuffled = scene(rig, people, rng=np.random.default_rng(2))
-    order = [np.argsort(v.person_ids) for v in shuffled]         # shuffled detections -> ordered ids
+    order = [np.argsort(v.person_ids) for v in shuffled]  # shuffled detections -> ordered ids
     np.testing.assert_allclose(pair_cost(matcher, shuffled, rig)[np.ix_(order[0], order[1])], first, rtol=1e-9)
     assert not np.array_equal(first, pair_cost(RansacMatcher(seed=4, iterations=3), views, rig))
 

@@ -1,4 +1,5 @@
 """Calibration loaders: the real files of every dataset agree with each other and with raw OpenCV."""
+
 from __future__ import annotations
 
 import json
@@ -10,10 +11,21 @@ import numpy as np
 import pytest
 
 from data.formats.fourd_skeletons import load_4dassoc_skeletons
-from data.geometry.calibration import (CalibrationError, decompose_projection, detect_format, load_4dassoc,
-                                        load_cameras_json, load_panoptic, load_rig, load_shelf_projections,
-                                        load_voxelpose, load_wildtrack, load_wildtrack_positions,
-                                        panoptic_world_to_ours, save_cameras_json)
+from data.geometry.calibration import (
+    CalibrationError,
+    decompose_projection,
+    detect_format,
+    load_4dassoc,
+    load_cameras_json,
+    load_panoptic,
+    load_rig,
+    load_shelf_projections,
+    load_voxelpose,
+    load_wildtrack,
+    load_wildtrack_positions,
+    panoptic_world_to_ours,
+    save_cameras_json,
+)
 from data.geometry.camera import Camera, Rig
 
 PANOPTIC_SEQ = "panoptic/160906_band1"
@@ -22,9 +34,11 @@ PANOPTIC_CAMERAS = ["00_00", "00_03", "00_12", "00_16", "00_30"]
 
 def _shelf_rigs(root: Path) -> tuple[Rig, Rig, Rig]:
     """The Shelf rig from the 4D Association, VoxelPose and original P-matrix files."""
-    return (load_4dassoc(root / "shelf/4d_association/calibration.json"),
-            load_voxelpose(root / "shelf/calibration_shelf.json", image_size=(1032, 776)),
-            load_shelf_projections(root / "shelf/tum/Calibration"))
+    return (
+        load_4dassoc(root / "shelf/4d_association/calibration.json"),
+        load_voxelpose(root / "shelf/calibration_shelf.json", image_size=(1032, 776)),
+        load_shelf_projections(root / "shelf/tum/Calibration"),
+    )
 
 
 def _shelf_gt_joints(root: Path) -> np.ndarray:
@@ -137,8 +151,10 @@ def test_wildtrack_world_is_z_up(shared_data: Path) -> None:
 
 # --- cameras.json and ground-plane homographies ---------------------------------------------------
 def test_cameras_json_round_trip_is_exact(shared_data: Path, tmp_path: Path) -> None:
-    rig = Rig(load_wildtrack(shared_data / "wildtrack").cameras[:3]
-              + load_panoptic(shared_data / PANOPTIC_SEQ / "calibration_160906_band1.json", ["00_07"]).cameras)
+    rig = Rig(
+        load_wildtrack(shared_data / "wildtrack").cameras[:3]
+        + load_panoptic(shared_data / PANOPTIC_SEQ / "calibration_160906_band1.json", ["00_07"]).cameras
+    )
     path = tmp_path / "cameras.json"
     save_cameras_json(rig, path)
     save_cameras_json(rig, path)  # overwriting works too
@@ -156,8 +172,9 @@ def test_cameras_json_round_trip_is_exact(shared_data: Path, tmp_path: Path) -> 
 
 def _ray_ground(cam: Camera, uv: np.ndarray) -> np.ndarray:
     """Intersect the back-projected rays of distorted pixels (N, 2) with z = 0: (N, 2)."""
-    norm = cv2.undistortPoints(uv.reshape(-1, 1, 2), cam.K, cam.dist,
-                               criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14))[:, 0]
+    norm = cv2.undistortPoints(
+        uv.reshape(-1, 1, 2), cam.K, cam.dist, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+    )[:, 0]
     rays = np.column_stack([norm, np.ones(len(norm))]) @ cam.R  # R^T d, as rows
     lam = -cam.center[2] / rays[:, 2]
     return (cam.center + lam[:, None] * rays)[:, :2]
@@ -192,9 +209,13 @@ def test_ground_homography_round_trip_shelf(shared_data: Path) -> None:
 
 # --- dispatch and bad input -----------------------------------------------------------------------
 def test_load_rig_detects_every_format(shared_data: Path) -> None:
-    cases = {"shelf/4d_association/calibration.json": ("4dassoc", 5), "shelf/calibration_shelf.json": ("voxelpose", 5),
-             "shelf/tum/Calibration": ("shelf_p", 5), "wildtrack": ("wildtrack", 7),
-             f"{PANOPTIC_SEQ}/calibration_160906_band1.json": ("panoptic", 31)}
+    cases = {
+        "shelf/4d_association/calibration.json": ("4dassoc", 5),
+        "shelf/calibration_shelf.json": ("voxelpose", 5),
+        "shelf/tum/Calibration": ("shelf_p", 5),
+        "wildtrack": ("wildtrack", 7),
+        f"{PANOPTIC_SEQ}/calibration_160906_band1.json": ("panoptic", 31),
+    }
     for rel, (fmt, count) in cases.items():
         assert detect_format(shared_data / rel) == fmt
         assert len(load_rig(shared_data / rel)) == count
@@ -209,13 +230,27 @@ def _good_entry(fmt: str) -> dict:
     return {"K": sum(K, []), "RT": [v for row, ti in zip(R, t) for v in row + [ti]], "imgSize": [1000, 800]}
 
 
-@pytest.mark.parametrize("fmt,loader,key", [("cameras_json", load_cameras_json, "K"),
-                                            ("cameras_json", load_cameras_json, "t"),
-                                            ("4dassoc", load_4dassoc, "RT"), ("4dassoc", load_4dassoc, "K")])
-@pytest.mark.parametrize("fault,message", [("missing", "is missing"), ("nan", "has a non-finite value"),
-                                           ("shape", "has shape"), ("text", "is not an array of numbers")])
-def test_bad_calibration_names_file_camera_key(tmp_path: Path, fmt: str, loader, key: str, fault: str,
-                                               message: str) -> None:
+@pytest.mark.parametrize(
+    "fmt,loader,key",
+    [
+        ("cameras_json", load_cameras_json, "K"),
+        ("cameras_json", load_cameras_json, "t"),
+        ("4dassoc", load_4dassoc, "RT"),
+        ("4dassoc", load_4dassoc, "K"),
+    ],
+)
+@pytest.mark.parametrize(
+    "fault,message",
+    [
+        ("missing", "is missing"),
+        ("nan", "has a non-finite value"),
+        ("shape", "has shape"),
+        ("text", "is not an array of numbers"),
+    ],
+)
+def test_bad_calibration_names_file_camera_key(
+    tmp_path: Path, fmt: str, loader, key: str, fault: str, message: str
+) -> None:
     entry = _good_entry(fmt)
     if fault == "missing":
         del entry[key]

@@ -1,4 +1,5 @@
 """Multi-peak heatmap decoding, back-projection to the image, and the global joints association."""
+
 from __future__ import annotations
 
 import cv2
@@ -15,7 +16,7 @@ from models.joint_association import associate_joints
 def gaussian(h: int, w: int, centre: tuple[float, float], sigma: float = 2.0, amp: float = 1.0) -> np.ndarray:
     """A Gaussian blob (h, w) at a sub-pixel (x, y) heatmap position."""
     ys, xs = np.mgrid[0:h, 0:w]
-    return amp * np.exp(-((xs - centre[0]) ** 2 + (ys - centre[1]) ** 2) / (2 * sigma ** 2))
+    return amp * np.exp(-((xs - centre[0]) ** 2 + (ys - centre[1]) ** 2) / (2 * sigma**2))
 
 
 def test_two_gaussian_peaks_at_sub_pixel_positions():
@@ -39,10 +40,10 @@ def test_suppression_keeps_exactly_the_local_maxima():
         for j in range(3):
             peak = (hm[b, j] == maximum_filter(hm[b, j], size=3, mode="constant", cval=-1)) & (hm[b, j] > 0.3)
             expected = np.sort(hm[b, j][peak])[::-1]
-            np.testing.assert_allclose(scores[b, j, :len(expected)], expected)
-            assert np.all(scores[b, j, len(expected):] == 0)
+            np.testing.assert_allclose(scores[b, j, : len(expected)], expected)
+            assert np.all(scores[b, j, len(expected) :] == 0)
             rows, cols = np.nonzero(peak)
-            near = np.abs(xy[b, j, :len(expected), None] - np.stack([cols, rows], 1)[None]).max(-1) <= 0.5
+            near = np.abs(xy[b, j, : len(expected), None] - np.stack([cols, rows], 1)[None]).max(-1) <= 0.5
             assert near.any(axis=1).all()
     np_xy, np_scores = find_candidates(hm, threshold=0.3, top_m=200)
     np.testing.assert_array_equal(np_scores, scores)
@@ -73,7 +74,7 @@ def one_joint(cands: list[list[tuple[float, float, float]]]) -> tuple[np.ndarray
     m = max(len(c) for c in cands)
     arr = np.zeros((len(cands), 1, m, 3))
     for p, c in enumerate(cands):
-        arr[p, 0, :len(c)] = c
+        arr[p, 0, : len(c)] = c
     return arr[..., :2], arr[..., 2]
 
 

@@ -1,4 +1,5 @@
 """COCO OKS AP/AR on the COCO-23 subsets: self-evaluation on real COCO-WholeBody, known OKS thresholds."""
+
 from __future__ import annotations
 
 import json
@@ -7,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.pose2d.coco_keypoints import load_coco_wholebody
 from data.keypoints import BODY_JOINTS, NUM_JOINTS, OKS_SIGMAS
-from data.pose2d.records import ImageRecord
 from data.pose2d.coco_eval import STAT_NAMES, SUBSET_JOINTS, evaluate_keypoints, write_coco_results
+from data.pose2d.coco_keypoints import load_coco_wholebody
+from data.pose2d.records import ImageRecord
 
 
 @pytest.fixture(scope="module")
@@ -35,8 +36,7 @@ def gt_predictions(records: list[ImageRecord], subset: str) -> list[dict]:
     """The ground truth as predictions, for the persons labelled in the subset, scores decreasing."""
     joints = list(SUBSET_JOINTS[subset])
     persons = [(r.image_id, k) for r in records for k in r.keypoints if (k[joints, 2] > 0).any()]
-    return [{"image_id": i, "keypoints": k.copy(), "score": 1.0 - 0.01 * n}
-            for n, (i, k) in enumerate(persons)]
+    return [{"image_id": i, "keypoints": k.copy(), "score": 1.0 - 0.01 * n} for n, (i, k) in enumerate(persons)]
 
 
 @pytest.mark.parametrize("subset", ["all", "body", "foot"])

@@ -1,4 +1,5 @@
 """COCO-format keypoint loaders on the real COCO-WholeBody and CrowdPose samples, writing, bad input."""
+
 from __future__ import annotations
 
 import json
@@ -7,9 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.pose2d.coco_keypoints import (load_coco23, load_coco_wholebody, load_crowdpose, load_detections,
-                                 load_keypoint_dataset, training_persons, write_coco_keypoints)
 from data.keypoints import CROWDPOSE14_TO_COCO23, NUM_JOINTS
+from data.pose2d.coco_keypoints import (
+    load_coco23,
+    load_coco_wholebody,
+    load_crowdpose,
+    load_detections,
+    load_keypoint_dataset,
+    training_persons,
+    write_coco_keypoints,
+)
 
 
 @pytest.fixture()
@@ -47,7 +55,7 @@ def test_wholebody_persons_body_and_feet(wholebody):
             np.testing.assert_allclose(box, ann["bbox"])
     first = records[0]
     assert first.image_id == 785 and (first.width, first.height) == (640, 425)
-    np.testing.assert_allclose(first.keypoints[0, 17], [439, 378, 2])      # left big toe of annotation 442619
+    np.testing.assert_allclose(first.keypoints[0, 17], [439, 378, 2])  # left big toe of annotation 442619
     np.testing.assert_allclose(first.areas, [27789.11055])
 
 
@@ -70,10 +78,10 @@ def test_crowdpose_joints_follow_the_index_map(crowdpose):
         for kps, ann in zip(record.keypoints, by_image[record.image_id]):
             src = np.array(ann["keypoints"], float).reshape(14, 3)
             np.testing.assert_array_equal(kps[mapped], src[CROWDPOSE14_TO_COCO23[mapped]])
-            assert np.all(kps[~(CROWDPOSE14_TO_COCO23 >= 0)] == 0)      # eyes, ears, feet; head/neck dropped
-    person = {r.image_id: r for r in records}[103319].keypoints[0]     # annotation 127068
-    np.testing.assert_array_equal(person[5], [388, 205, 2])            # CrowdPose 0 = left shoulder
-    np.testing.assert_array_equal(person[16], [359, 408, 1])           # CrowdPose 11 = right ankle
+            assert np.all(kps[~(CROWDPOSE14_TO_COCO23 >= 0)] == 0)  # eyes, ears, feet; head/neck dropped
+    person = {r.image_id: r for r in records}[103319].keypoints[0]  # annotation 127068
+    np.testing.assert_array_equal(person[5], [388, 205, 2])  # CrowdPose 0 = left shoulder
+    np.testing.assert_array_equal(person[16], [359, 408, 1])  # CrowdPose 11 = right ankle
     assert {r.image_id: r for r in records}[106848].areas[0] == pytest.approx(273.15 * 352.42)  # no area: w*h
 
 
@@ -86,14 +94,14 @@ def test_detections_attach_to_their_images(crowdpose):
     np.testing.assert_allclose(with_dets[106848].det_scores[0], 0.9999284744262695)
     strict = {r.image_id: r for r in load_detections(det_file, records, score_threshold=0.98)}
     assert len(strict[103319].det_boxes) == 2 and len(strict[106848].det_boxes) == 3
-    assert all(len(r.det_boxes) == 0 for r in records)                 # the inputs are left alone
+    assert all(len(r.det_boxes) == 0 for r in records)  # the inputs are left alone
 
 
 def test_keypoint_dataset_keeps_every_person_of_kept_images(crowdpose):
     ann_file, folder, det_file = crowdpose
     records = load_keypoint_dataset("crowdpose", ann_file, folder, det_file=det_file, min_keypoints=1)
     first = {r.image_id: r for r in records}[106848]
-    assert len(first) == 3                                              # annotation 131039 has no keypoint
+    assert len(first) == 3  # annotation 131039 has no keypoint
     np.testing.assert_array_equal(training_persons(first, 1), [0, 2])
     assert len(first.det_boxes) == 3
     strict = load_keypoint_dataset("crowdpose", ann_file, folder, min_keypoints=11)

@@ -2,19 +2,26 @@ import cv2
 import numpy as np
 import pytest
 
-from data.pose2d.crop_transforms import (CropAugmentation, box_to_center_scale, crop_affine, flip_keypoints,
-                                  flip_points, sample_augmentation, transform_points)
 from data.keypoints import flip_permutation
+from data.pose2d.crop_transforms import (
+    CropAugmentation,
+    box_to_center_scale,
+    crop_affine,
+    flip_keypoints,
+    flip_points,
+    sample_augmentation,
+    transform_points,
+)
 
 
 def blob_image(width: int, height: int, point: np.ndarray, sigma: float = 3.0) -> np.ndarray:
     """A float32 image with a Gaussian blob centred at the sub-pixel point (pixel centres at integers)."""
     xs, ys = np.meshgrid(np.arange(width), np.arange(height))
-    return np.exp(-((xs - point[0]) ** 2 + (ys - point[1]) ** 2) / (2 * sigma ** 2)).astype(np.float32)
+    return np.exp(-((xs - point[0]) ** 2 + (ys - point[1]) ** 2) / (2 * sigma**2)).astype(np.float32)
 
 
 def centroid(image: np.ndarray) -> np.ndarray:
-    ys, xs = np.mgrid[:image.shape[0], :image.shape[1]]
+    ys, xs = np.mgrid[: image.shape[0], : image.shape[1]]
     return np.array([(xs * image).sum(), (ys * image).sum()]) / image.sum()
 
 

@@ -1,4 +1,5 @@
 """2D inputs from other detectors: 4D Association BODY_25 candidates, PAF grouping, OpenPose JSON, poses2d.json."""
+
 from __future__ import annotations
 
 import json
@@ -8,21 +9,46 @@ import numpy as np
 import pytest
 
 from data.formats.fourd_detections import BODY25_PAF_LIMBS, load_4dassoc_detections
-from data.keypoints import BODY25_TO_COCO23, JOINT_INDEX, to_coco23
-from data.multiview import ViewDetections
 from data.formats.openpose_json import load_openpose_dir, load_openpose_json
-from models.paf_grouping import group_people, grouped_to_view_detections, limb_connections
 from data.formats.poses2d_io import Poses2DError, read_poses2d, write_poses2d
 from data.geometry.calibration import load_4dassoc
+from data.keypoints import BODY25_TO_COCO23, JOINT_INDEX, to_coco23
+from data.multiview import ViewDetections
+from models.paf_grouping import group_people, grouped_to_view_detections, limb_connections
 
 SHELF = Path("shelf") / "4d_association"
 
 # A standing BODY_25 person, pixels, facing the camera (its left on the image right).
-TEMPLATE = np.array([
-    [0, 0], [0, 30], [-25, 30], [-35, 70], [-40, 110], [25, 30], [35, 70], [40, 110], [0, 110],
-    [-15, 110], [-15, 170], [-15, 230], [15, 110], [15, 170], [15, 230], [-6, -5], [6, -5], [-12, 0],
-    [12, 0], [22, 245], [28, 243], [12, 238], [-22, 245], [-28, 243], [-12, 238],
-], dtype=np.float64)
+TEMPLATE = np.array(
+    [
+        [0, 0],
+        [0, 30],
+        [-25, 30],
+        [-35, 70],
+        [-40, 110],
+        [25, 30],
+        [35, 70],
+        [40, 110],
+        [0, 110],
+        [-15, 110],
+        [-15, 170],
+        [-15, 230],
+        [15, 110],
+        [15, 170],
+        [15, 230],
+        [-6, -5],
+        [6, -5],
+        [-12, 0],
+        [12, 0],
+        [22, 245],
+        [28, 243],
+        [12, 238],
+        [-22, 245],
+        [-28, 243],
+        [-12, 238],
+    ],
+    dtype=np.float64,
+)
 
 
 def two_people(cross_paf: float = 0.02, true_paf: float = 0.9) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
@@ -30,8 +56,7 @@ def two_people(cross_paf: float = 0.02, true_paf: float = 0.9) -> tuple[list[np.
 
     Candidate order alternates per joint so that candidate index never identifies the person.
     """
-    people = np.stack([np.c_[TEMPLATE + [200, 100], np.full(25, 0.8)],
-                       np.c_[TEMPLATE + [400, 120], np.full(25, 0.7)]])
+    people = np.stack([np.c_[TEMPLATE + [200, 100], np.full(25, 0.8)], np.c_[TEMPLATE + [400, 120], np.full(25, 0.7)]])
     order = [(0, 1) if j % 2 else (1, 0) for j in range(25)]
     candidates = [people[list(o), j] for j, o in enumerate(order)]
     pafs = []
@@ -104,9 +129,21 @@ def test_body25_to_coco23_named_joints() -> None:
     body25[:, 0] = np.arange(25)
     body25[:, 2] = 1
     coco = to_coco23(body25, BODY25_TO_COCO23)
-    expect = {"left_big_toe": 19, "right_heel": 24, "left_shoulder": 5, "right_shoulder": 2, "nose": 0,
-              "left_eye": 16, "right_ear": 17, "left_hip": 12, "right_knee": 10, "left_ankle": 14,
-              "right_wrist": 4, "left_small_toe": 20, "right_big_toe": 22}
+    expect = {
+        "left_big_toe": 19,
+        "right_heel": 24,
+        "left_shoulder": 5,
+        "right_shoulder": 2,
+        "nose": 0,
+        "left_eye": 16,
+        "right_ear": 17,
+        "left_hip": 12,
+        "right_knee": 10,
+        "left_ankle": 14,
+        "right_wrist": 4,
+        "left_small_toe": 20,
+        "right_big_toe": 22,
+    }
     for name, b25 in expect.items():
         assert coco[JOINT_INDEX[name], 0] == b25, name
     assert JOINT_INDEX["left_big_toe"] == 17 and JOINT_INDEX["right_heel"] == 22
@@ -173,8 +210,10 @@ def detections(rng: np.random.Generator, n: int, ids: list[int]) -> ViewDetectio
 def test_poses2d_round_trip(tmp_path: Path) -> None:
     rng = np.random.default_rng(0)
     names = ["0", "1", "2"]
-    frames = {300: [detections(rng, 2, [0, -1]), ViewDetections.empty(), detections(rng, 1, [3])],
-              302: [ViewDetections.empty(), detections(rng, 3, [-1, -1, 5]), ViewDetections.empty()]}
+    frames = {
+        300: [detections(rng, 2, [0, -1]), ViewDetections.empty(), detections(rng, 1, [3])],
+        302: [ViewDetections.empty(), detections(rng, 3, [-1, -1, 5]), ViewDetections.empty()],
+    }
     keypoints_before = frames[300][0].keypoints.copy()
     path = tmp_path / "poses2d.json"
     write_poses2d(path, frames, names)
@@ -196,20 +235,25 @@ def test_poses2d_round_trip(tmp_path: Path) -> None:
 
 def entry(camera: str = "0", values: int = 69, **extra) -> dict:
     """A poses2d.json entry."""
-    return {"frame": 300, "camera": camera, "bbox": [1, 2, 3, 4], "score": 0.9,
-            "keypoints": [1.0] * values, **extra}
+    return {"frame": 300, "camera": camera, "bbox": [1, 2, 3, 4], "score": 0.9, "keypoints": [1.0] * values, **extra}
 
 
 def test_poses2d_bad_inputs(tmp_path: Path, shared_data: Path) -> None:
     names = load_4dassoc(shared_data / SHELF / "calibration.json").names
     path = tmp_path / "poses2d.json"
     path.write_text(json.dumps([entry("0"), entry("7")]))
-    with pytest.raises(Poses2DError, match=r"poses2d.json: entry 1: camera '7' is not in the calibration "
-                                           r"\(known cameras: 0, 1, 2, 3, 4\)"):
+    with pytest.raises(
+        Poses2DError,
+        match=r"poses2d.json: entry 1: camera '7' is not in the calibration "
+        r"\(known cameras: 0, 1, 2, 3, 4\)",
+    ):
         read_poses2d(path, names)
     path.write_text(json.dumps([entry("1", values=60)]))
-    with pytest.raises(Poses2DError, match=r"entry 0: keypoints has 60 numbers, expected 69 "
-                                           r"\(23 keypoints x, y, score\)"):
+    with pytest.raises(
+        Poses2DError,
+        match=r"entry 0: keypoints has 60 numbers, expected 69 "
+        r"\(23 keypoints x, y, score\)",
+    ):
         read_poses2d(path, names)
     path.write_text(json.dumps([entry("1", bbox=[0, 0, float("nan"), 1])]))
     with pytest.raises(Poses2DError, match=r"entry 0: bbox has a non-finite value"):
@@ -223,8 +267,13 @@ def test_poses2d_bad_inputs(tmp_path: Path, shared_data: Path) -> None:
 
 def openpose_doc(*lengths: int) -> dict:
     """An OpenPose --write_json document with one person per length (values 0, 1, 2, ...)."""
-    return {"version": 1.3, "people": [{"person_id": [-1], "pose_keypoints_2d": list(map(float, range(n))),
-                                        "face_keypoints_2d": []} for n in lengths]}
+    return {
+        "version": 1.3,
+        "people": [
+            {"person_id": [-1], "pose_keypoints_2d": list(map(float, range(n))), "face_keypoints_2d": []}
+            for n in lengths
+        ],
+    }
 
 
 def test_openpose_json(tmp_path: Path) -> None:
@@ -245,6 +294,9 @@ def test_openpose_json(tmp_path: Path) -> None:
 def test_openpose_json_bad_length(tmp_path: Path) -> None:
     path = tmp_path / "x_000000000000_keypoints.json"
     path.write_text(json.dumps(openpose_doc(75, 54)))
-    with pytest.raises(ValueError, match=r"x_000000000000_keypoints.json: person 1 has 54 pose_keypoints_2d "
-                                         r"numbers, expected 75"):
+    with pytest.raises(
+        ValueError,
+        match=r"x_000000000000_keypoints.json: person 1 has 54 pose_keypoints_2d "
+        r"numbers, expected 75",
+    ):
         load_openpose_json(path)

@@ -1,4 +1,5 @@
 """End-to-end runs of eval.py through Hydra's compose API, and a multirun smoke test."""
+
 import json
 import subprocess
 import sys
@@ -21,8 +22,16 @@ def run_eval(tmp_path: Path, overrides: list[str]):
 
 
 def test_noise_free_synthetic_scene_is_reconstructed_below_a_millimetre(tmp_path, capsys):
-    report = run_eval(tmp_path, ["dataset.noise_px=0", "dataset.occlusion=false", "dataset.num_frames=5",
-                                 "matching=oracle", "reconstruction=vanilla"])
+    report = run_eval(
+        tmp_path,
+        [
+            "dataset.noise_px=0",
+            "dataset.occlusion=false",
+            "dataset.num_frames=5",
+            "matching=oracle",
+            "reconstruction=vanilla",
+        ],
+    )
     m = report.metrics
     assert m["mpjpe_mm"] < 1.0 and m["pcp_average"] == 100.0 and m["recall"] == 100.0
     assert m["matching_precision"] == 1.0
@@ -37,8 +46,12 @@ def test_noise_free_synthetic_scene_is_reconstructed_below_a_millimetre(tmp_path
 
 def test_reprojection_statistics_grow_with_the_2d_noise(tmp_path):
     """The paper's Table 3 statistics against the detections: about the 2D noise, ordered by it."""
-    means = [run_eval(tmp_path, [f"dataset.noise_px={n}", "dataset.num_frames=2", "matching=oracle"])
-             .metrics["reprojection_mean_px"] for n in (1, 4)]
+    means = [
+        run_eval(tmp_path, [f"dataset.noise_px={n}", "dataset.num_frames=2", "matching=oracle"]).metrics[
+            "reprojection_mean_px"
+        ]
+        for n in (1, 4)
+    ]
     assert 0.3 < means[0] < means[1] < 40.0
 
 
@@ -58,8 +71,15 @@ def test_default_noise_gives_a_plausible_error(tmp_path):
 
 
 def test_multirun_sweep_over_matchers(tmp_path):
-    cmd = [sys.executable, "eval.py", "-m", "matching=oracle,feet", "dataset.num_frames=2", "progress=false",
-           f"hydra.sweep.dir={tmp_path}"]
+    cmd = [
+        sys.executable,
+        "eval.py",
+        "-m",
+        "matching=oracle,feet",
+        "dataset.num_frames=2",
+        "progress=false",
+        f"hydra.sweep.dir={tmp_path}",
+    ]
     subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
     runs = sorted(tmp_path.glob("*/metrics.json"))
     assert len(runs) == 2
@@ -69,8 +89,11 @@ def test_multirun_sweep_over_matchers(tmp_path):
 def test_bad_calibration_stops_with_one_message_naming_file_camera_and_key(tmp_path):
     bad = tmp_path / "cams.json"
     eye = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
-    bad.write_text(json.dumps({"left": {"K": eye, "dist": [0] * 5, "R": eye, "t": [0, 1, 0], "size": [640, 480]}})
-                   .replace('"t": [0, 1, 0]', '"t": [0, NaN, 0]'))
+    bad.write_text(
+        json.dumps({"left": {"K": eye, "dist": [0] * 5, "R": eye, "t": [0, 1, 0], "size": [640, 480]}}).replace(
+            '"t": [0, 1, 0]', '"t": [0, NaN, 0]'
+        )
+    )
     cmd = [sys.executable, "eval.py", f"dataset.rig={bad}", "progress=false", f"hydra.run.dir={tmp_path / 'run'}"]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
     assert proc.returncode != 0
@@ -87,17 +110,27 @@ def test_a_bad_config_value_stops_with_one_message(tmp_path):
 def test_every_dataset_gets_the_default_matcher_and_reconstruction_unless_the_command_line_names_one():
     datasets = [p.stem for p in (Path(CONFIGS) / "dataset").glob("*.yaml")]
     with initialize_config_dir(config_dir=CONFIGS, version_base="1.3"):
-        chosen = {o[-1]: (compose(config_name="eval", overrides=o).matching._target_.rsplit(".", 1)[1],
-                          compose(config_name="eval", overrides=o).reconstruction._target_.rsplit(".", 1)[1])
-                  for o in [[f"dataset={d}"] for d in datasets] + [["dataset=shelf", "matching=feet_paper"]]}
+        chosen = {
+            o[-1]: (
+                compose(config_name="eval", overrides=o).matching._target_.rsplit(".", 1)[1],
+                compose(config_name="eval", overrides=o).reconstruction._target_.rsplit(".", 1)[1],
+            )
+            for o in [[f"dataset={d}"] for d in datasets] + [["dataset=shelf", "matching=feet_paper"]]
+        }
     assert len(datasets) >= 5
     assert all(chosen[f"dataset={d}"] == ("EvidenceMatcher", "MLEMAPReconstruction") for d in datasets)
     assert chosen["matching=feet_paper"][0] == "FeetMatcher"
 
 
-@pytest.mark.parametrize("override, key", [
-    ("evaluation.max_dist_m=abc", "evaluation.max_dist_m"), ("dataset.num_cameras=1", "num_cameras"),
-    ("dataset.num_persons=0", "num_persons"), ("vis_frame=-1", "vis_frame")])
+@pytest.mark.parametrize(
+    "override, key",
+    [
+        ("evaluation.max_dist_m=abc", "evaluation.max_dist_m"),
+        ("dataset.num_cameras=1", "num_cameras"),
+        ("dataset.num_persons=0", "num_persons"),
+        ("vis_frame=-1", "vis_frame"),
+    ],
+)
 def test_a_bad_value_stops_with_one_line_naming_the_key(tmp_path, override, key):
     cmd = [sys.executable, "eval.py", override, "progress=false", "dataset.num_frames=1", f"hydra.run.dir={tmp_path}"]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
@@ -106,8 +139,16 @@ def test_a_bad_value_stops_with_one_line_naming_the_key(tmp_path, override, key)
 
 
 def test_a_frame_to_draw_that_is_not_reconstructed_is_reported_after_the_report(tmp_path):
-    cmd = [sys.executable, "eval.py", "vis=true", "vis_frame=999", "progress=false", "dataset.num_frames=1",
-           "reconstruction=vanilla", f"hydra.run.dir={tmp_path}"]
+    cmd = [
+        sys.executable,
+        "eval.py",
+        "vis=true",
+        "vis_frame=999",
+        "progress=false",
+        "dataset.num_frames=1",
+        "reconstruction=vanilla",
+        f"hydra.run.dir={tmp_path}",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=Path(CONFIGS).parent, timeout=120)
     assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: vis_frame=999")
     assert "MPJPE all 23 joints (mm)" in proc.stdout
@@ -122,14 +163,18 @@ def test_a_2d_metric_of_minus_one_says_why():
 
 def test_frames_out_of_order_stop_a_tracked_run_with_one_line(tmp_path):
     from data.formats.poses2d_io import write_poses2d
-    from data.synthetic import SyntheticConfig, generate_sequence
     from data.geometry.calibration import save_cameras_json
+    from data.synthetic import SyntheticConfig, generate_sequence
 
     seq = generate_sequence(SyntheticConfig(num_persons=2, num_frames=3, num_cameras=3, seed=1))
     save_cameras_json(seq.rig, tmp_path / "cameras.json")
     write_poses2d(tmp_path / "poses2d.json", {f.index: f.views for f in seq.frames}, seq.rig.names)
-    files = ["dataset=files", f"dataset.cameras={tmp_path / 'cameras.json'}",
-             f"dataset.poses2d={tmp_path / 'poses2d.json'}", "dataset.frames=2:-1:-1"]
+    files = [
+        "dataset=files",
+        f"dataset.cameras={tmp_path / 'cameras.json'}",
+        f"dataset.poses2d={tmp_path / 'poses2d.json'}",
+        "dataset.frames=2:-1:-1",
+    ]
     with pytest.raises(eval_script.ConfigError, match="frame 1 comes after frame 2"):
         run_eval(tmp_path, files)
-    run_eval(tmp_path, [*files, "tracking=off"])          # every frame on its own: any order
+    run_eval(tmp_path, [*files, "tracking=off"])  # every frame on its own: any order

@@ -1,4 +1,5 @@
 """The default matcher: calibrated chi-square gate on feet + body evidence, complete-linkage merging."""
+
 import numpy as np
 import pytest
 
@@ -11,15 +12,18 @@ from reconstruction.matching import EvidenceMatcher
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence import gate_limits, merge_complete
 from reconstruction.matching.evidence_kernels import pair_chi2
-from reconstruction.solver.map_solver import MLEMAPReconstruction
 from reconstruction.pipeline import MultiViewPipeline
+from reconstruction.solver.map_solver import MLEMAPReconstruction
 
 FEET_AND_ANKLES = [*FOOT_JOINTS, LEFT_ANKLE, RIGHT_ANKLE]
 
 
 def _scene(seed: int = 5, persons: int = 6, cameras: int = 4):
-    return generate_sequence(SyntheticConfig(seed=seed, num_frames=1, num_persons=persons, num_cameras=cameras,
-                                             noise_px=1.0, occlusion=False))
+    return generate_sequence(
+        SyntheticConfig(
+            seed=seed, num_frames=1, num_persons=persons, num_cameras=cameras, noise_px=1.0, occlusion=False
+        )
+    )
 
 
 def _keep(views, joints) -> list[ViewDetections]:
@@ -47,9 +51,18 @@ def test_a_pair_with_only_body_joints_is_matched():
 
 def test_a_pair_with_only_feet_is_matched():
     # 3 people far apart: the feet (2 degrees of freedom) are enough evidence
-    seq = generate_sequence(SyntheticConfig(seed=2, num_frames=1, num_persons=3, num_cameras=3, noise_px=1.0,
-                                            occlusion=False, positions=[[[-2.0, -2.0], [2.0, 0.0], [-1.0, 2.5]]],
-                                            area=(-4.0, 4.0, -4.0, 4.0)))
+    seq = generate_sequence(
+        SyntheticConfig(
+            seed=2,
+            num_frames=1,
+            num_persons=3,
+            num_cameras=3,
+            noise_px=1.0,
+            occlusion=False,
+            positions=[[[-2.0, -2.0], [2.0, 0.0], [-1.0, 2.5]]],
+            area=(-4.0, 4.0, -4.0, 4.0),
+        )
+    )
     views = _keep(seq.frames[0].views, FEET_AND_ANKLES)
     c = _counts(EvidenceMatcher(min_dof=2)(views, seq.rig), views)
     assert c.precision == 1.0 and c.recall == 1.0
@@ -66,12 +79,13 @@ def test_the_gate_rejects_true_pairs_at_its_nominal_rate_whatever_the_degrees_of
         uv = [rig[v].project(X) + rng.normal(0, 2.0, X.shape[:2] + (2,)) for v in (0, 1)]
         var = np.full((400, joints), 4.0)
         out, dof = np.empty((400, 400)), np.empty((400, 400), dtype=np.int64)
-        pair_chi2(uv[0], var, uv[1], var, F, np.full((400, 400), np.nan), gate_limits(rate, joints), 1, 1e9, 1.0, out,
-                  dof)
+        pair_chi2(
+            uv[0], var, uv[1], var, F, np.full((400, 400), np.nan), gate_limits(rate, joints), 1, 1e9, 1.0, out, dof
+        )
         rejected = np.mean(~np.isfinite(np.diag(out)))
         assert abs(rejected - rate) < 3 * np.sqrt(rate * (1 - rate) / 400), (joints, rejected)
         assert np.all(np.diag(dof)[np.isfinite(np.diag(out))] == joints)
-        unrelated = out[~np.eye(400, dtype=bool)]          # the joints of another random person
+        unrelated = out[~np.eye(400, dtype=bool)]  # the joints of another random person
         assert np.mean(np.isfinite(unrelated)) < 0.02
 
 
@@ -86,7 +100,7 @@ def test_the_chi_square_is_the_sum_of_sampson_distances_and_the_feet_term():
     ha, hb = np.c_[a[0], np.ones(3)], np.c_[b[0], np.ones(3)]
     la, lb = ha @ F.T, hb @ F
     e = np.sum(hb * la, axis=1)
-    sampson = e ** 2 / (var[0] * (la[:, 0] ** 2 + la[:, 1] ** 2) + var[0] * (lb[:, 0] ** 2 + lb[:, 1] ** 2))
+    sampson = e**2 / (var[0] * (la[:, 0] ** 2 + la[:, 1] ** 2) + var[0] * (lb[:, 0] ** 2 + lb[:, 1] ** 2))
     assert dof[0, 0] == 5
     np.testing.assert_allclose(out[0, 0], 2.5 + sampson.sum())
 
@@ -103,8 +117,9 @@ def test_complete_linkage_never_joins_persons_whose_cross_pair_disagrees():
 
 
 def test_precise_in_a_dense_crowd_where_the_paper_matcher_merges_wrongly():
-    seq = generate_sequence(SyntheticConfig(seed=1, num_frames=2, num_persons=80, area=(-4.5, 4.5, -4.5, 4.5),
-                                            num_cameras=5, noise_px=2.0))
+    seq = generate_sequence(
+        SyntheticConfig(seed=1, num_frames=2, num_persons=80, area=(-4.5, 4.5, -4.5, 4.5), num_cameras=5, noise_px=2.0)
+    )
     total = CorrespondenceCounts()
     matcher = EvidenceMatcher()
     for frame in seq.frames:
@@ -115,9 +130,9 @@ def test_precise_in_a_dense_crowd_where_the_paper_matcher_merges_wrongly():
 def test_bad_detections_are_reported_as_unmatched_by_reason_not_a_crash():
     seq = _scene()
     views = [ViewDetections(v.keypoints.copy(), v.bboxes, v.scores, v.person_ids) for v in seq.frames[0].views]
-    views[0].keypoints[0] = np.nan                                   # a detection of NaN keypoints
-    views[1].keypoints[0, 1:] = 0.0                                  # one with a single joint
-    views[2].keypoints[0, :5] = np.nan                               # some NaN joints: still usable
+    views[0].keypoints[0] = np.nan  # a detection of NaN keypoints
+    views[1].keypoints[0, 1:] = 0.0  # one with a single joint
+    views[2].keypoints[0, :5] = np.nan  # some NaN joints: still usable
     matcher = EvidenceMatcher()
     assignment = matcher(views, seq.rig)
     reasons = matcher.last_unmatched_reasons
@@ -137,8 +152,14 @@ def test_a_frame_with_nan_keypoints_is_reconstructed_without_them():
 
 
 def test_rejects_bad_settings():
-    for bad in ({"reject_rate": 0.0}, {"min_dof": 0}, {"max_noise_scale": 0.5}, {"link_scale": 10.0},
-                {"outlier_sd": 0.0}, {"c": 0.0, "sigma_px": 0.0, "sigma_min": 0.0}):
+    for bad in (
+        {"reject_rate": 0.0},
+        {"min_dof": 0},
+        {"max_noise_scale": 0.5},
+        {"link_scale": 10.0},
+        {"outlier_sd": 0.0},
+        {"c": 0.0, "sigma_px": 0.0, "sigma_min": 0.0},
+    ):
         with pytest.raises(ValueError):
             EvidenceMatcher(**bad)
 
@@ -147,8 +168,17 @@ def test_the_noise_calibration_follows_the_detector():
     # the same scene with 1 and 4 px of noise: the estimated scale grows about 4x
     scales = []
     for noise in (1.0, 4.0):
-        seq = generate_sequence(SyntheticConfig(seed=3, num_frames=1, num_persons=8, num_cameras=4, noise_px=noise,
-                                                noise_depth_exponent=0.0, occlusion=False))
+        seq = generate_sequence(
+            SyntheticConfig(
+                seed=3,
+                num_frames=1,
+                num_persons=8,
+                num_cameras=4,
+                noise_px=noise,
+                noise_depth_exponent=0.0,
+                occlusion=False,
+            )
+        )
         m = EvidenceMatcher(sigma_px=1.0, c=0.0, score_power=0.0)
         m(seq.frames[0].views, seq.rig)
         scales.append(m.last_noise_scale)

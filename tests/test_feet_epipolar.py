@@ -1,4 +1,5 @@
 """The feet + epipolar matcher: its cost, and that it beats feet alone in a crowd."""
+
 import numpy as np
 import pytest
 
@@ -47,8 +48,9 @@ def counts(matcher, frames, rig) -> CorrespondenceCounts:
 def test_beats_feet_alone_in_a_dense_crowd():
     # 80 people in 81 m^2 at 2 px (seed 1: feet 88.3 / 65.5 %, feet + epipolar 95.0 / 79.4 % P / R);
     # benchmarks/matching.py measures the gap on more frames and settings
-    seq = generate_sequence(SyntheticConfig(seed=1, num_frames=2, num_persons=80, area=(-4.5, 4.5, -4.5, 4.5),
-                                            num_cameras=5, noise_px=2.0))
+    seq = generate_sequence(
+        SyntheticConfig(seed=1, num_frames=2, num_persons=80, area=(-4.5, 4.5, -4.5, 4.5), num_cameras=5, noise_px=2.0)
+    )
     feet = counts(FeetMatcher(), seq.frames, seq.rig)
     both = counts(FeetEpipolarMatcher(), seq.frames, seq.rig)
     assert both.precision > feet.precision + 0.03 and both.recall > feet.recall + 0.05
@@ -66,11 +68,13 @@ def test_people_without_feet_are_matched_by_their_body_unless_feet_are_required(
     seq = generate_sequence(SyntheticConfig(seed=5, num_frames=1, num_persons=6, num_cameras=4, noise_px=1.0))
     views = [ViewDetections(v.keypoints.copy(), v.bboxes, v.scores, v.person_ids) for v in seq.frames[0].views]
     pid = int(views[0].person_ids[0])
-    for v in views:                                   # one person's feet and ankles hidden in every view
+    for v in views:  # one person's feet and ankles hidden in every view
         v.keypoints[v.person_ids == pid, 15:, 2] = 0.0
     found = FeetEpipolarMatcher(missing_feet_cost=2.0)(views, seq.rig)
     rows = [r for r in found if any(r[v] >= 0 and views[v].person_ids[r[v]] == pid for v in range(len(views)))]
     assert len(rows) == 1 and np.sum(rows[0] >= 0) >= 2
     strict = FeetEpipolarMatcher()
-    assert not any(r[v] >= 0 and views[v].person_ids[r[v]] == pid for r in strict(views, seq.rig) for v in range(len(views)))
+    assert not any(
+        r[v] >= 0 and views[v].person_ids[r[v]] == pid for r in strict(views, seq.rig) for v in range(len(views))
+    )
     assert strict.last_unmatched_reasons["no_foot_joints"] == sum(int(np.sum(v.person_ids == pid)) for v in views)

@@ -3,13 +3,21 @@ import itertools
 import numpy as np
 import pytest
 
+from data.geometry.camera import Camera, Rig
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from evaluation.correspondence import correspondence_counts
-from data.geometry.camera import Camera, Rig
 from reconstruction.matching import FeetMatcher
-from reconstruction.matching.feet import (FEET_ABOVE_HORIZON, NO_COUNTERPART, NO_FOOT_JOINTS, edge_costs,
-                                          feet_features, features_from_feet, pair_homography, to_image)
+from reconstruction.matching.feet import (
+    FEET_ABOVE_HORIZON,
+    NO_COUNTERPART,
+    NO_FOOT_JOINTS,
+    edge_costs,
+    features_from_feet,
+    feet_features,
+    pair_homography,
+    to_image,
+)
 from reconstruction.matching.merge import merge_edges, solve_pair
 
 
@@ -45,8 +53,12 @@ def person(ground: np.ndarray, heading: float, stride: float) -> np.ndarray:
     return X
 
 
-def scene(rig: Rig, people: dict[int, np.ndarray], visible: dict[int, list[int]] | None = None,
-          rng: np.random.Generator | None = None) -> list[ViewDetections]:
+def scene(
+    rig: Rig,
+    people: dict[int, np.ndarray],
+    visible: dict[int, list[int]] | None = None,
+    rng: np.random.Generator | None = None,
+) -> list[ViewDetections]:
     """Project persons {id: (23, 3)} into the views where visible (default all), optionally shuffled."""
     views = []
     for v, cam in enumerate(rig):
@@ -65,8 +77,10 @@ def crowd(n: int = 6, seed: int = 0) -> dict[int, np.ndarray]:
     """n persons on a 1.2 m grid around the origin with random headings and strides."""
     rng = np.random.default_rng(seed)
     spots = [np.array([x, y]) for x in (-1.2, 0, 1.2) for y in (-1.2, 0, 1.2)]
-    return {i: person(spots[i] + rng.uniform(-0.2, 0.2, 2), rng.uniform(0, 2 * np.pi), rng.uniform(0.05, 0.5))
-            for i in range(n)}
+    return {
+        i: person(spots[i] + rng.uniform(-0.2, 0.2, 2), rng.uniform(0, 2 * np.pi), rng.uniform(0.05, 0.5))
+        for i in range(n)
+    }
 
 
 def matched_id_sets(assignment: np.ndarray, views: list[ViewDetections]) -> set[frozenset]:
@@ -98,7 +112,7 @@ def test_shuffling_detections_keeps_the_matched_identities():
 def test_person_seen_in_one_view_stays_unmatched_and_the_gate_is_what_keeps_it():
     rig = ring_rig(4)
     people = crowd(3)
-    people[10] = person(np.array([2.6, 2.4]), 0.3, 0.3)    # only in view 0
+    people[10] = person(np.array([2.6, 2.4]), 0.3, 0.3)  # only in view 0
     people[11] = person(np.array([-2.6, -2.4]), 1.0, 0.3)  # only in view 1
     views = scene(rig, people, visible={10: [0], 11: [1]})
     matcher = FeetMatcher()
@@ -139,21 +153,22 @@ def test_merger_on_random_conflicting_edges_keeps_each_detection_once():
 
 def feats(left, right, has_left=True, has_right=True):
     """FeetFeatures of one detection from two feet (2,)."""
-    return features_from_feet(np.array([left], float), np.array([right], float), np.array([has_left]),
-                              np.array([has_right]))
+    return features_from_feet(
+        np.array([left], float), np.array([right], float), np.array([has_left]), np.array([has_right])
+    )
 
 
 def test_edge_cost_known_answers_for_each_term():
-    a = feats([0, 0], [0.4, 0])                    # p (0.2, 0), v (0.4, 0)
-    moved = feats([0.3, 0.4], [0.7, 0.4])          # p moved by (0.3, 0.4): 0.5 m, same stride
+    a = feats([0, 0], [0.4, 0])  # p (0.2, 0), v (0.4, 0)
+    moved = feats([0.3, 0.4], [0.7, 0.4])  # p moved by (0.3, 0.4): 0.5 m, same stride
     assert edge_costs(a, moved, 2.0, 1.0, 1.0)[0, 0] == pytest.approx(1.0)
-    longer = feats([-0.1, 0], [0.5, 0])            # same p, parallel stride 0.6 m
+    longer = feats([-0.1, 0], [0.5, 0])  # same p, parallel stride 0.6 m
     assert edge_costs(a, longer, 1.0, 3.0, 7.0)[0, 0] == pytest.approx(3.0 * 0.2)
     perpendicular = feats([0.2, -0.2], [0.2, 0.2])
     assert edge_costs(a, perpendicular, 1.0, 1.0, 0.7)[0, 0] == pytest.approx(0.7)
-    diagonal = feats([0, -0.2], [0.4, 0.2])         # 45 degrees, p (0.2, 0), |v| = 0.4 sqrt 2
+    diagonal = feats([0, -0.2], [0.4, 0.2])  # 45 degrees, p (0.2, 0), |v| = 0.4 sqrt 2
     assert edge_costs(a, diagonal, 1.0, 0.0, 1.0)[0, 0] == pytest.approx(np.sqrt(0.5))
-    flipped = feats([0.4, 0], [0, 0])              # antiparallel: no direction cost
+    flipped = feats([0.4, 0], [0, 0])  # antiparallel: no direction cost
     assert edge_costs(a, flipped, 1.0, 1.0, 5.0)[0, 0] == pytest.approx(0.0)
 
 
@@ -175,7 +190,7 @@ def single_detection(cam: Camera, pixels: dict[int, tuple[float, float]]) -> np.
 
 
 def test_feet_features_lowest_rule_mean_rule_and_ankle_fallback():
-    cam = ring_rig(4, height=1.0)[0]   # the horizon is at y = 237
+    cam = ring_rig(4, height=1.0)[0]  # the horizon is at y = 237
     px = {17: (600, 520), 18: (610, 530), 19: (590, 500), 22: (700, 510), 15: (600, 490), 16: (700, 480)}
     kp = single_detection(cam, px)
     f = feet_features(kp, cam, "lowest")
@@ -186,7 +201,7 @@ def test_feet_features_lowest_rule_mean_rule_and_ankle_fallback():
     mean = feet_features(kp, cam, "mean")
     np.testing.assert_allclose(mean.left[0], cam.image_to_ground(np.array([px[j] for j in (17, 18, 19)])).mean(0))
     ankles = single_detection(cam, {15: px[15], 16: px[16]})
-    fb = feet_features(ankles, cam, ankle_height_m=0.0)   # ankles projected onto z = 0, as the paper does
+    fb = feet_features(ankles, cam, ankle_height_m=0.0)  # ankles projected onto z = 0, as the paper does
     np.testing.assert_allclose(fb.left[0], cam.image_to_ground(np.array(px[15])))
     assert fb.has_stride[0]
     no_fallback = feet_features(ankles, cam, ankle_fallback=False)
@@ -197,7 +212,7 @@ def test_feet_features_lowest_rule_mean_rule_and_ankle_fallback():
     low_score = kp.copy()
     low_score[0, :, 2] = 0.1
     assert feet_features(low_score, cam, min_score=0.2).reason[0] == NO_FOOT_JOINTS
-    sky = single_detection(cam, {17: (640, 100), 20: (650, 100)})   # above the horizon
+    sky = single_detection(cam, {17: (640, 100), 20: (650, 100)})  # above the horizon
     assert feet_features(sky, cam).reason[0] == FEET_ABOVE_HORIZON
     assert len(feet_features(np.zeros((0, NUM_JOINTS, 3)), cam)) == 0
 
@@ -205,7 +220,7 @@ def test_feet_features_lowest_rule_mean_rule_and_ankle_fallback():
 def test_matcher_reports_detections_without_feet():
     rig = ring_rig(3)
     views = scene(rig, crowd(3))
-    views[1].keypoints[0, 15:, 2] = 0.0   # no ankle, no foot joint
+    views[1].keypoints[0, 15:, 2] = 0.0  # no ankle, no foot joint
     matcher = FeetMatcher()
     matcher(views, rig)
     matcher(views, rig)
@@ -219,7 +234,7 @@ def test_image_space_matches_like_ground_space_and_uses_the_pair_homography():
     ground = FeetMatcher()(views, rig)
     image = FeetMatcher(space="image", k3=25.0, gate=60.0, unknown_stride_cost=10.0)(views, rig)
     assert matched_id_sets(ground, views) == matched_id_sets(image, views)
-    f1 = feet_features(views[1].keypoints, rig[1], "lowest")   # one foot pixel per foot, to map by H
+    f1 = feet_features(views[1].keypoints, rig[1], "lowest")  # one foot pixel per foot, to map by H
     in0 = to_image(f1, rig[0])
     H = pair_homography(rig[0], rig[1])
     lowest_right = 20 + np.argmax(views[1].keypoints[0, 20:23, 1])
@@ -271,12 +286,12 @@ def test_correspondence_counts_known_answer():
     with pytest.raises(ValueError, match="two persons"):
         correspondence_counts(np.array([[0, 1, -1], [0, 0, -1]]), ids)
     twice = correspondence_counts(np.array([[0, 0]]), [np.array([5, 5]), np.array([5])])
-    assert twice.true_pairs == 2 and twice.persons == 1 and twice.persons_recovered == 0   # 5 twice in view 0
+    assert twice.true_pairs == 2 and twice.persons == 1 and twice.persons_recovered == 0  # 5 twice in view 0
 
 
 def test_feet_features_undistort_to_the_exact_ground_point():
     cam = ring_rig(4, dist=(-0.25, 0.05, 0.001, -0.001, 0))[1]
-    ground = np.array([[1.5, -1.0], [1.8, -0.8]])           # left, right foot on z = 0
+    ground = np.array([[1.5, -1.0], [1.8, -0.8]])  # left, right foot on z = 0
     kp = np.zeros((1, NUM_JOINTS, 3))
     kp[0, [19, 22], :2] = cam.project(np.column_stack([ground, np.zeros(2)]))
     kp[0, [19, 22], 2] = 1.0

@@ -1,12 +1,13 @@
 """Feet matcher acceptance points not covered by test_feet_matching.py: three-view conflicts end to end,
 the calibrated homographies against cv2, people far apart, and a view where a person's feet are hidden."""
+
 import cv2
 import numpy as np
 import pytest
 
+from data.geometry.camera import Camera, apply_homography
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
-from data.geometry.camera import Camera, apply_homography
 from reconstruction.matching import FeetMatcher
 from reconstruction.matching.feet import NO_COUNTERPART, NO_FOOT_JOINTS, pair_homography
 from tests.test_feet_matching import crowd, matched_id_sets, person, ring_rig, scene
@@ -29,9 +30,12 @@ def test_three_view_conflict_is_resolved_in_favour_of_the_cheaper_edges():
     # and B (0.38), views 1 and 2 one detection each at 0.05 and 0.2. The pairs pick A0-D1 (0.05),
     # B0-D2 (0.18) and D1-D2 (0.15): together they chain A0 and B0, two view-0 detections.
     rig = ring_rig(3)
-    views = [feet_only(rig[0], [(0.0, 0.0), (0.38, 0.0)], [0, 1]), feet_only(rig[1], [(0.05, 0.0)], [2]),
-             feet_only(rig[2], [(0.2, 0.0)], [3])]
-    matcher = FeetMatcher(location_metric="euclidean")   # costs in metres (the default is in standard deviations)
+    views = [
+        feet_only(rig[0], [(0.0, 0.0), (0.38, 0.0)], [0, 1]),
+        feet_only(rig[1], [(0.05, 0.0)], [2]),
+        feet_only(rig[2], [(0.2, 0.0)], [3]),
+    ]
+    matcher = FeetMatcher(location_metric="euclidean")  # costs in metres (the default is in standard deviations)
     feats = matcher.features(views, rig)
     np.testing.assert_allclose(matcher.pair_cost(feats[0], feats[1], rig[0]), [[0.05], [0.33]], atol=1e-9)
     np.testing.assert_allclose(matcher.pair_cost(feats[0], feats[2], rig[0]), [[0.2], [0.18]], atol=1e-9)
@@ -66,12 +70,13 @@ def test_pair_homography_equals_the_one_cv2_estimates_from_four_ground_points(pa
     l, m = rig[pair[0]], rig[pair[1]]
     ground = np.column_stack([[-2.0, 2.5, 1.5, -1.0], [-1.5, -1.0, 2.0, 2.5], np.zeros(4)])
     in_l, in_m = (c.undistort_points(c.project(ground)) for c in (l, m))
-    H, _ = cv2.findHomography(in_m, in_l, 0)                   # view m -> view l
+    H, _ = cv2.findHomography(in_m, in_l, 0)  # view m -> view l
     ours = pair_homography(l, m)
     np.testing.assert_allclose(normalised(ours), normalised(H), atol=1e-6)
-    other = np.array([[0.3, -0.7, 0.0]])                        # a fifth ground point maps through it
-    np.testing.assert_allclose(apply_homography(ours, m.undistort_points(m.project(other))),
-                               l.undistort_points(l.project(other)), atol=1e-6)
+    other = np.array([[0.3, -0.7, 0.0]])  # a fifth ground point maps through it
+    np.testing.assert_allclose(
+        apply_homography(ours, m.undistort_points(m.project(other))), l.undistort_points(l.project(other)), atol=1e-6
+    )
 
 
 def test_two_people_far_apart_in_every_view_are_never_merged():
@@ -79,11 +84,14 @@ def test_two_people_far_apart_in_every_view_are_never_merged():
     people = {0: person(np.array([2.5, -2.0]), 0.4, 0.3), 1: person(np.array([-2.0, 2.5]), 2.0, 0.2)}
     everywhere = scene(rig, people)
     assert matched_id_sets(FeetMatcher()(everywhere, rig), everywhere) == {
-        frozenset((v, i) for v in range(4)) for i in (0, 1)}
+        frozenset((v, i) for v in range(4)) for i in (0, 1)
+    }
     apart = scene(rig, people, visible={0: [0, 1], 1: [2, 3]})  # the only cross pairs are 0 with 1
-    assert matched_id_sets(FeetMatcher()(apart, rig), apart) == {frozenset({(0, 0), (1, 0)}),
-                                                                frozenset({(2, 1), (3, 1)})}
-    assert len(FeetMatcher(gate=np.inf)(apart, rig)) == 1       # what the gate prevents
+    assert matched_id_sets(FeetMatcher()(apart, rig), apart) == {
+        frozenset({(0, 0), (1, 0)}),
+        frozenset({(2, 1), (3, 1)}),
+    }
+    assert len(FeetMatcher(gate=np.inf)(apart, rig)) == 1  # what the gate prevents
 
 
 def test_person_with_hidden_feet_in_one_view_is_matched_through_the_other_views():

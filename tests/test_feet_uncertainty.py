@@ -1,12 +1,17 @@
 """Uncertainty-aware feet matching: propagated ground covariances, the Mahalanobis cost, plane heights."""
+
 import numpy as np
 import pytest
 
 from data.keypoints import LEFT_ANKLE, NUM_JOINTS, RIGHT_ANKLE
 from reconstruction.matching import FeetMatcher
-from reconstruction.matching.feet import edge_costs, feet_features, features_from_feet
-from reconstruction.matching.feet_uncertainty import (image_to_plane_homography, joints_on_planes,
-                                                      mahalanobis_distances, plane_to_image_homography)
+from reconstruction.matching.feet import edge_costs, features_from_feet, feet_features
+from reconstruction.matching.feet_uncertainty import (
+    image_to_plane_homography,
+    joints_on_planes,
+    mahalanobis_distances,
+    plane_to_image_homography,
+)
 from tests.test_feet_matching import crowd, matched_id_sets, ring_rig, scene
 
 DIST = (-0.25, 0.05, 0.001, -0.001, 0.0)
@@ -32,11 +37,11 @@ def test_ground_covariance_matches_monte_carlo(dist):
 
 
 def test_ground_covariance_grows_with_distance():
-    cam = ring_rig(4)[0]                                  # at (8, 0, 3) looking at the origin
+    cam = ring_rig(4)[0]  # at (8, 0, 3) looking at the origin
     sizes = [np.sqrt(np.linalg.det(one_joint_cov(cam, (x, 0.0))[2])) for x in (6.0, 3.0, 0.0, -3.0)]
     assert all(a < b for a, b in zip(sizes, sizes[1:]))
     far, near = sizes[-1], sizes[0]
-    assert far / near > (11.0 / 2.0) ** 2                 # roughly d^2 / (H f): along the ray it grows faster
+    assert far / near > (11.0 / 2.0) ** 2  # roughly d^2 / (H f): along the ray it grows faster
 
 
 def test_mahalanobis_is_symmetric_and_euclidean_over_sigma_for_equal_isotropic_covariances():
@@ -48,12 +53,12 @@ def test_mahalanobis_is_symmetric_and_euclidean_over_sigma_for_equal_isotropic_c
     np.testing.assert_allclose(ab, mahalanobis_distances(pb, pa, cb, ca, 0.05).T, rtol=1e-12)
     s2, floor = 0.03, 0.05
     eye_a, eye_b = np.broadcast_to(s2 * np.eye(2), (4, 2, 2)), np.broadcast_to(s2 * np.eye(2), (3, 2, 2))
-    sigma = np.sqrt(2 * s2 + floor ** 2)
+    sigma = np.sqrt(2 * s2 + floor**2)
     euclid = np.linalg.norm(pa[:, None] - pb[None], axis=-1)
     np.testing.assert_allclose(mahalanobis_distances(pa, pb, eye_a, eye_b, floor), euclid / sigma, rtol=1e-12)
     fa = features_from_feet(pa, pa + [0.3, 0], np.ones(4, bool), np.ones(4, bool), None, eye_a * 2, eye_a * 2)
     fb = features_from_feet(pb, pb + [0.3, 0], np.ones(3, bool), np.ones(3, bool), None, eye_b * 2, eye_b * 2)
-    np.testing.assert_allclose(fa.cov, eye_a)              # p = mean of two feet: covariance halves
+    np.testing.assert_allclose(fa.cov, eye_a)  # p = mean of two feet: covariance halves
     cost = edge_costs(fa, fb, 1.0, 0.0, 0.0, metric="mahalanobis", floor_m=floor)
     np.testing.assert_allclose(cost, euclid / sigma, rtol=1e-12)
     with pytest.raises(ValueError, match="covariance"):
@@ -63,16 +68,16 @@ def test_mahalanobis_is_symmetric_and_euclidean_over_sigma_for_equal_isotropic_c
 @pytest.mark.parametrize("dist", [(0, 0, 0, 0, 0), DIST])
 def test_noise_free_ankle_only_detection_lands_on_the_truth(dist):
     cam = ring_rig(4, dist=dist)[2]
-    truth = np.array([[0.4, -0.7], [0.7, -0.5]])             # left, right ankle (x, y) at 0.07 m
+    truth = np.array([[0.4, -0.7], [0.7, -0.5]])  # left, right ankle (x, y) at 0.07 m
     kp = np.zeros((1, NUM_JOINTS, 3))
     kp[0, [LEFT_ANKLE, RIGHT_ANKLE], :2] = cam.project(np.column_stack([truth, np.full(2, 0.07)]))
     kp[0, [LEFT_ANKLE, RIGHT_ANKLE], 2] = 0.9
     f = feet_features(kp, cam, ankle_height_m=0.07)
     np.testing.assert_allclose(np.stack([f.left[0], f.right[0]]), truth, atol=1e-6)
-    flat = feet_features(kp, cam, ankle_height_m=0.0)        # the paper's z = 0: pushed away from the camera
+    flat = feet_features(kp, cam, ankle_height_m=0.0)  # the paper's z = 0: pushed away from the camera
     d_cam = np.linalg.norm(cam.center[:2] - truth[0])
     assert np.linalg.norm(cam.center[:2] - flat.left[0]) > d_cam + 0.05
-    pixel = plane_to_image_homography(cam, 0.07) @ np.append(truth[0], 1.0)   # K [r1 r2 h r3 + t]
+    pixel = plane_to_image_homography(cam, 0.07) @ np.append(truth[0], 1.0)  # K [r1 r2 h r3 + t]
     world = cam.P @ np.array([*truth[0], 0.07, 1.0])
     np.testing.assert_allclose(pixel[:2] / pixel[2], world[:2] / world[2], atol=1e-9)
     back = image_to_plane_homography(cam, 0.07) @ pixel

@@ -12,6 +12,7 @@ acceptance of a class that is invalid. Expectations per class:
 
 Add a class to CLASSES (name, expectation, mutation) when a format grows; SEEDS_PER_CLASS seeds each.
 """
+
 from __future__ import annotations
 
 import copy
@@ -110,8 +111,15 @@ def cam_wrong_shape(rng, cams, poses) -> Case:
 def cam_not_rotation(rng, cams, poses) -> Case:
     name = pick(rng, list(cams))
     R = np.array(cams[name]["R"])
-    cams[name]["R"] = pick(rng, [(R * 1.5).tolist(), (-R).tolist(), (R @ np.diag([1, 1, -1])).tolist(),
-                                 (R + 0.2 * rng.standard_normal((3, 3))).tolist()])
+    cams[name]["R"] = pick(
+        rng,
+        [
+            (R * 1.5).tolist(),
+            (-R).tolist(),
+            (R @ np.diag([1, 1, -1])).tolist(),
+            (R + 0.2 * rng.standard_normal((3, 3))).tolist(),
+        ],
+    )
     return cams, poses
 
 
@@ -130,8 +138,9 @@ def cam_bad_intrinsics(rng, cams, poses) -> Case:
 
 
 def cam_bad_size(rng, cams, poses) -> Case:
-    cams[pick(rng, list(cams))]["size"] = pick(rng, [[10, 10], [1e308, 720], [0, 720], [-1280, 720],
-                                                     [1280.5, 720], [1e6, 1e6]])
+    cams[pick(rng, list(cams))]["size"] = pick(
+        rng, [[10, 10], [1e308, 720], [0, 720], [-1280, 720], [1280.5, 720], [1e6, 1e6]]
+    )
     return cams, poses
 
 
@@ -248,15 +257,15 @@ def p_huge_numbers(rng, cams, poses) -> Case:
     entry = pick(rng, poses)
     choice = int(rng.integers(5))
     if choice == 0:
-        entry["frame"] = 2 ** 70
+        entry["frame"] = 2**70
     elif choice == 1:
-        entry["id"] = -(2 ** 70)
+        entry["id"] = -(2**70)
     elif choice == 2:
         entry["score"] = 1e200
     elif choice == 3:
         entry["keypoints"][3 * scored_joint(rng, entry) + int(rng.integers(2))] = pick(rng, [1e15, -1e15, 1e300])
     else:
-        entry["keypoints"][3 * scored_joint(rng, entry) + 2] = 10 ** 400
+        entry["keypoints"][3 * scored_joint(rng, entry) + 2] = 10**400
     return cams, poses
 
 
@@ -374,7 +383,7 @@ def p_slightly_outside_image(rng, cams, poses) -> Case:  # valid: joints guessed
 
 
 def p_big_frame_numbers(rng, cams, poses) -> Case:  # valid: frame numbers near the int64 limit
-    offset = 2 ** 62
+    offset = 2**62
     for entry in poses:
         entry["frame"] += offset
     return cams, poses

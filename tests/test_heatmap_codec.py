@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 import torch
 
-from data.pose2d.crop_transforms import crop_affine, flip_keypoints, flip_points, transform_points
 from data.keypoints import FOOT_JOINTS, flip_permutation
+from data.pose2d.crop_transforms import crop_affine, flip_keypoints, flip_points, transform_points
 from models.heatmap_codec import MultiModalHeatmapCodec
 
 LABELLED = np.ones(23, dtype=bool)
@@ -86,13 +86,13 @@ def test_others_combine_by_maximum_not_sum():
 def test_weighting_rule():
     codec = MultiModalHeatmapCodec(mu=0.5)
     own, other = np.zeros((23, 3)), np.zeros((23, 3))
-    own[0] = [50.0, 60.0, 2]      # own present
-    own[1] = [50.0, 60.0, 0]      # own unlabelled, another person's present -> 1
+    own[0] = [50.0, 60.0, 2]  # own present
+    own[1] = [50.0, 60.0, 0]  # own unlabelled, another person's present -> 1
     other[1] = [80.0, 90.0, 2]
-    own[2] = [500.0, 60.0, 2]     # own off the crop, nobody else -> 0
-    own[3] = [-40.0, 60.0, 2]     # own off the crop, another person's present -> 1
+    own[2] = [500.0, 60.0, 2]  # own off the crop, nobody else -> 0
+    own[3] = [-40.0, 60.0, 2]  # own off the crop, another person's present -> 1
     other[3] = [20.0, 30.0, 1]
-    other[4] = [-20.0, 30.0, 2]   # only another person's, off the crop -> 0
+    other[4] = [-20.0, 30.0, 2]  # only another person's, off the crop -> 0
     own[5], other[5] = [50.0, 60.0, 2], [60.0, 60.0, 2]  # the dataset does not label joint 5 -> 0
     labelled = LABELLED.copy()
     labelled[5] = False
@@ -149,5 +149,5 @@ def test_modulation_helps_on_noisy_heatmaps():
     targets = np.stack([codec.encode(p, np.zeros((0, 23, 3)), LABELLED)[0] for p in people])
     noisy = targets + rng.normal(0.0, 0.03, targets.shape)
     errors = [np.linalg.norm(codec.decode(noisy, modulate=m)[0] - people[..., :2], axis=-1) for m in (False, True)]
-    rms_raw, rms_modulated = (np.sqrt(np.mean(e ** 2)) for e in errors)
+    rms_raw, rms_modulated = (np.sqrt(np.mean(e**2)) for e in errors)
     assert rms_modulated < 0.7 * rms_raw

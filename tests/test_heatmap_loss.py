@@ -7,10 +7,10 @@ from models.loss import WeightedHeatmapLoss
 def small_case() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """B = 1, 23 channels of 2 x 2 pixels with a few non-zero entries."""
     pred, target, weight = torch.zeros(1, 23, 2, 2), torch.zeros(1, 23, 2, 2), torch.ones(1, 23)
-    pred[0, 0] = torch.tensor([[1.0, 0.0], [0.0, 0.0]])   # body: MSE (1^2) / 4 = 0.25
+    pred[0, 0] = torch.tensor([[1.0, 0.0], [0.0, 0.0]])  # body: MSE (1^2) / 4 = 0.25
     target[0, 3] = torch.tensor([[0.0, 2.0], [0.0, 0.0]])  # body: MSE (2^2) / 4 = 1.0, weight 0.5 -> 0.5
     weight[0, 3] = 0.5
-    pred[0, 7] = torch.tensor([[3.0, 3.0], [3.0, 3.0]])    # body: MSE 9, weight 0 -> 0
+    pred[0, 7] = torch.tensor([[3.0, 3.0], [3.0, 3.0]])  # body: MSE 9, weight 0 -> 0
     weight[0, 7] = 0.0
     target[0, 17] = torch.tensor([[1.0, 1.0], [0.0, 0.0]])  # foot: MSE 2 / 4 = 0.5
     pred[0, 22] = torch.tensor([[0.0, 0.0], [1.0, -1.0]])  # foot: MSE 2 / 4 = 0.5
@@ -40,7 +40,9 @@ def test_batch_mean_and_foot_weight_shift_attention_to_feet():
     batch = [torch.cat([pred, pred * 0]), torch.cat([target, target * 0]), torch.cat([weight, weight])]
     loss = WeightedHeatmapLoss(foot_weight=1.5)
     assert loss(*batch)["loss"].item() == pytest.approx(loss(pred, target, weight)["loss"].item() / 2)
-    assert WeightedHeatmapLoss(3.0)(pred, target, weight)["loss"] > WeightedHeatmapLoss(1.0)(pred, target, weight)["loss"]
+    assert (
+        WeightedHeatmapLoss(3.0)(pred, target, weight)["loss"] > WeightedHeatmapLoss(1.0)(pred, target, weight)["loss"]
+    )
 
 
 def test_zero_weight_channel_gets_no_gradient():

@@ -14,6 +14,7 @@ Layers, bottom to top (a repo module's layer is decided by its path):
 Every import is walked with ``ast``, those inside functions included; only imports under
 ``if TYPE_CHECKING:`` (annotations, never executed) are skipped. Tests may import anything.
 """
+
 from __future__ import annotations
 
 import ast
@@ -23,11 +24,20 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("data", "models", "reconstruction", "tracking", "evaluation", "benchmarks")
 # (module prefix, layer); the longest matching prefix wins
 LAYERS = (
-    ("data", 1), ("data.formats", 1), ("data.geometry", 1),
-    ("data.datasets", 2), ("data.synthetic", 2), ("data.pose2d", 2),
-    ("models", 3), ("reconstruction", 3), ("tracking", 3),
+    ("data", 1),
+    ("data.formats", 1),
+    ("data.geometry", 1),
+    ("data.datasets", 2),
+    ("data.synthetic", 2),
+    ("data.pose2d", 2),
+    ("models", 3),
+    ("reconstruction", 3),
+    ("tracking", 3),
     ("evaluation", 4),
-    ("eval", 5), ("train", 5), ("run_folders", 5), ("benchmarks", 5),
+    ("eval", 5),
+    ("train", 5),
+    ("run_folders", 5),
+    ("benchmarks", 5),
 )
 
 
@@ -80,15 +90,18 @@ def imports_of(path: Path) -> list[tuple[int, str]]:
             found += [(node.lineno, alias.name) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
             if node.level:
-                base = package[:len(package) - (node.level - 1)]
+                base = package[: len(package) - (node.level - 1)]
                 module = ".".join(base + ([node.module] if node.module else []))
             else:
                 module = node.module or ""
             found.append((node.lineno, module))
             # "from pkg import submodule" imports the submodule too
-            found += [(node.lineno, f"{module}.{alias.name}") for alias in node.names
-                      if (ROOT / Path(*module.split("."), alias.name)).with_suffix(".py").exists()
-                      or (ROOT / Path(*module.split("."), alias.name, "__init__.py")).exists()]
+            found += [
+                (node.lineno, f"{module}.{alias.name}")
+                for alias in node.names
+                if (ROOT / Path(*module.split("."), alias.name)).with_suffix(".py").exists()
+                or (ROOT / Path(*module.split("."), alias.name, "__init__.py")).exists()
+            ]
     return found
 
 

@@ -2,6 +2,7 @@
 
 One test (at least) per class of mistake in cameras.json, poses2d.json and the rig they describe.
 """
+
 from __future__ import annotations
 
 import copy
@@ -19,10 +20,11 @@ from data.datasets.files import load_files
 from data.formats.poses2d_io import OUTSIDE_IMAGE_TOLERANCE, Poses2DError, read_poses2d
 from data.geometry.calibration import CalibrationError, load_panoptic, load_rig
 from data.geometry.camera import Camera, Rig
-from data.geometry.check_rig import RigError, RigWarning, main as check_rig_main, pose_findings, rig_findings
+from data.geometry.check_rig import RigError, RigWarning, pose_findings, rig_findings
+from data.geometry.check_rig import main as check_rig_main
+from data.geometry.triangulation import triangulate_dlt
 from reconstruction.matching.feet import feet_features
 from reconstruction.matching.feet_uncertainty import image_to_plane_homography, joints_on_planes
-from data.geometry.triangulation import triangulate_dlt
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "own_rig"
@@ -66,13 +68,19 @@ def centre_to_t(R: list, centre: np.ndarray) -> list:
 
 
 # --- cameras.json ------------------------------------------------------------------------------------
-@pytest.mark.parametrize("key,value,what", [("K", [[1000, 0, "640"], [0, 1000, 360], [0, 0, 1]], "'640' (str)"),
-                                            ("t", [0.0, True, 6.6], "True (bool)"),
-                                            ("dist", [0, 0, 0, None, 0], "None (NoneType)")])
+@pytest.mark.parametrize(
+    "key,value,what",
+    [
+        ("K", [[1000, 0, "640"], [0, 1000, 360], [0, 0, 1]], "'640' (str)"),
+        ("t", [0.0, True, 6.6], "True (bool)"),
+        ("dist", [0, 0, 0, None, 0], "None (NoneType)"),
+    ],
+)
 def test_strings_booleans_and_null_where_numbers_belong_are_named(tmp_path, key, value, what):
     path = write(tmp_path, "cameras.json", cameras(cam_b={key: value}))
-    with pytest.raises(CalibrationError, match=re.escape(f"camera 'cam_b': key '{key}' is not an array of numbers: "
-                                                         f"{what}")):
+    with pytest.raises(
+        CalibrationError, match=re.escape(f"camera 'cam_b': key '{key}' is not an array of numbers: {what}")
+    ):
         load_rig(path)
 
 
@@ -113,8 +121,10 @@ def test_real_calibrations_load_without_a_warning(shared_data):
 
 # --- the rig check ------------------------------------------------------------------------------------
 def test_all_cameras_at_one_place_is_an_error(tmp_path):
-    doc = cameras(cam_b={"t": CAMERAS["cam_a"]["t"], "R": CAMERAS["cam_a"]["R"]},
-                  cam_c={"t": CAMERAS["cam_a"]["t"], "R": CAMERAS["cam_a"]["R"]})
+    doc = cameras(
+        cam_b={"t": CAMERAS["cam_a"]["t"], "R": CAMERAS["cam_a"]["R"]},
+        cam_c={"t": CAMERAS["cam_a"]["t"], "R": CAMERAS["cam_a"]["R"]},
+    )
     with pytest.raises(RigError, match="all 3 cameras have their centre at .* no baseline"):
         load_rig(write(tmp_path, "cameras.json", doc))
 
@@ -127,8 +137,9 @@ def test_one_camera_copied_under_two_names_is_named(tmp_path):
 
 def test_t_in_millimetres_is_named(tmp_path):
     doc = cameras(**{c: {"t": (np.array(CAMERAS[c]["t"]) * 1000).tolist()} for c in CAMERAS})
-    with pytest.warns(RigWarning, match="cameras 'cam_a', 'cam_b', 'cam_c': centre .* m from the world origin .* "
-                                        "millimetres"):
+    with pytest.warns(
+        RigWarning, match="cameras 'cam_a', 'cam_b', 'cam_c': centre .* m from the world origin .* millimetres"
+    ):
         load_rig(write(tmp_path, "cameras.json", doc))
 
 
@@ -142,7 +153,7 @@ def test_camera_below_the_ground_plane_is_named(tmp_path):
 
 def test_upside_down_camera_that_misses_the_scene_is_named(tmp_path):
     R = np.diag([-1.0, -1.0, 1.0]) @ np.asarray(CAMERAS["cam_c"]["R"])  # rolled by 180 degrees
-    R = np.diag([1.0, -1.0, -1.0]) @ R                                   # then looking backwards
+    R = np.diag([1.0, -1.0, -1.0]) @ R  # then looking backwards
     centre = -np.asarray(CAMERAS["cam_c"]["R"]).T @ CAMERAS["cam_c"]["t"]
     doc = cameras(cam_c={"R": R.tolist(), "t": centre_to_t(R, centre)})
     with pytest.warns(RigWarning) as record:
@@ -155,8 +166,9 @@ def test_upside_down_camera_that_misses_the_scene_is_named(tmp_path):
 def test_transposed_rotation_is_found_by_the_2d_poses(tmp_path, camera):
     doc = cameras(**{camera: {"R": np.asarray(CAMERAS[camera]["R"]).T.tolist()}})
     path = write(tmp_path, "cameras.json", doc)
-    with pytest.warns(RigWarning, match=f"camera '{camera}': its 2D poses do not fit the calibration .* "
-                                        f"likely R is transposed"):
+    with pytest.warns(
+        RigWarning, match=f"camera '{camera}': its 2D poses do not fit the calibration .* likely R is transposed"
+    ):
         load_files(path, EXAMPLE / "poses2d.json")
 
 
@@ -192,8 +204,11 @@ def read(tmp_path: Path, doc: object):
 def test_the_same_detection_twice_is_rejected_naming_both_entries(tmp_path):
     doc = entries()
     doc.append(copy.deepcopy(doc[3]))
-    with pytest.raises(Poses2DError, match=f"entries 3 and {len(doc) - 1} are the same detection "
-                                           f"\\(frame 100, camera 'cam_b', identical keypoints\\)"):
+    with pytest.raises(
+        Poses2DError,
+        match=f"entries 3 and {len(doc) - 1} are the same detection "
+        f"\\(frame 100, camera 'cam_b', identical keypoints\\)",
+    ):
         read(tmp_path, doc)
 
 
@@ -201,8 +216,11 @@ def test_the_same_detection_twice_is_rejected_naming_both_entries(tmp_path):
 def test_keypoint_scores_outside_0_1_are_rejected_naming_entry_and_joint(tmp_path, factor, offset):
     kps = np.array(ENTRIES[2]["keypoints"]).reshape(23, 3)
     kps[:, 2] = kps[:, 2] * factor + offset
-    with pytest.raises(Poses2DError, match=r"entry 2: frame 100, camera '\w+': keypoint 0 \(nose\) has score "
-                                           r".*outside \[0, 1\]"):
+    with pytest.raises(
+        Poses2DError,
+        match=r"entry 2: frame 100, camera '\w+': keypoint 0 \(nose\) has score "
+        r".*outside \[0, 1\]",
+    ):
         read(tmp_path, entries(2, keypoints=kps.ravel().tolist()))
 
 
@@ -219,8 +237,11 @@ def test_detection_score_outside_0_1_is_rejected_and_slightly_above_1_is_clipped
 def test_keypoints_far_outside_the_image_are_rejected(tmp_path, xy):
     kps = np.array(ENTRIES[0]["keypoints"]).reshape(23, 3)
     kps[5, :2] = xy
-    with pytest.raises(Poses2DError, match=r"entry 0: .* keypoint 5 \(left_shoulder\) at .* far outside the "
-                                           r"1280x720 image"):
+    with pytest.raises(
+        Poses2DError,
+        match=r"entry 0: .* keypoint 5 \(left_shoulder\) at .* far outside the "
+        r"1280x720 image",
+    ):
         read(tmp_path, entries(0, keypoints=kps.ravel().tolist()))
     kps[5, :2] = (-0.9 * OUTSIDE_IMAGE_TOLERANCE * 1280, 300.0)  # within the tolerance: a guessed joint
     read(tmp_path, entries(0, keypoints=kps.ravel().tolist()))
@@ -234,13 +255,18 @@ def test_an_empty_list_is_an_error(tmp_path):
 @pytest.mark.parametrize("key", ["frame", "id"])
 def test_integers_beyond_64_bits_are_one_line_errors(tmp_path, key):
     with pytest.raises(Poses2DError, match=f"entry 4: {key} 1180591620717411303424 does not fit a 64-bit integer"):
-        read(tmp_path, entries(4, **{key: 2 ** 70}))
+        read(tmp_path, entries(4, **{key: 2**70}))
 
 
-@pytest.mark.parametrize("key,value,what", [("frame", "100", "frame must be an integer, got '100' (str)"),
-                                            ("score", True, "score must be a number, got True (bool)"),
-                                            ("camera", 1.5, "camera must be a camera name"),
-                                            ("bbox", [1, 2, "3", 4], "bbox must be x, y, w, h, got '3' (str)")])
+@pytest.mark.parametrize(
+    "key,value,what",
+    [
+        ("frame", "100", "frame must be an integer, got '100' (str)"),
+        ("score", True, "score must be a number, got True (bool)"),
+        ("camera", 1.5, "camera must be a camera name"),
+        ("bbox", [1, 2, "3", 4], "bbox must be x, y, w, h, got '3' (str)"),
+    ],
+)
 def test_strings_and_booleans_where_numbers_belong_are_named(tmp_path, key, value, what):
     with pytest.raises(Poses2DError, match=re.escape(f"entry 6: {what}")):
         read(tmp_path, entries(6, **{key: value}))
@@ -294,15 +320,23 @@ def test_eval_files_without_paths_stops_with_one_line(tmp_path):
     cmd = [sys.executable, "eval.py", "dataset=files", "progress=false", f"hydra.run.dir={tmp_path}"]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert proc.returncode != 0
-    assert proc.stderr.strip() == ("error: dataset.cameras is not set: give it on the command line "
-                                   "(dataset.cameras=...; see configs/dataset/)")
+    assert proc.stderr.strip() == (
+        "error: dataset.cameras is not set: give it on the command line (dataset.cameras=...; see configs/dataset/)"
+    )
 
 
 def test_eval_prints_rig_warnings_in_one_line_each(tmp_path):
     doc = cameras(cam_c={"R": np.asarray(CAMERAS["cam_c"]["R"]).T.tolist()})
     path = write(tmp_path, "cameras.json", doc)
-    cmd = [sys.executable, "eval.py", "dataset=files", f"dataset.cameras={path}",
-           f"dataset.poses2d={EXAMPLE / 'poses2d.json'}", "progress=false", f"hydra.run.dir={tmp_path / 'run'}"]
+    cmd = [
+        sys.executable,
+        "eval.py",
+        "dataset=files",
+        f"dataset.cameras={path}",
+        f"dataset.poses2d={EXAMPLE / 'poses2d.json'}",
+        "progress=false",
+        f"hydra.run.dir={tmp_path / 'run'}",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert proc.returncode == 0, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]

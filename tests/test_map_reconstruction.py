@@ -1,4 +1,5 @@
 """MLE / MAP reconstruction (paper Sec. 3.3): bone table, residuals and Jacobians, the batched solver, stages."""
+
 from __future__ import annotations
 
 import json
@@ -8,28 +9,44 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from data.bone_lengths import (BONE_MEAN, BONE_NAMES, BONE_PAIRS, BONE_STD, MEAN_POSE, bone_lengths,
-                               estimate_bone_table, resolve_bone_table)
+from data.bone_lengths import (
+    BONE_MEAN,
+    BONE_NAMES,
+    BONE_PAIRS,
+    BONE_STD,
+    MEAN_POSE,
+    bone_lengths,
+    estimate_bone_table,
+    resolve_bone_table,
+)
+from data.geometry.triangulation import RQI_MIN_POINTS, smallest_eigenvectors, triangulate_dlt
 from data.synthetic import SyntheticConfig, generate_sequence
 from data.synthetic.body import mean_body, pose_joints
 from data.synthetic.observe import bbox_from_keypoints
 from data.synthetic.rigs import ring_rig
+from reconstruction.matching import OracleMatcher
+from reconstruction.pipeline import gather_views
+from reconstruction.reconstructors import VanillaTriangulation
 from reconstruction.solver import map_estimation as me
-from reconstruction.solver import map_solver
-from reconstruction.solver import pose_kernels
+from reconstruction.solver import map_solver, pose_kernels
 from reconstruction.solver.block_solver import _assemble, elimination_plan, inverse_3x3, solve_blocks, solve_dense
 from reconstruction.solver.compiled_solver import solve_poses_compiled, solver_plan
 from reconstruction.solver.lm_solver import levenberg_marquardt
-from reconstruction.solver.map_solver import (MAPReconstruction, MLEMAPReconstruction, MLEReconstruction,
-                                       bone_components, solve_poses)
-from reconstruction.matching import OracleMatcher
-from reconstruction.pipeline import gather_views
+from reconstruction.solver.map_solver import (
+    MAPReconstruction,
+    MLEMAPReconstruction,
+    MLEReconstruction,
+    bone_components,
+    solve_poses,
+)
 from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
-from reconstruction.reconstructors import VanillaTriangulation
-from data.geometry.triangulation import RQI_MIN_POINTS, smallest_eigenvectors, triangulate_dlt
 
-STAGES = {"vanilla": VanillaTriangulation, "mle": MLEReconstruction, "map": MAPReconstruction,
-          "mle_map": MLEMAPReconstruction}
+STAGES = {
+    "vanilla": VanillaTriangulation,
+    "mle": MLEReconstruction,
+    "map": MAPReconstruction,
+    "mle_map": MLEMAPReconstruction,
+}
 
 
 def _rig(num: int = 5):
@@ -39,8 +56,9 @@ def _rig(num: int = 5):
 def _persons(num: int = 3, walking: bool = True) -> np.ndarray:
     """Mean-body persons (identical bone lengths) at different places, headings and gait phases: (P, 23, 3)."""
     spots = [(-1.5, 0.5, 0.3), (1.0, -1.0, 2.0), (0.3, 1.5, -1.2), (-0.5, -1.8, 4.0)]
-    return np.stack([pose_joints(mean_body(), x, y, t, 0.17 * i, walking and i % 2 == 0)
-                     for i, (x, y, t) in enumerate(spots[:num])])
+    return np.stack(
+        [pose_joints(mean_body(), x, y, t, 0.17 * i, walking and i % 2 == 0) for i, (x, y, t) in enumerate(spots[:num])]
+    )
 
 
 def _observe(rig, X: np.ndarray, noise_px: float = 0.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -64,13 +82,13 @@ def test_default_table_is_the_synthetic_mean_body_and_covers_every_bone():
     np.testing.assert_allclose(bone_lengths(MEAN_POSE), BONE_MEAN, atol=2e-3)
     assert np.all(BONE_STD > 0.01) and np.all(BONE_STD < 0.2 * BONE_MEAN + 0.011)
     with pytest.raises(ValueError):
-        BONE_MEAN[0] = 1.0                                   # read-only constants
+        BONE_MEAN[0] = 1.0  # read-only constants
 
 
 def test_estimate_bone_table_uses_valid_joints_only():
     X = np.concatenate([_persons(4), np.ones((4, 23, 1))], axis=-1)
     X[1, 9, :3] = 100.0
-    X[1, 9, 3] = 0.0                                         # invalid wrist: its bone is skipped
+    X[1, 9, 3] = 0.0  # invalid wrist: its bone is skipped
     mean, std, count = estimate_bone_table(X)
     np.testing.assert_allclose(mean, bone_lengths(_persons(1))[0], atol=1e-9)
     assert count[BONE_NAMES.index("left_forearm")] == 3 and count[0] == 4
@@ -94,11 +112,12 @@ def test_bone_table_json_round_trip_keeps_defaults_and_rejects_bad_entries(tmp_p
 
 def test_fit_bone_lengths_on_shelf_writes_a_loadable_table(shared_data, tmp_path, capsys):
     from benchmarks.fit_bone_lengths import main
+
     out = tmp_path / "shelf.json"
     main(["--shelf", str(shared_data / "shelf/4d_association/gt.txt"), "--output", str(out)])
     assert "left_thigh" in capsys.readouterr().out
     doc = json.loads(out.read_text())
-    assert len(doc["bones"]) == 12 and "left_toes" not in doc["bones"]       # Shelf-14 has no feet or face
+    assert len(doc["bones"]) == 12 and "left_toes" not in doc["bones"]  # Shelf-14 has no feet or face
     mean, _ = resolve_bone_table(out)
     assert 0.3 < mean[BONE_NAMES.index("left_thigh")] < 0.5
 
@@ -110,8 +129,18 @@ def _random_problem(P: int = 2, seed: int = 0, robust: str = "none", prior: floa
     X = _persons(P) + rng.normal(0, 0.03, (P, 23, 3))
     uv = rig.project(X) + rng.normal(0, 3.0, (4, P, 23, 2))
     inv_sigma = rng.uniform(0.1, 0.5, (4, P, 23)) * (rng.random((4, P, 23)) > 0.25)
-    problem = me.PoseProblem(rig.projection_matrices(), uv, inv_sigma, BONE_PAIRS, BONE_MEAN, prior / BONE_STD,
-                             X + rng.normal(0, 0.01, X.shape), 1e-3, robust, 1.0)
+    problem = me.PoseProblem(
+        rig.projection_matrices(),
+        uv,
+        inv_sigma,
+        BONE_PAIRS,
+        BONE_MEAN,
+        prior / BONE_STD,
+        X + rng.normal(0, 0.01, X.shape),
+        1e-3,
+        robust,
+        1.0,
+    )
     return problem, X + rng.normal(0, 0.02, X.shape)
 
 
@@ -119,9 +148,9 @@ def test_analytic_jacobian_equals_finite_differences():
     problem, X = _random_problem()
     for p in range(len(X)):
         one = problem.take(np.array([p]))
-        jac = me.numeric_jacobian(X[p:p + 1], one)
-        r = me.residual_vector(X[p:p + 1], one)[0]
-        f, H, g = me.normal_equations(X[p:p + 1], one, "gauss_newton")
+        jac = me.numeric_jacobian(X[p : p + 1], one)
+        r = me.residual_vector(X[p : p + 1], one)[0]
+        f, H, g = me.normal_equations(X[p : p + 1], one, "gauss_newton")
         np.testing.assert_allclose(H[0], jac.T @ jac, atol=1e-6 * np.abs(H).max())
         np.testing.assert_allclose(g[0], jac.T @ r, atol=1e-6 * np.abs(g).max())
         np.testing.assert_allclose(f[0], 0.5 * r @ r, rtol=1e-12)
@@ -137,8 +166,9 @@ def test_gradient_and_exact_prior_hessian_match_finite_differences(robust):
     np.testing.assert_allclose(g[0], num_g, atol=1e-6 * np.abs(g).max())
     np.testing.assert_allclose(f, me.cost(X, problem), rtol=1e-12)
     assert np.linalg.eigvalsh(H_safe[0]).min() > -1e-9
-    prior_only = me.PoseProblem(problem.proj, problem.uv, 0 * problem.inv_sigma, BONE_PAIRS, BONE_MEAN,
-                                1 / BONE_STD, problem.anchor, 0.0)
+    prior_only = me.PoseProblem(
+        problem.proj, problem.uv, 0 * problem.inv_sigma, BONE_PAIRS, BONE_MEAN, 1 / BONE_STD, problem.anchor, 0.0
+    )
     grad = lambda x: me.linearize(x.reshape(X.shape), prior_only)[2][0]
     num_H = np.stack([(grad(x0 + 1e-5 * e) - grad(x0 - 1e-5 * e)) / 2e-5 for e in np.eye(69)])
     exact = me.linearize(X, prior_only)[3][0]
@@ -156,12 +186,17 @@ def test_levenberg_marquardt_solves_a_batch_of_rosenbrock_problems():
         r = residuals(x, idx)
         jac = np.zeros((len(x), 2, 2))
         jac[:, 0, 0], jac[:, 0, 1], jac[:, 1, 0] = -20 * x[:, 0], 10.0, -1.0
-        return 0.5 * (r ** 2).sum(1), jac.transpose(0, 2, 1) @ jac, np.einsum("bri,br->bi", jac, r)
+        return 0.5 * (r**2).sum(1), jac.transpose(0, 2, 1) @ jac, np.einsum("bri,br->bi", jac, r)
 
-    result = levenberg_marquardt(np.array([[-1.2, 1.0]] * 3), linearize,
-                                 lambda x, idx: 0.5 * (residuals(x, idx) ** 2).sum(1), max_iterations=200,
-                                 xtol=1e-12, ftol=0.0)
-    np.testing.assert_allclose(result.x, np.stack([a, a ** 2], axis=1), atol=1e-8)
+    result = levenberg_marquardt(
+        np.array([[-1.2, 1.0]] * 3),
+        linearize,
+        lambda x, idx: 0.5 * (residuals(x, idx) ** 2).sum(1),
+        max_iterations=200,
+        xtol=1e-12,
+        ftol=0.0,
+    )
+    np.testing.assert_allclose(result.x, np.stack([a, a**2], axis=1), atol=1e-8)
 
 
 def _scipy_optimum(problem: me.PoseProblem, X0: np.ndarray, loss: str = "linear") -> np.ndarray:
@@ -169,17 +204,38 @@ def _scipy_optimum(problem: me.PoseProblem, X0: np.ndarray, loss: str = "linear"
     for p in range(len(X0)):
         one = problem.take(np.array([p]))
         fun = lambda x: me.residual_vector(x.reshape(1, -1, 3), one)[0]
-        res = least_squares(fun, X0[p].ravel(), method="trf", jac="2-point", loss=loss,
-                            f_scale=problem.robust_scale, ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=2000)
+        res = least_squares(
+            fun,
+            X0[p].ravel(),
+            method="trf",
+            jac="2-point",
+            loss=loss,
+            f_scale=problem.robust_scale,
+            ftol=1e-12,
+            xtol=1e-12,
+            gtol=1e-12,
+            max_nfev=2000,
+        )
         out.append(res.x.reshape(-1, 3))
     return np.stack(out)
 
 
-@pytest.mark.parametrize("prior,robust,linear,bones", [
-    (1.0, "none", "dense", "all"), (1.0, "none", "blocks", "all"), (1.0, "none", "compiled", "all"),
-    (0.0, "none", "dense", "all"), (0.0, "none", "compiled", "all"), (0.0, "huber", "dense", "all"),
-    (0.0, "huber", "blocks", "all"), (0.0, "huber", "compiled", "all"), (1.0, "none", "dense", "arms"),
-    (1.0, "none", "blocks", "arms"), (1.0, "none", "compiled", "arms")])
+@pytest.mark.parametrize(
+    "prior,robust,linear,bones",
+    [
+        (1.0, "none", "dense", "all"),
+        (1.0, "none", "blocks", "all"),
+        (1.0, "none", "compiled", "all"),
+        (0.0, "none", "dense", "all"),
+        (0.0, "none", "compiled", "all"),
+        (0.0, "huber", "dense", "all"),
+        (0.0, "huber", "blocks", "all"),
+        (0.0, "huber", "compiled", "all"),
+        (1.0, "none", "dense", "arms"),
+        (1.0, "none", "blocks", "arms"),
+        (1.0, "none", "compiled", "arms"),
+    ],
+)
 def test_batched_solver_reaches_the_scipy_trf_optimum(prior, robust, linear, bones, monkeypatch):
     """Same residual function, per-person scipy TRF with a numerical Jacobian, both tightly converged.
 
@@ -193,10 +249,10 @@ def test_batched_solver_reaches_the_scipy_trf_optimum(prior, robust, linear, bon
     rig, X = _rig(5), _persons(3)
     poses2d, boxes = _observe(rig, X, noise_px=4.0, seed=7)
     rng = np.random.default_rng(7)
-    single = rng.random(X.shape[:2]) < 0.15                        # ~15 % of the joints in one view only
+    single = rng.random(X.shape[:2]) < 0.15  # ~15 % of the joints in one view only
     keep = rng.integers(0, 5, X.shape[:2])
     poses2d[..., 2] *= np.where(single[None], np.arange(5)[:, None, None] == keep[None], 1.0)
-    poses2d[rng.random(poses2d.shape[:-1]) < 0.1] = 0.0           # and a few more missing 2D joints
+    poses2d[rng.random(poses2d.shape[:-1]) < 0.1] = 0.0  # and a few more missing 2D joints
     stage = MAPReconstruction(prior_weight=prior, robust=robust, robust_scale=1.0)
     und, proj = rig.undistort(poses2d), rig.projection_matrices()
     X0, placed = initial_poses(triangulate_dlt(und, proj), und, proj)
@@ -204,8 +260,19 @@ def test_batched_solver_reaches_the_scipy_trf_optimum(prior, robust, linear, bon
     problem = stage.problem(und, boxes, proj, X0, prior > 0)
     boned = np.ones(23, dtype=bool)
     if bones == "arms":
-        on = np.isin(np.array(BONE_NAMES), ["left_upper_arm", "right_upper_arm", "left_forearm", "right_forearm",
-                                            "left_ankle_heel", "left_ankle_big_toe", "left_toes", "left_heel_big_toe"])
+        on = np.isin(
+            np.array(BONE_NAMES),
+            [
+                "left_upper_arm",
+                "right_upper_arm",
+                "left_forearm",
+                "right_forearm",
+                "left_ankle_heel",
+                "left_ankle_big_toe",
+                "left_toes",
+                "left_heel_big_toe",
+            ],
+        )
         problem = replace(problem, bone_weight=problem.bone_weight * on)
         boned = np.isin(np.arange(23), BONE_PAIRS[on])
     solve = solve_poses_compiled if linear == "compiled" else solve_poses
@@ -219,8 +286,9 @@ def test_batched_solver_reaches_the_scipy_trf_optimum(prior, robust, linear, bon
 
 def test_compiled_and_numpy_solvers_agree_on_a_noisy_crowd():
     """Same problems, damping and stopping rules: the same iterates up to rounding, with the default tolerances."""
-    seq = generate_sequence(SyntheticConfig(seed=3, num_frames=1, num_persons=25, density=0.5, num_cameras=6,
-                                            noise_px=5.0))
+    seq = generate_sequence(
+        SyntheticConfig(seed=3, num_frames=1, num_persons=25, density=0.5, num_cameras=6, noise_px=5.0)
+    )
     frame = seq.frames[0]
     poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig))
     outs = [MLEMAPReconstruction(solver=s, robust="huber")(poses2d, boxes, seq.rig) for s in ("compiled", "numpy")]
@@ -231,8 +299,11 @@ def test_compiled_and_numpy_solvers_agree_on_a_noisy_crowd():
 
 @pytest.mark.parametrize("graph", ["coco", "cycles"])
 def test_compiled_block_cholesky_matches_numpy_and_detects_indefinite_systems(graph):
-    edges = np.asarray(BONE_PAIRS if graph == "coco" else [[0, 1], [1, 2], [2, 3], [3, 0], [0, 2], [4, 5], [5, 6],
-                                                            [6, 4], [7, 8], [8, 9], [9, 7], [1, 3]])
+    edges = np.asarray(
+        BONE_PAIRS
+        if graph == "coco"
+        else [[0, 1], [1, 2], [2, 3], [3, 0], [0, 2], [4, 5], [5, 6], [6, 4], [7, 8], [8, 9], [9, 7], [1, 3]]
+    )
     J = 23 if graph == "coco" else 11
     diag, off, rhs, damping, A = _block_system(edges, J, 9, seed=2, shift=6.0)
     plan = solver_plan(J, tuple(map(tuple, edges.tolist())))
@@ -241,15 +312,33 @@ def test_compiled_block_cholesky_matches_numpy_and_detects_indefinite_systems(gr
     pos = plan.pos_joint
     for b in range(9):
         D = (diag[:, :, pos, b] + damping[pos, b] * np.eye(3)[..., None]).transpose(2, 0, 1).copy()
-        K = -off[..., b].transpose(2, 0, 1).copy()              # solve_component puts -K off the diagonal
+        K = -off[..., b].transpose(2, 0, 1).copy()  # solve_component puts -K off the diagonal
         g = -rhs[:, pos, b].T.copy()
         h = np.zeros((J, 3))
         B = np.empty((plan.slot.max() + 1, 3, 3))
-        ok = all(pose_kernels.solve_component(
-            int(plan.comp_start[c]), int(plan.comp_start[c + 1]), D, K, np.zeros_like(K), g, 0.0, False,
-            plan.comp_bones[plan.comp_bones_ptr[c]:plan.comp_bones_ptr[c + 1]], plan.bone_pa, plan.bone_pb,
-            plan.bone_slot, plan.slot, plan.comp_slots[plan.comp_slots_ptr[c]:plan.comp_slots_ptr[c + 1]],
-            plan.later_ptr, plan.later_idx, B, h) for c in range(len(plan.comp_start) - 1))
+        ok = all(
+            pose_kernels.solve_component(
+                int(plan.comp_start[c]),
+                int(plan.comp_start[c + 1]),
+                D,
+                K,
+                np.zeros_like(K),
+                g,
+                0.0,
+                False,
+                plan.comp_bones[plan.comp_bones_ptr[c] : plan.comp_bones_ptr[c + 1]],
+                plan.bone_pa,
+                plan.bone_pb,
+                plan.bone_slot,
+                plan.slot,
+                plan.comp_slots[plan.comp_slots_ptr[c] : plan.comp_slots_ptr[c + 1]],
+                plan.later_ptr,
+                plan.later_idx,
+                B,
+                h,
+            )
+            for c in range(len(plan.comp_start) - 1)
+        )
         assert ok == definite[b]
         if ok:
             x = np.zeros((J, 3))
@@ -278,23 +367,26 @@ def _block_system(edges: np.ndarray, J: int, b: int, seed: int, shift: float = 8
 
 @pytest.mark.parametrize("graph", ["coco", "cycles"])
 def test_block_elimination_and_dense_solves_match_numpy(graph):
-    edges = BONE_PAIRS if graph == "coco" else np.array([[0, 1], [1, 2], [2, 3], [3, 0], [0, 2], [4, 5], [5, 6],
-                                                         [6, 4], [7, 8], [8, 9], [9, 7], [1, 3]])
-    J = 23 if graph == "coco" else 11                                      # joint 10 has no edge
+    edges = (
+        BONE_PAIRS
+        if graph == "coco"
+        else np.array([[0, 1], [1, 2], [2, 3], [3, 0], [0, 2], [4, 5], [5, 6], [6, 4], [7, 8], [8, 9], [9, 7], [1, 3]])
+    )
+    J = 23 if graph == "coco" else 11  # joint 10 has no edge
     edges = np.asarray(edges)
     diag, off, rhs, damping, A = _block_system(edges, J, 9, seed=2, shift=6.0)
     ref = np.linalg.solve(A, rhs.transpose(2, 1, 0).reshape(9, -1)[..., None])[..., 0]
     plan = elimination_plan(J, tuple(map(tuple, edges.tolist())))
     eliminated = np.concatenate([lv.pivots for lv in plan.levels])
-    np.testing.assert_array_equal(np.sort(eliminated), np.arange(J))           # every joint once
+    np.testing.assert_array_equal(np.sort(eliminated), np.arange(J))  # every joint once
     x, pd = solve_blocks(plan, diag, off, rhs, damping)
     definite = np.linalg.eigvalsh(A).min(axis=1) > 0
     np.testing.assert_array_equal(pd.all(axis=0), definite)
-    assert 0 < definite.sum() < 9                                           # the shift leaves some indefinite
+    assert 0 < definite.sum() < 9  # the shift leaves some indefinite
     np.testing.assert_allclose(x.transpose(2, 1, 0).reshape(9, -1)[definite], ref[definite], atol=1e-10)
     comps = bone_components(J, edges)
     ranges = [(int(c[0]), int(c[-1]) + 1) for c in comps]
-    assert all(len(c) == e - s for c, (s, e) in zip(comps, ranges))         # contiguous here
+    assert all(len(c) == e - s for c, (s, e) in zip(comps, ranges))  # contiguous here
     run = np.ones((9, len(comps)), dtype=bool)
     run[0, 0] = False
     xd, pdd = solve_dense(diag, off, edges, rhs, ranges, run, damping)
@@ -310,7 +402,7 @@ def test_inverse_3x3_and_smallest_eigenvectors_match_lapack():
     rng = np.random.default_rng(4)
     M = rng.normal(size=(500, 3, 3))
     A = M @ M.transpose(0, 2, 1) + 0.01 * np.eye(3)
-    A[0] = -A[0]                                                            # one not positive definite
+    A[0] = -A[0]  # one not positive definite
     inv, pd = inverse_3x3(A.transpose(1, 2, 0))
     np.testing.assert_allclose(inv.transpose(2, 0, 1), np.linalg.inv(A), rtol=1e-8, atol=1e-8)
     assert not pd[0] and pd[1:].all()
@@ -318,8 +410,9 @@ def test_inverse_3x3_and_smallest_eigenvectors_match_lapack():
     rows = rng.normal(size=(600, 8, 4))
     point = np.concatenate([rng.normal(size=(600, 3)), np.ones((600, 1))], axis=1)
     rows -= (rows @ point[..., None]) * point[:, None, :] / (point * point).sum(1)[:, None, None]
-    rows += rng.normal(0, 1e-3, rows.shape) * (rng.random((600, 1, 1)) < 0.8) + rng.normal(0, 0.3, rows.shape) * \
-        (rng.random((600, 1, 1)) < 0.1)
+    rows += rng.normal(0, 1e-3, rows.shape) * (rng.random((600, 1, 1)) < 0.8) + rng.normal(0, 0.3, rows.shape) * (
+        rng.random((600, 1, 1)) < 0.1
+    )
     N = rows.transpose(0, 2, 1) @ rows
     ours, ref = smallest_eigenvectors(N), np.linalg.eigh(N)[1][..., 0]
     cos = np.abs((ours * ref).sum(axis=1))
@@ -347,7 +440,7 @@ def test_noise_free_input_is_reconstructed_exactly(name):
 def test_map_with_a_wrong_reference_is_biased_but_a_weak_or_adaptive_prior_is_not():
     rig, X = _rig(), _persons(3)
     poses2d, boxes = _observe(rig, X)
-    table = _table(bone_lengths(X[0]) * 1.1)                      # everyone 10 % taller than the table
+    table = _table(bone_lengths(X[0]) * 1.1)  # everyone 10 % taller than the table
     paper = dict(bone_table=table, bone_prior="population", noise_scale="model")
     biased = MAPReconstruction(**paper)(poses2d, boxes, rig)
     weak = MAPReconstruction(**paper, prior_weight=1e-4)(poses2d, boxes, rig)
@@ -355,7 +448,7 @@ def test_map_with_a_wrong_reference_is_biased_but_a_weak_or_adaptive_prior_is_no
     err = np.linalg.norm(biased[..., :3] - X, axis=-1)
     assert 1e-4 < err.mean() < 0.02
     np.testing.assert_allclose(weak[..., :3], X, atol=1e-5)
-    np.testing.assert_allclose(adaptive[..., :3], X, atol=5e-4)   # exact 2D: the triangulated points (0.5 mm)
+    np.testing.assert_allclose(adaptive[..., :3], X, atol=5e-4)  # exact 2D: the triangulated points (0.5 mm)
 
 
 def test_map_moves_bone_lengths_towards_the_reference():
@@ -373,9 +466,9 @@ def test_map_moves_bone_lengths_towards_the_reference():
 def test_joints_seen_in_one_view_or_none_get_a_position_near_the_truth():
     rig, X = _rig(), _persons(2, walking=False)
     poses2d, boxes = _observe(rig, X, noise_px=1.0, seed=5)
-    poses2d[1:, 0, 9] = 0.0          # person 0's left wrist: only view 0
-    poses2d[:, 0, 7] = 0.0           # person 0's left elbow: no view
-    poses2d[:, 1, 18] = 0.0          # person 1's left small toe: no view
+    poses2d[1:, 0, 9] = 0.0  # person 0's left wrist: only view 0
+    poses2d[:, 0, 7] = 0.0  # person 0's left elbow: no view
+    poses2d[:, 1, 18] = 0.0  # person 1's left small toe: no view
     vanilla = VanillaTriangulation()(poses2d, boxes, rig)
     assert vanilla[0, 9, 3] == 0 and vanilla[0, 7, 3] == 0
     for stage in (MAPReconstruction(), MLEMAPReconstruction()):
@@ -404,6 +497,7 @@ def test_stages_take_no_person_and_do_not_touch_their_input():
 def test_configs_instantiate_the_stages():
     from hydra.utils import instantiate
     from omegaconf import OmegaConf
+
     for name, cls in (("mle", MLEReconstruction), ("map", MAPReconstruction), ("mle_map", MLEMAPReconstruction)):
         stage = instantiate(OmegaConf.load(f"configs/reconstruction/{name}.yaml"))
         assert type(stage) is cls
@@ -416,8 +510,10 @@ def test_mle_map_beats_vanilla_on_a_noisy_synthetic_crowd():
     for frame in seq.frames:
         assignment = OracleMatcher()(frame.views, seq.rig)
         poses2d, boxes = gather_views(frame.views, assignment)
-        ids = [frame.views[v].person_ids[assignment[p, v]] for p, v in
-               zip(range(len(assignment)), np.argmax(assignment >= 0, axis=1))]
+        ids = [
+            frame.views[v].person_ids[assignment[p, v]]
+            for p, v in zip(range(len(assignment)), np.argmax(assignment >= 0, axis=1))
+        ]
         gt = frame.gt_poses[[list(frame.gt_ids).index(i) for i in ids]]
         outs = {k: s(poses2d, boxes, seq.rig) for k, s in stages.items()}
         both = (outs["vanilla"][..., 3] > 0) & (outs["mle_map"][..., 3] > 0)
@@ -435,33 +531,34 @@ def test_outliers_of_a_solved_pose_are_reset_onto_their_ray_near_the_body():
     proj = rig.projection_matrices()
     solved = X.copy()
     wrist = 9
-    solved[0, wrist] += [3.0, -2.0, 0.5]          # an MLE joint that slid metres along nearly parallel rays
+    solved[0, wrist] += [3.0, -2.0, 0.5]  # an MLE joint that slid metres along nearly parallel rays
     out = reinitialise_outliers(solved, und, proj)
-    assert np.linalg.norm(out[0, wrist] - X[0, wrist]) < 0.75    # back near the body ...
+    assert np.linalg.norm(out[0, wrist] - X[0, wrist]) < 0.75  # back near the body ...
     x, y, z = proj[0] @ np.append(out[0, wrist], 1.0)
     np.testing.assert_allclose([x / z, y / z], und[0, 0, wrist, :2], atol=1e-6)  # ... on its best view's ray
     keep = np.ones(X.shape[:2], dtype=bool)
     keep[0, wrist] = False
     np.testing.assert_array_equal(out[keep], solved[keep])
-    assert solved[0, wrist, 0] == X[0, wrist, 0] + 3.0            # the input is not modified
+    assert solved[0, wrist, 0] == X[0, wrist, 0] + 3.0  # the input is not modified
 
 
 def test_mean_body_fit_is_the_scipy_kabsch_rotation_and_falls_back_to_yaw():
     from scipy.spatial.transform import Rotation
+
     from reconstruction.solver.pose_init import fit_mean_body
+
     rng = np.random.default_rng(5)
-    mean = np.array(MEAN_POSE)                                        # a writable copy for scipy
+    mean = np.array(MEAN_POSE)  # a writable copy for scipy
     R_true = Rotation.from_euler("zyx", [40, 8, -5], degrees=True)
     pts = R_true.apply(mean) + [1.0, -2.0, 0.1] + rng.normal(0, 0.02, MEAN_POSE.shape)
     known = rng.random(23) < 0.7
     body, placed = fit_mean_body(pts[None], known[None])
     src, dst = mean[known] - mean[known].mean(0), pts[known] - pts[known].mean(0)
     R_ref, _ = Rotation.align_vectors(dst, src)
-    np.testing.assert_allclose(body[0], R_ref.apply(mean - mean[known].mean(0)) + pts[known].mean(0),
-                               atol=1e-9)
+    np.testing.assert_allclose(body[0], R_ref.apply(mean - mean[known].mean(0)) + pts[known].mean(0), atol=1e-9)
     assert placed[0]
     few = np.zeros(23, dtype=bool)
-    few[[15, 16]] = True                                              # two ankles: a rotation about z only
+    few[[15, 16]] = True  # two ankles: a rotation about z only
     body, placed = fit_mean_body(pts[None], few[None])
     assert placed[0] and np.allclose(body[0, 15:17, 2] - MEAN_POSE[15:17, 2], body[0, 15, 2] - MEAN_POSE[15, 2])
     _, placed = fit_mean_body(pts[None], np.zeros((1, 23), dtype=bool))

@@ -1,5 +1,6 @@
 """The distinctiveness margin of the pairwise solve (merge.swap_regret, solve_pair(margin=...)) and its
 matcher keys: an ambiguous pair is refused, a clear one kept."""
+
 from pathlib import Path
 
 import numpy as np
@@ -13,9 +14,7 @@ from tests.test_feet_matching import matched_id_sets, ring_rig
 from tests.test_feet_matching_extra import feet_only
 
 # Two neighbours A, B whose costs hardly tell them apart (a swap costs 1 more), and a clear C.
-AMBIGUOUS_AND_CLEAR = np.array([[1.0, 1.5, 9.0],
-                                [1.5, 1.0, 9.0],
-                                [9.0, 9.0, 1.0]])
+AMBIGUOUS_AND_CLEAR = np.array([[1.0, 1.5, 9.0], [1.5, 1.0, 9.0], [9.0, 9.0, 1.0]])
 
 
 def test_swap_regret_known_answers():
@@ -27,7 +26,7 @@ def test_swap_regret_known_answers():
 
 
 def test_swap_regret_counts_free_partners_and_gated_competitors_but_not_infinite_ones():
-    cost = np.array([[1.0, 3.4, np.inf]])      # column 1 is above the gate, still a competitor
+    cost = np.array([[1.0, 3.4, np.inf]])  # column 1 is above the gate, still a competitor
     rows, cols = solve_pair(cost, gate=3.0)
     np.testing.assert_allclose(swap_regret(cost, rows, cols), [2.4])
     cost = np.array([[1.0, np.inf], [np.inf, 1.0]])
@@ -53,8 +52,10 @@ def test_feet_matcher_margin_end_to_end():
     # Euclidean costs in metres: A and B 0.3 m apart are seen 0.1 / 0.05 m off (a swap costs 0.3 m
     # more); C stands 3 m away. margin 0.5 m leaves A and B unmatched and keeps C.
     rig = ring_rig(2)
-    views = [feet_only(rig[0], [(0.0, 0.0), (0.3, 0.0), (3.0, 0.0)], [0, 1, 2]),
-             feet_only(rig[1], [(0.1, 0.0), (0.25, 0.0), (3.0, 0.0)], [0, 1, 2])]
+    views = [
+        feet_only(rig[0], [(0.0, 0.0), (0.3, 0.0), (3.0, 0.0)], [0, 1, 2]),
+        feet_only(rig[1], [(0.1, 0.0), (0.25, 0.0), (3.0, 0.0)], [0, 1, 2]),
+    ]
     plain = FeetMatcher(location_metric="euclidean", k2=0.0, k3=0.0, gate=0.6)
     assert matched_id_sets(plain(views, rig), views) == {frozenset({(0, i), (1, i)}) for i in range(3)}
     strict = FeetMatcher(location_metric="euclidean", k2=0.0, k3=0.0, gate=0.6, margin=0.5)

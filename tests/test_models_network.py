@@ -1,4 +1,5 @@
 """FastPose network and the torchvision-compatible ResNet trunk."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -15,8 +16,13 @@ Checkpoint = tuple[Path, dict[str, torch.Tensor]]
 
 
 def _bn(prefix: str, c: int) -> dict[str, tuple[int, ...]]:
-    return {f"{prefix}.weight": (c,), f"{prefix}.bias": (c,), f"{prefix}.running_mean": (c,),
-            f"{prefix}.running_var": (c,), f"{prefix}.num_batches_tracked": ()}
+    return {
+        f"{prefix}.weight": (c,),
+        f"{prefix}.bias": (c,),
+        f"{prefix}.running_mean": (c,),
+        f"{prefix}.running_var": (c,),
+        f"{prefix}.num_batches_tracked": (),
+    }
 
 
 def _block(prefix: str, cin: int, planes: int, bottleneck: bool, first: bool) -> dict[str, tuple[int, ...]]:
@@ -51,8 +57,14 @@ def torchvision_resnet_shapes(depth: int) -> dict[str, tuple[int, ...]]:
 
 def _random_checkpoint(shapes: dict[str, tuple[int, ...]], path: Path) -> dict[str, torch.Tensor]:
     gen = torch.Generator().manual_seed(0)
-    state = {k: (torch.randint(0, 100, s, generator=gen) if k.endswith("num_batches_tracked")
-                 else torch.randn(s, generator=gen)) for k, s in shapes.items()}
+    state = {
+        k: (
+            torch.randint(0, 100, s, generator=gen)
+            if k.endswith("num_batches_tracked")
+            else torch.randn(s, generator=gen)
+        )
+        for k, s in shapes.items()
+    }
     torch.save(state, path)
     return state
 
@@ -64,8 +76,7 @@ def resnet50_file(tmp_path_factory: pytest.TempPathFactory) -> Checkpoint:
     return path, _random_checkpoint(torchvision_resnet_shapes(50), path)
 
 
-@pytest.mark.parametrize("depth, size", [(18, (256, 192)), (18, (320, 256)), (50, (256, 192)),
-                                         (50, (320, 256))])
+@pytest.mark.parametrize("depth, size", [(18, (256, 192)), (18, (320, 256)), (50, (256, 192)), (50, (320, 256))])
 def test_output_shape_is_stride_4(depth: int, size: tuple[int, int]) -> None:
     net = FastPose(depth=depth).eval()
     with torch.no_grad():

@@ -1,4 +1,5 @@
 """python -m data.formats.openpose_json: OpenPose BODY_25 folders (one per camera) -> a poses2d.json dataset=files reads."""
+
 from __future__ import annotations
 
 import json
@@ -9,8 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from data.datasets.files import load_files
-from data.keypoints import BODY25_TO_COCO23
 from data.formats.openpose_json import camera_folders, main
+from data.keypoints import BODY25_TO_COCO23
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "own_rig"
@@ -31,8 +32,10 @@ def write_openpose_folders(root: Path) -> dict[tuple[int, str], list[np.ndarray]
     for (frame, camera), people in poses.items():
         folder = root / camera
         folder.mkdir(parents=True, exist_ok=True)
-        doc = {"version": 1.3, "people": [{"person_id": [-1], "pose_keypoints_2d": coco23_to_body25(p).ravel().tolist()}
-                                          for p in people]}
+        doc = {
+            "version": 1.3,
+            "people": [{"person_id": [-1], "pose_keypoints_2d": coco23_to_body25(p).ravel().tolist()} for p in people],
+        }
         (folder / f"{camera}_{frame:012d}_keypoints.json").write_text(json.dumps(doc))
     (root / "cam_a" / "notes.txt").write_text("not an OpenPose file")  # ignored
     return poses
@@ -57,7 +60,9 @@ def test_named_folders_and_scores_above_one_are_clipped(tmp_path):
     folder = tmp_path / "x"
     folder.mkdir()
     pose = np.tile([600.0, 300.0, 1.3], (25, 1))
-    (folder / f"img_{7:012d}_keypoints.json").write_text(json.dumps({"people": [{"pose_keypoints_2d": pose.ravel().tolist()}]}))
+    (folder / f"img_{7:012d}_keypoints.json").write_text(
+        json.dumps({"people": [{"pose_keypoints_2d": pose.ravel().tolist()}]})
+    )
     assert camera_folders([f"cam_b={folder}"]) == {"cam_b": folder}
     out = tmp_path / "p.json"
     assert main([f"cam_b={folder}", "-o", str(out)]) == 0
@@ -66,6 +71,16 @@ def test_named_folders_and_scores_above_one_are_clipped(tmp_path):
 
 
 def test_bad_folder_stops_with_one_line(tmp_path):
-    cmd = [sys.executable, "-m", "data.formats.openpose_json", str(tmp_path / "missing"), "-o", str(tmp_path / "p.json")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "data.formats.openpose_json",
+        str(tmp_path / "missing"),
+        "-o",
+        str(tmp_path / "p.json"),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=60)
-    assert proc.returncode == 1 and proc.stderr.strip() == f"error: {tmp_path / 'missing'}: not a folder of OpenPose JSON files"
+    assert (
+        proc.returncode == 1
+        and proc.stderr.strip() == f"error: {tmp_path / 'missing'}: not a folder of OpenPose JSON files"
+    )

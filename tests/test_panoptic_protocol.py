@@ -1,4 +1,5 @@
 """CMU Panoptic loader (data/datasets/panoptic.py) and protocols (evaluation/protocols/panoptic.py)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,11 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data.keypoints import FOOT_JOINTS, JOINT_INDEX
 from data.datasets.panoptic import DEFAULT_CAMERAS, load_panoptic_sequence
+from data.keypoints import FOOT_JOINTS, JOINT_INDEX
 from evaluation.protocols.panoptic import (
-    AP_THRESHOLDS_MM, PanopticAPEvaluator, PanopticEvaluator, PanopticPoseEvaluator, average_precision,
-    coco23_to_panoptic15, format_panoptic_report,
+    AP_THRESHOLDS_MM,
+    PanopticAPEvaluator,
+    PanopticEvaluator,
+    PanopticPoseEvaluator,
+    average_precision,
+    coco23_to_panoptic15,
+    format_panoptic_report,
 )
 
 BODIES = {"160906_band1": {168: 3, 169: 3}, "160906_band2": {139: 3, 140: 3}}
@@ -30,9 +36,25 @@ def band1(panoptic: Path):
 
 def _person(offset: float = 0.0) -> np.ndarray:
     """A plausible standing Panoptic-15 pose at x = offset (m), all joints valid: (15, 4)."""
-    xyz = np.array([[0, 0, 1.5], [0, 0.1, 1.65], [0, 0, 0.95], [0.2, 0, 1.45], [0.25, 0, 1.15], [0.3, 0, 0.9],
-                    [0.1, 0, 0.95], [0.1, 0, 0.5], [0.1, 0, 0.08], [-0.2, 0, 1.45], [-0.25, 0, 1.15],
-                    [-0.3, 0, 0.9], [-0.1, 0, 0.95], [-0.1, 0, 0.5], [-0.1, 0, 0.08]])
+    xyz = np.array(
+        [
+            [0, 0, 1.5],
+            [0, 0.1, 1.65],
+            [0, 0, 0.95],
+            [0.2, 0, 1.45],
+            [0.25, 0, 1.15],
+            [0.3, 0, 0.9],
+            [0.1, 0, 0.95],
+            [0.1, 0, 0.5],
+            [0.1, 0, 0.08],
+            [-0.2, 0, 1.45],
+            [-0.25, 0, 1.15],
+            [-0.3, 0, 0.9],
+            [-0.1, 0, 0.95],
+            [-0.1, 0, 0.5],
+            [-0.1, 0, 0.08],
+        ]
+    )
     return np.column_stack([xyz + [offset, 0, 0], np.ones(15)])
 
 
@@ -72,20 +94,21 @@ def test_duplicate_ranked_above_a_true_positive_is_a_false_positive() -> None:
     ev.update(pred, gt, scores=np.array([0.9, 0.8, 0.7]))
     assert ev.summary()["ap@50"] == pytest.approx(100.0 * 5 / 6)
     low = PanopticAPEvaluator()
-    low.update(pred, gt, scores=np.array([0.9, 0.6, 0.7]))   # duplicate last: no effect on AP
+    low.update(pred, gt, scores=np.array([0.9, 0.6, 0.7]))  # duplicate last: no effect on AP
     assert low.summary()["ap@50"] == pytest.approx(100.0)
 
 
 def test_average_precision_by_hand_with_a_miss() -> None:
     # 3 GT; ranked TP, FP (too far), TP; one GT never found: precision 1, 1/2, 2/3 -> AP = (1 + 2/3) / 3.
-    ap, recall = average_precision(np.array([3.0, 2.0, 1.0]), np.array([10.0, 90.0, 20.0]),
-                                   np.array([0, 1, 2]), num_gt=3, threshold=50)
+    ap, recall = average_precision(
+        np.array([3.0, 2.0, 1.0]), np.array([10.0, 90.0, 20.0]), np.array([0, 1, 2]), num_gt=3, threshold=50
+    )
     assert ap == pytest.approx((1 + 2 / 3) / 3) and recall == pytest.approx(2 / 3)
 
 
 def test_ground_truth_without_root_is_not_counted() -> None:
     gt = _scene(1, 2)[0]
-    gt[1, 2, 3] = 0.0                                   # mid-hip invalid: VoxelPose skips the person
+    gt[1, 2, 3] = 0.0  # mid-hip invalid: VoxelPose skips the person
     ev = PanopticAPEvaluator()
     ev.update(gt[:1], gt)
     assert ev.summary()["num_gt"] == 1 and ev.summary()["ap@25"] == pytest.approx(100.0)
@@ -108,11 +131,11 @@ def test_root_aligned_mpjpe_of_a_translated_copy_is_zero() -> None:
 def test_root_aligned_mpjpe_per_group_and_pcp_of_a_bent_arm() -> None:
     gt = _scene(1, 1)[0]
     pred = gt.copy()
-    pred[0, 5, :3] += [0.0, 0.0, 0.26]                  # left wrist 26 cm off
+    pred[0, 5, :3] += [0.0, 0.0, 0.26]  # left wrist 26 cm off
     ev = PanopticPoseEvaluator()
     ev.update(pred, gt)
     s = ev.summary()
-    assert s["root_mpjpe_wrist_mm"] == pytest.approx(130.0)   # one of the two wrists
+    assert s["root_mpjpe_wrist_mm"] == pytest.approx(130.0)  # one of the two wrists
     assert s["root_mpjpe_13_mm"] == pytest.approx(260.0 / 13)
     assert s["pcp_lower_arms"] == 50.0 and s["pcp_upper_arms"] == 100.0
 

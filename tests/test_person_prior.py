@@ -1,4 +1,5 @@
 """What the MAP learns per person before its prior: noise scale, own bone lengths; left / right swaps undone."""
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -11,8 +12,13 @@ from data.synthetic.rigs import ring_rig
 from evaluation.pcp import pcp_by_part
 from evaluation.pose3d import Pose3DEvaluator
 from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstruction
-from reconstruction.solver.person_prior import (PROPORTION_SD, bone_groups, noise_scale, person_bone_lengths,
-                                         proportion_sds)
+from reconstruction.solver.person_prior import (
+    PROPORTION_SD,
+    bone_groups,
+    noise_scale,
+    person_bone_lengths,
+    proportion_sds,
+)
 from reconstruction.solver.side_swaps import apply_swaps, find_swaps
 
 
@@ -39,7 +45,7 @@ def test_bone_groups_pair_left_and_right():
 
 def test_proportion_sds_are_what_the_table_leaves_after_stature_and_placement():
     prop = proportion_sds(BONE_MEAN, BONE_STD, ABSOLUTE_SD_M)
-    np.testing.assert_allclose(prop, np.sqrt(0.057 ** 2 - 0.053 ** 2), rtol=1e-6)
+    np.testing.assert_allclose(prop, np.sqrt(0.057**2 - 0.053**2), rtol=1e-6)
     assert abs(prop[0] - PROPORTION_SD) < 0.002
 
 
@@ -55,8 +61,14 @@ def test_the_hierarchical_prior_recovers_a_body_15_percent_larger_than_the_table
     noisy, boxes = _observe(rig, X, 3.0, seed=1)
     mle = MLEReconstruction()(noisy, boxes, rig)[..., :3]
     lengths = bone_lengths(mle)
-    mean, sd = person_bone_lengths(lengths, np.full_like(lengths, 0.005 ** 2), BONE_MEAN,
-                                   proportion_sds(BONE_MEAN, BONE_STD, ABSOLUTE_SD_M), 0.01, bone_groups())
+    mean, sd = person_bone_lengths(
+        lengths,
+        np.full_like(lengths, 0.005**2),
+        BONE_MEAN,
+        proportion_sds(BONE_MEAN, BONE_STD, ABSOLUTE_SD_M),
+        0.01,
+        bone_groups(),
+    )
     assert np.mean(np.abs(mean[0] - own)) < 0.005 < np.mean(np.abs(BONE_MEAN - own))
     assert np.all(sd[0] < BONE_STD)
     paper = MAPReconstruction(bone_prior="population", noise_scale="model")(noisy, boxes, rig)
@@ -69,7 +81,7 @@ def test_unmeasured_bones_follow_the_stature_of_the_measured_ones():
     own = BONE_MEAN * 1.1
     lengths = own[None].copy()
     variances = np.full_like(lengths, 1e-6)
-    variances[0, BONE_NAMES.index("left_forearm")] = np.inf          # not measured
+    variances[0, BONE_NAMES.index("left_forearm")] = np.inf  # not measured
     variances[0, BONE_NAMES.index("right_forearm")] = np.inf
     mean, _ = person_bone_lengths(lengths, variances, BONE_MEAN, np.full(24, 0.02), 0.01, bone_groups())
     k = BONE_NAMES.index("left_forearm")
@@ -94,7 +106,7 @@ def test_a_left_right_swap_in_one_view_is_found_and_undone():
     rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
     X = _scaled_body(1.0)[None]
     poses2d, boxes = _observe(rig, X, 1.0)
-    swapped = apply_swaps(poses2d, [(2, 0, 9, 10)])                  # wrists exchanged in view 2
+    swapped = apply_swaps(poses2d, [(2, 0, 9, 10)])  # wrists exchanged in view 2
     assert not np.shares_memory(swapped, poses2d)
     fixed = MAPReconstruction()(swapped, boxes, rig)
     broken = MAPReconstruction(fix_swaps=False)(swapped, boxes, rig)
@@ -107,21 +119,27 @@ def test_a_left_right_swap_in_one_view_is_found_and_undone():
 
 def test_pcp_counts_only_parts_whose_ground_truth_is_annotated():
     valid = np.ones((1, 23), dtype=bool)
-    valid[0, 3] = False                                              # an ear: the head joints are unknown
+    valid[0, 3] = False  # an ear: the head joints are unknown
     v15 = shelf15_validity(valid)
     assert not v15[0, 12] and not v15[0, 13] and v15[0, :12].all() and v15[0, 14]
     ev = Pose3DEvaluator()
     gt = np.concatenate([_scaled_body(1.0), np.ones((23, 1))], axis=1)[None]
     gt[0, 3] = 0.0
     pred = gt.copy()
-    pred[0, 3] = [0.1, 0.1, 1.6, 1.0]                                  # an ear placed where the GT has none
+    pred[0, 3] = [0.1, 0.1, 1.6, 1.0]  # an ear placed where the GT has none
     ev.update(pred, gt)
     assert ev.summary()["pcp_average"] == 100.0
     assert np.isnan(pcp_by_part(np.zeros((1, 10), bool), np.zeros((1, 10), bool))["average"])
 
 
 def test_rejects_bad_settings():
-    for bad in ({"bone_prior": "x"}, {"noise_scale": "x"}, {"bone_tie_sd_m": 0.0}, {"min_noise_scale": 0.0},
-                {"sigma_px": -1.0}, {"c": 0.0, "sigma_px": 0.0, "sigma_min": 0.0}):
+    for bad in (
+        {"bone_prior": "x"},
+        {"noise_scale": "x"},
+        {"bone_tie_sd_m": 0.0},
+        {"min_noise_scale": 0.0},
+        {"sigma_px": -1.0},
+        {"c": 0.0, "sigma_px": 0.0, "sigma_min": 0.0},
+    ):
         with pytest.raises(ValueError):
             MAPReconstruction(**bad)

@@ -3,8 +3,8 @@ import json
 import numpy as np
 import pytest
 
-from data.multiview import Frame, ViewDetections
 from data.formats.poses_io import read_poses3d, write_poses3d
+from data.multiview import Frame, ViewDetections
 from reconstruction.matching import OracleMatcher, assignment_from_labels
 from reconstruction.pipeline import MultiViewPipeline, gather_views
 from reconstruction.reconstructors import VanillaTriangulation
@@ -14,7 +14,7 @@ from tests.test_triangulation import ring
 def test_assignment_from_labels_groups_and_drops_single_view_people():
     labels = [np.array([4, 7, -1]), np.array([7, 2]), np.array([2, 4, 9])]
     a = assignment_from_labels(labels)
-    np.testing.assert_array_equal(a, [[-1, 1, 0], [0, -1, 1], [1, 0, -1]])   # persons 2, 4, 7; 9 dropped
+    np.testing.assert_array_equal(a, [[-1, 1, 0], [0, -1, 1], [1, 0, -1]])  # persons 2, 4, 7; 9 dropped
     with pytest.raises(ValueError, match="twice"):
         assignment_from_labels([np.array([1, 1])])
 
@@ -36,8 +36,7 @@ def test_oracle_pipeline_reconstructs_shuffled_noise_free_detections():
     for v in range(4):
         order = rng.permutation(3)
         uv = rig[v].project(X[order])
-        views.append(ViewDetections(np.concatenate([uv, np.ones((3, 23, 1))], -1), np.ones((3, 4)),
-                                    np.ones(3), order))
+        views.append(ViewDetections(np.concatenate([uv, np.ones((3, 23, 1))], -1), np.ones((3, 4)), np.ones(3), order))
     result = MultiViewPipeline(rig, OracleMatcher(), VanillaTriangulation())(Frame(0, views))
     np.testing.assert_allclose(result.poses3d[..., :3], X, atol=1e-6)
     with pytest.raises(ValueError, match="ground-truth identities"):
@@ -46,7 +45,8 @@ def test_oracle_pipeline_reconstructs_shuffled_noise_free_detections():
 
 def test_poses3d_json_round_trip(tmp_path):
     poses = np.random.default_rng(0).uniform(-1, 1, (2, 23, 4)).round(6)
-    poses[..., 3] = np.abs(poses[..., 3]); poses[0, 5] = 0
+    poses[..., 3] = np.abs(poses[..., 3])
+    poses[0, 5] = 0
     write_poses3d(tmp_path / "p.json", [(300, poses, np.array([[0, -1], [1, 2]]))], ["a", "b"])
     doc = json.loads((tmp_path / "p.json").read_text())
     assert doc["units"] == "m" and doc["frames"][0]["poses"][1]["views"] == {"a": 1, "b": 2}

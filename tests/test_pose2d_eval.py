@@ -1,5 +1,6 @@
 """eval.py checkpoint=...: 2D evaluation of a train.py checkpoint, multi-peak decoding with the global joint
 association, COCO AP/AR and poses2d.json for the multi-view pipeline."""
+
 from __future__ import annotations
 
 import json
@@ -15,11 +16,11 @@ from torch.utils.data import DataLoader
 
 import eval as eval_script
 import train
-from data.pose2d.coco_keypoints import load_coco_wholebody
 from data.formats.poses2d_io import read_poses2d
+from data.pose2d.coco_eval import evaluate_keypoints
+from data.pose2d.coco_keypoints import load_coco_wholebody
 from data.pose2d.synthetic_images import ImageOptions, generate_dataset
 from data.pose2d.topdown_dataset import TopDownDataset
-from data.pose2d.coco_eval import evaluate_keypoints
 from evaluation.pose2d_eval import associate_crops, decode_candidates
 from models.heatmap_codec import MultiModalHeatmapCodec
 
@@ -45,10 +46,20 @@ def checkpoint(tmp_path_factory) -> tuple[Path, Path]:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     with initialize_config_dir(config_dir=CONFIGS, version_base="1.3"):
-        cfg = compose("train", overrides=[
-            "model=fastpose_r18", "data.input_size=[64,64]", "data.sigma=1.0", "trainer.batch_size=4",
-            "trainer.num_workers=0", "trainer.progress=false", "trainer.max_steps=2", "trainer.threads=1",
-            f"data.root={root}"])
+        cfg = compose(
+            "train",
+            overrides=[
+                "model=fastpose_r18",
+                "data.input_size=[64,64]",
+                "data.sigma=1.0",
+                "trainer.batch_size=4",
+                "trainer.num_workers=0",
+                "trainer.progress=false",
+                "trainer.max_steps=2",
+                "trainer.threads=1",
+                f"data.root={root}",
+            ],
+        )
     train.run(cfg, run_dir)
     torch.set_num_threads(threads)
     return run_dir / "checkpoints" / "last.ckpt", root
@@ -80,7 +91,7 @@ def eval_config(overrides: list[str]):
 def test_eval_py_evaluates_a_checkpoint_and_writes_poses2d(checkpoint, tmp_path):
     ckpt, root = checkpoint
     doc = json.loads((root / "val" / "annotations.json").read_text())
-    for n, image in enumerate(doc["images"]):                  # two cameras of one frame
+    for n, image in enumerate(doc["images"]):  # two cameras of one frame
         image.update(frame=300, camera=f"cam{n}")
     ann = tmp_path / "val_views.json"
     ann.write_text(json.dumps(doc))
@@ -88,7 +99,7 @@ def test_eval_py_evaluates_a_checkpoint_and_writes_poses2d(checkpoint, tmp_path)
     metrics = eval_script.run_pose2d(cfg, tmp_path)
     assert set(metrics) == {f"{m}_{s}" for m in ("AP", "AR") for s in ("all", "body", "foot")}
     results = json.loads((tmp_path / "keypoints_results.json").read_text())
-    assert len(results) == len(doc["annotations"])               # one per ground-truth box
+    assert len(results) == len(doc["annotations"])  # one per ground-truth box
     poses = read_poses2d(tmp_path / "poses2d.json", ["cam0", "cam1"])  # what dataset=files reads
     assert list(poses) == [300]
     per_camera = [sum(a["image_id"] == img["id"] for a in doc["annotations"]) for img in doc["images"]]
@@ -111,10 +122,20 @@ def test_eval_py_single_decoding_matches_train_validation(checkpoint, tmp_path):
 
 def test_eval_py_command_line_and_a_missing_checkpoint(checkpoint, tmp_path):
     ckpt, _ = checkpoint
-    ok = subprocess.run([sys.executable, "eval.py", f"checkpoint={ckpt}", f"hydra.run.dir={tmp_path / 'ok'}"],
-                        capture_output=True, text=True, cwd=REPO, timeout=120)
+    ok = subprocess.run(
+        [sys.executable, "eval.py", f"checkpoint={ckpt}", f"hydra.run.dir={tmp_path / 'ok'}"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
     assert ok.returncode == 0, ok.stderr[-3000:]
     assert "AP_foot" in ok.stdout and (tmp_path / "ok" / "poses2d.json").is_file()
-    bad = subprocess.run([sys.executable, "eval.py", f"checkpoint={tmp_path / 'absent.ckpt'}",
-                          f"hydra.run.dir={tmp_path / 'bad'}"], capture_output=True, text=True, cwd=REPO, timeout=120)
+    bad = subprocess.run(
+        [sys.executable, "eval.py", f"checkpoint={tmp_path / 'absent.ckpt'}", f"hydra.run.dir={tmp_path / 'bad'}"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
     assert bad.returncode == 1 and bad.stderr.strip() == f"error: {tmp_path / 'absent.ckpt'}: no such checkpoint"

@@ -7,6 +7,7 @@ compose API (not run); ``python -m X`` commands must import and answer ``--help`
 writing into a temporary folder. Hydra keys and group choices named in the prose (`dataset.drop_feet=true`,
 `matching=feet_paper`) must exist too.
 """
+
 from __future__ import annotations
 
 import os
@@ -27,7 +28,7 @@ from tests.conftest import require_data_dir
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
-DOCS = (README, *sorted((REPO / "docs").glob("*.md")))   # the front page and the reference pages it links
+DOCS = (README, *sorted((REPO / "docs").glob("*.md")))  # the front page and the reference pages it links
 CONFIGS = REPO / "configs"
 PLACEHOLDER = "PLACEHOLDER"  # stands for <run dir>, <date_time>, <.pth>, ... and `...`
 RUN_TIMEOUT_S = 120  # generous: the first run after an install compiles numba's kernels (15-35 s)
@@ -120,8 +121,11 @@ def _page_commands(page: Path) -> tuple[ReadmeCommand, ...]:
             continue
         full, pending = (pending + code.strip()).strip(), ""
         commands += [ReadmeCommand(pending_line, part, "block", doc) for part in _python_parts(full)]
-    commands += [ReadmeCommand(line, span, "inline", doc) for line, span in _page_spans(page)
-                 if re.match(r"(python3?|torchrun)\s", span + " ")]
+    commands += [
+        ReadmeCommand(line, span, "inline", doc)
+        for line, span in _page_spans(page)
+        if re.match(r"(python3?|torchrun)\s", span + " ")
+    ]
     return tuple(sorted(set(commands), key=lambda c: (c.line, c.text)))
 
 
@@ -141,7 +145,7 @@ def _script_and_args(command: ReadmeCommand) -> tuple[str, list[str]]:
     words = _tokens(command)
     if words[0] == "torchrun":
         scripts = [i for i, w in enumerate(words) if w.endswith(".py")]
-        return (words[scripts[0]], words[scripts[0] + 1:]) if scripts else ("other", words)
+        return (words[scripts[0]], words[scripts[0] + 1 :]) if scripts else ("other", words)
     if len(words) >= 3 and words[1] == "-m":
         return f"-m {words[2]}", words[3:]
     if len(words) >= 2 and words[1].endswith(".py"):
@@ -166,8 +170,10 @@ def test_readme_commands_are_found_and_every_script_exists() -> None:
     texts = [c.text for c in commands]
     assert len(_hydra_commands()) >= 20 and len(_module_names()) >= 8, texts
     assert "python eval.py dataset.noise_px=0 dataset.occlusion=false" in texts
-    joined = ("python eval.py dataset=files dataset.cameras=examples/own_rig/cameras.json "
-              "dataset.poses2d=examples/own_rig/poses2d.json")
+    joined = (
+        "python eval.py dataset=files dataset.cameras=examples/own_rig/cameras.json "
+        "dataset.poses2d=examples/own_rig/poses2d.json"
+    )
     assert joined in texts, "continuation lines are not joined"
     assert any(c.where == "block" and c.text.startswith("python -m data.geometry.check_rig") for c in commands)
     for command in commands:
@@ -194,20 +200,25 @@ def _expand_alternatives(overrides: list[str]) -> list[list[str]]:
     for i, override in enumerate(overrides):
         key, _, value = override.partition("=")
         if "|" in value and not value.startswith(("'", '"')):
-            return [alt for choice in value.split("|")
-                    for alt in _expand_alternatives([*overrides[:i], f"{key}={choice}", *overrides[i + 1:]])]
+            return [
+                alt
+                for choice in value.split("|")
+                for alt in _expand_alternatives([*overrides[:i], f"{key}={choice}", *overrides[i + 1 :]])
+            ]
     return [overrides]
 
 
 def _sweep_variants(overrides: list[str]) -> list[list[str]]:
     """Plain override lists for a -m command: each choice of each sweep override, the others at their first."""
     parsed = OverridesParser.create().parse_overrides(overrides)
-    choices = [[f"{o.get_key_element()}={v}" for v in o.sweep_string_iterator()] if o.is_sweep_override()
-               else [o.input_line] for o in parsed]
+    choices = [
+        [f"{o.get_key_element()}={v}" for v in o.sweep_string_iterator()] if o.is_sweep_override() else [o.input_line]
+        for o in parsed
+    ]
     firsts = [c[0] for c in choices]
     variants = [firsts]
     for i, options in enumerate(choices):
-        variants += [[*firsts[:i], option, *firsts[i + 1:]] for option in options[1:]]
+        variants += [[*firsts[:i], option, *firsts[i + 1 :]] for option in options[1:]]
     return variants
 
 
@@ -231,8 +242,9 @@ def _compose_problems(command: ReadmeCommand) -> list[str]:
         try:
             cfg = _compose(config_name, variant, hydra_config=multirun)
         except Exception as error:  # noqa: BLE001 - any composition error is a README/code mismatch
-            problems.append(f"{variant} does not compose with configs/{config_name}.yaml: "
-                            f"{type(error).__name__}: {error}")
+            problems.append(
+                f"{variant} does not compose with configs/{config_name}.yaml: {type(error).__name__}: {error}"
+            )
             continue
         if multirun:  # the sweep an experiment defines (hydra.sweeper.params): each of its choices
             params = cfg.hydra.sweeper.get("params") or {}
@@ -241,8 +253,9 @@ def _compose_problems(command: ReadmeCommand) -> list[str]:
                 try:
                     _compose(config_name, [*variant, *sweep_variant])
                 except Exception as error:  # noqa: BLE001
-                    problems.append(f"its sweep {swept} does not compose ({sweep_variant}): "
-                                    f"{type(error).__name__}: {error}")
+                    problems.append(
+                        f"its sweep {swept} does not compose ({sweep_variant}): {type(error).__name__}: {error}"
+                    )
     return problems
 
 
@@ -253,13 +266,16 @@ def test_hydra_command_overrides_compose(command: ReadmeCommand) -> None:
     assert not problems, f"{command}\n" + "\n".join(problems)
 
 
-@pytest.mark.parametrize("text", [
-    "python eval.py dataset.no_such_key=1",
-    "python eval.py matching=no_such_matcher",
-    "python eval.py reconstruction=... no_such_group=<x>",
-    "python train.py -m loss.mu=0,0.5 trainer.no_such_key=1,2",
-    "python train.py resume=<run dir>/last.ckpt trainer.epoch=200",
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "python eval.py dataset.no_such_key=1",
+        "python eval.py matching=no_such_matcher",
+        "python eval.py reconstruction=... no_such_group=<x>",
+        "python train.py -m loss.mu=0,0.5 trainer.no_such_key=1,2",
+        "python train.py resume=<run dir>/last.ckpt trainer.epoch=200",
+    ],
+)
 def test_the_compose_check_catches_a_missing_key(text: str) -> None:
     """The check is not vacuous: a key or group that does not exist is reported."""
     assert _compose_problems(ReadmeCommand(0, text, "block"))
@@ -268,8 +284,14 @@ def test_the_compose_check_catches_a_missing_key(text: str) -> None:
 def _run(words: list[str], timeout: float = RUN_TIMEOUT_S) -> tuple[subprocess.CompletedProcess, float]:
     """The command run from the repository root with this interpreter, and its wall time in seconds."""
     start = time.perf_counter()
-    proc = subprocess.run([sys.executable, *words], cwd=REPO, capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    proc = subprocess.run(
+        [sys.executable, *words],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
     return proc, time.perf_counter() - start
 
 
@@ -304,11 +326,18 @@ SHARED = "../shared/data"
 FAST_COMMANDS = [
     ("python eval.py dataset.noise_px=0 dataset.occlusion=false", ["progress=false", "hydra.run.dir={tmp}"], False),
     ("python eval.py progress=false", ["hydra.run.dir={tmp}"], False),
-    ("python eval.py dataset=files dataset.cameras=examples/own_rig/cameras.json "
-     "dataset.poses2d=examples/own_rig/poses2d.json", ["progress=false", "hydra.run.dir={tmp}"], False),
+    (
+        "python eval.py dataset=files dataset.cameras=examples/own_rig/cameras.json "
+        "dataset.poses2d=examples/own_rig/poses2d.json",
+        ["progress=false", "hydra.run.dir={tmp}"],
+        False,
+    ),
     ("python eval.py dataset=panoptic", ["progress=false", "hydra.run.dir={tmp}"], True),
-    ("python eval.py dataset.rig=../shared/data/wildtrack dataset.rig_format=wildtrack "
-     "dataset.area='[-3,9,-9,27]'", ["progress=false", "hydra.run.dir={tmp}"], True),
+    (
+        "python eval.py dataset.rig=../shared/data/wildtrack dataset.rig_format=wildtrack dataset.area='[-3,9,-9,27]'",
+        ["progress=false", "hydra.run.dir={tmp}"],
+        True,
+    ),
     ("python eval.py dataset=shelf dataset.root=../shared/data/shelf", ["progress=false", "hydra.run.dir={tmp}"], True),
     ("python -m data.geometry.check_rig cameras.json poses2d.json", [], False),
 ]
@@ -340,7 +369,8 @@ def test_readme_reconstruction_sweeps_and_their_gather_sweep_command_run(tmp_pat
     gather = _readme_command(
         "python -m benchmarks.gather_sweep multirun/reconstruction_ablation/<a> multirun/prior_weight/<b> "
         "--metrics mpjpe_mm,pcp_average,reprojection_mean_px,reprojection_min_px,reprojection_max_px,"
-        "reprojection_var_px2,reconstruction_ms")
+        "reprojection_var_px2,reconstruction_ms"
+    )
     for experiment in ("reconstruction_ablation", "prior_weight"):
         sweep = _readme_command(f"python eval.py -m +experiment={experiment}")
         words = [*shlex.split(sweep.text)[1:], "progress=false", f"hydra.sweep.dir={tmp_path / experiment}"]
@@ -350,13 +380,17 @@ def test_readme_reconstruction_sweeps_and_their_gather_sweep_command_run(tmp_pat
     proc, _ = _run(words[1:])
     assert proc.returncode == 0, f"{gather}\nexited {proc.returncode}:\n{proc.stderr[-3000:]}"
     metrics = words[words.index("--metrics") + 1].split(",")
-    rows = [[cell.strip() for cell in row.strip().strip("|").split("|")] for row in proc.stdout.splitlines()
-            if row.startswith("|") and not row.startswith("|-")]
+    rows = [
+        [cell.strip() for cell in row.strip().strip("|").split("|")]
+        for row in proc.stdout.splitlines()
+        if row.startswith("|") and not row.startswith("|-")
+    ]
     runs = len(list(tmp_path.glob("*/*/metrics.json")))
     assert runs > 0 and len(rows) == 1 + runs, f"{gather}\nnot one row per run of the two sweeps:\n{proc.stdout}"
     for column, metric in enumerate(metrics, start=len(rows[0]) - len(metrics)):
         assert any(row[column] != "-" for row in rows[1:]), (
-            f"{gather}\nmetric {metric!r} is in no run's metrics.json:\n{proc.stdout}")
+            f"{gather}\nmetric {metric!r} is in no run's metrics.json:\n{proc.stdout}"
+        )
 
 
 CONFIG_GROUPS = sorted(p.name for p in CONFIGS.iterdir() if p.is_dir())
@@ -446,6 +480,9 @@ def test_config_keys_named_in_readme_prose_exist() -> None:
         else:
             ok = key in known or _is_python_object(key)
         if not ok:
-            missing.append(f"README.md or docs, line {line}: `{span}`: {mention!r} is neither a config key nor a config choice"
-                           if not choice else f"README.md or docs, line {line}: `{span}`: no configs/{key}/{choice}.yaml")
+            missing.append(
+                f"README.md or docs, line {line}: `{span}`: {mention!r} is neither a config key nor a config choice"
+                if not choice
+                else f"README.md or docs, line {line}: `{span}`: no configs/{key}/{choice}.yaml"
+            )
     assert not missing, "\n".join(missing)

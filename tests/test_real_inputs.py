@@ -1,4 +1,5 @@
 """The dev-set benchmark and the sigma-model fit run, and say what the issue asks of the default."""
+
 from benchmarks.fit_sigma_model import main as fit_main
 from benchmarks.real_inputs import main as real_main
 

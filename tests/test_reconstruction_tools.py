@@ -1,4 +1,5 @@
 """Reprojection statistics of the paper's Table 3, and the reconstruction ablation sweep."""
+
 import subprocess
 import sys
 import time
@@ -39,8 +40,16 @@ def test_frame_errors_are_zero_on_noise_free_input_against_detections_and_ground
 
 def test_reconstruction_ablation_sweep_runs_every_stage(tmp_path):
     sweep = tmp_path / "sweep"
-    cmd = [sys.executable, "eval.py", "-m", "+experiment=reconstruction_ablation", "dataset.num_frames=1",
-           "dataset.num_persons=4", "progress=false", f"hydra.sweep.dir={sweep}"]
+    cmd = [
+        sys.executable,
+        "eval.py",
+        "-m",
+        "+experiment=reconstruction_ablation",
+        "dataset.num_frames=1",
+        "dataset.num_persons=4",
+        "progress=false",
+        f"hydra.sweep.dir={sweep}",
+    ]
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=REPO, timeout=60)
     assert time.perf_counter() - t0 < 20
@@ -54,6 +63,7 @@ def test_reconstruction_ablation_sweep_runs_every_stage(tmp_path):
 def test_benchmark_left_right_swap_swaps_the_chosen_detections_only():
     from benchmarks.reconstruction import swap_left_right
     from data.keypoints import JOINT_INDEX
+
     rng = np.random.default_rng(0)
     poses2d = rng.normal(size=(3, 4, 23, 3))
     before = poses2d.copy()
@@ -61,5 +71,5 @@ def test_benchmark_left_right_swap_swaps_the_chosen_detections_only():
     swapped = swap_left_right(poses2d, 1.0, rng)
     left, right = JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]
     np.testing.assert_array_equal(swapped[..., left, :], poses2d[..., right, :])
-    np.testing.assert_array_equal(swapped[..., 0, :], poses2d[..., 0, :])           # the nose stays
+    np.testing.assert_array_equal(swapped[..., 0, :], poses2d[..., 0, :])  # the nose stays
     np.testing.assert_array_equal(poses2d, before)

@@ -1,6 +1,7 @@
 """Pictures over time: the HTML viewer embeds every frame's poses and ids to the millimetre and needs no
 network, the trajectories PNG has its size and the tracks' colours, the command line reads a
 poses3d.json back, and eval.py with vis_sequence=true writes both pictures."""
+
 from __future__ import annotations
 
 import json
@@ -77,7 +78,7 @@ def test_the_page_embeds_every_frame_with_its_ids_to_a_millimetre_and_needs_no_n
     assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:)?//""", text, re.I)
     assert "http://" not in text and "https://" not in text
     assert "<title>walk &lt;test&gt;</title>" in text
-    for root, (_, poses, _) in zip(data["frames"], frames):   # the mid-hip, on the walking line
+    for root, (_, poses, _) in zip(data["frames"], frames):  # the mid-hip, on the walking line
         assert np.allclose(root["roots"], pose_roots(poses), atol=1e-3)
 
 
@@ -86,7 +87,7 @@ def test_a_camera_named_like_a_closing_script_tag_cannot_break_the_page(tmp_path
     cams = [type(c)("</script><b>", c.K, c.dist, c.R, c.t, c.size) if i == 0 else c for i, c in enumerate(rig)]
     path = write_sequence_html(tmp_path / "seq.html", _walkers(2), type(rig).from_cameras(cams))
     assert _page_data(path)["cameras"][0]["name"] == "</script><b>"
-    assert path.read_text().count("</script>") == 2      # the data element's and the code's
+    assert path.read_text().count("</script>") == 2  # the data element's and the code's
 
 
 def test_without_tracking_ids_are_indices_in_the_frame_and_the_page_says_so(tmp_path):
@@ -104,7 +105,7 @@ def test_a_sequence_above_the_size_cap_is_shown_every_kth_frame_below_it(tmp_pat
     data = _page_data(capped)
     assert capped.stat().st_size <= cap_mb * 1e6
     assert data["every"] >= 3 and data["num_frames"] == 60 and f"one frame in {data['every']}" in data["note"]
-    _assert_frames_equal(data, frames[::data["every"]])
+    _assert_frames_equal(data, frames[:: data["every"]])
 
 
 def test_camera_frustum_corners_project_to_the_image_corners_in_front_of_the_camera():
@@ -120,7 +121,7 @@ def test_roots_are_the_mid_hip_else_the_mean_of_the_valid_trunk_joints():
     poses = np.zeros((3, 23, 4))
     poses[:, [11, 12, 5, 6], :3] = [[0, 0, 1], [2, 0, 1], [0, 0, 3], [2, 2, 3]]
     poses[:, [11, 12, 5, 6], 3] = 1.0
-    poses[1, 12, 3] = 0.0           # one hip missing: the left hip and the shoulders
+    poses[1, 12, 3] = 0.0  # one hip missing: the left hip and the shoulders
     poses[2, [5, 6, 11, 12], 3] = 0.0
     roots = pose_roots(poses)
     assert np.allclose(roots[0], [1, 0, 1]) and np.allclose(roots[1], [2 / 3, 2 / 3, 7 / 3])
@@ -149,8 +150,7 @@ def test_the_trajectories_png_has_its_size_and_each_tracks_colour(tmp_path):
 def test_the_command_line_reads_a_written_poses3d_back_with_its_ids(tmp_path):
     frames = _walkers(5)
     rig = ring_rig(3, 6.0, 2.5)
-    write_poses3d(tmp_path / "poses3d.json", ((f, p, np.full((len(p), 3), -1), ids) for f, p, ids in frames),
-                  rig.names)
+    write_poses3d(tmp_path / "poses3d.json", ((f, p, np.full((len(p), 3), -1), ids) for f, p, ids in frames), rig.names)
     read = read_poses3d_frames(tmp_path / "poses3d.json")
     assert [ids.tolist() for _, _, ids in read] == [ids.tolist() for _, _, ids in frames]
     assert sorted(read_poses3d(tmp_path / "poses3d.json")) == [f for f, _, _ in frames]
@@ -181,7 +181,9 @@ def test_without_tracking_the_trajectories_are_dots_not_paths_joining_different_
     frames = _walkers(12)
     fig_tracked = trajectories_figure(frames, ring_rig(4, 6.0, 2.5))
     fig_untracked = trajectories_figure([(f, p, None) for f, p, _ in frames], ring_rig(4, 6.0, 2.5))
-    styles = [{line.get_linestyle() for line in fig.axes[0].lines if line.get_marker() in ("None", ".")}
-              for fig in (fig_tracked, fig_untracked)]
+    styles = [
+        {line.get_linestyle() for line in fig.axes[0].lines if line.get_marker() in ("None", ".")}
+        for fig in (fig_tracked, fig_untracked)
+    ]
     assert styles == [{"-"}, {"None"}]
     assert "tracking off" in fig_untracked.axes[0].get_title()

@@ -1,4 +1,5 @@
 """The Shelf oracle bound (benchmarks/shelf_bound.py): exact views give the truth; the oracle never loses."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,7 +22,7 @@ def _scene(views: int = 4):
 def test_every_view_subset_of_exact_detections_triangulates_the_truth():
     rig, X, keypoints = _scene(4)
     poses = subset_poses(keypoints, rig)
-    assert poses.shape == (11, 15, 3)          # C(4,2) + C(4,3) + C(4,4) subsets
+    assert poses.shape == (11, 15, 3)  # C(4,2) + C(4,3) + C(4,4) subsets
     np.testing.assert_allclose(poses, np.broadcast_to(with_mid_hip(coco23_to_shelf14(X)), poses.shape), atol=1e-6)
 
 
@@ -49,9 +50,11 @@ def test_nearest_detection_is_the_one_on_the_projected_truth():
     gt = with_mid_hip(coco23_to_shelf14(X))
     decoy = keypoints.copy()
     decoy[..., :2] += 200.0
-    views = [ViewDetections(np.stack([decoy[v], keypoints[v]]), np.zeros((2, 4)), np.ones(2), -np.ones(2))
-             for v in range(3)]
+    views = [
+        ViewDetections(np.stack([decoy[v], keypoints[v]]), np.zeros((2, 4)), np.ones(2), -np.ones(2)) for v in range(3)
+    ]
     chosen = nearest_detections(views, rig, gt, max_px=40.0)
     np.testing.assert_allclose(chosen, keypoints)
-    assert not nearest_detections([ViewDetections(decoy[v][None], np.zeros((1, 4)), np.ones(1), -np.ones(1))
-                                   for v in range(3)], rig, gt, 40.0).any()
+    assert not nearest_detections(
+        [ViewDetections(decoy[v][None], np.zeros((1, 4)), np.ones(1), -np.ones(1)) for v in range(3)], rig, gt, 40.0
+    ).any()

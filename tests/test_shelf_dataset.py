@@ -1,4 +1,5 @@
 """The Shelf loader (data/datasets/shelf.py), its ShelfProtocol and eval.py on Shelf frames."""
+
 from __future__ import annotations
 
 import json
@@ -9,19 +10,20 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 import eval as eval_script
+from data.datasets.shelf import load_shelf as load_shelf_sequence
+from data.formats.poses2d_io import write_poses2d
 from data.keypoints import COCO23_TO_SHELF14_LIMBS, SHELF_HEAD_BLEND, SHELF_HEAD_TOP_NOSE_SCALE
 from data.multiview import Frame
-from data.formats.poses2d_io import write_poses2d
-from data.datasets.shelf import load_shelf as load_shelf_sequence
 from evaluation.protocols import attach_protocols
-from models.paf_grouping import group_view
 from evaluation.protocols.shelf import AVERAGED_ACTOR_IDS, ShelfProtocol
+from models.paf_grouping import group_view
 from reconstruction.pipeline import FrameResult
 
 
 def load_shelf(*args, **kwargs):
     """The Shelf loader as configs/dataset/shelf.yaml builds it (PAF grouper given), protocols attached as eval.py does."""
     return attach_protocols(load_shelf_sequence(*args, grouper=group_view, **kwargs))
+
 
 CONFIGS = str(Path(__file__).resolve().parents[1] / "configs")
 
@@ -96,7 +98,7 @@ def test_track_ids_of_the_predictions_actors_take_give_the_identity_summary(five
     protocol = load_shelf(five_frames.meta["root"], frames="0:10", baseline=None).protocols[0]
     for k, (frame, gt) in enumerate(sorted(protocol.gt.items())):
         poses = np.array([_coco23_from_shelf15(p) for p in gt.values()]).reshape(-1, 23, 4)
-        ids = np.arange(len(poses)) + (100 if k >= 6 else 0)        # every actor switches id once, at frame 6
+        ids = np.arange(len(poses)) + (100 if k >= 6 else 0)  # every actor switches id once, at frame 6
         protocol.update(Frame(frame, []), FrameResult(frame, poses, np.zeros((len(poses), 5), int), ids))
     tracking = protocol.summary()["tracking"]
     actors = sum(a in AVERAGED_ACTOR_IDS for a in protocol.gt[300])
@@ -113,7 +115,7 @@ def test_a_frame_without_predictions_is_wrong_when_strict_and_skipped_when_lenie
     strict, lenient = summary["ours"]["strict"], summary["ours"]["lenient"]
     assert strict["actors"][1]["frames"] == 2 and strict["actors"][1]["average"] == 50.0
     assert lenient["actors"][1]["frames"] == 1 and lenient["actors"][1]["average"] == 100.0
-    assert summary["ours"]["protocol"]["averaged_actors"] == [1, 3]    # actor 2 is not in frames 300-301
+    assert summary["ours"]["protocol"]["averaged_actors"] == [1, 3]  # actor 2 is not in frames 300-301
 
 
 def test_write_saves_the_scored_shelf_predictions(shelf_root: Path, tmp_path: Path) -> None:
@@ -152,8 +154,16 @@ def test_bad_input_names_the_file(shelf_root: Path, tmp_path: Path) -> None:
 
 def test_eval_on_ten_frames_with_feet_matching_prints_the_shelf_table(shelf_root: Path, tmp_path: Path, capsys) -> None:
     with initialize_config_dir(config_dir=CONFIGS, version_base="1.3"):
-        cfg = compose(config_name="eval", overrides=["progress=false", "dataset=shelf", f"dataset.root={shelf_root}",
-                                                     "dataset.frames=0:10", "matching=feet"])
+        cfg = compose(
+            config_name="eval",
+            overrides=[
+                "progress=false",
+                "dataset=shelf",
+                f"dataset.root={shelf_root}",
+                "dataset.frames=0:10",
+                "matching=feet",
+            ],
+        )
     report = eval_script.run(cfg, tmp_path)
     ours = report.protocols["shelf"]["ours"]
     assert ours["protocol"]["frames"] == 10 and ours["strict"]["average"]["average"] > 80.0
@@ -162,5 +172,5 @@ def test_eval_on_ten_frames_with_feet_matching_prints_the_shelf_table(shelf_root
     out = capsys.readouterr().out
     assert "Shelf protocol: frames 300-309 (10)" in out and "4D Association stored output, same code" in out
     assert "| grouping" in out and "ms / frame" in out
-    scored = json.loads((tmp_path / "shelf_predictions.json").read_text())    # eval.py calls protocol.write
+    scored = json.loads((tmp_path / "shelf_predictions.json").read_text())  # eval.py calls protocol.write
     assert [f["frame"] for f in scored["frames"]] == list(range(300, 310))

@@ -1,4 +1,5 @@
 """The Shelf PCP protocol (evaluation/protocols/shelf.py) on hand-built cases and the real Shelf files."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,16 +9,38 @@ import pytest
 
 from data.formats.fourd_skeletons import load_4dassoc_skeletons
 from evaluation.pcp import PART_NAMES
-from evaluation.protocols.shelf import (ShelfEvaluator, coco23_predictions_to_shelf15, format_table,
-                                       load_actors_gt, main, score_4dassoc_output, skel19_to_shelf15)
+from evaluation.protocols.shelf import (
+    ShelfEvaluator,
+    coco23_predictions_to_shelf15,
+    format_table,
+    load_actors_gt,
+    main,
+    score_4dassoc_output,
+    skel19_to_shelf15,
+)
 
 
 def _person(offset_x: float) -> np.ndarray:
     """A standing Shelf-14 + mid-hip person facing +x, valid column 1: (15, 4)."""
-    pts = np.array([
-        [0, -.1, 0], [0, -.1, .45], [0, -.1, .9], [0, .1, .9], [0, .1, .45], [0, .1, 0],
-        [0, -.25, .9], [0, -.25, 1.15], [0, -.2, 1.4], [0, .2, 1.4], [0, .25, 1.15], [0, .25, .9],
-        [0, 0, 1.5], [0, 0, 1.75], [0, 0, .9]]) + [offset_x, 0, 0]
+    pts = np.array(
+        [
+            [0, -0.1, 0],
+            [0, -0.1, 0.45],
+            [0, -0.1, 0.9],
+            [0, 0.1, 0.9],
+            [0, 0.1, 0.45],
+            [0, 0.1, 0],
+            [0, -0.25, 0.9],
+            [0, -0.25, 1.15],
+            [0, -0.2, 1.4],
+            [0, 0.2, 1.4],
+            [0, 0.25, 1.15],
+            [0, 0.25, 0.9],
+            [0, 0, 1.5],
+            [0, 0, 1.75],
+            [0, 0, 0.9],
+        ]
+    ) + [offset_x, 0, 0]
     return np.concatenate([pts, np.ones((15, 1))], axis=1)
 
 
@@ -107,8 +130,9 @@ def test_fourda_stored_output_reproduces_published_average(fourda_summary: dict)
     assert fourda_summary["protocol"]["averaged_actors"] == [1, 2, 3]
 
 
-def test_format_table_and_cli(fourda_summary: dict, shelf_files: tuple[Path, Path],
-                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_format_table_and_cli(
+    fourda_summary: dict, shelf_files: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     table = format_table(fourda_summary, "4DA")
     assert "strict" in table and "lenient" in table and "actor 4*" in table and "96.27" in table
     assert all(name in table for name in PART_NAMES)

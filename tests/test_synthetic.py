@@ -1,4 +1,5 @@
 """The synthetic crowd generator: bodies, placement, cameras, occlusion and detections."""
+
 from __future__ import annotations
 
 import math
@@ -6,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from data.geometry.camera import Rig
 from data.keypoints import BONES, LEFT_FOOT, RIGHT_FOOT
 from data.synthetic import SyntheticConfig, generate_sequence
 from data.synthetic.body import mean_body, pose_joints, sample_body, stride_length
@@ -13,7 +15,6 @@ from data.synthetic.capsules import body_capsules, capsule_radii, occluded_joint
 from data.synthetic.observe import observe_view
 from data.synthetic.rigs import look_at_camera, ring_rig
 from data.synthetic.scene import place_persons, scene_area, simulate_scene
-from data.geometry.camera import Rig
 
 PHASES = np.linspace(0.0, 1.0, 41)[:-1]
 HEAD = [0, 1, 2, 3, 4]
@@ -34,13 +35,18 @@ def _all_poses(body, theta: float = 0.3, x: float = 1.0, y: float = -2.0):
 def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance of points (S, 3) to segments [a, b] (K, 3) or (3,): (S, K) or (S,)."""
     ab = b - a
-    t = np.clip(np.einsum("s...i,...i->s...", p[:, None] - a if ab.ndim == 2 else p - a, ab)
-                / np.maximum(np.sum(ab * ab, axis=-1), 1e-18), 0.0, 1.0)
+    t = np.clip(
+        np.einsum("s...i,...i->s...", p[:, None] - a if ab.ndim == 2 else p - a, ab)
+        / np.maximum(np.sum(ab * ab, axis=-1), 1e-18),
+        0.0,
+        1.0,
+    )
     closest = a + t[..., None] * ab
     return np.linalg.norm((p[:, None] if ab.ndim == 2 else p) - closest, axis=-1)
 
 
 # --- determinism ------------------------------------------------------------------------------------
+
 
 def _flatten(seq) -> list[np.ndarray]:
     out = []
@@ -64,9 +70,15 @@ def test_same_seed_same_arrays_different_seed_different():
 # --- bodies -----------------------------------------------------------------------------------------
 
 BONE_RANGES = {  # metres, generous adult ranges
-    "shoulders": (0.28, 0.46), "hips": (0.14, 0.26), "left_torso": (0.38, 0.62),
-    "left_upper_arm": (0.26, 0.40), "left_forearm": (0.20, 0.31), "left_thigh": (0.34, 0.52),
-    "left_shin": (0.34, 0.52), "left_ankle_heel": (0.05, 0.12), "left_ankle_big_toe": (0.15, 0.28),
+    "shoulders": (0.28, 0.46),
+    "hips": (0.14, 0.26),
+    "left_torso": (0.38, 0.62),
+    "left_upper_arm": (0.26, 0.40),
+    "left_forearm": (0.20, 0.31),
+    "left_thigh": (0.34, 0.52),
+    "left_shin": (0.34, 0.52),
+    "left_ankle_heel": (0.05, 0.12),
+    "left_ankle_big_toe": (0.15, 0.28),
 }
 
 
@@ -111,16 +123,17 @@ def test_left_is_left_of_heading_and_arms_swing_opposite_to_legs():
         for label, j in _all_poses(mean_body(), theta=theta):
             for a, b in ((5, 6), (11, 12), (1, 2), (3, 4), (19, 22)):
                 assert (j[a, :2] - j[b, :2]) @ left > 0.02, (label, a, b)
-            assert (j[0, :2] - (j[5, :2] + j[6, :2]) / 2) @ forward > 0.03, label   # nose in front
-            assert (j[17, :2] - j[19, :2]) @ forward > 0.1, label                   # toes ahead of heel
+            assert (j[0, :2] - (j[5, :2] + j[6, :2]) / 2) @ forward > 0.03, label  # nose in front
+            assert (j[17, :2] - j[19, :2]) @ forward > 0.1, label  # toes ahead of heel
             if label != "standing":
-                knees = (j[13, :2] - j[14, :2]) @ forward    # the thighs lead, the feet lag
+                knees = (j[13, :2] - j[14, :2]) @ forward  # the thighs lead, the feet lag
                 hands = (j[9, :2] - j[10, :2]) @ forward
                 if abs(knees) > 0.1:
                     assert knees * hands < 0, label
 
 
 # --- placement and motion ---------------------------------------------------------------------------
+
 
 def test_placement_respects_spacing_and_density():
     cfg = SyntheticConfig(num_persons=40, density=1.2, min_spacing_m=0.6)
@@ -138,7 +151,7 @@ def test_placement_respects_spacing_and_density():
         assert d[np.triu_indices(30, 1)].min() >= 0.6 - 1e-9
     area = scene.area
     assert np.all((scene.positions[..., 0] >= area[0]) & (scene.positions[..., 0] <= area[1]))
-    moved = np.linalg.norm(np.diff(scene.positions, axis=0), axis=-1)          # (F-1, P)
+    moved = np.linalg.norm(np.diff(scene.positions, axis=0), axis=-1)  # (F-1, P)
     walkers = scene.walking[0]
     assert walkers.sum() == 15
     assert np.all(moved[:, ~walkers] == 0)
@@ -162,6 +175,7 @@ def test_walkers_move_at_walking_speed_and_turn_at_the_border():
 
 # --- cameras and projection -------------------------------------------------------------------------
 
+
 def test_ring_rig_looks_at_the_centre_with_image_y_down():
     rig = ring_rig(4, 6.0, 2.0, (1.0, -1.0, 1.0), (640, 480), 500.0)
     for cam in rig:
@@ -170,7 +184,7 @@ def test_ring_rig_looks_at_the_centre_with_image_y_down():
         assert cam.center[2] == pytest.approx(2.0)
         uv = cam.project(np.array([[1.0, -1.0, 1.0], [1.0, -1.0, 1.5]]))
         assert np.allclose(uv[0], [320, 240])
-        assert uv[1, 1] < uv[0, 1] - 10    # higher in the world = higher in the image
+        assert uv[1, 1] < uv[0, 1] - 10  # higher in the world = higher in the image
         # A point on the camera's right (forward x up) appears right of the centre.
         forward = cam.R[2]
         right = np.cross(forward, [0, 0, 1])
@@ -198,8 +212,17 @@ def test_noise_free_keypoints_are_exact_projections():
 
 
 def test_pixel_noise_grows_with_depth_and_for_hidden_joints():
-    seq = generate_sequence(SyntheticConfig(noise_px=2.0, noise_ref_depth_m=5.0, occluded_noise_scale=3.0,
-                                            occluded_drop_prob=0.0, num_persons=20, density=1.0, num_frames=6))
+    seq = generate_sequence(
+        SyntheticConfig(
+            noise_px=2.0,
+            noise_ref_depth_m=5.0,
+            occluded_noise_scale=3.0,
+            occluded_drop_prob=0.0,
+            num_persons=20,
+            density=1.0,
+            num_frames=6,
+        )
+    )
     ratios = {False: [], True: []}
     for fr in seq.frames:
         gt = {int(i): p[:, :3] for i, p in zip(fr.gt_ids, fr.gt_poses)}
@@ -219,15 +242,16 @@ def test_pixel_noise_grows_with_depth_and_for_hidden_joints():
 
 # --- occlusion --------------------------------------------------------------------------------------
 
+
 def test_segment_distance_matches_dense_sampling():
     rng = np.random.default_rng(0)
     s = np.linspace(0, 1, 801)
     for _ in range(200):
         p1, q1, p2, q2 = rng.normal(size=(4, 3))
         if rng.random() < 0.2:
-            q2 = p2.copy()                       # a sphere
+            q2 = p2.copy()  # a sphere
         if rng.random() < 0.1:
-            q2 = p2 + 3 * (q1 - p1)              # parallel segments
+            q2 = p2 + 3 * (q1 - p1)  # parallel segments
         got = segment_distance(p1, q1, p2, q2)
         pts = p1 + s[:, None] * (q1 - p1)
         brute = _point_segment_distance(pts, p2, q2).min()
@@ -267,7 +291,7 @@ def test_occlusion_flags_agree_with_brute_force_ray_marching():
     ends_a, ends_b = body_capsules(poses)
     radii = capsule_radii()
     row = {int(i): r for r, i in enumerate(fr.gt_ids)}
-    samples = np.linspace(0.0, 1.0, 2001)[:, None]   # <= 7 mm apart: sampled clearance is >= true, < true + 4 mm
+    samples = np.linspace(0.0, 1.0, 2001)[:, None]  # <= 7 mm apart: sampled clearance is >= true, < true + 4 mm
 
     def clearance(center: np.ndarray, p: int, j: int) -> float:
         """Least (distance - radius) between the sight line and another person's capsules."""
@@ -276,7 +300,7 @@ def test_occlusion_flags_agree_with_brute_force_ray_marching():
         for q in range(len(poses)):
             # Every capsule lies within 1.5 m of the mid-hip: farther persons cannot reach the ray.
             if q != p and np.linalg.norm(ray - poses[q, 11:13].mean(axis=0), axis=1).min() < 1.5:
-                dist = _point_segment_distance(ray, ends_a[q], ends_b[q])         # (S, K)
+                dist = _point_segment_distance(ray, ends_a[q], ends_b[q])  # (S, K)
                 best = min(best, float((dist - radii).min()))
         return best
 
@@ -309,6 +333,7 @@ def test_person_behind_or_beside_a_camera_is_absent_from_that_view():
 
 
 # --- detector errors ---------------------------------------------------------------------------------
+
 
 def test_false_positives_have_no_identity_and_follow_the_rate():
     seq = generate_sequence(SyntheticConfig(num_persons=4, num_cameras=3, num_frames=60, fp_rate=2.0))
@@ -357,15 +382,20 @@ def test_positions_hook_places_persons_and_derives_heading():
         pelvis = fr.gt_poses[0, [11, 12], :2].mean(axis=0)
         assert np.allclose(pelvis, track[f][0], atol=1e-9)
         forward = fr.gt_poses[0, 0, :2] - pelvis
-        assert forward[0] > 0 and abs(forward[1]) < 1e-9   # walking along +x, facing +x
+        assert forward[0] > 0 and abs(forward[1]) < 1e-9  # walking along +x, facing +x
 
 
 def test_config_accepts_plain_lists_and_rejects_bad_values():
     cfg = SyntheticConfig(**{"image_size": [640, 480], "area": [-3, 3, -2, 2], "noise_px": 0})
     assert cfg.image_size == (640, 480) and cfg.area == (-3.0, 3.0, -2.0, 2.0)
     assert SyntheticConfig(**cfg.to_dict()).to_dict() == cfg.to_dict()
-    for bad in ({"miss_rate": 1.5}, {"density": 0}, {"image_size": [640]}, {"area": [3, -3, 0, 1]},
-                {"positions": [[[0, 0, 0]]]}):
+    for bad in (
+        {"miss_rate": 1.5},
+        {"density": 0},
+        {"image_size": [640]},
+        {"area": [3, -3, 0, 1]},
+        {"positions": [[[0, 0, 0]]]},
+    ):
         with pytest.raises(ValueError):
             SyntheticConfig(**bad)
     rig = ring_rig(2, 5.0, 2.0)
@@ -379,8 +409,11 @@ def test_rig_from_a_calibration_file(tmp_path):
     ring = ring_rig(3, 7.0, 2.5, (1.0, 2.0, 1.0))
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps(ring.to_dict()))
-    seq = generate_sequence(SyntheticConfig(rig=str(path), area=[-1.0, 3.0, 0.0, 4.0], num_frames=2,
-                                            num_persons=6, noise_px=0.0, occlusion=False))
+    seq = generate_sequence(
+        SyntheticConfig(
+            rig=str(path), area=[-1.0, 3.0, 0.0, 4.0], num_frames=2, num_persons=6, noise_px=0.0, occlusion=False
+        )
+    )
     assert seq.rig.names == ["0", "1", "2"]
     for cam, ref in zip(seq.rig, ring):
         assert np.allclose(cam.P, ref.P)
@@ -390,8 +423,11 @@ def test_rig_from_a_calibration_file(tmp_path):
 
 
 def test_noise_depth_exponent_zero_gives_the_same_pixel_noise_at_every_depth():
-    seq = generate_sequence(SyntheticConfig(noise_px=3.0, noise_depth_exponent=0.0, occlusion=False,
-                                            num_persons=20, density=0.5, num_frames=4))
+    seq = generate_sequence(
+        SyntheticConfig(
+            noise_px=3.0, noise_depth_exponent=0.0, occlusion=False, num_persons=20, density=0.5, num_frames=4
+        )
+    )
     near, far = [], []
     for fr in seq.frames:
         gt = {int(i): p[:, :3] for i, p in zip(fr.gt_ids, fr.gt_poses)}
@@ -400,6 +436,7 @@ def test_noise_depth_exponent_zero_gives_the_same_pixel_noise_at_every_depth():
                 valid = kp[:, 2] > 0
                 err = (kp[:, :2] - cam.project(gt[int(pid)]))[valid]
                 depth = cam.depth(gt[int(pid)])[valid]
-                near.append(err[depth < np.median(depth)]); far.append(err[depth >= np.median(depth)])
+                near.append(err[depth < np.median(depth)])
+                far.append(err[depth >= np.median(depth)])
     assert np.std(np.concatenate(near)) == pytest.approx(3.0, rel=0.08)
     assert np.std(np.concatenate(far)) == pytest.approx(3.0, rel=0.08)

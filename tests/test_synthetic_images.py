@@ -1,4 +1,5 @@
 """Synthetic crowded images: determinism, COCO-23 annotations, labels that match what is drawn."""
+
 from __future__ import annotations
 
 import cv2
@@ -55,8 +56,10 @@ def test_visible_joints_are_drawn_in_their_box(index):
 
 
 def test_crowds_have_occluded_joints():
-    hidden = [np.sum(synthetic_image(image_rng(5, i), ImageOptions(persons=(12, 12))).keypoints[..., 2] == 1)
-              for i in range(2)]
+    hidden = [
+        np.sum(synthetic_image(image_rng(5, i), ImageOptions(persons=(12, 12))).keypoints[..., 2] == 1)
+        for i in range(2)
+    ]
     assert min(hidden) > 10
 
 

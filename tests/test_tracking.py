@@ -1,4 +1,5 @@
 """The online tracker (tracking/tracker.py) and its identity metrics (evaluation/identity.py)."""
+
 from __future__ import annotations
 
 import json
@@ -9,10 +10,10 @@ import pytest
 
 from data.bone_lengths import BONE_PAIRS
 from data.synthetic.body import mean_body, pose_joints
-from tracking import Tracker
-from reconstruction.solver.map_solver import combine_estimates
-from tracking.tracker import CORE_JOINTS, mean_distances, robust_lengths
 from evaluation.identity import IdentityEvaluator
+from reconstruction.solver.map_solver import combine_estimates
+from tracking import Tracker
+from tracking.tracker import CORE_JOINTS, mean_distances, robust_lengths
 
 FPS = 25.0
 
@@ -36,9 +37,9 @@ def test_two_people_crossing_paths_keep_their_ids():
     tracker = Tracker()
     seen = {0: set(), 1: set()}
     for f in range(100):
-        a = _walker((-2.4, 0.0), 0.0, 1.2, f)            # along x
+        a = _walker((-2.4, 0.0), 0.0, 1.2, f)  # along x
         b = _walker((0.0, -2.4), np.pi / 2, 1.2, f - 4)  # along y, 4 frames behind: closest approach ~0.3 m
-        order = rng.permutation(2)                       # the frame's persons come in any order
+        order = rng.permutation(2)  # the frame's persons come in any order
         poses = _noisy(np.stack([a, b])[order], rng)
         ids = tracker.update(f, poses).ids
         for slot, person in enumerate(order):
@@ -51,9 +52,9 @@ def test_a_person_who_returns_after_the_death_age_gets_a_new_id_and_before_it_ke
     pose = _walker((0.0, 0.0), 0.0, 0.0, 0)
     first = tracker.update(0, pose[None]).ids[0]
     tracker.update(1, pose[None])
-    tracker.update(2, np.zeros((0, 23, 4)))                  # missed 4 frames (2..5): within max_age
+    tracker.update(2, np.zeros((0, 23, 4)))  # missed 4 frames (2..5): within max_age
     assert tracker.update(6, pose[None]).ids[0] == first
-    assert tracker.update(13, pose[None]).ids[0] != first         # gone 6 frames after its last hit: a new id
+    assert tracker.update(13, pose[None]).ids[0] != first  # gone 6 frames after its last hit: a new id
 
 
 def test_a_tentative_track_missed_once_is_dropped():
@@ -80,7 +81,7 @@ def test_a_gap_is_predicted_over_the_missed_frames_not_taken_as_a_jump():
     # velocity would jump to 0.54 m per frame
     assert tracker.update(28, _walker((0.0, 0.0), 0.0, 1.5, 28)[None]).ids[0] == ids[0]
     hips = tracker.tracks[0].velocity[11:13].mean(axis=0)
-    np.testing.assert_allclose(hips[:2], [1.5 / FPS, 0.0], atol=0.01)    # horizontal: the hips bob in z
+    np.testing.assert_allclose(hips[:2], [1.5 / FPS, 0.0], atol=0.01)  # horizontal: the hips bob in z
 
 
 def test_the_bone_lengths_of_a_track_converge_to_the_bodys_own():
@@ -101,7 +102,7 @@ def test_identity_metrics_count_switches_fragments_and_the_kept_share():
     gt = np.stack([_walker((0.0, 0.0), 0.0, 0.0, 0), _walker((3.0, 0.0), 0.0, 0.0, 0)])
     gt_ids = np.array([10, 11])
     #            frame:    0        1        2        3        4        5
-    tracks_of_0 = [7, 7, 8, -1, 8, 7]      # one switch 7->8, one back 8->7; one gap (fragment)
+    tracks_of_0 = [7, 7, 8, -1, 8, 7]  # one switch 7->8, one back 8->7; one gap (fragment)
     for t0 in tracks_of_0:
         pred = gt if t0 >= 0 else gt[1:]
         ids = np.array([t0, 3]) if t0 >= 0 else np.array([3])
@@ -115,9 +116,14 @@ def test_pre_gated_mean_distances_equal_the_brute_force_within_the_gate():
     rng = np.random.default_rng(3)
     guess = rng.uniform(-3, 3, (12, 1, 3)) + rng.normal(0, 0.3, (12, 23, 3))
     seen = rng.random((12, 23)) > 0.2
-    poses = np.concatenate([rng.uniform(-3, 3, (15, 1, 3)) + rng.normal(0, 0.3, (15, 23, 3)),
-                            (rng.random((15, 23, 1)) > 0.2).astype(float)], axis=-1)
-    poses[0, CORE_JOINTS, 3] = 0.0                       # a person without head and trunk: every joint counts
+    poses = np.concatenate(
+        [
+            rng.uniform(-3, 3, (15, 1, 3)) + rng.normal(0, 0.3, (15, 23, 3)),
+            (rng.random((15, 23, 1)) > 0.2).astype(float),
+        ],
+        axis=-1,
+    )
+    poses[0, CORE_JOINTS, 3] = 0.0  # a person without head and trunk: every joint counts
     got = mean_distances(guess, seen, poses, max_m=1.0)
     for t in range(12):
         for p in range(15):
@@ -146,14 +152,17 @@ def test_the_pipeline_gives_track_ids_to_poses3d_json_and_identity_metrics(tmp_p
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(), progress=False)
     assert report.metrics["tracking_id_switches"] == 0 and report.metrics["tracking_idf1_like"] == 100.0
     assert "tracking" in report.timings
-    write_poses3d(tmp_path / "p.json", [(r.frame, r.poses3d, r.assignment, r.ids) for r in report.results],
-                  sequence.rig.names)
+    write_poses3d(
+        tmp_path / "p.json", [(r.frame, r.poses3d, r.assignment, r.ids) for r in report.results], sequence.rig.names
+    )
     frames = json.loads((tmp_path / "p.json").read_text())["frames"]
     first = {p["id"] for p in frames[0]["poses"]}
     assert all({p["id"] for p in f["poses"]} == first for f in frames) and len(first) == 4
     untracked = MultiViewPipeline(sequence.rig, OracleMatcher(), VanillaTriangulation())
     assert untracked(sequence.frames[0]).ids is None
-    assert "tracking_id_switches" not in evaluate_sequence(sequence, untracked, Pose3DEvaluator(), progress=False).metrics
+    assert (
+        "tracking_id_switches" not in evaluate_sequence(sequence, untracked, Pose3DEvaluator(), progress=False).metrics
+    )
 
 
 def test_exact_joints_are_kept_and_noisy_ones_are_smoothed():
@@ -161,7 +170,7 @@ def test_exact_joints_are_kept_and_noisy_ones_are_smoothed():
     exact, smooth = Tracker(), Tracker()
     raw_err, out_err = [], []
     for f in range(40):
-        truth = _walker((0.0, 0.0), 0.2, 0.0, f, walking=False)[None]      # a player on a stage
+        truth = _walker((0.0, 0.0), 0.2, 0.0, f, walking=False)[None]  # a player on a stage
         kept = exact.update(f, truth, np.full((1, 23), 1e-10)).poses3d
         np.testing.assert_allclose(kept, truth, atol=1e-6)
         noisy = _noisy(truth, rng, sd=0.01)
@@ -170,7 +179,7 @@ def test_exact_joints_are_kept_and_noisy_ones_are_smoothed():
             raw_err.append(np.linalg.norm(noisy[0, :, :3] - truth[0, :, :3], axis=-1).mean())
             out_err.append(np.linalg.norm(out[0, :, :3] - truth[0, :, :3], axis=-1).mean())
     assert np.mean(out_err) < 0.75 * np.mean(raw_err)
-    plain = Tracker()                                    # no variances (e.g. reconstruction=vanilla): ids only
+    plain = Tracker()  # no variances (e.g. reconstruction=vanilla): ids only
     for f in range(5):
         noisy = _noisy(_walker((0.0, 0.0), 0.2, 0.0, f, walking=False)[None], rng, sd=0.01)
         np.testing.assert_array_equal(plain.update(f, noisy).poses3d, noisy)
@@ -184,7 +193,7 @@ def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
     rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
     rng = np.random.default_rng(5)
     tracker, rec = Tracker(), MLEMAPReconstruction()
-    hidden = 9                                           # left wrist: no view sees it in frames 20-22
+    hidden = 9  # left wrist: no view sees it in frames 20-22
     for f in range(23):
         truth = _walker((-1.0, 0.0), 0.0, 1.2, f)
         uv = rig.project(truth[None, :, :3]) + rng.normal(0, 1.0, (4, 1, 23, 2))
@@ -196,7 +205,7 @@ def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
         out = tracker.update(f, alone, rec.last_joint_variance).poses3d
     tracked, by_prior = (np.linalg.norm(p[0, hidden, :3] - truth[hidden, :3]) for p in (out, alone))
     assert tracked < 0.05 and tracked < by_prior
-    assert out[0, hidden, 3] == alone[0, hidden, 3] < 0.5      # the reconstruction's low score is kept
+    assert out[0, hidden, 3] == alone[0, hidden, 3] < 0.5  # the reconstruction's low score is kept
 
 
 def test_the_map_reports_each_joints_variance_for_the_tracker():
@@ -211,8 +220,8 @@ def test_the_map_reports_each_joints_variance_for_the_tracker():
     for noise in (1.0, 4.0):
         uv = rig.project(X) + rng.normal(0, noise, (4, 1, 23, 2))
         poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
-        poses2d[1:, 0, 9, 2] = 0.0                       # the left wrist seen in one view only
-        poses2d[:, 0, 10, 2] = 0.0                       # the right wrist in none
+        poses2d[1:, 0, 9, 2] = 0.0  # the left wrist seen in one view only
+        poses2d[:, 0, 10, 2] = 0.0  # the right wrist in none
         boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
         rec = MLEMAPReconstruction()
         rec(poses2d, boxes, rig)
@@ -220,9 +229,9 @@ def test_the_map_reports_each_joints_variance_for_the_tracker():
     var = out[1.0][0]
     assert var.shape == (23,) and np.isinf(var[10])
     many = np.ones(23, bool)
-    many[[9, 10]] = False                                 # seen in 4 views: the likelihood fixes them
+    many[[9, 10]] = False  # seen in 4 views: the likelihood fixes them
     assert np.all(np.isfinite(var[many])) and np.all(out[4.0][0, many] > 4 * var[many])
-    assert 10 * var[many].max() < var[9] < 0.03 ** 2      # one view: the bone tie fixes its depth
+    assert 10 * var[many].max() < var[9] < 0.03**2  # one view: the bone tie fixes its depth
 
 
 def test_robust_lengths_match_numpys_nanmedian():
@@ -241,8 +250,9 @@ def test_robust_lengths_match_numpys_nanmedian():
 
 
 def test_precision_weighted_combination_of_two_bone_estimates():
-    mean, sd = combine_estimates(np.array([[0.30, 0.40]]), np.array([[0.02, 0.02]]),
-                                 np.array([[0.34, np.nan]]), np.array([[0.01, 0.01]]))
+    mean, sd = combine_estimates(
+        np.array([[0.30, 0.40]]), np.array([[0.02, 0.02]]), np.array([[0.34, np.nan]]), np.array([[0.01, 0.01]])
+    )
     np.testing.assert_allclose(mean, [[(0.30 / 4e-4 + 0.34 / 1e-4) / (1 / 4e-4 + 1 / 1e-4), 0.40]])
     np.testing.assert_allclose(sd, [[1 / np.sqrt(1 / 4e-4 + 1 / 1e-4), 0.02]])
 
@@ -250,8 +260,8 @@ def test_precision_weighted_combination_of_two_bone_estimates():
 def test_a_tracked_persons_own_skeleton_sharpens_the_maps_bones():
     from data.synthetic.observe import bbox_from_keypoints
     from data.synthetic.rigs import ring_rig
-    from reconstruction.solver.map_solver import MLEMAPReconstruction
     from reconstruction.pipeline import MultiViewPipeline
+    from reconstruction.solver.map_solver import MLEMAPReconstruction
 
     rig = ring_rig(3, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
     a, b = BONE_PAIRS[:, 0], BONE_PAIRS[:, 1]
@@ -262,7 +272,7 @@ def test_a_tracked_persons_own_skeleton_sharpens_the_maps_bones():
         pipe = MultiViewPipeline(rig, None, rec, tracker if tracked else None)
         err = []
         for f in range(30):
-            truth = _walker((-0.5, 0.0), 0.3, 0.0, f, scale=1.15, walking=False)[:, :3]   # 15 % above the table
+            truth = _walker((-0.5, 0.0), 0.3, 0.0, f, scale=1.15, walking=False)[:, :3]  # 15 % above the table
             true_bones = np.linalg.norm(truth[a] - truth[b], axis=-1)
             uv = rig.project(truth[None]) + rng.normal(0, 4.0, (3, 1, 23, 2))
             poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
@@ -276,5 +286,5 @@ def test_a_tracked_persons_own_skeleton_sharpens_the_maps_bones():
         errors[tracked] = np.mean(err)
     median, _, count = tracker.tracks[0].bone_lengths()
     assert np.all(count == 30)
-    assert np.abs(median - true_bones).mean() < 0.5 * np.mean(measured)   # the track knows the body better
-    assert errors[True] < errors[False]                                   # and the MAP's bones follow
+    assert np.abs(median - true_bones).mean() < 0.5 * np.mean(measured)  # the track knows the body better
+    assert errors[True] < errors[False]  # and the MAP's bones follow

@@ -1,5 +1,6 @@
 """Top-down training: the crop dataset on real images, overfitting, exact resume, the Hydra sweep, the
 validation geometry and the target picture."""
+
 from __future__ import annotations
 
 import subprocess
@@ -14,24 +15,32 @@ from hydra import compose, initialize_config_dir
 from torch.utils.data import DataLoader
 
 import train
+from data.keypoints import FOOT_JOINTS, LEFT_FOOT, RIGHT_FOOT
+from data.pose2d.coco_eval import evaluate_keypoints
 from data.pose2d.coco_keypoints import load_coco23, load_coco_wholebody, load_keypoint_dataset
 from data.pose2d.crop_transforms import CropAugmentation, transform_points
-from data.keypoints import FOOT_JOINTS, LEFT_FOOT, RIGHT_FOOT
-from models.show_targets import main as show_targets_main
-from models.show_targets import target_parts
 from data.pose2d.synthetic_images import ImageOptions, generate_dataset
 from data.pose2d.topdown_dataset import EpochSampler, TopDownDataset
-from data.pose2d.coco_eval import evaluate_keypoints
+from models.checkpoint_io import read_checkpoint
 from models.fastpose import FastPose
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss
-from models.checkpoint_io import read_checkpoint
+from models.show_targets import main as show_targets_main
+from models.show_targets import target_parts
 from models.training import TrainState, decode_predictions, save_checkpoint, save_weights, train_one_epoch
 
 REPO = Path(__file__).resolve().parents[1]
-TINY = ["model=fastpose_r18", "data.input_size=[64,64]", "data.sigma=1.0", "trainer.batch_size=4",
-        "trainer.val_batch_size=16", "trainer.num_workers=0", "trainer.progress=false", "trainer.grid_images=2",
-        "trainer.threads=1"]
+TINY = [
+    "model=fastpose_r18",
+    "data.input_size=[64,64]",
+    "data.sigma=1.0",
+    "trainer.batch_size=4",
+    "trainer.val_batch_size=16",
+    "trainer.num_workers=0",
+    "trainer.progress=false",
+    "trainer.grid_images=2",
+    "trainer.threads=1",
+]
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -68,10 +77,11 @@ def present_joints(codec: MultiModalHeatmapCodec, keypoints: np.ndarray, affine_
 
 # --- (d) the dataset on real images -----------------------------------------------------------------
 
+
 def test_decoded_targets_land_on_the_annotated_keypoints(wholebody):
     codec = MultiModalHeatmapCodec((192, 256), (48, 64), sigma=2.0, mu=0.5)
     dataset = TopDownDataset(wholebody, codec, (192, 256), augment=None, train=True)
-    assert len(dataset) == 12                      # persons with >= 1 labelled joint (2 have none)
+    assert len(dataset) == 12  # persons with >= 1 labelled joint (2 have none)
     checked = 0
     for i in range(len(dataset)):
         sample = dataset[i]
@@ -82,7 +92,7 @@ def test_decoded_targets_land_on_the_annotated_keypoints(wholebody):
         present = present_joints(codec, record.keypoints[own], affine_inv)
         points, _ = codec.decode(sample["target"])
         error = np.linalg.norm(transform_points(points, affine_inv) - record.keypoints[own, :, :2], axis=1)
-        heatmap_px = 4 * np.linalg.norm(affine_inv[:, 0])          # one heatmap pixel in image pixels
+        heatmap_px = 4 * np.linalg.norm(affine_inv[:, 0])  # one heatmap pixel in image pixels
         assert np.all(error[present] <= heatmap_px), (i, error[present] / heatmap_px)
         assert np.all(sample["weight"].numpy()[present] == 1)
         checked += present.sum()
@@ -94,7 +104,7 @@ def test_a_flipped_sample_mirrors_the_image_and_swaps_the_feet(wholebody):
     plain = TopDownDataset(wholebody, codec, (192, 256), augment=None)
     flip_only = CropAugmentation(scale_factor=0, rotation_factor=0, rotation_prob=0, flip_prob=1)
     flipped = TopDownDataset(wholebody, codec, (192, 256), augment=flip_only)
-    a, b = plain[0], flipped[0]                    # the person with all 6 foot joints
+    a, b = plain[0], flipped[0]  # the person with all 6 foot joints
     assert not a["flipped"] and b["flipped"]
     assert a["weight"][list(FOOT_JOINTS)].min() == 1
     mirrored = a["target"].numpy()[..., ::-1]
@@ -107,8 +117,9 @@ def test_a_flipped_sample_mirrors_the_image_and_swaps_the_feet(wholebody):
 
 def test_evaluation_on_detector_boxes(shared_data):
     folder = shared_data / "crowdpose_sample"
-    records = load_keypoint_dataset("crowdpose", folder / "test_crowdpose.json", folder,
-                                    det_file=folder / "test_crowdpose_det_AP_40.json")
+    records = load_keypoint_dataset(
+        "crowdpose", folder / "test_crowdpose.json", folder, det_file=folder / "test_crowdpose_det_AP_40.json"
+    )
     codec = MultiModalHeatmapCodec((64, 64), (16, 16))
     dets = TopDownDataset(records, codec, (64, 64), train=False, use_det_boxes=True)
     assert len(dets) == sum(len(r.det_boxes) for r in records) == 6
@@ -116,11 +127,11 @@ def test_evaluation_on_detector_boxes(shared_data):
     record = records[dets.samples[4][0]]
     assert sample["score"] == pytest.approx(record.det_scores[1]) and sample["image_id"] == record.image_id
     np.testing.assert_allclose(sample["box"].numpy(), record.det_boxes[1])
-    assert sample["weight"].sum() == 0 and sample["target"].abs().sum() == 0   # no own person is known
+    assert sample["weight"].sum() == 0 and sample["target"].abs().sum() == 0  # no own person is known
     gt_boxes = TopDownDataset(records, codec, (64, 64), train=False)
-    assert len(gt_boxes) == 4 < sum(len(r) for r in records)                 # not the person without joints
+    assert len(gt_boxes) == 4 < sum(len(r) for r in records)  # not the person without joints
     assert gt_boxes[0]["score"] == 1.0
-    assert gt_boxes[0]["weight"][:5].sum() == 0                               # CrowdPose has no eyes, ears
+    assert gt_boxes[0]["weight"][:5].sum() == 0  # CrowdPose has no eyes, ears
 
 
 def test_augmentation_is_seeded_per_epoch_and_sample(wholebody):
@@ -152,7 +163,7 @@ def test_epoch_sampler_resumes_and_shards():
 def test_target_picture_parts_add_up_to_the_target(wholebody, tmp_path):
     codec = MultiModalHeatmapCodec((192, 256), (48, 64), mu=0.5)
     dataset = TopDownDataset(wholebody, codec, (192, 256))
-    sample = dataset[8]                            # a skier among others: the crowd term is non-zero
+    sample = dataset[8]  # a skier among others: the crowd term is non-zero
     own_t, crowd, _ = target_parts(dataset, 8, sample["affine_inv"].numpy())
     assert crowd.max() > 0.3
     np.testing.assert_allclose(own_t + crowd, sample["target"].numpy(), atol=1e-6)
@@ -163,6 +174,7 @@ def test_target_picture_parts_add_up_to_the_target(wholebody, tmp_path):
 
 
 # --- validation geometry ----------------------------------------------------------------------------
+
 
 def test_decoding_the_targets_as_predictions_scores_near_perfect_ap(wholebody):
     codec = MultiModalHeatmapCodec((192, 256), (48, 64), sigma=2.0, mu=0.0)
@@ -175,6 +187,7 @@ def test_decoding_the_targets_as_predictions_scores_near_perfect_ap(wholebody):
 
 
 # --- (a) overfitting --------------------------------------------------------------------------------
+
 
 def test_fastpose18_overfits_four_synthetic_crops(synthetic_root):
     torch.manual_seed(0)
@@ -194,6 +207,7 @@ def test_fastpose18_overfits_four_synthetic_crops(synthetic_root):
 
 # --- (b) exact resume -------------------------------------------------------------------------------
 
+
 def run_training(root: Path, run_dir: Path, *overrides: str) -> dict:
     """train.run with the tiny config and these overrides, into run_dir."""
     with initialize_config_dir(config_dir=str(REPO / "configs"), version_base="1.3"):
@@ -207,23 +221,32 @@ def test_resume_reproduces_the_uninterrupted_losses(synthetic_root, tmp_path):
     assert steps_per_epoch >= 2 and len(straight["losses"]) == 2 * steps_per_epoch
     assert set(straight["metrics"]) >= {"AP_all", "AP_body", "AP_foot", "loss"}
 
-    run_training(synthetic_root, tmp_path / "first", "trainer.epochs=1")             # stops after epoch 0
-    resumed = run_training(synthetic_root, tmp_path / "second", "trainer.epochs=2",
-                           f"resume={tmp_path / 'first' / 'checkpoints' / 'last.ckpt'}")
+    run_training(synthetic_root, tmp_path / "first", "trainer.epochs=1")  # stops after epoch 0
+    resumed = run_training(
+        synthetic_root,
+        tmp_path / "second",
+        "trainer.epochs=2",
+        f"resume={tmp_path / 'first' / 'checkpoints' / 'last.ckpt'}",
+    )
     assert sorted(resumed["losses"]) == list(range(steps_per_epoch + 1, 2 * steps_per_epoch + 1))
     for step, loss in resumed["losses"].items():
         assert loss == pytest.approx(straight["losses"][step], rel=1e-6), step
 
     run_training(synthetic_root, tmp_path / "cut", "trainer.epochs=2", "trainer.max_steps=1")  # mid-epoch
-    rest = run_training(synthetic_root, tmp_path / "rest", "trainer.epochs=2",
-                        f"resume={tmp_path / 'cut' / 'checkpoints' / 'last.ckpt'}")
+    rest = run_training(
+        synthetic_root,
+        tmp_path / "rest",
+        "trainer.epochs=2",
+        f"resume={tmp_path / 'cut' / 'checkpoints' / 'last.ckpt'}",
+    )
     assert sorted(rest["losses"]) == list(range(2, 2 * steps_per_epoch + 1))
     for step, loss in rest["losses"].items():
         assert loss == pytest.approx(straight["losses"][step], rel=1e-6), step
 
 
-def kill_after_first_checkpoint(cmd: list[str], checkpoint: Path, timeout_s: float = 120.0, run_on_s: float = 1.0
-                                ) -> None:
+def kill_after_first_checkpoint(
+    cmd: list[str], checkpoint: Path, timeout_s: float = 120.0, run_on_s: float = 1.0
+) -> None:
     """Start cmd, wait until checkpoint exists, let it run on run_on_s seconds, then SIGKILL it."""
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + timeout_s
@@ -232,14 +255,19 @@ def kill_after_first_checkpoint(cmd: list[str], checkpoint: Path, timeout_s: flo
             assert proc.poll() is None, proc.stderr.read()[-3000:]
             assert time.monotonic() < deadline, "no checkpoint in time"
             time.sleep(0.05)
-        time.sleep(run_on_s)                       # killed somewhere in a later epoch
+        time.sleep(run_on_s)  # killed somewhere in a later epoch
         assert proc.poll() is None, "the run ended before it was killed"
     finally:
         proc.kill()
         proc.wait()
 
 
-SMALL = ["+experiment=train_small", "trainer.epochs=10000", "trainer.log_every=1", "trainer.val_every=1000"]  # max_steps
+SMALL = [
+    "+experiment=train_small",
+    "trainer.epochs=10000",
+    "trainer.log_every=1",
+    "trainer.val_every=1000",
+]  # max_steps
 #                                                                             bounds the run, only its end is validated
 
 
@@ -249,12 +277,26 @@ def killed_run(synthetic_root, tmp_path_factory) -> tuple[Path, int]:
     (its last.ckpt, its max_steps)."""
     run_dir = tmp_path_factory.mktemp("killed") / "run"
     checkpoint = run_dir / "checkpoints" / "last.ckpt"
-    steps_per_epoch = -(-len(TopDownDataset(load_coco23(synthetic_root / "train" / "annotations.json",
-                                                        synthetic_root / "train" / "images"),
-                                            MultiModalHeatmapCodec((64, 64), (16, 16)), (64, 64))) // 4)
+    steps_per_epoch = -(
+        -len(
+            TopDownDataset(
+                load_coco23(synthetic_root / "train" / "annotations.json", synthetic_root / "train" / "images"),
+                MultiModalHeatmapCodec((64, 64), (16, 16)),
+                (64, 64),
+            )
+        )
+        // 4
+    )
     max_steps = 3 * steps_per_epoch
-    cmd = [sys.executable, "train.py", *TINY, *SMALL, f"data.root={synthetic_root}", f"trainer.max_steps={max_steps}",
-           f"hydra.run.dir={run_dir}"]
+    cmd = [
+        sys.executable,
+        "train.py",
+        *TINY,
+        *SMALL,
+        f"data.root={synthetic_root}",
+        f"trainer.max_steps={max_steps}",
+        f"hydra.run.dir={run_dir}",
+    ]
     kill_after_first_checkpoint(cmd, checkpoint, run_on_s=0.0)
     return checkpoint, max_steps
 
@@ -269,13 +311,18 @@ def tensorboard_losses(run_dir: Path) -> dict[int, float]:
 
 def test_killed_run_resumes_with_its_stored_config_from_the_command_line(killed_run, synthetic_root, tmp_path):
     checkpoint, max_steps = killed_run
-    saved = read_checkpoint(checkpoint)                          # whole, whenever the kill came
+    saved = read_checkpoint(checkpoint)  # whole, whenever the kill came
     step = saved["global_step"]
     assert saved["epoch"] >= 1 and saved["step_in_epoch"] == 0 and 0 < step < max_steps
     assert saved["choices"]["experiment"] == "train_small"
     resumed_dir = tmp_path / "resumed"
-    proc = subprocess.run([sys.executable, "train.py", f"resume={checkpoint}", f"hydra.run.dir={resumed_dir}"],
-                          capture_output=True, text=True, cwd=REPO, timeout=300)   # no other override
+    proc = subprocess.run(
+        [sys.executable, "train.py", f"resume={checkpoint}", f"hydra.run.dir={resumed_dir}"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=300,
+    )  # no other override
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert read_checkpoint(resumed_dir / "checkpoints" / "last.ckpt")["global_step"] == max_steps
     straight = run_training(synthetic_root, tmp_path / "straight", *SMALL, f"trainer.max_steps={max_steps}")
@@ -285,12 +332,23 @@ def test_killed_run_resumes_with_its_stored_config_from_the_command_line(killed_
         assert loss == pytest.approx(straight["losses"][s], rel=1e-5), s
 
 
-@pytest.mark.parametrize("override, key", [("trainer.batch_size=8", "trainer.batch_size"), ("model=fastpose_r50", "model"),
-                                           ("optimizer.lr=0.1", "optimizer.lr")])
+@pytest.mark.parametrize(
+    "override, key",
+    [
+        ("trainer.batch_size=8", "trainer.batch_size"),
+        ("model=fastpose_r50", "model"),
+        ("optimizer.lr=0.1", "optimizer.lr"),
+    ],
+)
 def test_an_unsafe_override_of_a_resumed_run_stops_with_one_line(killed_run, tmp_path, override, key):
     checkpoint, _ = killed_run
-    proc = subprocess.run([sys.executable, "train.py", f"resume={checkpoint}", override, f"hydra.run.dir={tmp_path}"],
-                          capture_output=True, text=True, cwd=REPO, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "train.py", f"resume={checkpoint}", override, f"hydra.run.dir={tmp_path}"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
     assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     assert proc.stderr.startswith(f"error: resume: {override} would change {key} ") and str(checkpoint) in proc.stderr
 
@@ -305,13 +363,20 @@ def corrupt(kind: str, good: bytes, weights: Path) -> bytes:
         return np.random.default_rng(0).bytes(len(good))
     if kind == "flipped":
         middle = len(good) // 2
-        return good[:middle] + bytes(b ^ 0xFF for b in good[middle:middle + 8]) + good[middle + 8:]
+        return good[:middle] + bytes(b ^ 0xFF for b in good[middle : middle + 8]) + good[middle + 8 :]
     return weights.read_bytes()
 
 
-@pytest.mark.parametrize("kind, says", [("truncated", "cannot be read"), ("empty", "empty file"),
-                                        ("random", "cannot be read"), ("flipped", "checksum mismatch"),
-                                        ("best.pth", "model weights only")])
+@pytest.mark.parametrize(
+    "kind, says",
+    [
+        ("truncated", "cannot be read"),
+        ("empty", "empty file"),
+        ("random", "cannot be read"),
+        ("flipped", "checksum mismatch"),
+        ("best.pth", "model weights only"),
+    ],
+)
 def test_a_damaged_checkpoint_stops_resume_with_one_line_naming_the_file(tmp_path, kind, says):
     model = FastPose(18)
     optimizer = torch.optim.Adam(model.parameters())
@@ -321,8 +386,13 @@ def test_a_damaged_checkpoint_stops_resume_with_one_line_naming_the_file(tmp_pat
     save_weights(weights, model, TrainState(epoch=1), {}, {"ok": 1})
     bad = tmp_path / f"{kind}.ckpt"
     bad.write_bytes(corrupt(kind, good.read_bytes(), weights))
-    proc = subprocess.run([sys.executable, "train.py", f"resume={bad}", f"hydra.run.dir={tmp_path / 'run'}"],
-                          capture_output=True, text=True, cwd=REPO, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "train.py", f"resume={bad}", f"hydra.run.dir={tmp_path / 'run'}"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
     assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.startswith(f"error: {bad}: ") and says in proc.stderr
 
@@ -336,15 +406,29 @@ def test_a_checkpoint_written_before_the_envelope_loads_with_a_warning(tmp_path,
     assert "no checksum" in caplog.text
 
 
-@pytest.mark.parametrize("override, key", [
-    ("trainer.max_steps=abc", "trainer.max_steps"), ("trainer.batch_size=0", "trainer.batch_size"),
-    ("data.input_size=[100,100]", "data.input_size"), ("optimizer.lr=-1", "optimizer.lr"),
-    ("trainer.epochs=0", "trainer.epochs"),
-    pytest.param("trainer.device=cuda", "trainer.device",
-                 marks=pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA"))])
+@pytest.mark.parametrize(
+    "override, key",
+    [
+        ("trainer.max_steps=abc", "trainer.max_steps"),
+        ("trainer.batch_size=0", "trainer.batch_size"),
+        ("data.input_size=[100,100]", "data.input_size"),
+        ("optimizer.lr=-1", "optimizer.lr"),
+        ("trainer.epochs=0", "trainer.epochs"),
+        pytest.param(
+            "trainer.device=cuda",
+            "trainer.device",
+            marks=pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA"),
+        ),
+    ],
+)
 def test_a_bad_config_value_stops_training_with_one_line_naming_the_key(tmp_path, override, key):
-    proc = subprocess.run([sys.executable, "train.py", override, f"hydra.run.dir={tmp_path}"],
-                          capture_output=True, text=True, cwd=REPO, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "train.py", override, f"hydra.run.dir={tmp_path}"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+    )
     assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.startswith(f"error: {key}=")
 
@@ -356,7 +440,8 @@ def test_tensorboard_logs_losses_lr_ap_and_heatmap_grid(synthetic_root, tmp_path
     events.Reload()
     scalars = set(events.Tags()["scalars"])
     expected = {"train/loss", "train/body", "train/foot", "train/lr", "val/loss"} | {
-        f"val/{m}_{s}" for m in ("AP", "AR") for s in ("all", "body", "foot")}
+        f"val/{m}_{s}" for m in ("AP", "AR") for s in ("all", "body", "foot")
+    }
     assert expected <= scalars, expected - scalars
     assert [e.value for e in events.Scalars("train/loss")] == pytest.approx(list(out["losses"].values()), rel=1e-5)
     assert events.Scalars("train/lr")[0].value == pytest.approx(1e-3)
@@ -379,34 +464,61 @@ def test_a_failed_checkpoint_write_keeps_the_previous_file(tmp_path):
 
 # --- DistributedDataParallel ----------------------------------------------------------------------
 
+
 def test_torchrun_two_processes_shard_the_epoch(synthetic_root, tmp_path):
     run_dir = tmp_path / "ddp"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2", "train.py",
-           *TINY, f"data.root={synthetic_root}", "trainer.epochs=2", "trainer.device=cpu", f"hydra.run.dir={run_dir}"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--standalone",
+        "--nproc_per_node=2",
+        "train.py",
+        *TINY,
+        f"data.root={synthetic_root}",
+        "trainer.epochs=2",
+        "trainer.device=cpu",
+        f"hydra.run.dir={run_dir}",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, timeout=120)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    single = TopDownDataset(load_coco23(synthetic_root / "train" / "annotations.json",
-                                        synthetic_root / "train" / "images"), MultiModalHeatmapCodec((64, 64), (16, 16)),
-                            (64, 64))
-    per_rank = -(-len(single) // 2)                                     # DistributedSampler-style shards
+    single = TopDownDataset(
+        load_coco23(synthetic_root / "train" / "annotations.json", synthetic_root / "train" / "images"),
+        MultiModalHeatmapCodec((64, 64), (16, 16)),
+        (64, 64),
+    )
+    per_rank = -(-len(single) // 2)  # DistributedSampler-style shards
     checkpoint = read_checkpoint(run_dir / "checkpoints" / "last.ckpt")
     assert checkpoint["epoch"] == 2 and checkpoint["global_step"] == 2 * -(-per_rank // 4)
-    assert checkpoint["global_step"] < 2 * -(-len(single) // 4)         # fewer steps than one process takes
+    assert checkpoint["global_step"] < 2 * -(-len(single) // 4)  # fewer steps than one process takes
     assert list(run_dir.glob("events.out.tfevents.*")) and (run_dir / "metrics.json").is_file()
 
 
 # --- (c) the Hydra sweep ----------------------------------------------------------------------------
 
+
 def test_mu_lambda_multirun_writes_checkpoints_and_tensorboard(synthetic_root, tmp_path):
     sweep = tmp_path / "sweep"
-    cmd = [sys.executable, "train.py", "-m", "+experiment=mu_lambda_ablation", "loss.mu=0,0.5",
-           "loss.foot_weight=1.5", "trainer.max_steps=2", f"data.root={synthetic_root}", "data.input_size=[64,64]",
-           "trainer.batch_size=4", "trainer.val_batch_size=16", "trainer.progress=false", "trainer.threads=1",
-           f"hydra.sweep.dir={sweep}"]
+    cmd = [
+        sys.executable,
+        "train.py",
+        "-m",
+        "+experiment=mu_lambda_ablation",
+        "loss.mu=0,0.5",
+        "loss.foot_weight=1.5",
+        "trainer.max_steps=2",
+        f"data.root={synthetic_root}",
+        "data.input_size=[64,64]",
+        "trainer.batch_size=4",
+        "trainer.val_batch_size=16",
+        "trainer.progress=false",
+        "trainer.threads=1",
+        f"hydra.sweep.dir={sweep}",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, timeout=120)
     assert proc.returncode == 0, proc.stderr[-3000:]
     for mu in ("0", "0.5"):
-        run_dir = sweep / f"loss.foot_weight=1.5,loss.mu={mu}"          # named by the swept settings only
+        run_dir = sweep / f"loss.foot_weight=1.5,loss.mu={mu}"  # named by the swept settings only
         assert list(run_dir.glob("events.out.tfevents.*")), sorted(p.name for p in sweep.iterdir())
         checkpoint = read_checkpoint(run_dir / "checkpoints" / "last.ckpt")
         assert checkpoint["global_step"] == 2 and checkpoint["config"]["loss"]["mu"] == float(mu)

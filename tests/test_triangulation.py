@@ -2,9 +2,9 @@ import cv2
 import numpy as np
 import pytest
 
-from data.synthetic.rigs import ring_rig
 from data.geometry.camera import Rig
 from data.geometry.triangulation import reprojection_error, triangulate_dlt
+from data.synthetic.rigs import ring_rig
 
 
 def ring(num: int, radius: float = 6.0, height: float = 2.5) -> Rig:
@@ -12,7 +12,7 @@ def ring(num: int, radius: float = 6.0, height: float = 2.5) -> Rig:
 
 
 def observe(rig: Rig, X: np.ndarray) -> np.ndarray:
-    uv = rig.project(X)                      # (V, P, J, 2)
+    uv = rig.project(X)  # (V, P, J, 2)
     return np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
 
 
@@ -41,15 +41,16 @@ def test_two_views_match_cv2_triangulate_points():
     assert err_ours <= 1.05 * err_cv2
     rig_exact = observe(rig, X)
     h = cv2.triangulatePoints(P0, P1, rig_exact[0, 0, :, :2].T.copy(), rig_exact[1, 0, :, :2].T.copy())
-    np.testing.assert_allclose(triangulate_dlt(rig_exact, rig.projection_matrices())[0, :, :3],
-                               (h[:3] / h[3]).T, atol=1e-6)
+    np.testing.assert_allclose(
+        triangulate_dlt(rig_exact, rig.projection_matrices())[0, :, :3], (h[:3] / h[3]).T, atol=1e-6
+    )
 
 
 def test_joint_seen_in_one_view_gets_score_zero():
     rig = ring(3)
     X = np.array([[[0.0, 0.0, 1.0], [0.5, 0.2, 1.5]]])
     obs = observe(rig, X)
-    obs[1:, 0, 1, 2] = 0.0          # joint 1 only in view 0
+    obs[1:, 0, 1, 2] = 0.0  # joint 1 only in view 0
     out = triangulate_dlt(obs, rig.projection_matrices())
     assert out[0, 1, 3] == 0 and np.all(out[0, 1, :3] == 0)
     np.testing.assert_allclose(out[0, 0, :3], X[0, 0], atol=1e-6)
@@ -59,8 +60,9 @@ def test_scores_weight_the_views():
     rig = ring(4)
     X = np.array([[[0.3, -0.2, 1.2]]])
     obs = observe(rig, X)
-    obs[0, 0, 0, :2] += 40.0        # an outlier in view 0
-    low = obs.copy(); low[0, 0, 0, 2] = 0.05
+    obs[0, 0, 0, :2] += 40.0  # an outlier in view 0
+    low = obs.copy()
+    low[0, 0, 0, 2] = 0.05
     err_high = np.linalg.norm(triangulate_dlt(obs, rig.projection_matrices())[0, 0, :3] - X[0, 0])
     err_low = np.linalg.norm(triangulate_dlt(low, rig.projection_matrices())[0, 0, :3] - X[0, 0])
     assert err_low < 0.25 * err_high

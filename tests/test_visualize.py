@@ -1,5 +1,6 @@
 """Pictures of a frame: reprojected joints land on their projected pixels in their person's colour,
 the four PNGs are written, and the real Shelf frame 572 is drawn where its ground truth projects."""
+
 from __future__ import annotations
 
 import matplotlib
@@ -10,15 +11,24 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from data.keypoints import LIMBS, SHELF14_TO_COCO23, to_coco23  # noqa: E402
 from data.formats.fourd_skeletons import load_4dassoc_skeletons  # noqa: E402
-from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
-from evaluation.pictures.vis_draw import CANVAS_GREY, UNMATCHED_COLOR, image_grid  # noqa: E402
-from evaluation.pictures.visualize import (draw_reprojections, image_png, load_view_images, person_colors,  # noqa: E402
-                                  plot_feet_on_ground, plot_scene_3d, plot_top_view, save_frame_pictures,
-                                  save_run_pictures, write_png)
 from data.geometry.calibration import load_4dassoc  # noqa: E402
 from data.geometry.camera import Camera, Rig  # noqa: E402
+from data.keypoints import LIMBS, SHELF14_TO_COCO23, to_coco23  # noqa: E402
+from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
+from evaluation.pictures.vis_draw import CANVAS_GREY, UNMATCHED_COLOR, image_grid  # noqa: E402
+from evaluation.pictures.visualize import (  # noqa: E402
+    draw_reprojections,
+    image_png,
+    load_view_images,
+    person_colors,
+    plot_feet_on_ground,
+    plot_scene_3d,
+    plot_top_view,
+    save_frame_pictures,
+    save_run_pictures,
+    write_png,
+)
 from reconstruction.matching import FeetMatcher, OracleMatcher  # noqa: E402
 from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
 from reconstruction.reconstructors import VanillaTriangulation  # noqa: E402
@@ -83,20 +93,21 @@ def test_joints_with_score_zero_or_behind_the_camera_are_skipped_and_limbs_join_
     cam = _camera()
     poses = np.zeros((1, 23, 4))
     poses[0, :, :3] = [0.0, 0.0, 1.0]
-    poses[0, 5, :] = [-0.2, 0.0, 1.4, 1.0]       # left shoulder
-    poses[0, 6, :] = [0.2, 0.0, 1.4, 1.0]        # right shoulder: limb (5, 6)
-    poses[0, 0, :] = [0.0, -8.0, 1.0, 1.0]       # nose behind the camera
+    poses[0, 5, :] = [-0.2, 0.0, 1.4, 1.0]  # left shoulder
+    poses[0, 6, :] = [0.2, 0.0, 1.4, 1.0]  # right shoulder: limb (5, 6)
+    poses[0, 0, :] = [0.0, -8.0, 1.0, 1.0]  # nose behind the camera
     out = draw_reprojections([None], Rig((cam,)), poses)[0]
     (u5, v5), (u6, v6) = np.round(cam.project(poses[0, [5, 6], :3])).astype(int)
-    assert np.array_equal(out[v5, (u5 + u6) // 2], _rgb(person_colors(1)[0]))   # the limb between them
+    assert np.array_equal(out[v5, (u5 + u6) // 2], _rgb(person_colors(1)[0]))  # the limb between them
     drawn = np.argwhere(np.any(out != CANVAS_GREY, axis=-1))
-    assert drawn[:, 1].min() >= u5 - 8 and drawn[:, 1].max() <= u6 + 8          # nothing else drawn
+    assert drawn[:, 1].min() >= u5 - 8 and drawn[:, 1].max() <= u6 + 8  # nothing else drawn
 
 
 @pytest.fixture(scope="module")
 def synthetic_frame():
-    seq = generate_sequence(SyntheticConfig(seed=3, num_frames=1, num_persons=3, density=0.2,
-                                            image_size=[640, 360], focal_px=500.0))
+    seq = generate_sequence(
+        SyntheticConfig(seed=3, num_frames=1, num_persons=3, density=0.2, image_size=[640, 360], focal_px=500.0)
+    )
     result = MultiViewPipeline(seq.rig, OracleMatcher(), VanillaTriangulation())(seq.frames[0])
     return seq, result
 
@@ -108,7 +119,7 @@ def test_save_frame_pictures_writes_the_four_pngs_atomically(tmp_path, synthetic
     assert [p.name for p in paths] == ["frame_0_views.png", "frame_0_3d.png", "frame_0_top.png", "frame_0_feet.png"]
     images = [cv2.imread(str(p)) for p in paths]
     assert all(im is not None and im.shape[0] > 200 and im.shape[1] > 200 for im in images)
-    assert images[0].shape == (2 * 540, 3 * 960, 3)      # 5 views of 640x360 on a 3 x 2 grid of 960 px tiles
+    assert images[0].shape == (2 * 540, 3 * 960, 3)  # 5 views of 640x360 on a 3 x 2 grid of 960 px tiles
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in paths)  # no temporary left
     assert save_run_pictures(tmp_path / "run", seq, [result], frame=0)[0].exists()
     with pytest.raises(ValueError, match="frame 7"):

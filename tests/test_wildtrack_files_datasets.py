@@ -1,4 +1,5 @@
 """dataset=wildtrack (reprojection COCO protocol), dataset=files (own rig), and the Panoptic protocol adapter."""
+
 from __future__ import annotations
 
 import json
@@ -12,17 +13,17 @@ from hydra import compose, initialize_config_dir
 
 import eval as eval_script
 from data.datasets.files import load_files
-from data.multiview import Frame
 from data.datasets.panoptic import load_panoptic_sequence as _load_panoptic
+from data.datasets.wildtrack import load_wildtrack_crowd as _load_wildtrack
 from data.formats.poses2d_io import Poses2DError, write_poses2d
 from data.formats.poses_io import read_poses3d
-from data.synthetic import SyntheticConfig, generate_sequence
-from data.datasets.wildtrack import load_wildtrack_crowd as _load_wildtrack
-from evaluation.protocols import attach_protocols
+from data.geometry.calibration import load_wildtrack_positions, save_cameras_json
+from data.multiview import Frame
 from data.pose2d.coco_eval import STAT_NAMES, evaluate_keypoints
+from data.synthetic import SyntheticConfig, generate_sequence
+from evaluation.protocols import attach_protocols
 from evaluation.protocols.panoptic import PanopticProtocol
 from evaluation.protocols.reprojection_coco import ReprojectionCOCOProtocol, coco_keypoint_stats
-from data.geometry.calibration import load_wildtrack_positions, save_cameras_json
 from reconstruction.pipeline import FrameResult
 
 
@@ -34,6 +35,7 @@ def load_panoptic_sequence(*args, **kwargs):
 def load_wildtrack_crowd(*args, **kwargs):
     """The Wildtrack loader with its protocol attached, as eval.py does."""
     return attach_protocols(_load_wildtrack(*args, **kwargs))
+
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = str(ROOT / "configs")
@@ -67,10 +69,12 @@ def _score(sequence, poses_of=lambda frame: frame.gt_poses, **options) -> dict:
 
 def _shifted(dx_m: float):
     """A prediction function: the GT poses moved dx_m along world x (a new array)."""
+
     def poses(frame: Frame) -> np.ndarray:
         out = frame.gt_poses.copy()
         out[..., 0] += dx_m
         return out
+
     return poses
 
 
@@ -117,10 +121,13 @@ def test_stats_with_coco_max_dets_equal_evaluate_keypoints():
             pred[:, 2] = 0.9
             x0, y0 = pred[:, :2].min(axis=0)
             x1, y1 = pred[:, :2].max(axis=0)
-            preds.append({"image_id": image, "keypoints": pred, "score": rng.uniform(),
-                          "area": float((x1 - x0) * (y1 - y0))})
-    doc = {"images": [{"id": i} for i in (1, 2, 3)],
-           "annotations": [{**a, "keypoints": a["keypoints"].ravel().tolist()} for a in gt]}
+            preds.append(
+                {"image_id": image, "keypoints": pred, "score": rng.uniform(), "area": float((x1 - x0) * (y1 - y0))}
+            )
+    doc = {
+        "images": [{"id": i} for i in (1, 2, 3)],
+        "annotations": [{**a, "keypoints": a["keypoints"].ravel().tolist()} for a in gt],
+    }
     for subset in ("all", "foot"):
         ours = coco_keypoint_stats([1, 2, 3], gt, preds, subset, max_dets=20)
         assert ours == pytest.approx(evaluate_keypoints(doc, preds, subset))
@@ -187,8 +194,14 @@ def _compose(overrides: list[str]):
 
 
 def test_eval_on_the_example_folder_writes_poses3d(tmp_path, capsys):
-    cfg = _compose(["dataset=files", f"dataset.cameras={EXAMPLE / 'cameras.json'}",
-                    f"dataset.poses2d={EXAMPLE / 'poses2d.json'}", "matching=feet"])
+    cfg = _compose(
+        [
+            "dataset=files",
+            f"dataset.cameras={EXAMPLE / 'cameras.json'}",
+            f"dataset.poses2d={EXAMPLE / 'poses2d.json'}",
+            "matching=feet",
+        ]
+    )
     report = eval_script.run(cfg, tmp_path)
     poses = read_poses3d(tmp_path / "poses3d.json")
     assert sorted(poses) == [100, 101, 102] and all(p.shape == (3, 23, 4) for p in poses.values())
@@ -213,8 +226,15 @@ def _bad_poses2d(tmp_path: Path, kind: str) -> tuple[Path, str]:
 @pytest.mark.parametrize("kind", ["unknown_camera", "60_numbers"])
 def test_eval_bad_poses2d_stops_with_one_line_naming_the_entry(tmp_path, kind):
     path, message = _bad_poses2d(tmp_path, kind)
-    cmd = [sys.executable, "eval.py", "dataset=files", f"dataset.cameras={EXAMPLE / 'cameras.json'}",
-           f"dataset.poses2d={path}", "progress=false", f"hydra.run.dir={tmp_path / 'run'}"]
+    cmd = [
+        sys.executable,
+        "eval.py",
+        "dataset=files",
+        f"dataset.cameras={EXAMPLE / 'cameras.json'}",
+        f"dataset.poses2d={path}",
+        "progress=false",
+        f"hydra.run.dir={tmp_path / 'run'}",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert proc.returncode != 0 and message in proc.stderr
     assert proc.stderr.strip() == f"error: {message}"

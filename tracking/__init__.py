@@ -5,6 +5,7 @@ association on a gated 3D distance, track birth and death, each track's bone len
 metrics against ground-truth ids are in ``evaluation.identity``. May import ``data`` (layers 1-2) and
 the other stages; never ``evaluation`` or the entry points.
 """
+
 from tracking.tracker import Track, Tracker
 
 __all__ = ["Track", "Tracker"]

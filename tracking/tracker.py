@@ -33,9 +33,9 @@ The state of all tracks is held in arrays over tracks (:class:`TrackState`), so 
 persons costs a few vectorised operations, not a hundred small ones; :attr:`Tracker.tracks` gives
 per-track views (:class:`Track`).
 """
+
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -44,15 +44,15 @@ from scipy.optimize import linear_sum_assignment
 
 from data.bone_lengths import BONE_PAIRS
 
-MAD_TO_SD = 1.4826   # SD of a normal distribution per median absolute deviation
+MAD_TO_SD = 1.4826  # SD of a normal distribution per median absolute deviation
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
 # shoulders, hips) move with the body; arms and legs swing by tens of cm between frames at 5 fps.
 CORE_JOINTS = np.array([0, 1, 2, 3, 4, 5, 6, 11, 12])
 # m^2: variance of a joint no view sees, placed by the reconstruction's bone prior alone (a bone's direction is
 # unknown: about 15 cm); the motion filter does not take such a joint as a measurement
-UNSEEN_VAR_M2 = 0.15 ** 2
+UNSEEN_VAR_M2 = 0.15**2
 SKELETON_REFRESH = 5  # hits between two updates of a track's robust skeleton (it changes slowly)
-BODY_SPAN_M = 1.0    # m: the centres of any two subsets of one body's head and trunk joints lie this close
+BODY_SPAN_M = 1.0  # m: the centres of any two subsets of one body's head and trunk joints lie this close
 
 
 class Tracked(NamedTuple):
@@ -93,7 +93,7 @@ def robust_lengths(lengths: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.n
 
 def _sorted_median(values: np.ndarray, count: np.ndarray) -> np.ndarray:
     """Median of the finite values along the last axis, NaN last after sorting: (..., n), (...) -> (...)."""
-    ordered = np.sort(values, axis=-1)                     # NaN sort to the end
+    ordered = np.sort(values, axis=-1)  # NaN sort to the end
     lo = np.maximum(count - 1, 0) // 2
     hi = np.minimum(count // 2, max(values.shape[-1] - 1, 0))
     if values.shape[-1] == 0:
@@ -136,10 +136,27 @@ class TrackState:
     def empty(cls, joints: int, window: int) -> "TrackState":
         """No track, for poses of J joints and a bone window W."""
         z = lambda *shape, dtype=np.float64: np.zeros((0, *shape), dtype=dtype)  # noqa: E731
-        return cls(z(dtype=np.int64), z(joints, 3), z(joints, 3), z(joints), z(joints), z(joints),
-                   z(joints, dtype=bool), z(dtype=np.int64), z(dtype=np.int64), z(dtype=bool),
-                   z(window, len(BONE_PAIRS)), z(dtype=np.int64), z(joints, 3), z(joints), z(joints),
-                   z(joints, dtype=bool), z(len(BONE_PAIRS)), z(len(BONE_PAIRS)), z(len(BONE_PAIRS), dtype=np.int64))
+        return cls(
+            z(dtype=np.int64),
+            z(joints, 3),
+            z(joints, 3),
+            z(joints),
+            z(joints),
+            z(joints),
+            z(joints, dtype=bool),
+            z(dtype=np.int64),
+            z(dtype=np.int64),
+            z(dtype=bool),
+            z(window, len(BONE_PAIRS)),
+            z(dtype=np.int64),
+            z(joints, 3),
+            z(joints),
+            z(joints),
+            z(joints, dtype=bool),
+            z(len(BONE_PAIRS)),
+            z(len(BONE_PAIRS)),
+            z(len(BONE_PAIRS), dtype=np.int64),
+        )
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -178,9 +195,10 @@ def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max
     far = np.linalg.norm(_centres(guess, seen, core)[:, None] - _centres(poses3d[..., :3], valid, core)[None], axis=-1)
     rows, cols = np.nonzero(far <= max_m + BODY_SPAN_M)
     out = np.full(far.shape, np.inf)
-    out[rows, cols] = _pair_mean_distance(guess[rows][:, core], seen[rows][:, core], poses3d[cols][:, core, :3],
-                                          valid[cols][:, core])
-    left = ~np.isfinite(out[rows, cols])            # pairs without a shared trunk joint: every joint
+    out[rows, cols] = _pair_mean_distance(
+        guess[rows][:, core], seen[rows][:, core], poses3d[cols][:, core, :3], valid[cols][:, core]
+    )
+    left = ~np.isfinite(out[rows, cols])  # pairs without a shared trunk joint: every joint
     if left.any():
         r, c = rows[left], cols[left]
         out[r, c] = _pair_mean_distance(guess[r], seen[r], poses3d[c, :, :3], valid[c])
@@ -205,29 +223,46 @@ def _pair_mean_distance(a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np
 class Tracker:
     """Frame-by-frame tracker of 3D poses; ``update(frame, poses3d (P, J, 4)) -> ids (P,)``."""
 
-    def __init__(self, max_distance_m: float = 0.5, gate_growth_m: float = 0.1, min_hits: int = 3,
-                 max_age: int = 10, accel_sd_m: float = 0.05, measurement_sd_m: float = 0.03,
-                 velocity_sd_m: float = 0.5, bone_window: int = 100, smooth: bool = True,
-                 smooth_rate: float = 0.3, smooth_floor_m: float = 0.001, smooth_initial_m: float = 0.01,
-                 skeleton_min_frames: int = 5) -> None:
+    def __init__(
+        self,
+        max_distance_m: float = 0.5,
+        gate_growth_m: float = 0.1,
+        min_hits: int = 3,
+        max_age: int = 10,
+        accel_sd_m: float = 0.05,
+        measurement_sd_m: float = 0.03,
+        velocity_sd_m: float = 0.5,
+        bone_window: int = 100,
+        smooth: bool = True,
+        smooth_rate: float = 0.3,
+        smooth_floor_m: float = 0.001,
+        smooth_initial_m: float = 0.01,
+        skeleton_min_frames: int = 5,
+    ) -> None:
         if not min(max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m) > 0 or not gate_growth_m >= 0:
-            raise ValueError("tracking: max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m must be > 0 and "
-                             f"gate_growth_m >= 0; got {max_distance_m}, {accel_sd_m}, {measurement_sd_m}, "
-                             f"{velocity_sd_m}, {gate_growth_m}")
+            raise ValueError(
+                "tracking: max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m must be > 0 and "
+                f"gate_growth_m >= 0; got {max_distance_m}, {accel_sd_m}, {measurement_sd_m}, "
+                f"{velocity_sd_m}, {gate_growth_m}"
+            )
         if int(min_hits) < 1 or int(max_age) < 0 or int(bone_window) < 1:
-            raise ValueError(f"tracking: need min_hits >= 1, max_age >= 0, bone_window >= 1; got {min_hits}, "
-                             f"{max_age}, {bone_window}")
+            raise ValueError(
+                f"tracking: need min_hits >= 1, max_age >= 0, bone_window >= 1; got {min_hits}, "
+                f"{max_age}, {bone_window}"
+            )
         self.max_distance_m, self.gate_growth_m = float(max_distance_m), float(gate_growth_m)
         self.min_hits, self.max_age, self.bone_window = int(min_hits), int(max_age), int(bone_window)
         self.q, self.r2, self.v2 = float(accel_sd_m) ** 2, float(measurement_sd_m) ** 2, float(velocity_sd_m) ** 2
         if not (0 < smooth_rate <= 1 and smooth_floor_m > 0 and smooth_initial_m > 0):
-            raise ValueError(f"tracking: need 0 < smooth_rate <= 1, smooth_floor_m > 0, smooth_initial_m > 0; got "
-                             f"{smooth_rate}, {smooth_floor_m}, {smooth_initial_m}")
+            raise ValueError(
+                f"tracking: need 0 < smooth_rate <= 1, smooth_floor_m > 0, smooth_initial_m > 0; got "
+                f"{smooth_rate}, {smooth_floor_m}, {smooth_initial_m}"
+            )
         self.smooth, self.smooth_rate = bool(smooth), float(smooth_rate)
-        self.skeleton_min_frames = int(skeleton_min_frames)     # 0: the tracks' skeletons are never offered
+        self.skeleton_min_frames = int(skeleton_min_frames)  # 0: the tracks' skeletons are never offered
         self.smooth_floor2, self.smooth_q0 = float(smooth_floor_m) ** 2, float(smooth_initial_m) ** 2
         self.state: TrackState | None = None
-        self._pairing: tuple | None = None      # (frame, persons, track ids, person indices) of skeletons()
+        self._pairing: tuple | None = None  # (frame, persons, track ids, person indices) of skeletons()
         self.last_frame: int | None = None
         self._next_id = 0
 
@@ -237,12 +272,27 @@ class Tracker:
         st = self.state
         if st is None:
             return []
-        return [Track(int(st.ids[t]), st.position[t].copy(), st.velocity[t].copy(), st.seen[t].copy(),
-                      int(st.last_frame[t]), int(st.hits[t]), bool(st.confirmed[t]),
-                      st.bones[t][np.isfinite(st.bones[t]).any(axis=1)]) for t in range(len(st))]
+        return [
+            Track(
+                int(st.ids[t]),
+                st.position[t].copy(),
+                st.velocity[t].copy(),
+                st.seen[t].copy(),
+                int(st.last_frame[t]),
+                int(st.hits[t]),
+                bool(st.confirmed[t]),
+                st.bones[t][np.isfinite(st.bones[t]).any(axis=1)],
+            )
+            for t in range(len(st))
+        ]
 
-    def update(self, frame: int, poses3d: np.ndarray, variance: np.ndarray | None = None,
-               bone_lengths: np.ndarray | None = None) -> Tracked:
+    def update(
+        self,
+        frame: int,
+        poses3d: np.ndarray,
+        variance: np.ndarray | None = None,
+        bone_lengths: np.ndarray | None = None,
+    ) -> Tracked:
         """Associate one frame's persons with the tracks and update them: (P, J, 4), per-joint variance (P, J)
         m^2 of the reconstruction -> Tracked(ids (P,), poses3d (P, J, 4)), the poses smoothed over time where
         ``smooth`` and variances are given (a new track's as given). Without variances (a reconstruction that
@@ -254,25 +304,27 @@ class Tracker:
         """
         frame = int(frame)
         if self.last_frame is not None and frame <= self.last_frame:
-            raise ValueError(f"tracking: frame {frame} comes after frame {self.last_frame}; frame numbers must "
-                             "increase (sort the sequence, remove repeated frames)")
+            raise ValueError(
+                f"tracking: frame {frame} comes after frame {self.last_frame}; frame numbers must "
+                "increase (sort the sequence, remove repeated frames)"
+            )
         poses3d = np.asarray(poses3d, dtype=np.float64)
         if poses3d.ndim != 3 or poses3d.shape[-1] != 4:
             raise ValueError(f"tracking: poses must be (P, J, 4), got {poses3d.shape}")
-        smooth = self.smooth and variance is not None          # without variances nothing to weigh: ids only
+        smooth = self.smooth and variance is not None  # without variances nothing to weigh: ids only
         variance = self._variance(variance, poses3d)
         bones = self._bones(bone_lengths, poses3d, variance)
         if self.state is None:
             self.state = TrackState.empty(poses3d.shape[1], self.bone_window)
         self.last_frame = frame
-        st = self.state.select(self._alive(self.state, frame - 1))              # gone during a gap
+        st = self.state.select(self._alive(self.state, frame - 1))  # gone during a gap
         tracks, persons = self._reused_pairing(st, frame, len(poses3d)) or self._associate(st, frame, poses3d)
         ids = np.full(len(poses3d), -1, dtype=np.int64)
         out = poses3d.copy()
         if len(tracks):
             self._correct(st, tracks, frame, poses3d[persons], variance[persons], bones[persons])
             ids[persons] = st.ids[tracks]
-            if smooth:                         # confirmed tracks only: a new one may be a wrong match
+            if smooth:  # confirmed tracks only: a new one may be a wrong match
                 use = (poses3d[persons, :, 3:] > 0) & st.confirmed[tracks, None, None]
                 out[persons, :, :3] = np.where(use, st.sx[tracks], poses3d[persons, :, :3])
         hit = np.zeros(len(st), dtype=bool)
@@ -297,7 +349,7 @@ class Tracker:
             return median, se
         st = self.state.select(self._alive(self.state, frame - 1))
         tracks, persons = self._associate(st, frame, np.asarray(poses3d, dtype=np.float64))
-        self._pairing = (frame, len(poses3d), st.ids[tracks], persons)       # update() reuses it for this frame
+        self._pairing = (frame, len(poses3d), st.ids[tracks], persons)  # update() reuses it for this frame
         keep = st.confirmed[tracks]
         tracks, persons = tracks[keep], persons[keep]
         if len(tracks):
@@ -351,8 +403,9 @@ class Tracker:
         predicted = st.position + dt[:, None, None] * self._body_velocity(st)[:, None, :]
         gate = self.max_distance_m + self.gate_growth_m * (dt - 1.0)
         live = np.where(st.live.any(axis=1, keepdims=True), st.live, st.seen)
-        cost = np.minimum(mean_distances(predicted, live, poses3d, gate.max()),
-                          mean_distances(st.position, live, poses3d, gate.max()))
+        cost = np.minimum(
+            mean_distances(predicted, live, poses3d, gate.max()), mean_distances(st.position, live, poses3d, gate.max())
+        )
         cost = np.where(cost <= gate[:, None], cost, np.inf)
         if not np.isfinite(cost).any():
             return none, none
@@ -368,39 +421,63 @@ class Tracker:
         n = np.maximum(use.sum(axis=1), 1)[:, None]
         return np.where(use[..., None], st.velocity, 0.0).sum(axis=1) / n
 
-    def _births(self, ids: np.ndarray, frame: int, poses3d: np.ndarray, variance: np.ndarray,
-                lengths: np.ndarray) -> TrackState:
+    def _births(
+        self, ids: np.ndarray, frame: int, poses3d: np.ndarray, variance: np.ndarray, lengths: np.ndarray
+    ) -> TrackState:
         """Tentative tracks at persons' joints: ids (B,), (B, J, 4), joint variances (B, J) -> B tracks."""
         (B, J), L = poses3d.shape[:2], len(BONE_PAIRS)
         seen = poses3d[..., 3] > 0
         bones = np.full((B, self.bone_window, L), np.nan)
         bones[:, 0] = lengths
-        return TrackState(ids.astype(np.int64), np.where(seen[..., None], poses3d[..., :3], 0.0), np.zeros((B, J, 3)),
-                          np.full((B, J), self.r2), np.zeros((B, J)), np.full((B, J), self.v2), seen,
-                          np.full(B, frame, dtype=np.int64), np.ones(B, dtype=np.int64),
-                          np.full(B, self.min_hits <= 1), bones, np.ones(B, dtype=np.int64) % self.bone_window,
-                          np.where(seen[..., None], poses3d[..., :3], 0.0), np.where(seen, variance, 0.0),
-                          np.full((B, J), self.smooth_q0), seen & (variance < UNSEEN_VAR_M2),
-                          np.full((B, L), np.nan), np.full((B, L), np.inf), np.zeros((B, L), dtype=np.int64))
+        return TrackState(
+            ids.astype(np.int64),
+            np.where(seen[..., None], poses3d[..., :3], 0.0),
+            np.zeros((B, J, 3)),
+            np.full((B, J), self.r2),
+            np.zeros((B, J)),
+            np.full((B, J), self.v2),
+            seen,
+            np.full(B, frame, dtype=np.int64),
+            np.ones(B, dtype=np.int64),
+            np.full(B, self.min_hits <= 1),
+            bones,
+            np.ones(B, dtype=np.int64) % self.bone_window,
+            np.where(seen[..., None], poses3d[..., :3], 0.0),
+            np.where(seen, variance, 0.0),
+            np.full((B, J), self.smooth_q0),
+            seen & (variance < UNSEEN_VAR_M2),
+            np.full((B, L), np.nan),
+            np.full((B, L), np.inf),
+            np.zeros((B, L), dtype=np.int64),
+        )
 
-    def _correct(self, st: TrackState, tracks: np.ndarray, frame: int, poses3d: np.ndarray,
-                 variance: np.ndarray, lengths: np.ndarray) -> None:
+    def _correct(
+        self,
+        st: TrackState,
+        tracks: np.ndarray,
+        frame: int,
+        poses3d: np.ndarray,
+        variance: np.ndarray,
+        lengths: np.ndarray,
+    ) -> None:
         """Kalman predict over the frames since each track's last hit, then update with the observed joints
         (a joint seen for the first time starts there): tracks (K,), poses (K, J, 4), variances (K, J); st
         changed in place (the motion filter, then the smoother, then the bone lengths)."""
-        dt = (frame - st.last_frame[tracks]).astype(np.float64)[:, None]              # (K, 1)
+        dt = (frame - st.last_frame[tracks]).astype(np.float64)[:, None]  # (K, 1)
         self._smooth(st, tracks, dt, poses3d, variance)
         p00, p01, p11 = st.p00[tracks], st.p01[tracks], st.p11[tracks]
-        p00 = p00 + 2 * dt * p01 + dt ** 2 * p11 + self.q * dt ** 4 / 4
-        p01 = p01 + dt * p11 + self.q * dt ** 3 / 2
-        p11 = p11 + self.q * dt ** 2
+        p00 = p00 + 2 * dt * p01 + dt**2 * p11 + self.q * dt**4 / 4
+        p01 = p01 + dt * p11 + self.q * dt**3 / 2
+        p11 = p11 + self.q * dt**2
         x = st.position[tracks] + dt[..., None] * st.velocity[tracks]
-        obs = (poses3d[..., 3] > 0) & (variance < UNSEEN_VAR_M2)     # a joint no view fixes is no measurement
+        obs = (poses3d[..., 3] > 0) & (variance < UNSEEN_VAR_M2)  # a joint no view fixes is no measurement
         seen = st.seen[tracks]
         upd, new = obs & seen, obs & ~seen
         k0, k1 = p00 / (p00 + self.r2), p01 / (p00 + self.r2)
         innov = poses3d[..., :3] - x
-        st.position[tracks] = np.where(upd[..., None], x + k0[..., None] * innov, np.where(new[..., None], poses3d[..., :3], x))
+        st.position[tracks] = np.where(
+            upd[..., None], x + k0[..., None] * innov, np.where(new[..., None], poses3d[..., :3], x)
+        )
         st.velocity[tracks] = np.where(upd[..., None], st.velocity[tracks] + k1[..., None] * innov, st.velocity[tracks])
         st.live[tracks] = obs
         st.p00[tracks] = np.where(upd, (1 - k0) * p00, p00)
@@ -418,8 +495,9 @@ class Tracker:
             st.skel_median[refresh], st.skel_count[refresh] = median, count
             st.skel_se[refresh] = np.where(np.isfinite(sd), sd / np.sqrt(np.maximum(count, 1)), np.inf)
 
-    def _smooth(self, st: TrackState, tracks: np.ndarray, dt: np.ndarray, poses3d: np.ndarray,
-                variance: np.ndarray) -> None:
+    def _smooth(
+        self, st: TrackState, tracks: np.ndarray, dt: np.ndarray, poses3d: np.ndarray, variance: np.ndarray
+    ) -> None:
         """The smoother of each joint: a random walk whose process variance follows the innovations (a joint the
         reconstruction does not see moves with the body), updated with the reconstruction's joint (its variance):
         tracks (K,), dt (K, 1), poses (K, J, 4), variances (K, J); st changed in place."""
@@ -433,12 +511,13 @@ class Tracker:
         x = st.sx[tracks] + dt[..., None] * v
         p, q = st.sp[tracks], st.sq[tracks]
         innov = poses3d[..., :3] - x
-        excess = (innov ** 2).sum(-1) / 3 - p - variance
-        rate = np.maximum(self.smooth_rate, 1.0 / st.hits[tracks])[:, None]   # a plain mean over the first hits
+        excess = (innov**2).sum(-1) / 3 - p - variance
+        rate = np.maximum(self.smooth_rate, 1.0 / st.hits[tracks])[:, None]  # a plain mean over the first hits
         q = np.where(upd, (1 - rate) * q + rate * np.maximum(excess, self.smooth_floor2), q)
         p = p + dt * q
         gain = p / (p + variance)
-        st.sx[tracks] = np.where(upd[..., None], x + gain[..., None] * innov,
-                                 np.where(fresh[..., None], poses3d[..., :3], x))
+        st.sx[tracks] = np.where(
+            upd[..., None], x + gain[..., None] * innov, np.where(fresh[..., None], poses3d[..., :3], x)
+        )
         st.sp[tracks] = np.where(upd, (1 - gain) * p, np.where(fresh, variance, p))
         st.sq[tracks] = np.where(fresh, self.smooth_q0, q)

@@ -9,14 +9,15 @@ Frames are the frame numbers found in the file, or the ones asked for: a frame w
 in any view is still a frame (the pipeline then reports it as skipped), so that a detector's output,
 which omits empty frames, can be evaluated over a fixed range.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
-from data.multiview import Frame, Sequence, ViewDetections
 from data.formats.poses2d_io import read_poses2d
 from data.geometry.calibration import load_rig
 from data.geometry.check_rig import check_rig
+from data.multiview import Frame, Sequence, ViewDetections
 
 
 def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str | None = None) -> Sequence:
@@ -35,10 +36,15 @@ def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str
     empty = [f for f in numbers if f not in views]
     out = [Frame(f, views.get(f) or [ViewDetections.empty() for _ in rig.names]) for f in numbers]
     detections = sum(len(v) for f in numbers for v in views.get(f, []))
-    meta = {"dataset": "files", "cameras": str(cameras), "poses2d": str(poses2d),
-            "frames_without_detections": len(empty), "frames_not_selected": len(set(views) - set(numbers)),
-            "description": f"{poses2d} ({detections} detections; {len(empty)} frames without any) on {cameras}, "
-                           f"no ground truth"}
+    meta = {
+        "dataset": "files",
+        "cameras": str(cameras),
+        "poses2d": str(poses2d),
+        "frames_without_detections": len(empty),
+        "frames_not_selected": len(set(views) - set(numbers)),
+        "description": f"{poses2d} ({detections} detections; {len(empty)} frames without any) on {cameras}, "
+        f"no ground truth",
+    }
     return Sequence(rig, out, meta)
 
 

@@ -19,6 +19,7 @@ projecting it through the chosen cameras with Gaussian pixel noise and capsule o
 protocol checks only: it carries ground-truth identities (so the oracle matcher works) and, like the
 ground truth, has no foot joints; the feet matcher then falls back to the ankles.
 """
+
 from __future__ import annotations
 
 import json
@@ -27,12 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from data.geometry.calibration import load_panoptic, panoptic_world_to_ours
+from data.geometry.camera import Camera, Rig
 from data.keypoints import FOOT_JOINTS, LEFT_ANKLE, LEFT_FOOT, PANOPTIC19_TO_COCO23, RIGHT_ANKLE, RIGHT_FOOT, to_coco23
 from data.multiview import Frame, Sequence, ViewDetections
 from data.synthetic.config import SyntheticConfig
 from data.synthetic.observe import bbox_from_keypoints, observe_view
-from data.geometry.calibration import load_panoptic, panoptic_world_to_ours
-from data.geometry.camera import Camera, Rig
 
 # The five HD cameras of VoxelPose's Panoptic experiments (panel 0, nodes 3, 6, 12, 13, 23).
 DEFAULT_CAMERAS = ("00_03", "00_06", "00_12", "00_13", "00_23")
@@ -42,11 +43,19 @@ NUM_PANOPTIC_JOINTS = 19
 _POSE_FILE = re.compile(r"body3DScene_(\d+)\.json")
 
 
-def load_panoptic_sequence(root: str | Path, sequence: str = "160906_band1", cameras: list[str] | None = None,
-                           frames: list[int] | slice | str | None = None, poses2d: str | None = None,
-                           noise_px: float = 2.0, occlusion: bool = True, seed: int = 0,
-                           occluded_drop_prob: float = 0.3, occluded_noise_scale: float = 3.0,
-                           min_joints_in_view: int = 5) -> Sequence:
+def load_panoptic_sequence(
+    root: str | Path,
+    sequence: str = "160906_band1",
+    cameras: list[str] | None = None,
+    frames: list[int] | slice | str | None = None,
+    poses2d: str | None = None,
+    noise_px: float = 2.0,
+    occlusion: bool = True,
+    seed: int = 0,
+    occluded_drop_prob: float = 0.3,
+    occluded_noise_scale: float = 3.0,
+    min_joints_in_view: int = 5,
+) -> Sequence:
     """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) per frame, 2D views.
 
     ``frames``: None = every body3DScene file found; a list = those frame numbers; a slice or a
@@ -61,21 +70,37 @@ def load_panoptic_sequence(root: str | Path, sequence: str = "160906_band1", cam
     all_files = find_pose_files(seq_dir)
     files = _select_frames(all_files, frames, seq_dir / POSE_DIR)
     ground_truth = {frame: read_bodies(path) for frame, path in files.items()}
-    meta = {"dataset": "panoptic", "root": str(root), "sequence": sequence, "cameras": names,
-            "gt_min_confidence": GT_MIN_CONFIDENCE, "gt_panoptic15": {},
-            "persistent_ids": True}      # Panoptic body ids name one person over the sequence
+    meta = {
+        "dataset": "panoptic",
+        "root": str(root),
+        "sequence": sequence,
+        "cameras": names,
+        "gt_min_confidence": GT_MIN_CONFIDENCE,
+        "gt_panoptic15": {},
+        "persistent_ids": True,
+    }  # Panoptic body ids name one person over the sequence
     if poses2d is not None:
         views_by_frame = _read_poses2d(poses2d, rig, meta)
         source = f"2D poses from {poses2d}"
     else:
-        cfg = SyntheticConfig(noise_px=noise_px, noise_depth_exponent=0.0, occlusion=occlusion,
-                              occluded_drop_prob=occluded_drop_prob, occluded_noise_scale=occluded_noise_scale,
-                              min_joints_in_view=min_joints_in_view, miss_rate=0.0, fp_rate=0.0)
+        cfg = SyntheticConfig(
+            noise_px=noise_px,
+            noise_depth_exponent=0.0,
+            occlusion=occlusion,
+            occluded_drop_prob=occluded_drop_prob,
+            occluded_noise_scale=occluded_noise_scale,
+            min_joints_in_view=min_joints_in_view,
+            miss_rate=0.0,
+            fp_rate=0.0,
+        )
         rng = np.random.default_rng(seed)
-        views_by_frame = {f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng)
-                          for f, (ids, j19) in ground_truth.items()}
-        source = (f"2D generated from GT: {noise_px} px noise, occlusion {'on' if occlusion else 'off'}, "
-                  f"seed {seed}, no foot joints")
+        views_by_frame = {
+            f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng) for f, (ids, j19) in ground_truth.items()
+        }
+        source = (
+            f"2D generated from GT: {noise_px} px noise, occlusion {'on' if occlusion else 'off'}, "
+            f"seed {seed}, no foot joints"
+        )
     out = []
     for frame, (ids, joints19) in ground_truth.items():
         meta["gt_panoptic15"][frame] = panoptic19_to_ours(joints19)[:, :15]
@@ -117,8 +142,7 @@ def read_bodies(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         except (KeyError, TypeError, ValueError):
             raise ValueError(f"{path}: bodies[{n}] needs an integer 'id' and numeric 'joints19'") from None
         if j19.size != NUM_PANOPTIC_JOINTS * 4 or not np.all(np.isfinite(j19)):
-            raise ValueError(f"{path}: bodies[{n}] (id {ids[-1]}) 'joints19' must be 76 finite numbers, "
-                             f"got {j19.size}")
+            raise ValueError(f"{path}: bodies[{n}] (id {ids[-1]}) 'joints19' must be 76 finite numbers, got {j19.size}")
         joints.append(j19.reshape(NUM_PANOPTIC_JOINTS, 4))
     return np.array(ids, dtype=np.int64), np.array(joints).reshape(-1, NUM_PANOPTIC_JOINTS, 4)
 
@@ -136,8 +160,9 @@ def _coco23(joints19: np.ndarray) -> np.ndarray:
     return to_coco23(panoptic19_to_ours(joints19), PANOPTIC19_TO_COCO23)
 
 
-def observe_ground_truth(rig: Rig, gt_poses: np.ndarray, gt_ids: np.ndarray, cfg: SyntheticConfig,
-                         rng: np.random.Generator) -> list[ViewDetections]:
+def observe_ground_truth(
+    rig: Rig, gt_poses: np.ndarray, gt_ids: np.ndarray, cfg: SyntheticConfig, rng: np.random.Generator
+) -> list[ViewDetections]:
     """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera of the rig.
 
     The synthetic generator's :func:`observe_view` does the projection, noise, occlusion and scores.
@@ -150,8 +175,7 @@ def observe_ground_truth(rig: Rig, gt_poses: np.ndarray, gt_ids: np.ndarray, cfg
     ids = np.asarray(gt_ids, dtype=np.int64)
     valid_by_id = {int(i): gt_poses[n, :, 3] > 0 for n, i in enumerate(ids)}
     filled = _fill_invalid(gt_poses)
-    return [_mask_invalid(observe_view(camera, filled, ids, cfg, rng), valid_by_id, camera, cfg)
-            for camera in rig]
+    return [_mask_invalid(observe_view(camera, filled, ids, cfg, rng), valid_by_id, camera, cfg) for camera in rig]
 
 
 def _fill_invalid(poses: np.ndarray) -> np.ndarray:
@@ -168,8 +192,9 @@ def _fill_invalid(poses: np.ndarray) -> np.ndarray:
     return out
 
 
-def _mask_invalid(views: ViewDetections, valid_by_id: dict[int, np.ndarray], camera: Camera,
-                  cfg: SyntheticConfig) -> ViewDetections:
+def _mask_invalid(
+    views: ViewDetections, valid_by_id: dict[int, np.ndarray], camera: Camera, cfg: SyntheticConfig
+) -> ViewDetections:
     """Zero the joints invalid in the ground truth, drop persons left with too few joints, redo boxes."""
     keypoints = views.keypoints.copy()
     for n, pid in enumerate(views.person_ids):
@@ -182,12 +207,12 @@ def _mask_invalid(views: ViewDetections, valid_by_id: dict[int, np.ndarray], cam
     keypoints = keypoints[keep]
     valid = keypoints[..., 2] > 0
     scores = (keypoints[..., 2] * valid).sum(axis=1) / valid.sum(axis=1)
-    return ViewDetections(keypoints, bbox_from_keypoints(keypoints, camera.size), scores,
-                          views.person_ids[keep], views.occluded[keep])
+    return ViewDetections(
+        keypoints, bbox_from_keypoints(keypoints, camera.size), scores, views.person_ids[keep], views.occluded[keep]
+    )
 
 
-def _select_frames(files: dict[int, Path], frames: list[int] | slice | str | None,
-                   pose_dir: Path) -> dict[int, Path]:
+def _select_frames(files: dict[int, Path], frames: list[int] | slice | str | None, pose_dir: Path) -> dict[int, Path]:
     """The requested subset of {frame: path} (see load_panoptic_sequence for ``frames``)."""
     if frames is None:
         return files
@@ -201,8 +226,10 @@ def _select_frames(files: dict[int, Path], frames: list[int] | slice | str | Non
         return {f: files[f] for f in numbers[frames]}
     missing = [int(f) for f in frames if int(f) not in files]
     if missing:
-        raise ValueError(f"{pose_dir}: frame {missing[0]} requested but body3DScene_{missing[0]:08d}.json "
-                         f"is not there (found {numbers[0]}..{numbers[-1]}, {len(numbers)} files)")
+        raise ValueError(
+            f"{pose_dir}: frame {missing[0]} requested but body3DScene_{missing[0]:08d}.json "
+            f"is not there (found {numbers[0]}..{numbers[-1]}, {len(numbers)} files)"
+        )
     return {int(f): files[int(f)] for f in frames}
 
 

@@ -18,27 +18,38 @@ path), and the evaluation layer attaches :class:`evaluation.protocols.shelf.Shel
 for 4D Association.
 ``Frame.index`` is the Shelf frame number (file frame i = ``first_frame`` + i).
 """
-from __future__ import annotations
 
-from typing import Callable
+from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Callable
 
-from data.keypoints import FOOT_JOINTS
 from data.formats.fourd_detections import FrameCandidates, load_4dassoc_detections
-from data.multiview import Frame, Sequence, ViewDetections
 from data.formats.fourd_skeletons import load_4dassoc_skeletons
 from data.geometry.calibration import load_4dassoc
 from data.geometry.camera import Rig
+from data.keypoints import FOOT_JOINTS
+from data.multiview import Frame, Sequence, ViewDetections
 
 
-def load_shelf(root: str | Path = "../shared/data/shelf", detections: str = "4d_association/detection",
-               calibration: str = "4d_association/calibration.json", gt: str = "4d_association/gt.txt",
-               baseline: str | None = "4d_association/skel.txt", first_frame: int = 300,
-               frames: str | list[int] | None = None, min_paf: float = 0.05, min_joints: int = 8,
-               min_mean_score: float = 0.4, bbox_margin: float = 0.1, poses2d: str | None = None,
-               alpha: float = 0.5, drop_feet: bool = False, grouper: Callable | None = None) -> Sequence:
+def load_shelf(
+    root: str | Path = "../shared/data/shelf",
+    detections: str = "4d_association/detection",
+    calibration: str = "4d_association/calibration.json",
+    gt: str = "4d_association/gt.txt",
+    baseline: str | None = "4d_association/skel.txt",
+    first_frame: int = 300,
+    frames: str | list[int] | None = None,
+    min_paf: float = 0.05,
+    min_joints: int = 8,
+    min_mean_score: float = 0.4,
+    bbox_margin: float = 0.1,
+    poses2d: str | None = None,
+    alpha: float = 0.5,
+    drop_feet: bool = False,
+    grouper: Callable | None = None,
+) -> Sequence:
     """The Shelf rig (5 views) and one Frame per chosen frame with V ViewDetections (N, 23, 3), gt_poses None.
 
     Paths are relative to ``root`` unless absolute. ``frames``: None = all frames of gt.txt; a
@@ -59,14 +70,24 @@ def load_shelf(root: str | Path = "../shared/data/shelf", detections: str = "4d_
     meta = {"dataset": "shelf", "root": str(root), "first_frame": first_frame, "frames": len(numbers)}
     if poses2d is None:
         if grouper is None:
-            raise ValueError("load_shelf: grouping the detection files needs a grouper "
-                             "(dataset.grouper: models.paf_grouping.group_view), or give dataset.poses2d")
-        views, seconds = _grouped_views(_under(root, detections), rig, numbers, first_frame, grouper,
-                                        dict(min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score),
-                                        bbox_margin)
+            raise ValueError(
+                "load_shelf: grouping the detection files needs a grouper "
+                "(dataset.grouper: models.paf_grouping.group_view), or give dataset.poses2d"
+            )
+        views, seconds = _grouped_views(
+            _under(root, detections),
+            rig,
+            numbers,
+            first_frame,
+            grouper,
+            dict(min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score),
+            bbox_margin,
+        )
         meta["stage_seconds"] = {"grouping": seconds}
-        source = (f"OpenPose BODY_25 candidates of {_under(root, detections)} grouped by PAF (min_paf {min_paf:g}, "
-                  f"min_joints {min_joints}, min_mean_score {min_mean_score:g})")
+        source = (
+            f"OpenPose BODY_25 candidates of {_under(root, detections)} grouped by PAF (min_paf {min_paf:g}, "
+            f"min_joints {min_joints}, min_mean_score {min_mean_score:g})"
+        )
     else:
         views = _read_poses2d(poses2d, rig)
         meta["poses2d_frames_not_selected"] = len(set(views) - set(numbers))
@@ -76,11 +97,20 @@ def load_shelf(root: str | Path = "../shared/data/shelf", detections: str = "4d_
         source += "; the 6 foot keypoints removed (dataset.drop_feet)"
     out = [Frame(n, views.get(n) or [ViewDetections.empty() for _ in rig.names]) for n in numbers]
     detected = sum(len(v) for f in out for v in f.views)
-    meta["description"] = (f"Shelf frames {numbers[0]}-{numbers[-1]} ({len(numbers)}), cameras "
-                           f"{', '.join(rig.names)}: {source}; {detected / max(len(out), 1):.1f} detections per frame")
-    meta["protocol_inputs"] = [{"name": "shelf", "gt": {n: gts[n - first_frame] for n in numbers}, "gt_path": gt_path,
-                                "baseline_path": None if baseline is None else _under(root, baseline),
-                                "first_frame": first_frame, "alpha": alpha}]
+    meta["description"] = (
+        f"Shelf frames {numbers[0]}-{numbers[-1]} ({len(numbers)}), cameras "
+        f"{', '.join(rig.names)}: {source}; {detected / max(len(out), 1):.1f} detections per frame"
+    )
+    meta["protocol_inputs"] = [
+        {
+            "name": "shelf",
+            "gt": {n: gts[n - first_frame] for n in numbers},
+            "gt_path": gt_path,
+            "baseline_path": None if baseline is None else _under(root, baseline),
+            "first_frame": first_frame,
+            "alpha": alpha,
+        }
+    ]
     return Sequence(rig, out, meta)
 
 
@@ -119,27 +149,33 @@ def _frame_numbers(frames: str | list[int] | None, count: int, first: int, gt_pa
     return chosen
 
 
-def _grouped_views(folder: Path, rig: Rig, numbers: list[int], first: int, grouper: Callable, grouping: dict,
-                   margin: float) -> tuple[dict[int, list[ViewDetections]], float]:
+def _grouped_views(
+    folder: Path, rig: Rig, numbers: list[int], first: int, grouper: Callable, grouping: dict, margin: float
+) -> tuple[dict[int, list[ViewDetections]], float]:
     """{frame: V ViewDetections} from <folder>/<camera>.txt, and the seconds spent grouping."""
-    per_camera = [_camera_candidates(folder, name, rig.cameras[v].size, numbers, first)
-                  for v, name in enumerate(rig.names)]
+    per_camera = [
+        _camera_candidates(folder, name, rig.cameras[v].size, numbers, first) for v, name in enumerate(rig.names)
+    ]
     t0 = time.perf_counter()
-    views = {n: [grouper(c[i].candidates, c[i].pafs, **grouping, margin=margin)
-                 for c in per_camera] for i, n in enumerate(numbers)}
+    views = {
+        n: [grouper(c[i].candidates, c[i].pafs, **grouping, margin=margin) for c in per_camera]
+        for i, n in enumerate(numbers)
+    }
     return views, time.perf_counter() - t0
 
 
-def _camera_candidates(folder: Path, name: str, size: tuple[int, int], numbers: list[int],
-                       first: int) -> list[FrameCandidates]:
+def _camera_candidates(
+    folder: Path, name: str, size: tuple[int, int], numbers: list[int], first: int
+) -> list[FrameCandidates]:
     """The chosen frames of one camera's detection file."""
     path = folder / f"{name}.txt"
     if not path.is_file():
         raise FileNotFoundError(f"{path}: detection file of camera {name!r} not found")
     frames = load_4dassoc_detections(path, (int(size[0]), int(size[1])))
     if numbers[-1] - first >= len(frames):
-        raise ValueError(f"{path}: {len(frames)} frames, but frame {numbers[-1]} (position {numbers[-1] - first}) "
-                         "is asked for")
+        raise ValueError(
+            f"{path}: {len(frames)} frames, but frame {numbers[-1]} (position {numbers[-1] - first}) is asked for"
+        )
     return [frames[n - first] for n in numbers]
 
 
@@ -150,4 +186,3 @@ def _read_poses2d(path: str | Path, rig: Rig) -> dict[int, list[ViewDetections]]
     if not Path(path).is_file():
         raise FileNotFoundError(f"{path}: poses2d.json not found")
     return read_poses2d(path, list(rig.names), [c.size for c in rig])
-

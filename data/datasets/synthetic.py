@@ -1,4 +1,5 @@
 """Dataset entry points for ``configs/dataset/*.yaml``: each builds a :class:`data.multiview.Sequence`."""
+
 from __future__ import annotations
 
 from data.multiview import Sequence
@@ -15,5 +16,6 @@ def load_synthetic(**options) -> Sequence:
         f"Synthetic crowd (seed {cfg.seed}): {len(sequence.frames[0].gt_ids) if sequence.frames else 0} persons, "
         f"{rig}, 2D noise {cfg.noise_px} px at {cfg.noise_ref_depth_m} m x (depth ratio)^{cfg.noise_depth_exponent:g}, "
         f"occlusion {'on' if cfg.occlusion else 'off'}, "
-        f"miss rate {cfg.miss_rate}, false positives {cfg.fp_rate} per view")
+        f"miss rate {cfg.miss_rate}, false positives {cfg.fp_rate} per view"
+    )
     return sequence

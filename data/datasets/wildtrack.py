@@ -12,26 +12,38 @@ The sequence asks for the paper's Table 1 protocol, COCO AP/AR of the reprojecte
 (:class:`evaluation.protocols.reprojection_coco.ReprojectionCOCOProtocol`), in ``meta["protocol_inputs"]``;
 the evaluation layer attaches it (:func:`evaluation.protocols.attach_protocols`).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
+from data.geometry.calibration import load_wildtrack, load_wildtrack_positions
 from data.multiview import Frame, Sequence
 from data.synthetic import SyntheticConfig, generate_sequence
-from data.geometry.calibration import load_wildtrack, load_wildtrack_positions
 
 POSITIONS_FILE = "gt_positions_mvdet.txt"
 # The annotated region (m), grid cells 0..480 x 0..1440 of 2.5 cm from (-3, -9).
 WILDTRACK_AREA = (-3.0, 9.0, -9.0, 27.0)
 
 
-def load_wildtrack_crowd(root: str | Path = "../shared/data/wildtrack", frames: int | list[int] = 20,
-                         noise_px: float = 5.0, noise_depth_exponent: float = 0.0, noise_ref_depth_m: float = 5.0,
-                         occlusion: bool = True, occluded_drop_prob: float = 0.3, occluded_noise_scale: float = 3.0,
-                         miss_rate: float = 0.0, fp_rate: float = 0.0, min_joints_in_view: int = 5, seed: int = 0,
-                         coco_min_joints: int = 1, coco_max_dets: int = 100) -> Sequence:
+def load_wildtrack_crowd(
+    root: str | Path = "../shared/data/wildtrack",
+    frames: int | list[int] = 20,
+    noise_px: float = 5.0,
+    noise_depth_exponent: float = 0.0,
+    noise_ref_depth_m: float = 5.0,
+    occlusion: bool = True,
+    occluded_drop_prob: float = 0.3,
+    occluded_noise_scale: float = 3.0,
+    miss_rate: float = 0.0,
+    fp_rate: float = 0.0,
+    min_joints_in_view: int = 5,
+    seed: int = 0,
+    coco_min_joints: int = 1,
+    coco_max_dets: int = 100,
+) -> Sequence:
     """The Wildtrack rig (7 views) and F frames of synthetic bodies at the annotated positions, GT (P, 23, 4).
 
     ``frames``: the first N annotated frames (an int), or a list of annotated frame numbers.
@@ -43,20 +55,41 @@ def load_wildtrack_crowd(root: str | Path = "../shared/data/wildtrack", frames: 
     rig = load_wildtrack(root)
     positions = load_wildtrack_positions(root / POSITIONS_FILE)
     chosen = _choose_frames(positions, frames, root / POSITIONS_FILE)
-    options = dict(noise_px=noise_px, noise_depth_exponent=noise_depth_exponent, noise_ref_depth_m=noise_ref_depth_m,
-                   occlusion=occlusion, occluded_drop_prob=occluded_drop_prob,
-                   occluded_noise_scale=occluded_noise_scale, miss_rate=miss_rate, fp_rate=fp_rate,
-                   min_joints_in_view=min_joints_in_view)
+    options = dict(
+        noise_px=noise_px,
+        noise_depth_exponent=noise_depth_exponent,
+        noise_ref_depth_m=noise_ref_depth_m,
+        occlusion=occlusion,
+        occluded_drop_prob=occluded_drop_prob,
+        occluded_noise_scale=occluded_noise_scale,
+        miss_rate=miss_rate,
+        fp_rate=fp_rate,
+        min_joints_in_view=min_joints_in_view,
+    )
     out = []
     for number in chosen:
         frame_seed = int(np.random.SeedSequence([int(seed), number]).generate_state(1)[0])
-        cfg = SyntheticConfig(seed=frame_seed, positions=[positions[number]], area=WILDTRACK_AREA, min_spacing_m=0.0,
-                              rig=str(root), rig_format="wildtrack", **options)
+        cfg = SyntheticConfig(
+            seed=frame_seed,
+            positions=[positions[number]],
+            area=WILDTRACK_AREA,
+            min_spacing_m=0.0,
+            rig=str(root),
+            rig_format="wildtrack",
+            **options,
+        )
         frame = generate_sequence(cfg, rig=rig).frames[0]
         out.append(Frame(number, frame.views, frame.gt_poses, frame.gt_ids))
-    meta = {"dataset": "wildtrack", "root": str(root), "frames": chosen, "seed": int(seed), "options": options,
-            "description": _description(chosen, positions, noise_px, noise_depth_exponent, noise_ref_depth_m,
-                                        occlusion, miss_rate, fp_rate, seed)}
+    meta = {
+        "dataset": "wildtrack",
+        "root": str(root),
+        "frames": chosen,
+        "seed": int(seed),
+        "options": options,
+        "description": _description(
+            chosen, positions, noise_px, noise_depth_exponent, noise_ref_depth_m, occlusion, miss_rate, fp_rate, seed
+        ),
+    }
     meta["protocol_inputs"] = [{"name": "reprojection_coco", "min_joints": coco_min_joints, "max_dets": coco_max_dets}]
     return Sequence(rig, out, meta)
 
@@ -67,21 +100,37 @@ def _choose_frames(positions: dict[int, np.ndarray], frames: int | list[int], pa
     if isinstance(frames, (int, np.integer)) and not isinstance(frames, bool):
         if not 1 <= frames <= len(numbers):
             raise ValueError(f"{path}: frames={frames}, expected 1..{len(numbers)} (the annotated frames)")
-        return numbers[:int(frames)]
+        return numbers[: int(frames)]
     chosen = [int(f) for f in frames]
     missing = [f for f in chosen if f not in positions]
     if missing or not chosen:
-        raise ValueError(f"{path}: frame {missing[0] if missing else '(none)'} is not annotated "
-                         f"(annotated: {numbers[0]}, {numbers[1]}, ..., {numbers[-1]})")
+        raise ValueError(
+            f"{path}: frame {missing[0] if missing else '(none)'} is not annotated "
+            f"(annotated: {numbers[0]}, {numbers[1]}, ..., {numbers[-1]})"
+        )
     return chosen
 
 
-def _description(chosen: list[int], positions: dict[int, np.ndarray], noise_px: float, exponent: float,
-                 ref_depth: float, occlusion: bool, miss_rate: float, fp_rate: float, seed: int) -> str:
+def _description(
+    chosen: list[int],
+    positions: dict[int, np.ndarray],
+    noise_px: float,
+    exponent: float,
+    ref_depth: float,
+    occlusion: bool,
+    miss_rate: float,
+    fp_rate: float,
+    seed: int,
+) -> str:
     """One line saying what the sequence is."""
     people = np.mean([len(positions[f]) for f in chosen])
-    noise = (f"{noise_px:g} px at every depth" if exponent == 0
-             else f"{noise_px:g} px at {ref_depth:g} m x (depth ratio)^{exponent:g}")
-    return (f"Wildtrack rig (7 real calibrations), synthetic bodies at the annotated positions of "
-            f"{len(chosen)} frames ({people:.1f} persons per frame), seed {seed}: 2D noise {noise}, "
-            f"occlusion {'on' if occlusion else 'off'}, miss rate {miss_rate:g}, false positives {fp_rate:g} per view")
+    noise = (
+        f"{noise_px:g} px at every depth"
+        if exponent == 0
+        else f"{noise_px:g} px at {ref_depth:g} m x (depth ratio)^{exponent:g}"
+    )
+    return (
+        f"Wildtrack rig (7 real calibrations), synthetic bodies at the annotated positions of "
+        f"{len(chosen)} frames ({people:.1f} persons per frame), seed {seed}: 2D noise {noise}, "
+        f"occlusion {'on' if occlusion else 'off'}, miss rate {miss_rate:g}, false positives {fp_rate:g} per view"
+    )

@@ -7,6 +7,7 @@ sees (an exception, KeyboardInterrupt, SystemExit: SIGTERM becomes one when the 
 temporary (its writer is no longer running on this host) is removed by the next write to the same target
 and by the run-folder check of eval.py / train.py, and is never read as an output.
 """
+
 from __future__ import annotations
 
 import os
@@ -40,7 +41,7 @@ def _running(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:      # someone else's process
+    except PermissionError:  # someone else's process
         return True
     return True
 
@@ -54,7 +55,7 @@ def is_stale(path: Path) -> bool:
     """Whether path is a temporary whose writer, on this host, is no longer running (killed before its rename)."""
     match = TEMPORARY.match(path.name)
     if match is None or match["host"] != _host():
-        return False              # another host's writer may still be running
+        return False  # another host's writer may still be running
     pid = int(match["pid"])
     return pid != os.getpid() and not _running(pid)
 

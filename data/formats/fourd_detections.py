@@ -3,6 +3,7 @@
 Each frame holds, per BODY_25 joint, its candidates (x, y, score) and, per part-affinity limb, the
 matrix of PAF scores between the candidates of the limb's two joints. See ../shared/data/PROVENANCE.md.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -15,9 +16,32 @@ BODY25_SKELETON_TYPE = 4  # the header's skeleton id for BODY_25 in 4D Associati
 
 # The 26 BODY_25 part-affinity limbs (joint a, joint b) in the order of the file (and of OpenPose).
 BODY25_PAF_LIMBS: tuple[tuple[int, int], ...] = (
-    (1, 8), (9, 10), (10, 11), (8, 9), (8, 12), (12, 13), (13, 14), (1, 2), (2, 3), (3, 4), (2, 17),
-    (1, 5), (5, 6), (6, 7), (5, 18), (1, 0), (0, 15), (0, 16), (15, 17), (16, 18), (14, 19), (19, 20),
-    (14, 21), (11, 22), (22, 23), (11, 24),
+    (1, 8),
+    (9, 10),
+    (10, 11),
+    (8, 9),
+    (8, 12),
+    (12, 13),
+    (13, 14),
+    (1, 2),
+    (2, 3),
+    (3, 4),
+    (2, 17),
+    (1, 5),
+    (5, 6),
+    (6, 7),
+    (5, 18),
+    (1, 0),
+    (0, 15),
+    (0, 16),
+    (15, 17),
+    (16, 18),
+    (14, 19),
+    (19, 20),
+    (14, 21),
+    (11, 22),
+    (22, 23),
+    (11, 24),
 )
 
 
@@ -47,7 +71,7 @@ class _Reader:
             raise ValueError(f"{self.path}: file ends while reading {where}")
         if self.first_bad < self.pos + n:
             raise ValueError(f"{self.path}: non-numeric or non-finite value in {where}")
-        out = self.values[self.pos:self.pos + n]
+        out = self.values[self.pos : self.pos + n]
         self.pos += n
         return out
 
@@ -109,6 +133,7 @@ def load_4dassoc_detections(path: str | Path, image_size: tuple[int, int] = (103
     scale = np.array([image_size[0] - 1, image_size[1] - 1, 1.0])
     frames = [_read_frame(reader, f, scale) for f in range(num_frames)]
     if reader.pos != len(reader.values):
-        raise ValueError(f"{path}: {len(reader.values) - reader.pos} numbers left after the {num_frames} frames "
-                         "of the header")
+        raise ValueError(
+            f"{path}: {len(reader.values) - reader.pos} numbers left after the {num_frames} frames of the header"
+        )
     return frames

@@ -1,4 +1,5 @@
 """Shelf benchmark files of the 4D Association repository (see ../shared/data/PROVENANCE.md)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -25,7 +26,7 @@ def load_4dassoc_skeletons(path: str | Path) -> list[dict[int, np.ndarray]]:
         if pos + n > len(tokens):
             raise ValueError(f"{path}: file ends while reading {what}")
         try:
-            values = np.array(tokens[pos:pos + n], dtype=np.float64)
+            values = np.array(tokens[pos : pos + n], dtype=np.float64)
         except ValueError:
             raise ValueError(f"{path}: non-numeric value while reading {what}") from None
         pos += n

@@ -9,6 +9,7 @@ A folder argument may be ``name=folder`` (camera name given) or a folder or glob
 folder name). Keypoint scores are clipped to [0, 1] (OpenPose's confidences can exceed 1 slightly).
 ``--cameras cameras.json`` checks the names against a calibration and the pixels against its image sizes.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -69,8 +70,10 @@ def _body25(path: Path, n: int, person: object) -> np.ndarray:
     if not isinstance(values, list):
         raise ValueError(f"{path}: person {n} has no 'pose_keypoints_2d' list")
     if len(values) != BODY25_VALUES:
-        raise ValueError(f"{path}: person {n} has {len(values)} pose_keypoints_2d numbers, expected "
-                         f"{BODY25_VALUES} (BODY_25: 25 keypoints x, y, score)")
+        raise ValueError(
+            f"{path}: person {n} has {len(values)} pose_keypoints_2d numbers, expected "
+            f"{BODY25_VALUES} (BODY_25: 25 keypoints x, y, score)"
+        )
     try:
         pose = np.array(values, dtype=np.float64).reshape(25, 3)
     except (TypeError, ValueError):
@@ -140,9 +143,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command line (module docstring); a bad folder or file stops with one line 'error: ...'."""
     from data.formats.poses2d_io import read_poses2d, write_poses2d
 
-    parser = argparse.ArgumentParser(prog="python -m data.formats.openpose_json",
-                                     description="OpenPose BODY_25 JSON folders (one per camera) -> poses2d.json "
-                                                 "(COCO-23)")
+    parser = argparse.ArgumentParser(
+        prog="python -m data.formats.openpose_json",
+        description="OpenPose BODY_25 JSON folders (one per camera) -> poses2d.json (COCO-23)",
+    )
     parser.add_argument("folders", nargs="+", help="name=folder, folder or glob pattern per camera")
     parser.add_argument("-o", "--output", required=True, help="poses2d.json to write")
     parser.add_argument("--cameras", help="calibration whose camera names and image sizes to check against")

@@ -13,6 +13,7 @@ negative box width or height; and the same detection twice (same frame, camera a
 least one of them scored: rejected, not merged, because a duplicate is a concatenation or export bug
 that a merge would hide; detections without any scored joint, e.g. a 2D model's empty boxes, may repeat).
 """
+
 from __future__ import annotations
 
 import json
@@ -21,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
+from data.formats.atomic_io import atomic_write_text
 from data.keypoints import COCO23_NAMES, NUM_JOINTS
 from data.multiview import ViewDetections
-from data.formats.atomic_io import atomic_write_text
 
 KEYPOINT_VALUES = NUM_JOINTS * 3  # 69
 WRITE_DECIMALS = 4  # pixels and scores are written rounded to 1e-4
@@ -31,7 +32,7 @@ SCORE_SLACK = 0.05  # scores in (1, 1 + SCORE_SLACK] are clipped to 1; beyond, a
 # A scored keypoint (or a box corner) may lie this many image widths/heights outside the image (a joint of
 # a person cut by the border is guessed outside it); farther is a unit or format mistake (e.g. 1e15 px).
 OUTSIDE_IMAGE_TOLERANCE = 1.0
-INT64_RANGE = (-(2 ** 63), 2 ** 63 - 1)  # frame numbers and ids must fit numpy's int64
+INT64_RANGE = (-(2**63), 2**63 - 1)  # frame numbers and ids must fit numpy's int64
 
 
 class Poses2DError(ValueError):
@@ -48,8 +49,11 @@ def _numbers(path: Path, i: int, entry: dict, key: str, count: int | None, what:
         if ok and len(value) != count:
             raise Poses2DError(f"{path}: entry {i}: {key} has {len(value)} numbers, expected {count} ({what})")
     if not ok:
-        bad = value if count is None or not isinstance(value, list) else next(
-            (v for v in value if isinstance(v, bool) or not isinstance(v, (int, float))), value)
+        bad = (
+            value
+            if count is None or not isinstance(value, list)
+            else next((v for v in value if isinstance(v, bool) or not isinstance(v, (int, float))), value)
+        )
         raise Poses2DError(f"{path}: entry {i}: {key} must be {what}, got {_short(bad)} ({type(bad).__name__})")
     try:
         out = np.asarray(value, dtype=np.float64)
@@ -63,14 +67,13 @@ def _numbers(path: Path, i: int, entry: dict, key: str, count: int | None, what:
 def _short(value: Any, limit: int = 40) -> str:
     """repr of a value cut to `limit` characters, for one-line messages."""
     text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _integer(path: Path, i: int, key: str, value: Any) -> int:
     """A JSON integer that fits int64 (frame numbers, ids); Poses2DError naming the entry otherwise."""
     if not isinstance(value, int) or isinstance(value, bool):
-        raise Poses2DError(f"{path}: entry {i}: {key} must be an integer, got {_short(value)} "
-                           f"({type(value).__name__})")
+        raise Poses2DError(f"{path}: entry {i}: {key} must be an integer, got {_short(value)} ({type(value).__name__})")
     if not INT64_RANGE[0] <= value <= INT64_RANGE[1]:
         raise Poses2DError(f"{path}: entry {i}: {key} {_short(value)} does not fit a 64-bit integer")
     return value
@@ -87,11 +90,14 @@ def _entry(path: Path, i: int, entry: Any, cameras: dict[str, int]) -> tuple[int
     pid = _integer(path, i, "id", entry.get("id", -1))
     camera = entry["camera"]
     if isinstance(camera, bool) or not isinstance(camera, (str, int)):
-        raise Poses2DError(f"{path}: entry {i}: camera must be a camera name (a string), got {_short(camera)} "
-                           f"({type(camera).__name__})")
+        raise Poses2DError(
+            f"{path}: entry {i}: camera must be a camera name (a string), got {_short(camera)} "
+            f"({type(camera).__name__})"
+        )
     if str(camera) not in cameras:
-        raise Poses2DError(f"{path}: entry {i}: camera {str(camera)!r} is not in the calibration "
-                           f"(known cameras: {', '.join(cameras)})")
+        raise Poses2DError(
+            f"{path}: entry {i}: camera {str(camera)!r} is not in the calibration (known cameras: {', '.join(cameras)})"
+        )
     keypoints = _numbers(path, i, entry, "keypoints", KEYPOINT_VALUES, "23 keypoints x, y, score")
     bbox = _numbers(path, i, entry, "bbox", 4, "x, y, w, h")
     score = float(_numbers(path, i, entry, "score", None, "a number"))
@@ -108,8 +114,10 @@ def _check_values(where: str, det: tuple, size: tuple[int, int] | None) -> tuple
     bad = np.flatnonzero((scores < 0) | (scores > 1.0 + SCORE_SLACK))
     if len(bad):
         j = int(bad[0])
-        raise Poses2DError(f"{where}: keypoint {j} ({COCO23_NAMES[j]}) has score {scores[j]:g}, outside [0, 1] "
-                           f"(0 = missing){f'; {len(bad)} keypoints in all' if len(bad) > 1 else ''}")
+        raise Poses2DError(
+            f"{where}: keypoint {j} ({COCO23_NAMES[j]}) has score {scores[j]:g}, outside [0, 1] "
+            f"(0 = missing){f'; {len(bad)} keypoints in all' if len(bad) > 1 else ''}"
+        )
     if bbox[2] < 0 or bbox[3] < 0:
         raise Poses2DError(f"{where}: bbox [x, y, w, h] has a negative width or height: {bbox.tolist()}")
     if size is not None:
@@ -118,13 +126,17 @@ def _check_values(where: str, det: tuple, size: tuple[int, int] | None) -> tuple
         far = np.flatnonzero((scores > 0) & np.any((keypoints[:, :2] < lo) | (keypoints[:, :2] > hi), axis=1))
         if len(far):
             j = int(far[0])
-            raise Poses2DError(f"{where}: keypoint {j} ({COCO23_NAMES[j]}) at ({keypoints[j, 0]:.6g}, "
-                               f"{keypoints[j, 1]:.6g}) px is far outside the {w}x{h} image (more than "
-                               f"{OUTSIDE_IMAGE_TOLERANCE:g} image sizes: pixels of the original image expected)")
+            raise Poses2DError(
+                f"{where}: keypoint {j} ({COCO23_NAMES[j]}) at ({keypoints[j, 0]:.6g}, "
+                f"{keypoints[j, 1]:.6g}) px is far outside the {w}x{h} image (more than "
+                f"{OUTSIDE_IMAGE_TOLERANCE:g} image sizes: pixels of the original image expected)"
+            )
         corners = np.array([bbox[:2], bbox[:2] + bbox[2:]])
         if np.any((corners < lo) | (corners > hi)):
-            raise Poses2DError(f"{where}: bbox {bbox.tolist()} is far outside the {w}x{h} image (more than "
-                               f"{OUTSIDE_IMAGE_TOLERANCE:g} image sizes)")
+            raise Poses2DError(
+                f"{where}: bbox {bbox.tolist()} is far outside the {w}x{h} image (more than "
+                f"{OUTSIDE_IMAGE_TOLERANCE:g} image sizes)"
+            )
     return np.concatenate([keypoints[:, :2], np.minimum(scores, 1.0)[:, None]], axis=1), bbox, min(score, 1.0), pid
 
 
@@ -153,8 +165,9 @@ def _load(path: Path) -> list:
     return doc
 
 
-def read_poses2d(path: str | Path, camera_names: list[str],
-                 image_sizes: list[tuple[int, int]] | None = None) -> dict[int, list[ViewDetections]]:
+def read_poses2d(
+    path: str | Path, camera_names: list[str], image_sizes: list[tuple[int, int]] | None = None
+) -> dict[int, list[ViewDetections]]:
     """Read poses2d.json -> {frame: one ViewDetections (N, 23, 3) per camera in camera_names order (empty
     where none)}; with image_sizes (w, h) per camera, scored keypoints far outside the image are errors."""
     path = Path(path)
@@ -167,8 +180,10 @@ def read_poses2d(path: str | Path, camera_names: list[str],
         det = _check_values(where, det, None if image_sizes is None else tuple(image_sizes[v]))
         key = (frame, v, det[0].tobytes())
         if key in seen and np.any(det[0][:, 2] > 0):  # detections without any joint carry nothing twice
-            raise Poses2DError(f"{path}: entries {seen[key]} and {i} are the same detection (frame {frame}, camera "
-                               f"{camera_names[v]!r}, identical keypoints): remove the duplicate")
+            raise Poses2DError(
+                f"{path}: entries {seen[key]} and {i} are the same detection (frame {frame}, camera "
+                f"{camera_names[v]!r}, identical keypoints): remove the duplicate"
+            )
         seen[key] = i
         grouped.setdefault(frame, [[] for _ in camera_names])[v].append(det)
     return {frame: [_view(dets) for dets in views] for frame, views in sorted(grouped.items())}
@@ -203,10 +218,13 @@ def _entry_dict(frame: int, camera: str, dets: ViewDetections, n: int) -> dict:
     values = np.concatenate([kps.ravel(), dets.bboxes[n], [dets.scores[n]]])
     if not np.all(np.isfinite(values)):
         raise ValueError(f"poses2d: frame {frame}, camera {camera}, detection {n} has a non-finite value")
-    entry = {"frame": frame, "camera": camera,
-             "bbox": [round(float(v), WRITE_DECIMALS) for v in dets.bboxes[n]],
-             "score": round(float(dets.scores[n]), WRITE_DECIMALS),
-             "keypoints": [round(float(v), WRITE_DECIMALS) for v in kps.ravel()]}
+    entry = {
+        "frame": frame,
+        "camera": camera,
+        "bbox": [round(float(v), WRITE_DECIMALS) for v in dets.bboxes[n]],
+        "score": round(float(dets.scores[n]), WRITE_DECIMALS),
+        "keypoints": [round(float(v), WRITE_DECIMALS) for v in kps.ravel()],
+    }
     if dets.person_ids[n] >= 0:
         entry["id"] = int(dets.person_ids[n])
     return entry

@@ -1,4 +1,5 @@
 """Reading and writing the pose files users see (DESIGN.md): poses3d.json."""
+
 from __future__ import annotations
 
 import json
@@ -36,10 +37,14 @@ def read_poses3d_frames(path: str | Path) -> list[tuple[int, np.ndarray, np.ndar
     doc = json.loads(Path(path).read_text())
     if doc.get("units") != "m" or len(doc.get("keypoints", [])) != len(COCO23_NAMES):
         raise ValueError(f"{path}: not a poses3d.json with 23 keypoints in metres")
-    return [(int(f["frame"]),
-             np.array([p["keypoints"] for p in f["poses"]], dtype=np.float64).reshape(-1, 23, 4),
-             np.array([p["id"] for p in f["poses"]], dtype=np.int64))
-            for f in doc["frames"]]
+    return [
+        (
+            int(f["frame"]),
+            np.array([p["keypoints"] for p in f["poses"]], dtype=np.float64).reshape(-1, 23, 4),
+            np.array([p["id"] for p in f["poses"]], dtype=np.int64),
+        )
+        for f in doc["frames"]
+    ]
 
 
 def read_poses3d(path: str | Path) -> dict[int, np.ndarray]:

@@ -10,6 +10,7 @@ Camera order (= view index) per format:
 - Wildtrack: CVLab1, CVLab2, CVLab3, CVLab4, IDIAP1, IDIAP2, IDIAP3.
 - Shelf P-matrices: P0 ... P4, named "0" ... "4" like the 4D Association and VoxelPose files.
 """
+
 from __future__ import annotations
 
 import json
@@ -75,8 +76,12 @@ def _array(entry: Any, key: str, shape: tuple[int, ...], path: str | Path, camer
         raise _error(path, camera, key, _missing_key(entry, key))
     bad = _non_number(entry[key])
     if bad is not None:
-        raise _error(path, camera, key, f"is not an array of numbers: {bad[0]!r} ({type(bad[0]).__name__}) "
-                                          f"where a number belongs")
+        raise _error(
+            path,
+            camera,
+            key,
+            f"is not an array of numbers: {bad[0]!r} ({type(bad[0]).__name__}) where a number belongs",
+        )
     try:
         value = np.array(entry[key], dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -99,8 +104,16 @@ def _rotation(R: np.ndarray, path: str | Path, camera: str, key: str) -> np.ndar
     return U @ Vt
 
 
-def _camera(name: str, K: np.ndarray, dist: np.ndarray, R: np.ndarray, t: np.ndarray,
-            size: Sequence[float], path: str | Path, keys: tuple[str, str, str]) -> Camera:
+def _camera(
+    name: str,
+    K: np.ndarray,
+    dist: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    size: Sequence[float],
+    path: str | Path,
+    keys: tuple[str, str, str],
+) -> Camera:
     """A Camera after consistency checks of K (3, 3), R (3, 3), size (w, h); keys = names of K, R, size."""
     if not np.allclose(K[2], (0.0, 0.0, 1.0), atol=1e-9) or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise _error(path, name, keys[0], "is not an intrinsic matrix (positive focal lengths, last row 0 0 1)")
@@ -110,8 +123,13 @@ def _camera(name: str, K: np.ndarray, dist: np.ndarray, R: np.ndarray, t: np.nda
         raise _error(path, name, keys[2], f"is not a positive integer image size: {list(size)}")
     lo, hi = IMAGE_SIDE_RANGE_PX
     if not (lo <= w <= hi and lo <= h <= hi):
-        raise _error(path, name, keys[2], f"is not a plausible image size (w, h) = ({w:g}, {h:g}) px: each side "
-                     f"must lie in [{lo}, {hi}] (IMAGE_SIDE_RANGE_PX)")
+        raise _error(
+            path,
+            name,
+            keys[2],
+            f"is not a plausible image size (w, h) = ({w:g}, {h:g}) px: each side "
+            f"must lie in [{lo}, {hi}] (IMAGE_SIDE_RANGE_PX)",
+        )
     return Camera(name, K, dist, R, t, (int(w), int(h)))
 
 
@@ -137,8 +155,13 @@ def _read_json(path: str | Path) -> Any:
     except FileNotFoundError:
         raise _error(path, None, None, "calibration file not found") from None
     except _DuplicateKey as exc:
-        raise _error(path, None, None, f"key {exc.args[0]!r} appears twice in one object (a camera or a "
-                                       f"parameter given twice; JSON would keep only the last)") from None
+        raise _error(
+            path,
+            None,
+            None,
+            f"key {exc.args[0]!r} appears twice in one object (a camera or a "
+            f"parameter given twice; JSON would keep only the last)",
+        ) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise _error(path, None, None, f"cannot read calibration JSON ({exc})") from None
 
@@ -309,8 +332,7 @@ def load_wildtrack(root: str | Path) -> Rig:
         dist = _xml_array(intr, "distortion_coefficients", (5,), name)
         rvec, tvec = _xml_array(extr, "rvec", (3,), name), _xml_array(extr, "tvec", (3,), name)
         R = cv2.Rodrigues(rvec)[0]
-        cameras.append(_camera(name, K, dist, R, tvec / 100.0, WILDTRACK_SIZE, intr,
-                               ("camera_matrix", "rvec", "size")))
+        cameras.append(_camera(name, K, dist, R, tvec / 100.0, WILDTRACK_SIZE, intr, ("camera_matrix", "rvec", "size")))
     return Rig(tuple(cameras))
 
 
@@ -329,8 +351,11 @@ def load_wildtrack_positions(path: str | Path) -> dict[int, np.ndarray]:
 
 # --- dispatch --------------------------------------------------------------------------------------
 _SIGNATURES = (("4dassoc", {"K", "RT"}), ("voxelpose", {"R", "T", "fx"}), ("cameras_json", {"K", "R", "t"}))
-_ALL_KEYS = {"cameras_json": {"K", "dist", "R", "t", "size"}, "4dassoc": {"K", "RT", "imgSize"},
-             "voxelpose": {"R", "T", "fx", "fy", "cx", "cy", "k", "p"}}
+_ALL_KEYS = {
+    "cameras_json": {"K", "dist", "R", "t", "size"},
+    "4dassoc": {"K", "RT", "imgSize"},
+    "voxelpose": {"R", "T", "fx", "fy", "cx", "cy", "k", "p"},
+}
 # Without a complete camera, the format whose keys make up at least this fraction of the cameras' keys wins.
 FORMAT_MIN_KEY_OVERLAP = 0.5
 
@@ -358,8 +383,13 @@ def detect_format(path: str | Path) -> str:
     best = max(overlap, key=overlap.get)
     if overlap[best] >= FORMAT_MIN_KEY_OVERLAP:
         return best
-    raise _error(path, None, None, "cannot detect the calibration format of this file (expected cameras.json "
-                 "{name: {K, dist, R, t, size}}, 4D Association, VoxelPose or Panoptic JSON)")
+    raise _error(
+        path,
+        None,
+        None,
+        "cannot detect the calibration format of this file (expected cameras.json "
+        "{name: {K, dist, R, t, size}}, 4D Association, VoxelPose or Panoptic JSON)",
+    )
 
 
 def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: Any) -> Rig:
@@ -367,8 +397,14 @@ def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: 
     shelf_p, or auto (detected from the file content or folder layout); kwargs go to the loader. With
     ``check``, the rig check (data/geometry/check_rig.py) runs: RigError (a CalibrationError) where every
     result would be garbage, RigWarning for what looks wrong."""
-    loaders = {"cameras_json": load_cameras_json, "4dassoc": load_4dassoc, "voxelpose": load_voxelpose,
-               "panoptic": load_panoptic, "wildtrack": load_wildtrack, "shelf_p": load_shelf_projections}
+    loaders = {
+        "cameras_json": load_cameras_json,
+        "4dassoc": load_4dassoc,
+        "voxelpose": load_voxelpose,
+        "panoptic": load_panoptic,
+        "wildtrack": load_wildtrack,
+        "shelf_p": load_shelf_projections,
+    }
     fmt = detect_format(path) if fmt == "auto" else fmt
     if fmt not in loaders:
         raise CalibrationError(f"{path}: unknown calibration format {fmt!r}, expected auto or one of {list(loaders)}")

@@ -3,6 +3,7 @@
 Conventions (DESIGN.md): world in metres, z up, ground z = 0; x_cam = R x_world + t; pixels of the
 original image; ``dist`` = OpenCV (k1, k2, p1, p2, k3).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -39,7 +40,7 @@ class Camera:
             w, h = (int(s) for s in self.size)
         except (TypeError, ValueError, OverflowError):
             raise ValueError(f"camera {self.name!r}: size must be two integers (w, h), got {self.size}") from None
-        if not (0 < w < 2 ** 31 and 0 < h < 2 ** 31):
+        if not (0 < w < 2**31 and 0 < h < 2**31):
             raise ValueError(f"camera {self.name!r}: size must be positive, got {self.size}")
         object.__setattr__(self, "size", (w, h))
         object.__setattr__(self, "_fov_r2", self._field_of_view_r2())
@@ -84,8 +85,7 @@ class Camera:
         uv = np.asarray(uv, dtype=np.float64)
         if not self.has_distortion or uv.size == 0:
             return uv.copy()
-        out = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.dist, None, self.K,
-                                  criteria=_UNDISTORT_CRITERIA)
+        out = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.dist, None, self.K, criteria=_UNDISTORT_CRITERIA)
         return out.reshape(uv.shape)
 
     def distort_points(self, uv: np.ndarray) -> np.ndarray:
@@ -107,12 +107,16 @@ class Camera:
         cam = self.world_to_camera(points)
         z = cam[..., 2]
         safe_z = np.where(z > 1e-9, z, 1.0)
-        r2 = (cam[..., 0] ** 2 + cam[..., 1] ** 2) / safe_z ** 2
+        r2 = (cam[..., 0] ** 2 + cam[..., 1] ** 2) / safe_z**2
         ok = (z > 1e-9) & (r2 <= self._fov_r2 * 1.05)
         uv = self.project(points)
         w, h = self.size
-        inside = ((uv[..., 0] >= -margin) & (uv[..., 0] <= w - 1 + margin)
-                  & (uv[..., 1] >= -margin) & (uv[..., 1] <= h - 1 + margin))
+        inside = (
+            (uv[..., 0] >= -margin)
+            & (uv[..., 0] <= w - 1 + margin)
+            & (uv[..., 1] >= -margin)
+            & (uv[..., 1] <= h - 1 + margin)
+        )
         return ok & inside
 
     def _field_of_view_r2(self) -> float:
@@ -120,14 +124,20 @@ class Camera:
         w, h = self.size
         xs = np.linspace(0, w - 1, 9)
         ys = np.linspace(0, h - 1, 9)
-        border = np.concatenate([np.stack([xs, np.zeros_like(xs)], 1), np.stack([xs, np.full_like(xs, h - 1)], 1),
-                                 np.stack([np.zeros_like(ys), ys], 1), np.stack([np.full_like(ys, w - 1), ys], 1)])
+        border = np.concatenate(
+            [
+                np.stack([xs, np.zeros_like(xs)], 1),
+                np.stack([xs, np.full_like(xs, h - 1)], 1),
+                np.stack([np.zeros_like(ys), ys], 1),
+                np.stack([np.full_like(ys, w - 1), ys], 1),
+            ]
+        )
         und = self.undistort_points(border)
         # Where strong distortion is not invertible (e.g. Wildtrack's corners) the iterative undistortion
         # lands on a wrong point; keep only border points it maps back onto themselves.
         exact = np.linalg.norm(self.distort_points(und) - border, axis=1) < 0.5
         norm = (und[exact] - self.K[:2, 2]) / np.diag(self.K)[:2]
-        return float(np.max(np.sum(norm ** 2, axis=1))) if len(norm) else float("inf")
+        return float(np.max(np.sum(norm**2, axis=1))) if len(norm) else float("inf")
 
     # --- ground plane z = 0 -----------------------------------------------------------------------
     def ground_to_image_homography(self) -> np.ndarray:
@@ -140,8 +150,9 @@ class Camera:
         try:
             H = np.linalg.inv(self.ground_to_image_homography())
         except np.linalg.LinAlgError:
-            raise ValueError(f"camera {self.name!r}: its centre lies on the ground plane z = 0, so pixels have no "
-                             f"ground point") from None
+            raise ValueError(
+                f"camera {self.name!r}: its centre lies on the ground plane z = 0, so pixels have no ground point"
+            ) from None
         return H / H[2, 2]
 
     def image_to_ground(self, uv: np.ndarray, undistort: bool = True) -> np.ndarray:
@@ -156,8 +167,13 @@ class Camera:
 
     def to_dict(self) -> dict:
         """The cameras.json entry of this camera (DESIGN.md)."""
-        return {"K": self.K.tolist(), "dist": self.dist.tolist(), "R": self.R.tolist(),
-                "t": self.t.tolist(), "size": list(self.size)}
+        return {
+            "K": self.K.tolist(),
+            "dist": self.dist.tolist(),
+            "R": self.R.tolist(),
+            "t": self.t.tolist(),
+            "size": list(self.size),
+        }
 
 
 def apply_homography(H: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -26,6 +26,7 @@ detection of the other view and the mutual best pairs kept; a camera whose pairs
 ``max_reprojection`` (a fraction of the image diagonal) gets a warning, naming the correction (R
 transposed, camera -> world pose, t in mm, poses of another camera) that makes its 2D poses fit, if any.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,11 +38,10 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from data.multiview import ViewDetections
 from data.geometry.calibration import CalibrationError, load_rig
 from data.geometry.camera import Camera, Rig
 from data.geometry.triangulation import reprojection_error, triangulate_dlt
-
+from data.multiview import ViewDetections
 
 _COST_CAP = 1e6  # reprojection errors (in image diagonals) are capped here, so that medians cannot overflow
 
@@ -58,16 +58,16 @@ class RigWarning(UserWarning):
 class RigTolerances:
     """The documented tolerances of the rig check (module docstring)."""
 
-    min_baseline_m: float = 0.05          # centres closer than this are one place
+    min_baseline_m: float = 0.05  # centres closer than this are one place
     max_centre_distance_m: float = 250.0  # centres farther from the world origin: units other than metres
-    ground_clearance_m: float = 0.02      # a centre farther below z = 0 is below the ground plane
-    min_camera_height_m: float = 0.3      # a centre lower than this sits on the feet's / ankles' planes
-    max_image_up: float = 0.1             # sine of the angle the image's y axis may point up in the world
-    scene_margin: float = 0.5             # image sizes the common scene point may lie outside the image
-    max_reprojection: float = 0.02        # median 2-view reprojection error, fraction of the image diagonal
-    min_joints: int = 8                   # joints two detections must share to be triangulated
-    max_frames: int = 20                  # frames (evenly spread) the 2D check looks at
-    max_axes_condition: float = 1e6       # optical axes closer to parallel have no common point
+    ground_clearance_m: float = 0.02  # a centre farther below z = 0 is below the ground plane
+    min_camera_height_m: float = 0.3  # a centre lower than this sits on the feet's / ankles' planes
+    max_image_up: float = 0.1  # sine of the angle the image's y axis may point up in the world
+    scene_margin: float = 0.5  # image sizes the common scene point may lie outside the image
+    max_reprojection: float = 0.02  # median 2-view reprojection error, fraction of the image diagonal
+    min_joints: int = 8  # joints two detections must share to be triangulated
+    max_frames: int = 20  # frames (evenly spread) the 2D check looks at
+    max_axes_condition: float = 1e6  # optical axes closer to parallel have no common point
 
 
 @dataclass(frozen=True)
@@ -133,45 +133,80 @@ def rig_findings(rig: Rig, tol: RigTolerances = RigTolerances()) -> list[Finding
     C = np.array([c.center for c in cams])
     dist = np.linalg.norm(C[:, None] - C[None], axis=-1)
     if dist.max() < tol.min_baseline_m:
-        out.append(Finding("error", f"all {len(cams)} cameras have their centre at ({C[0, 0]:.3g}, {C[0, 1]:.3g}, "
-                                    f"{C[0, 2]:.3g}) (within {tol.min_baseline_m} m): no baseline, nothing can be "
-                                    f"triangulated (R and t copied from one camera?)"))
+        out.append(
+            Finding(
+                "error",
+                f"all {len(cams)} cameras have their centre at ({C[0, 0]:.3g}, {C[0, 1]:.3g}, "
+                f"{C[0, 2]:.3g}) (within {tol.min_baseline_m} m): no baseline, nothing can be "
+                f"triangulated (R and t copied from one camera?)",
+            )
+        )
         return out
     for a, b in zip(*np.nonzero(np.triu(dist < tol.min_baseline_m, 1))):
         same = all(np.array_equal(getattr(cams[a], k), getattr(cams[b], k)) for k in ("K", "R", "t"))
-        out.append(Finding("warning", f"cameras {cams[a].name!r} and {cams[b].name!r} "
-                                      f"{'have identical calibrations' if same else 'share their centre'} "
-                                      f"({dist[a, b]:.3g} m apart): that view pair cannot triangulate "
-                                      f"(one camera copied under two names?)"))
+        out.append(
+            Finding(
+                "warning",
+                f"cameras {cams[a].name!r} and {cams[b].name!r} "
+                f"{'have identical calibrations' if same else 'share their centre'} "
+                f"({dist[a, b]:.3g} m apart): that view pair cannot triangulate "
+                f"(one camera copied under two names?)",
+            )
+        )
     far = [c for c, d in zip(cams, np.linalg.norm(C, axis=1)) if d > tol.max_centre_distance_m]
     if far:
         with np.errstate(over="ignore"):
             d = np.minimum(np.linalg.norm([c.center for c in far], axis=1), np.finfo(np.float64).max)
-        out.append(Finding("warning", f"camera{'s' if len(far) > 1 else ''} {_names(far)}: centre {d.min():.4g}"
-                                      f"{f'-{d.max():.4g}' if d.max() > d.min() * 1.001 else ''} m from the world origin "
-                                      f"(more than {tol.max_centre_distance_m:g} m): is t in millimetres or "
-                                      f"centimetres? cameras.json wants metres"))
+        out.append(
+            Finding(
+                "warning",
+                f"camera{'s' if len(far) > 1 else ''} {_names(far)}: centre {d.min():.4g}"
+                f"{f'-{d.max():.4g}' if d.max() > d.min() * 1.001 else ''} m from the world origin "
+                f"(more than {tol.max_centre_distance_m:g} m): is t in millimetres or "
+                f"centimetres? cameras.json wants metres",
+            )
+        )
     below = [c for c in cams if c.center[2] < -tol.ground_clearance_m]
     on = [c for c in cams if -tol.ground_clearance_m <= c.center[2] < tol.min_camera_height_m]
     if below:
-        out.append(Finding("warning", f"camera{'s' if len(below) > 1 else ''} {_names(below)}: centre below the "
-                                      f"ground plane z = 0 (the world must be z up with the floor at z = 0; "
-                                      f"y up or R transposed?)"))
+        out.append(
+            Finding(
+                "warning",
+                f"camera{'s' if len(below) > 1 else ''} {_names(below)}: centre below the "
+                f"ground plane z = 0 (the world must be z up with the floor at z = 0; "
+                f"y up or R transposed?)",
+            )
+        )
     if on:
-        out.append(Finding("warning", f"camera{'s' if len(on) > 1 else ''} {_names(on)}: centre at "
-                                      f"z = {min(c.center[2] for c in on):.3g} m, on or just above the ground "
-                                      f"plane (below {tol.min_camera_height_m} m): the feet matcher cannot place "
-                                      f"feet seen from the planes of the feet and ankles and drops them"))
+        out.append(
+            Finding(
+                "warning",
+                f"camera{'s' if len(on) > 1 else ''} {_names(on)}: centre at "
+                f"z = {min(c.center[2] for c in on):.3g} m, on or just above the ground "
+                f"plane (below {tol.min_camera_height_m} m): the feet matcher cannot place "
+                f"feet seen from the planes of the feet and ankles and drops them",
+            )
+        )
     upside = [c for c in cams if c.R[1, 2] > tol.max_image_up]
     if upside:
-        out.append(Finding("warning", f"camera{'s' if len(upside) > 1 else ''} {_names(upside)}: the image's y "
-                                      f"axis points up in the world (upside down? R transposed, or the world's "
-                                      f"z axis pointing down?)"))
+        out.append(
+            Finding(
+                "warning",
+                f"camera{'s' if len(upside) > 1 else ''} {_names(upside)}: the image's y "
+                f"axis points up in the world (upside down? R transposed, or the world's "
+                f"z axis pointing down?)",
+            )
+        )
     blind = [c for c in cams if c.center[2] >= tol.min_camera_height_m and not sees_ground(c)]
     if blind:
-        out.append(Finding("warning", f"camera{'s' if len(blind) > 1 else ''} {_names(blind)}: the ground plane "
-                                      f"z = 0 is nowhere in the image (looking up? R transposed?); the feet "
-                                      f"matcher needs the floor in front of the cameras"))
+        out.append(
+            Finding(
+                "warning",
+                f"camera{'s' if len(blind) > 1 else ''} {_names(blind)}: the ground plane "
+                f"z = 0 is nowhere in the image (looking up? R transposed?); the feet "
+                f"matcher needs the floor in front of the cameras",
+            )
+        )
     out.extend(_scene_findings(cams, tol))
     return out
 
@@ -182,21 +217,36 @@ def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
     if len(cams) == 2:
         point = axes_point(cams, tol.max_axes_condition)
         if point is not None and not all(sees_point(c, point, tol.scene_margin) for c in cams):
-            return [Finding("warning", f"cameras {_names(cams)} do not look at a common region (their optical "
-                                       f"axes meet behind or beside them): R transposed or of another camera?")]
+            return [
+                Finding(
+                    "warning",
+                    f"cameras {_names(cams)} do not look at a common region (their optical "
+                    f"axes meet behind or beside them): R transposed or of another camera?",
+                )
+            ]
         return []
     lost = []
     for i, cam in enumerate(cams):
-        point = axes_point(cams[:i] + cams[i + 1:], tol.max_axes_condition)
+        point = axes_point(cams[:i] + cams[i + 1 :], tol.max_axes_condition)
         if point is not None and not sees_point(cam, point, tol.scene_margin):
             lost.append(cam)
     if lost and len(lost) < len(cams):
-        return [Finding("warning", f"camera{'s' if len(lost) > 1 else ''} {_names(lost)}: not looking at the "
-                                   f"common scene of the other cameras (R transposed, camera -> world, or of "
-                                   f"another camera?)")]
+        return [
+            Finding(
+                "warning",
+                f"camera{'s' if len(lost) > 1 else ''} {_names(lost)}: not looking at the "
+                f"common scene of the other cameras (R transposed, camera -> world, or of "
+                f"another camera?)",
+            )
+        ]
     if lost:
-        return [Finding("warning", "the cameras do not look at a common region (every camera misses the point "
-                                   "the others look at): R camera -> world instead of world -> camera?")]
+        return [
+            Finding(
+                "warning",
+                "the cameras do not look at a common region (every camera misses the point "
+                "the others look at): R camera -> world instead of world -> camera?",
+            )
+        ]
     return []
 
 
@@ -207,7 +257,7 @@ def _pair_costs(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.ndarray
     Na, Nb, J = len(kp_a), len(kp_b), kp_a.shape[1]
     ua = np.concatenate([cam_a.undistort_points(kp_a[..., :2]), kp_a[..., 2:]], -1)
     ub = np.concatenate([cam_b.undistort_points(kp_b[..., :2]), kp_b[..., 2:]], -1)
-    both = (ua[:, None, :, 2] > 0) & (ub[None, :, :, 2] > 0)                                       # (Na, Nb, J)
+    both = (ua[:, None, :, 2] > 0) & (ub[None, :, :, 2] > 0)  # (Na, Nb, J)
     poses = np.zeros((2, Na, Nb, J, 3))
     poses[0, ..., :2], poses[1, ..., :2] = ua[:, None, :, :2], ub[None, :, :, :2]
     poses[..., 2] = both
@@ -215,7 +265,7 @@ def _pair_costs(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.ndarray
     proj = np.stack([cam_a.P, cam_b.P])
     with np.errstate(all="ignore"):
         X = triangulate_dlt(poses, proj)
-        err = reprojection_error(X, poses, proj)                                                # (2, P, J)
+        err = reprojection_error(X, poses, proj)  # (2, P, J)
         front = (cam_a.depth(X[..., :3]) > 0) & (cam_b.depth(X[..., :3]) > 0)
     diag = np.array([np.hypot(*cam_a.size), np.hypot(*cam_b.size)])[:, None, None]
     err = np.where(front[None], err / diag, np.inf)
@@ -243,8 +293,9 @@ def _frames(views_by_frame: Mapping[int, list[ViewDetections]], count: int) -> l
     return [views_by_frame[keys[i]] for i in pick]
 
 
-def pair_fit(cam_a: Camera, cam_b: Camera, frames: list[list[ViewDetections]], a: int, b: int,
-             tol: RigTolerances) -> float:
+def pair_fit(
+    cam_a: Camera, cam_b: Camera, frames: list[list[ViewDetections]], a: int, b: int, tol: RigTolerances
+) -> float:
     """Median over the frames' mutual best detection pairs of views a, b (poses of those views, cameras
     cam_a, cam_b) of their 2-view reprojection error (fraction of the diagonal); nan without detections
     in both views."""
@@ -256,8 +307,14 @@ def pair_fit(cam_a: Camera, cam_b: Camera, frames: list[list[ViewDetections]], a
     return float(np.median(costs))
 
 
-def camera_fit(cams: list[Camera], frames: list[list[ViewDetections]], v: int, partners: Iterable[int],
-               tol: RigTolerances, poses_of: int | None = None) -> float:
+def camera_fit(
+    cams: list[Camera],
+    frames: list[list[ViewDetections]],
+    v: int,
+    partners: Iterable[int],
+    tol: RigTolerances,
+    poses_of: int | None = None,
+) -> float:
     """Median of camera v's pair fits (pair_fit) with the partner views; poses_of: take view v's 2D poses
     from that view instead (a name swap); nan without pairs."""
     fits = [pair_fit(cams[v], cams[u], frames, v if poses_of is None else poses_of, u, tol) for u in partners]
@@ -268,10 +325,12 @@ def camera_fit(cams: list[Camera], frames: list[list[ViewDetections]], v: int, p
 def _corrections(cam: Camera) -> list[tuple[str, Camera]]:
     """Candidate corrections of a camera that does not fit its 2D poses: (what was wrong, corrected camera)."""
     R, t = cam.R, cam.t
-    return [("R is transposed (give world -> camera)", replace_camera(cam, R.T, t)),
-            ("R, t are the camera -> world pose (invert them)", replace_camera(cam, R.T, -R.T @ t)),
-            ("t is in millimetres (metres expected)", replace_camera(cam, R, t / 1000.0)),
-            ("t is in centimetres (metres expected)", replace_camera(cam, R, t / 100.0))]
+    return [
+        ("R is transposed (give world -> camera)", replace_camera(cam, R.T, t)),
+        ("R, t are the camera -> world pose (invert them)", replace_camera(cam, R.T, -R.T @ t)),
+        ("t is in millimetres (metres expected)", replace_camera(cam, R, t / 1000.0)),
+        ("t is in centimetres (metres expected)", replace_camera(cam, R, t / 100.0)),
+    ]
 
 
 def replace_camera(cam: Camera, R: np.ndarray, t: np.ndarray) -> Camera:
@@ -279,11 +338,12 @@ def replace_camera(cam: Camera, R: np.ndarray, t: np.ndarray) -> Camera:
     return Camera(cam.name, cam.K, cam.dist, R, t, cam.size)
 
 
-def _diagnose(cams: list[Camera], frames: list[list[ViewDetections]], v: int, good: list[int],
-              tol: RigTolerances) -> str:
+def _diagnose(
+    cams: list[Camera], frames: list[list[ViewDetections]], v: int, good: list[int], tol: RigTolerances
+) -> str:
     """The correction of camera v that makes its 2D poses fit the good cameras, in words."""
     for what, fixed in _corrections(cams[v]):
-        trial = cams[:v] + [fixed] + cams[v + 1:]
+        trial = cams[:v] + [fixed] + cams[v + 1 :]
         if camera_fit(trial, frames, v, good, tol) <= tol.max_reprojection:
             return f"likely {what}"
     for u in range(len(cams)):
@@ -292,8 +352,9 @@ def _diagnose(cams: list[Camera], frames: list[list[ViewDetections]], v: int, go
     return "a wrong R, t or K, or the 2D poses of another camera"
 
 
-def pose_findings(rig: Rig, views_by_frame: Mapping[int, list[ViewDetections]],
-                  tol: RigTolerances = RigTolerances()) -> list[Finding]:
+def pose_findings(
+    rig: Rig, views_by_frame: Mapping[int, list[ViewDetections]], tol: RigTolerances = RigTolerances()
+) -> list[Finding]:
     """Cameras whose 2D poses do not fit the calibration (quick 2-view triangulation), each with the likely
     mistake; views_by_frame {frame: V ViewDetections (N, 23, 3)}. The worst camera is set aside until the
     remaining ones fit each other, so one wrong camera does not blame its partners."""
@@ -319,19 +380,34 @@ def pose_findings(rig: Rig, views_by_frame: Mapping[int, list[ViewDetections]],
         return []
     if len(good) < 2:
         values = [f for _, f in bad]
-        return [Finding("warning", f"the 2D poses fit no camera pair (median 2-view reprojection error "
-                                   f"{_share(min(values))} or more, more than "
-                                   f"{tol.max_reprojection:.0%}): t in other units, R camera -> world, or the "
-                                   f"2D poses of another rig?")]
-    return [Finding("warning", f"camera {cams[v].name!r}: its 2D poses do not fit the calibration (median 2-view "
-                               f"reprojection error {_share(f)} against the other cameras, more "
-                               f"than {tol.max_reprojection:.0%}): {_diagnose(cams, frames, v, good, tol)}")
-            for v, f in bad]
+        return [
+            Finding(
+                "warning",
+                f"the 2D poses fit no camera pair (median 2-view reprojection error "
+                f"{_share(min(values))} or more, more than "
+                f"{tol.max_reprojection:.0%}): t in other units, R camera -> world, or the "
+                f"2D poses of another rig?",
+            )
+        ]
+    return [
+        Finding(
+            "warning",
+            f"camera {cams[v].name!r}: its 2D poses do not fit the calibration (median 2-view "
+            f"reprojection error {_share(f)} against the other cameras, more "
+            f"than {tol.max_reprojection:.0%}): {_diagnose(cams, frames, v, good, tol)}",
+        )
+        for v, f in bad
+    ]
 
 
 # --- running the check --------------------------------------------------------------------------------
-def check_rig(rig: Rig, path: str | Path, views_by_frame: Mapping[int, list[ViewDetections]] | None = None,
-              tol: RigTolerances = RigTolerances(), warn: bool = True) -> list[Finding]:
+def check_rig(
+    rig: Rig,
+    path: str | Path,
+    views_by_frame: Mapping[int, list[ViewDetections]] | None = None,
+    tol: RigTolerances = RigTolerances(),
+    warn: bool = True,
+) -> list[Finding]:
     """Run the checks (2D ones with views_by_frame); raise RigError on the first error, emit the warnings
     as RigWarning (warn=True) prefixed with `path`, and return the findings."""
     findings = rig_findings(rig, tol)
@@ -367,8 +443,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     for f in findings:
         print(f"{f.level}: {args.cameras}: {f.message}")
     errors = sum(f.level == "error" for f in findings)
-    print(f"{args.cameras}: {len(rig)} cameras{f', {args.poses2d}' if args.poses2d else ''}: {errors} errors, "
-          f"{len(findings) - errors} warnings")
+    print(
+        f"{args.cameras}: {len(rig)} cameras{f', {args.poses2d}' if args.poses2d else ''}: {errors} errors, "
+        f"{len(findings) - errors} warnings"
+    )
     return 1 if errors else 0
 
 

@@ -1,10 +1,11 @@
 """Batched small linear algebra shared by the geometry and the solver."""
+
 from __future__ import annotations
 
 import numpy as np
 
 # cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1], indices mod 3
-_CYCLIC = np.ix_([1, 2, 0, 1, 2], [1, 2, 0, 1, 2])    # E[i, j] = A[(i + 1) % 3, (j + 1) % 3]
+_CYCLIC = np.ix_([1, 2, 0, 1, 2], [1, 2, 0, 1, 2])  # E[i, j] = A[(i + 1) % 3, (j + 1) % 3]
 
 
 def inverse_3x3(A: np.ndarray, check: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
@@ -13,7 +14,7 @@ def inverse_3x3(A: np.ndarray, check: bool = True) -> tuple[np.ndarray, np.ndarr
     Cofactors over the determinant (the cofactor matrix of a symmetric matrix is symmetric);
     positive definite = all leading minors > 0 (None unless check). A singular matrix gives inf / NaN.
     """
-    E = A[_CYCLIC]                  # cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1], mod 3
+    E = A[_CYCLIC]  # cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1], mod 3
     cof = E[:3, :3] * E[1:4, 1:4] - E[:3, 1:4] * E[1:4, :3]
     det = (A[0] * cof[0]).sum(axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):

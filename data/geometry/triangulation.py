@@ -1,13 +1,14 @@
 """Batched, score-weighted linear triangulation (DLT)."""
+
 from __future__ import annotations
 
 import numpy as np
 
 from data.geometry.linalg import inverse_3x3
 
-RQI_MIN_POINTS = 256    # from this many points the vectorised Rayleigh quotient iteration beats LAPACK eigh
+RQI_MIN_POINTS = 256  # from this many points the vectorised Rayleigh quotient iteration beats LAPACK eigh
 RQI_ITERATIONS = 3
-RQI_TOLERANCE = 1e-10   # accepted eigenvector error bound (sine of the angle); the rest goes to eigh
+RQI_TOLERANCE = 1e-10  # accepted eigenvector error bound (sine of the angle); the rest goes to eigh
 
 
 def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -> np.ndarray:
@@ -40,7 +41,9 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
         # so that huge scores cannot overflow the squared weights
         s = score.reshape(V, P * J)[:, solve]
         with np.errstate(over="ignore", invalid="ignore"):
-            A_tA = _normal_matrices(xy.reshape(V, P * J, 2)[:, solve], s / np.where(s.max(axis=0) > 0, s.max(axis=0), 1.0), proj)
+            A_tA = _normal_matrices(
+                xy.reshape(V, P * J, 2)[:, solve], s / np.where(s.max(axis=0) > 0, s.max(axis=0), 1.0), proj
+            )
         usable = np.isfinite(A_tA).all(axis=(1, 2))  # pixels so large that the rows overflow: not solvable
         X = np.zeros((len(A_tA), 4))
         X[usable] = smallest_eigenvectors(A_tA[usable]) if usable.any() else X[usable]
@@ -61,16 +64,22 @@ def _normal_matrices(xy: np.ndarray, score: np.ndarray, proj: np.ndarray) -> np.
     matrices: one matrix product for all points.
     """
     V, n, _ = xy.shape
-    u = np.moveaxis(xy, -1, 0)                                                          # (2, V, n)
-    P3, Pr = proj[:, 2], proj[:, :2].transpose(1, 0, 2)                                 # (V, 4), (2, V, 4)
-    norm2 = u * u * (P3 * P3).sum(-1)[:, None] - 2.0 * u * (Pr * P3).sum(-1)[..., None] \
-        + (Pr * Pr).sum(-1)[..., None]
+    u = np.moveaxis(xy, -1, 0)  # (2, V, n)
+    P3, Pr = proj[:, 2], proj[:, :2].transpose(1, 0, 2)  # (V, 4), (2, V, 4)
+    norm2 = u * u * (P3 * P3).sum(-1)[:, None] - 2.0 * u * (Pr * P3).sum(-1)[..., None] + (Pr * Pr).sum(-1)[..., None]
     weight = score * score / np.where(norm2 > 0, norm2, 1.0)
     wu = weight * u
-    coef = np.concatenate([weight, -wu, (wu * u).sum(axis=0, keepdims=True)])            # (5, V, n)
+    coef = np.concatenate([weight, -wu, (wu * u).sum(axis=0, keepdims=True)])  # (5, V, n)
     outer = lambda a, b: (a[..., :, None] * b[..., None, :]).reshape(V, 16)  # noqa: E731
-    mats = np.stack([outer(Pr[0], Pr[0]), outer(Pr[1], Pr[1]), outer(P3, Pr[0]) + outer(Pr[0], P3),
-                     outer(P3, Pr[1]) + outer(Pr[1], P3), outer(P3, P3)])                  # (5, V, 16)
+    mats = np.stack(
+        [
+            outer(Pr[0], Pr[0]),
+            outer(Pr[1], Pr[1]),
+            outer(P3, Pr[0]) + outer(Pr[0], P3),
+            outer(P3, Pr[1]) + outer(Pr[1], P3),
+            outer(P3, P3),
+        ]
+    )  # (5, V, 16)
     return (coef.reshape(5 * V, n).T @ mats.reshape(5 * V, 16)).reshape(n, 4, 4)
 
 
@@ -97,7 +106,7 @@ def _rayleigh_quotient(N: np.ndarray, iterations: int, tol: float) -> tuple[np.n
     bound and residual |N v - rho v| <= tol (1 / tr(B^-1) - rho), v is the smallest eigenvector to
     within an angle of tol (Davis-Kahan).
     """
-    Nt = N.transpose(1, 2, 0)                                                            # (4, 4, n)
+    Nt = N.transpose(1, 2, 0)  # (4, 4, n)
     B, c, d = Nt[:3, :3], Nt[:3, 3], Nt[3, 3]
     B_inv, pd = inverse_3x3(B)
     v = np.concatenate([-np.einsum("ijn,jn->in", B_inv, c), np.ones((1, len(N)))])

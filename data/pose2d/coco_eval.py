@@ -7,6 +7,7 @@ ignores it. A detection's area (used only to ignore unmatched detections outside
 extent of all its 23 keypoints, as ``COCO.loadRes`` computes it for 23-keypoint results, whatever the
 subset.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -19,20 +20,23 @@ import numpy as np
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
-from data.pose2d.coco_keypoints import coco23_document
-from data.keypoints import BODY_JOINTS, FOOT_JOINTS, NUM_BODY_JOINTS, NUM_JOINTS, OKS_SIGMAS
 from data.formats.atomic_io import atomic_write_text
+from data.keypoints import BODY_JOINTS, FOOT_JOINTS, NUM_BODY_JOINTS, NUM_JOINTS, OKS_SIGMAS
+from data.pose2d.coco_keypoints import coco23_document
 from data.pose2d.records import ImageRecord
 
 SUBSET_JOINTS: dict[str, tuple[int, ...]] = {
-    "all": tuple(range(NUM_JOINTS)), "body": BODY_JOINTS, "foot": FOOT_JOINTS,
+    "all": tuple(range(NUM_JOINTS)),
+    "body": BODY_JOINTS,
+    "foot": FOOT_JOINTS,
 }
 STAT_NAMES = ("AP", "AP50", "AP75", "APm", "APl", "AR", "AR50", "AR75", "ARm", "ARl")
 _CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
 
 
-def evaluate_keypoints(gt: Sequence[ImageRecord] | dict, predictions: Iterable[dict],
-                       subset: str = "all") -> dict[str, float]:
+def evaluate_keypoints(
+    gt: Sequence[ImageRecord] | dict, predictions: Iterable[dict], subset: str = "all"
+) -> dict[str, float]:
     """COCO OKS AP/AR of predictions ({image_id, keypoints (23, 3) or 69 numbers, score}) on one subset.
 
     ``gt``: ImageRecords, or a COCO-format dict whose annotations hold COCO-23 ``keypoints`` (69 numbers)
@@ -47,8 +51,13 @@ def evaluate_keypoints(gt: Sequence[ImageRecord] | dict, predictions: Iterable[d
     dt_anns = _detections(predictions, image_ids)
     with contextlib.redirect_stdout(io.StringIO()):
         coco_gt = _coco({**gt_doc, "annotations": [_gt_subset(a, joints) for a in gt_doc["annotations"]]})
-        coco_dt = _coco({"images": gt_doc["images"], "categories": _CATEGORIES,
-                         "annotations": [_dt_subset(a, joints) for a in dt_anns]})
+        coco_dt = _coco(
+            {
+                "images": gt_doc["images"],
+                "categories": _CATEGORIES,
+                "annotations": [_dt_subset(a, joints) for a in dt_anns],
+            }
+        )
         evaluator = COCOeval(coco_gt, coco_dt, "keypoints")
         evaluator.params.kpt_oks_sigmas = OKS_SIGMAS[joints]
         evaluator.params.imgIds = sorted(image_ids)
@@ -65,10 +74,17 @@ def _ground_truth(gt: Sequence[ImageRecord] | dict) -> dict:
     anns = []
     for ann in doc["annotations"]:
         bbox = [float(v) for v in ann["bbox"]]
-        anns.append({"id": len(anns) + 1,  # pycocotools treats id 0 as "no match"
-                     "image_id": int(ann["image_id"]), "category_id": 1, "bbox": bbox,
-                     "keypoints": _annotation_keypoints(ann), "area": float(ann.get("area", bbox[2] * bbox[3])),
-                     "iscrowd": int(ann.get("iscrowd", 0))})
+        anns.append(
+            {
+                "id": len(anns) + 1,  # pycocotools treats id 0 as "no match"
+                "image_id": int(ann["image_id"]),
+                "category_id": 1,
+                "bbox": bbox,
+                "keypoints": _annotation_keypoints(ann),
+                "area": float(ann.get("area", bbox[2] * bbox[3])),
+                "iscrowd": int(ann.get("iscrowd", 0)),
+            }
+        )
     return {"images": [dict(img) for img in images], "annotations": anns, "categories": _CATEGORIES}
 
 
@@ -78,8 +94,9 @@ def _annotation_keypoints(ann: dict) -> np.ndarray:
     if kps.size == 3 * NUM_JOINTS:
         return kps.reshape(NUM_JOINTS, 3)
     if kps.size != 3 * NUM_BODY_JOINTS:
-        raise ValueError(f"annotation {ann.get('id')}: {kps.size} keypoint numbers; need 51 (COCO-17) "
-                         f"or {3 * NUM_JOINTS} (COCO-23)")
+        raise ValueError(
+            f"annotation {ann.get('id')}: {kps.size} keypoint numbers; need 51 (COCO-17) or {3 * NUM_JOINTS} (COCO-23)"
+        )
     foot = np.asarray(ann.get("foot_kpts", np.zeros(3 * len(FOOT_JOINTS))), dtype=np.float64)
     return np.concatenate([kps, foot.ravel()]).reshape(NUM_JOINTS, 3)
 
@@ -102,9 +119,17 @@ def _detections(predictions: Iterable[dict], image_ids: set[int]) -> list[dict]:
         kps = kps.reshape(NUM_JOINTS, 3)
         x0, y0 = kps[:, :2].min(axis=0)
         x1, y1 = kps[:, :2].max(axis=0)
-        anns.append({"id": i + 1, "image_id": int(pred["image_id"]), "category_id": 1, "keypoints": kps,
-                     "score": float(pred["score"]), "bbox": [x0, y0, x1 - x0, y1 - y0],
-                     "area": float((x1 - x0) * (y1 - y0))})
+        anns.append(
+            {
+                "id": i + 1,
+                "image_id": int(pred["image_id"]),
+                "category_id": 1,
+                "keypoints": kps,
+                "score": float(pred["score"]),
+                "bbox": [x0, y0, x1 - x0, y1 - y0],
+                "area": float((x1 - x0) * (y1 - y0)),
+            }
+        )
     return anns
 
 
@@ -125,9 +150,12 @@ def write_coco_results(path: str | Path, predictions: Iterable[dict]) -> None:
     """Write predictions ({image_id, keypoints (23, 3), score, bbox?}) as a COCO results JSON, atomically."""
     out = []
     for pred in predictions:
-        entry = {"image_id": int(pred["image_id"]), "category_id": 1,
-                 "keypoints": np.round(np.asarray(pred["keypoints"], dtype=np.float64).ravel(), 4).tolist(),
-                 "score": float(pred["score"])}
+        entry = {
+            "image_id": int(pred["image_id"]),
+            "category_id": 1,
+            "keypoints": np.round(np.asarray(pred["keypoints"], dtype=np.float64).ravel(), 4).tolist(),
+            "score": float(pred["score"]),
+        }
         if pred.get("bbox") is not None:
             entry["bbox"] = np.round(np.asarray(pred["bbox"], dtype=np.float64), 4).tolist()
         out.append(entry)

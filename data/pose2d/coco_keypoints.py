@@ -5,6 +5,7 @@ file order, with every non-crowd person of that image in COCO-23 order, however 
 joints of persons that are not training samples are still needed for the multi-modal targets of the
 others. :func:`training_persons` picks the training samples of a record.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -15,18 +16,19 @@ from typing import Any, Callable
 
 import numpy as np
 
-from data.keypoints import COCO23_NAMES, CROWDPOSE14_TO_COCO23, LIMBS, NUM_BODY_JOINTS, NUM_JOINTS, to_coco23
 from data.formats.atomic_io import atomic_write_text
+from data.keypoints import COCO23_NAMES, CROWDPOSE14_TO_COCO23, LIMBS, NUM_BODY_JOINTS, NUM_JOINTS, to_coco23
 from data.pose2d.records import ImageRecord
 
 KINDS = ("coco_wholebody", "coco23", "crowdpose")
 NUM_FOOT_JOINTS = NUM_JOINTS - NUM_BODY_JOINTS
-CROWDPOSE_JOINTS = len(CROWDPOSE14_TO_COCO23[CROWDPOSE14_TO_COCO23 >= 0]) + 2   # 12 limb joints, head, neck
+CROWDPOSE_JOINTS = len(CROWDPOSE14_TO_COCO23[CROWDPOSE14_TO_COCO23 >= 0]) + 2  # 12 limb joints, head, neck
 
 Converter = Callable[[dict], np.ndarray]
 
 
 # --- reading ----------------------------------------------------------------------------------------
+
 
 def _read_json(path: Path, what: str) -> Any:
     """The parsed JSON of a file, or a ValueError naming the file."""
@@ -47,8 +49,9 @@ def _numbers(path: Path, ann: dict, key: str, count: int) -> np.ndarray:
         raise ValueError(f"{path}: annotation id {ann.get('id')!r} has no list {key!r}")
     if len(value) != count:
         expected = f"{count} ({count // 3} keypoints x 3)" if key != "bbox" else str(count)
-        raise ValueError(f"{path}: annotation id {ann.get('id')!r} has {len(value)} numbers in {key!r}, "
-                         f"expected {expected}")
+        raise ValueError(
+            f"{path}: annotation id {ann.get('id')!r} has {len(value)} numbers in {key!r}, expected {expected}"
+        )
     try:
         arr = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
@@ -64,11 +67,15 @@ def _person_category_ids(doc: dict) -> set:
     return ids or {1}
 
 
-def _load(path: Path, doc: Any, image_dir: str | Path, convert: Converter, labelled: np.ndarray,
-          skip_crowd: bool) -> list[ImageRecord]:
+def _load(
+    path: Path, doc: Any, image_dir: str | Path, convert: Converter, labelled: np.ndarray, skip_crowd: bool
+) -> list[ImageRecord]:
     """Records of a parsed COCO keypoint file; convert maps one annotation to its (23, 3) keypoints."""
-    if not isinstance(doc, dict) or not isinstance(doc.get("images"), list) \
-            or not isinstance(doc.get("annotations"), list):
+    if (
+        not isinstance(doc, dict)
+        or not isinstance(doc.get("images"), list)
+        or not isinstance(doc.get("annotations"), list)
+    ):
         raise ValueError(f"{path}: not a COCO annotation file (needs the lists 'images' and 'annotations')")
     persons: dict[Any, list[tuple[np.ndarray, np.ndarray, float]]] = {}
     for img in doc["images"]:
@@ -82,8 +89,10 @@ def _load(path: Path, doc: Any, image_dir: str | Path, convert: Converter, label
         if ann.get("category_id", 1) not in category_ids or (skip_crowd and ann.get("iscrowd", 0)):
             continue
         if ann.get("image_id") not in persons:
-            raise ValueError(f"{path}: annotation id {ann.get('id')!r} refers to image id "
-                             f"{ann.get('image_id')!r}, which is not in 'images'")
+            raise ValueError(
+                f"{path}: annotation id {ann.get('id')!r} refers to image id "
+                f"{ann.get('image_id')!r}, which is not in 'images'"
+            )
         keypoints = convert(ann)
         box = _numbers(path, ann, "bbox", 4)
         persons[ann["image_id"]].append((keypoints, box, _area(path, ann, box)))
@@ -105,11 +114,15 @@ def _area(path: Path, ann: dict, box: np.ndarray) -> float:
 def _record(img: dict, image_dir: Path, persons: list, labelled: np.ndarray) -> ImageRecord:
     """One ImageRecord of an image entry and its (keypoints (23, 3), box (4,), area) persons."""
     return ImageRecord(
-        image_id=int(img["id"]), file=image_dir / img["file_name"],
-        width=int(img["width"]), height=int(img["height"]),
+        image_id=int(img["id"]),
+        file=image_dir / img["file_name"],
+        width=int(img["width"]),
+        height=int(img["height"]),
         keypoints=np.array([p[0] for p in persons]).reshape(-1, NUM_JOINTS, 3),
         boxes=np.array([p[1] for p in persons]).reshape(-1, 4),
-        areas=np.array([p[2] for p in persons]), labelled=labelled.copy())
+        areas=np.array([p[2] for p in persons]),
+        labelled=labelled.copy(),
+    )
 
 
 def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
@@ -155,8 +168,10 @@ def _coco23_count(path: Path, doc: Any) -> int:
         if isinstance(ann, dict) and isinstance(ann.get("keypoints"), list):
             n = len(ann["keypoints"])
             if n not in (3 * NUM_BODY_JOINTS, 3 * NUM_JOINTS):
-                raise ValueError(f"{path}: annotation id {ann.get('id')!r} has {n} numbers in 'keypoints', "
-                                 f"expected {3 * NUM_JOINTS} (23 x 3) or {3 * NUM_BODY_JOINTS} (17 x 3)")
+                raise ValueError(
+                    f"{path}: annotation id {ann.get('id')!r} has {n} numbers in 'keypoints', "
+                    f"expected {3 * NUM_JOINTS} (23 x 3) or {3 * NUM_BODY_JOINTS} (17 x 3)"
+                )
             return n // 3
     return NUM_JOINTS
 
@@ -173,8 +188,9 @@ def load_crowdpose(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool
     return _load(path, doc, image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
 
 
-def load_detections(det_file: str | Path, records: list[ImageRecord], score_threshold: float = 0.0,
-                    category_id: int = 1) -> list[ImageRecord]:
+def load_detections(
+    det_file: str | Path, records: list[ImageRecord], score_threshold: float = 0.0, category_id: int = 1
+) -> list[ImageRecord]:
     """New records with det_boxes (M, 4) / det_scores (M,) from a COCO detection-results file.
 
     Entries of another category or with score < score_threshold are dropped; entries of images not
@@ -183,8 +199,9 @@ def load_detections(det_file: str | Path, records: list[ImageRecord], score_thre
     path = Path(det_file)
     dets = _read_json(path, "detections file")
     if not isinstance(dets, list):
-        raise ValueError(f"{path}: a detection-results file must be a JSON list of "
-                         "{image_id, category_id, bbox, score} objects")
+        raise ValueError(
+            f"{path}: a detection-results file must be a JSON list of {{image_id, category_id, bbox, score}} objects"
+        )
     found: dict[int, list[tuple[np.ndarray, float]]] = {r.image_id: [] for r in records}
     for i, det in enumerate(dets):
         if not isinstance(det, dict) or not all(k in det for k in ("image_id", "bbox", "score")):
@@ -200,9 +217,14 @@ def load_detections(det_file: str | Path, records: list[ImageRecord], score_thre
             continue
         if det["image_id"] in found:
             found[det["image_id"]].append((box, score))
-    return [dataclasses.replace(r, det_boxes=np.array([b for b, _ in found[r.image_id]]).reshape(-1, 4),
-                                det_scores=np.array([s for _, s in found[r.image_id]]))
-            for r in records]
+    return [
+        dataclasses.replace(
+            r,
+            det_boxes=np.array([b for b, _ in found[r.image_id]]).reshape(-1, 4),
+            det_scores=np.array([s for _, s in found[r.image_id]]),
+        )
+        for r in records
+    ]
 
 
 def labelled_counts(record: ImageRecord) -> np.ndarray:
@@ -215,9 +237,15 @@ def training_persons(record: ImageRecord, min_keypoints: int = 1) -> np.ndarray:
     return np.flatnonzero(labelled_counts(record) >= min_keypoints)
 
 
-def load_keypoint_dataset(kind: str, ann_file: str | Path, image_dir: str | Path, det_file: str | Path | None = None,
-                          min_keypoints: int = 1, skip_crowd: bool = True,
-                          det_score_threshold: float = 0.0) -> list[ImageRecord]:
+def load_keypoint_dataset(
+    kind: str,
+    ann_file: str | Path,
+    image_dir: str | Path,
+    det_file: str | Path | None = None,
+    min_keypoints: int = 1,
+    skip_crowd: bool = True,
+    det_score_threshold: float = 0.0,
+) -> list[ImageRecord]:
     """Records of a keypoint dataset of this kind ("coco_wholebody", "coco23", "crowdpose").
 
     Images without any person of at least min_keypoints labelled joints are dropped (min_keypoints
@@ -237,14 +265,21 @@ def load_keypoint_dataset(kind: str, ann_file: str | Path, image_dir: str | Path
 
 # --- writing ----------------------------------------------------------------------------------------
 
+
 def coco23_categories() -> list[dict]:
     """The COCO "categories" list of COCO-23: person, the 23 keypoint names, LIMBS as 1-based skeleton."""
-    return [{"supercategory": "person", "id": 1, "name": "person", "keypoints": list(COCO23_NAMES),
-             "skeleton": [[a + 1, b + 1] for a, b in LIMBS]}]
+    return [
+        {
+            "supercategory": "person",
+            "id": 1,
+            "name": "person",
+            "keypoints": list(COCO23_NAMES),
+            "skeleton": [[a + 1, b + 1] for a, b in LIMBS],
+        }
+    ]
 
 
-def coco23_document(records: list[ImageRecord], image_root: str | Path | None = None,
-                    info: dict | None = None) -> dict:
+def coco23_document(records: list[ImageRecord], image_root: str | Path | None = None, info: dict | None = None) -> dict:
     """The COCO-23 annotation document of records; file_name is relative to image_root, else the base name."""
     images, annotations = [], []
     for record in records:
@@ -252,11 +287,19 @@ def coco23_document(records: list[ImageRecord], image_root: str | Path | None = 
         images.append({"id": record.image_id, "file_name": name, "width": record.width, "height": record.height})
         for kps, box, area in zip(record.keypoints, record.boxes, record.areas):
             flat = [v for x, y, vis in kps.tolist() for v in (x, y, int(vis))]
-            annotations.append({"id": len(annotations) + 1, "image_id": record.image_id, "category_id": 1,
-                                "iscrowd": 0, "num_keypoints": int(np.sum(kps[:, 2] > 0)), "keypoints": flat,
-                                "bbox": box.tolist(), "area": float(area)})
-    return {"info": dict(info or {}), "categories": coco23_categories(), "images": images,
-            "annotations": annotations}
+            annotations.append(
+                {
+                    "id": len(annotations) + 1,
+                    "image_id": record.image_id,
+                    "category_id": 1,
+                    "iscrowd": 0,
+                    "num_keypoints": int(np.sum(kps[:, 2] > 0)),
+                    "keypoints": flat,
+                    "bbox": box.tolist(),
+                    "area": float(area),
+                }
+            )
+    return {"info": dict(info or {}), "categories": coco23_categories(), "images": images, "annotations": annotations}
 
 
 def _file_name(record: ImageRecord, image_root: str | Path | None) -> str:
@@ -269,8 +312,9 @@ def _file_name(record: ImageRecord, image_root: str | Path | None) -> str:
         raise ValueError(f"image id {record.image_id}: {record.file} is not inside {image_root}") from None
 
 
-def write_coco_keypoints(path: str | Path, records: list[ImageRecord], image_root: str | Path | None = None,
-                         info: dict | None = None) -> None:
+def write_coco_keypoints(
+    path: str | Path, records: list[ImageRecord], image_root: str | Path | None = None, info: dict | None = None
+) -> None:
     """Write records as a COCO-23 annotation file (atomic), readable by :func:`load_coco23`.
 
     Annotation ids are 1..N in record order. The file states all 23 joints as annotated; a record's

@@ -11,6 +11,7 @@ of width ``W`` spans ``[-0.5, W - 0.5]``. This is the convention of ``cv2.warpAf
   crop centre goes to ``((w - 1) / 2, (h - 1) / 2)`` and lengths scale by ``w / scale_w``, which is
   isotropic when the box has the output's aspect ratio (:func:`box_to_center_scale` ensures it).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -20,8 +21,7 @@ import numpy as np
 from data.keypoints import flip_permutation
 
 
-def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.25
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.25) -> tuple[np.ndarray, np.ndarray]:
     """Person box (4,) x, y, w, h -> crop centre (2,) and extent (2,) w, h in image pixels.
 
     The box is grown along one side to the aspect ratio ``aspect`` = w / h of the network input
@@ -36,8 +36,9 @@ def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.
     return center, np.array([w, h]) * padding
 
 
-def crop_affine(center: np.ndarray, scale: np.ndarray, rotation_deg: float,
-                out_size: tuple[int, int], inverse: bool = False) -> np.ndarray:
+def crop_affine(
+    center: np.ndarray, scale: np.ndarray, rotation_deg: float, out_size: tuple[int, int], inverse: bool = False
+) -> np.ndarray:
     """(2, 3) affine from image pixels to crop pixels (or back with ``inverse``).
 
     center (2,), scale (2,) = crop extent w, h in image pixels, out_size = (w, h) of the crop. A positive
@@ -102,8 +103,9 @@ class CropAugmentation:
     flip_prob: float = 0.5
 
 
-def sample_augmentation(rng: np.random.Generator, settings: CropAugmentation | None = None
-                        ) -> tuple[float, float, bool]:
+def sample_augmentation(
+    rng: np.random.Generator, settings: CropAugmentation | None = None
+) -> tuple[float, float, bool]:
     """Draw (scale multiplier, rotation in degrees, flip) for one crop; settings default to CropAugmentation()."""
     settings = settings or CropAugmentation()
     sf, rf = settings.scale_factor, settings.rotation_factor

@@ -1,4 +1,5 @@
 """Plain records of top-down 2D keypoint datasets: what every COCO-format loader yields to training."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -12,6 +12,7 @@ CLI: ``python -m data.pose2d.synthetic_images --out DIR --num-images N --seed S 
 ``DIR/images/NNNNNN.jpg`` and ``DIR/annotations.json``; read them with
 ``data.pose2d.coco_keypoints.load_coco23(DIR / "annotations.json", DIR / "images")``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,28 +25,28 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from data.pose2d.coco_keypoints import load_coco23, write_coco_keypoints
+from data.geometry.camera import Camera
 from data.keypoints import LIMBS, NUM_JOINTS
+from data.pose2d.coco_keypoints import load_coco23, write_coco_keypoints
 from data.pose2d.records import ImageRecord
 from data.synthetic.body import pose_joints, sample_body
 from data.synthetic.capsules import HEAD_RADIUS_M, body_capsules, capsule_radii, occluded_joints
 from data.synthetic.rigs import look_at_camera
-from data.geometry.camera import Camera
 
 # Part groups that get one clothing colour per person.
 SHIRT, SLEEVE, TROUSERS, SHIN, SHOES, SKIN, HAIR = range(7)
 SKIN_TONES = np.array([(185, 205, 240), (150, 180, 225), (110, 150, 205), (80, 115, 170), (50, 75, 120)], float)
 HAIR_TONES = np.array([(20, 20, 25), (30, 45, 70), (40, 80, 130), (120, 170, 210), (140, 140, 140)], float)
 SHADE_LAYERS = ((1.0, 0.0, 0.62), (0.78, 0.10, 0.84), (0.45, 0.30, 1.0))  # (radius, light shift, brightness)
-FACE_VISIBLE_COS = -0.2          # a face joint is seen while cos(joint - head centre, camera - head centre) >= this
-STATURE_M = 1.7                  # stature used to turn the wanted pixel height into a depth
+FACE_VISIBLE_COS = -0.2  # a face joint is seen while cos(joint - head centre, camera - head centre) >= this
+STATURE_M = 1.7  # stature used to turn the wanted pixel height into a depth
 MIN_SPACING_M = 0.5
 HAIR_BACK_M, HAIR_UP_M, HAIR_RADIUS_M = 0.03, 0.015, 0.095
-SUBPIXEL_SHIFT = 3               # fixed-point bits of the polygon coordinates
-MAX_PERSONS = 1000               # the uint16 part-owner map holds persons x 28 parts
+SUBPIXEL_SHIFT = 3  # fixed-point bits of the polygon coordinates
+MAX_PERSONS = 1000  # the uint16 part-owner map holds persons x 28 parts
 
-_HEAD = len(LIMBS) + 1           # index of the head sphere in body_capsules
-_HAIR = len(LIMBS) + 2           # the hair sphere, appended after the capsules
+_HEAD = len(LIMBS) + 1  # index of the head sphere in body_capsules
+_HAIR = len(LIMBS) + 2  # the hair sphere, appended after the capsules
 
 
 @dataclass(frozen=True)
@@ -62,11 +63,16 @@ class ImageOptions:
     def __post_init__(self) -> None:
         if self.height_px is None:
             object.__setattr__(self, "height_px", (self.size[1] / 6, self.size[1] * 5 / 8))
-        checks = (("size", min(self.size) >= 32, "must be at least 32 x 32 pixels"),
-                  ("persons", 1 <= self.persons[0] <= self.persons[1] <= MAX_PERSONS,
-                   f"must be (min, max), 1 <= min <= max <= {MAX_PERSONS}"),
-                  ("height_px", 0 < self.height_px[0] <= self.height_px[1], "must be (min, max), 0 < min <= max"),
-                  ("jpeg_quality", 1 <= self.jpeg_quality <= 100, "must be in 1..100"))
+        checks = (
+            ("size", min(self.size) >= 32, "must be at least 32 x 32 pixels"),
+            (
+                "persons",
+                1 <= self.persons[0] <= self.persons[1] <= MAX_PERSONS,
+                f"must be (min, max), 1 <= min <= max <= {MAX_PERSONS}",
+            ),
+            ("height_px", 0 < self.height_px[0] <= self.height_px[1], "must be (min, max), 0 < min <= max"),
+            ("jpeg_quality", 1 <= self.jpeg_quality <= 100, "must be in 1..100"),
+        )
         for key, ok, what in checks:
             if not ok:
                 raise ValueError(f"synthetic image option {key}={getattr(self, key)!r} {what}")
@@ -87,6 +93,7 @@ class SyntheticImage:
 
 # --- scene ------------------------------------------------------------------------------------------
 
+
 def _part_groups() -> np.ndarray:
     """Colour group (K,) of every capsule of body_capsules, then the hair; -1: face segments, not drawn."""
     groups = []
@@ -97,15 +104,15 @@ def _part_groups() -> np.ndarray:
         elif hi <= 4:
             groups.append(-1)
         elif lo <= 4:
-            groups.append(SKIN)                               # neck sides
+            groups.append(SKIN)  # neck sides
         elif (lo, hi) in ((13, 15), (14, 16)):
             groups.append(SHIN)
         elif lo >= 11:
-            groups.append(TROUSERS)                           # thighs, pelvis
+            groups.append(TROUSERS)  # thighs, pelvis
         elif (lo, hi) in ((7, 9), (8, 10)):
             groups.append(SLEEVE)
         else:
-            groups.append(SHIRT)                              # flanks, shoulders, upper arms
+            groups.append(SHIRT)  # flanks, shoulders, upper arms
     return np.array(groups + [SHIRT, SKIN, HAIR])
 
 
@@ -170,8 +177,9 @@ def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions
             ground.append(point)
     poses = np.zeros((len(ground), NUM_JOINTS, 3))
     for p, (x, y) in enumerate(ground):
-        joints = pose_joints(sample_body(rng), x, y, rng.uniform(0, 2 * math.pi), rng.uniform(),
-                             bool(rng.random() < 0.5))
+        joints = pose_joints(
+            sample_body(rng), x, y, rng.uniform(0, 2 * math.pi), rng.uniform(), bool(rng.random() < 0.5)
+        )
         for arm in ((5, 7, 9), (6, 8, 10)):
             if rng.random() < 0.6:
                 _vary_arm(joints, *arm, rng)
@@ -180,6 +188,7 @@ def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions
 
 
 # --- background -------------------------------------------------------------------------------------
+
 
 def _smooth_field(rng: np.random.Generator, size: tuple[int, int], cells: int, low: float, high: float) -> np.ndarray:
     """A smooth random colour field (H, W, 3) uint8, upsampled from a coarse grid (cubic, then linear)."""
@@ -193,14 +202,23 @@ def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
     """A textured background (H, W, 3) uint8: smooth colours, stripes, blobs, a tiled floor below the horizon."""
     w, h = camera.size
     image = _smooth_field(rng, (w, h), int(rng.integers(2, 7)), 30, 230)
-    for _ in range(int(rng.integers(0, 8))):                        # stripes and bars
+    for _ in range(int(rng.integers(0, 8))):  # stripes and bars
         p0 = rng.uniform([-w, -h], [2 * w, 2 * h])
         p1 = p0 + rng.normal(0, w, 2)
         cv2.line(image, _ipt(p0), _ipt(p1), _colour(rng), int(rng.integers(2, 40)), cv2.LINE_AA)
-    for _ in range(int(rng.integers(3, 20))):                       # blobs
+    for _ in range(int(rng.integers(3, 20))):  # blobs
         axes = (int(rng.integers(4, w // 6)), int(rng.integers(4, h // 6)))
-        cv2.ellipse(image, _ipt(rng.uniform([0, 0], [w, h])), axes, float(rng.uniform(0, 180)), 0, 360,
-                    _colour(rng), -1, cv2.LINE_AA)
+        cv2.ellipse(
+            image,
+            _ipt(rng.uniform([0, 0], [w, h])),
+            axes,
+            float(rng.uniform(0, 180)),
+            0,
+            360,
+            _colour(rng),
+            -1,
+            cv2.LINE_AA,
+        )
     horizon = int(np.clip(camera.project(np.array([1e4, 0.0, 0.0]))[1], 0, h))
     if horizon < h:
         floor = _smooth_field(rng, (w, h - horizon), 3, 40, 200)
@@ -216,9 +234,12 @@ def _draw_floor_grid(image: np.ndarray, camera: Camera, rng: np.random.Generator
     near, far, side = 1.0, 30.0, 30.0
     ys = np.arange(-side, side, tile)
     xs = np.arange(near, far, tile)
-    ends = np.concatenate([
-        np.stack([np.stack([np.full_like(ys, near), ys], 1), np.stack([np.full_like(ys, far), ys], 1)], 1),
-        np.stack([np.stack([xs, np.full_like(xs, -side)], 1), np.stack([xs, np.full_like(xs, side)], 1)], 1)])
+    ends = np.concatenate(
+        [
+            np.stack([np.stack([np.full_like(ys, near), ys], 1), np.stack([np.full_like(ys, far), ys], 1)], 1),
+            np.stack([np.stack([xs, np.full_like(xs, -side)], 1), np.stack([xs, np.full_like(xs, side)], 1)], 1),
+        ]
+    )
     uv = np.round(np.clip(camera.project(np.concatenate([ends, np.zeros(ends.shape[:2] + (1,))], -1)), -1e5, 1e5))
     for (u0, v0), (u1, v1) in uv.astype(np.int64).tolist():
         cv2.line(image, (u0, v0), (u1, v1), colour, 1, cv2.LINE_AA)
@@ -236,6 +257,7 @@ def _ipt(p: np.ndarray) -> tuple[int, int]:
 
 
 # --- bodies -----------------------------------------------------------------------------------------
+
 
 def _person_colours(rng: np.random.Generator) -> np.ndarray:
     """BGR colour (7, 3) of each part group of one person: shirt, sleeve, trousers, shin, shoes, skin, hair."""
@@ -259,9 +281,10 @@ def capsule_outlines(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarra
     unit = np.where(length > 1e-6, d / np.maximum(length, 1e-6), [1.0, 0.0])
     perp = np.stack([-unit[..., 1], unit[..., 0]], axis=-1)
     t = np.linspace(-math.pi / 2, math.pi / 2, n)[:, None]
-    front = np.cos(t) * unit[..., None, :] + np.sin(t) * perp[..., None, :]          # (..., n, 2)
-    return np.concatenate([b[..., None, :] + rb[..., None, None] * front,
-                           a[..., None, :] - ra[..., None, None] * front], axis=-2)
+    front = np.cos(t) * unit[..., None, :] + np.sin(t) * perp[..., None, :]  # (..., n, 2)
+    return np.concatenate(
+        [b[..., None, :] + rb[..., None, None] * front, a[..., None, :] - ra[..., None, None] * front], axis=-2
+    )
 
 
 def _fixed(points: np.ndarray) -> np.ndarray:
@@ -299,19 +322,35 @@ def _view_person(camera: Camera, joints: np.ndarray, light: np.ndarray) -> _Pers
     ra, rb = np.maximum(focal * radii / da, 1.0), np.maximum(focal * radii / db, 1.0)
     scale = np.array([f for f, _, _ in SHADE_LAYERS])
     shift = np.array([s for _, s, _ in SHADE_LAYERS])[None, :, None] * np.maximum(ra, rb)[:, None, None] * light
-    outlines = capsule_outlines(camera.project(ends_a)[:, None] + shift, camera.project(ends_b)[:, None] + shift,
-                                ra[:, None] * scale, rb[:, None] * scale)
+    outlines = capsule_outlines(
+        camera.project(ends_a)[:, None] + shift,
+        camera.project(ends_b)[:, None] + shift,
+        ra[:, None] * scale,
+        rb[:, None] * scale,
+    )
     rel = joints - head
     cos = rel @ to_cam / np.maximum(np.linalg.norm(rel, axis=1) * np.linalg.norm(to_cam), 1e-12)
     face_seen = np.ones(NUM_JOINTS, dtype=bool)
     face_seen[:5] = cos[:5] >= FACE_VISIBLE_COS
-    return _PersonView(_fixed(outlines), (da + db) / 2, camera.project(joints), face_seen,
-                       bool(forward @ to_cam > 0), max(0.12 * focal * HEAD_RADIUS_M / da[_HEAD], 0.8),
-                       float(np.mean(camera.depth(joints))))
+    return _PersonView(
+        _fixed(outlines),
+        (da + db) / 2,
+        camera.project(joints),
+        face_seen,
+        bool(forward @ to_cam > 0),
+        max(0.12 * focal * HEAD_RADIUS_M / da[_HEAD], 0.8),
+        float(np.mean(camera.depth(joints))),
+    )
 
 
-def _draw_person(image: np.ndarray, owner: np.ndarray, view: _PersonView, colours: np.ndarray,
-                 first_id: int, rng: np.random.Generator) -> None:
+def _draw_person(
+    image: np.ndarray,
+    owner: np.ndarray,
+    view: _PersonView,
+    colours: np.ndarray,
+    first_id: int,
+    rng: np.random.Generator,
+) -> None:
     """Paint one person's parts far to near in place; the owner map gets first_id + part index."""
     groups = PART_GROUPS
     bright = np.array([b for _, _, b in SHADE_LAYERS])
@@ -332,8 +371,15 @@ def _draw_face(image: np.ndarray, view: _PersonView, skin: np.ndarray) -> None:
     for j, colour, size in ((1, (30, 30, 30), 1.0), (2, (30, 30, 30), 1.0), (0, (skin * 0.7).tolist(), 1.4)):
         if view.face_seen[j]:
             centre = _fixed(view.uv[j])
-            cv2.circle(image, (int(centre[0]), int(centre[1])), int(round(view.dot_px * size * (1 << SUBPIXEL_SHIFT))),
-                       colour, -1, cv2.LINE_AA, SUBPIXEL_SHIFT)
+            cv2.circle(
+                image,
+                (int(centre[0]), int(centre[1])),
+                int(round(view.dot_px * size * (1 << SUBPIXEL_SHIFT))),
+                colour,
+                -1,
+                cv2.LINE_AA,
+                SUBPIXEL_SHIFT,
+            )
 
 
 def _draw_shadows(image: np.ndarray, camera: Camera, poses: np.ndarray) -> None:
@@ -351,8 +397,10 @@ def _draw_shadows(image: np.ndarray, camera: Camera, poses: np.ndarray) -> None:
 
 # --- labels -----------------------------------------------------------------------------------------
 
-def _labels(camera: Camera, poses: np.ndarray, views: list[_PersonView],
-            owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+
+def _labels(
+    camera: Camera, poses: np.ndarray, views: list[_PersonView], owner: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Keypoints (P, 23, 3) x, y, v and boxes (P, 4) of the painted persons (see the module docstring)."""
     w, h = camera.size
     num, parts = len(poses), len(PART_GROUPS)
@@ -360,7 +408,7 @@ def _labels(camera: Camera, poses: np.ndarray, views: list[_PersonView],
     inside = (uv[..., 0] >= 0) & (uv[..., 0] <= w - 1) & (uv[..., 1] >= 0) & (uv[..., 1] <= h - 1)
     inside &= camera.depth(poses) > 0
     px = np.clip(np.round(uv).astype(np.int64), 0, [w - 1, h - 1])
-    top = owner[px[..., 1], px[..., 0]].astype(np.int64) - 1                           # part id, -1 = none
+    top = owner[px[..., 1], px[..., 0]].astype(np.int64) - 1  # part id, -1 = none
     top_person = np.where(top >= 0, top // parts, -1)
     top_part = np.where(top >= 0, top % parts, 0)
     hidden = occluded_joints(camera.center, poses) if num else np.zeros((0, NUM_JOINTS), bool)
@@ -388,8 +436,10 @@ def _painted_boxes(owner: np.ndarray, num: int, parts: int) -> np.ndarray:
 
 # --- images -----------------------------------------------------------------------------------------
 
-def synthetic_image(rng: np.random.Generator, options: ImageOptions = ImageOptions(),
-                    with_background: bool = False) -> SyntheticImage:
+
+def synthetic_image(
+    rng: np.random.Generator, options: ImageOptions = ImageOptions(), with_background: bool = False
+) -> SyntheticImage:
     """Render one crowded image and its labels; persons with no painted pixel or no joint in view are left out."""
     camera = sample_camera(rng, options.size)
     poses = sample_crowd(rng, camera, options)
@@ -399,7 +449,7 @@ def synthetic_image(rng: np.random.Generator, options: ImageOptions = ImageOptio
     w, h = options.size
     owner = np.zeros((h, w), np.uint16)
     light = rng.normal(size=2) * [1.0, 0.5]
-    light[1] = -abs(light[1])                                      # highlights towards the top
+    light[1] = -abs(light[1])  # highlights towards the top
     light /= max(float(np.linalg.norm(light)), 1e-9)
     views = [_view_person(camera, joints, light) for joints in poses]
     for p in np.argsort([-v.person_depth for v in views], kind="stable"):
@@ -408,8 +458,9 @@ def synthetic_image(rng: np.random.Generator, options: ImageOptions = ImageOptio
     keep = (boxes[:, 2] > 0) & np.any(keypoints[..., 2] > 0, axis=1)
     grain = rng.normal(0, rng.uniform(1, 5), (h // 2, w // 2)).astype(np.float32)
     grain = cv2.resize(cv2.merge([grain] * 3), (w, h))
-    return SyntheticImage(_finish(image, grain), keypoints[keep], boxes[keep],
-                          _finish(background, grain) if with_background else None)
+    return SyntheticImage(
+        _finish(image, grain), keypoints[keep], boxes[keep], _finish(background, grain) if with_background else None
+    )
 
 
 def _finish(image: np.ndarray, grain: np.ndarray) -> np.ndarray:
@@ -422,8 +473,9 @@ def image_rng(seed: int, index: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), int(index)])
 
 
-def generate_dataset(out_dir: str | Path, num_images: int, seed: int, options: ImageOptions = ImageOptions(),
-                     progress: bool = True) -> Path:
+def generate_dataset(
+    out_dir: str | Path, num_images: int, seed: int, options: ImageOptions = ImageOptions(), progress: bool = True
+) -> Path:
     """Write out_dir/images/NNNNNN.jpg and out_dir/annotations.json (COCO-23); returns the annotation path."""
     out_dir = Path(out_dir)
     image_dir = out_dir / "images"
@@ -438,13 +490,18 @@ def generate_dataset(out_dir: str | Path, num_images: int, seed: int, options: I
         boxes = sample.boxes
         records.append(ImageRecord(i + 1, path, w, h, sample.keypoints, boxes, boxes[:, 2] * boxes[:, 3]))
     ann_path = out_dir / "annotations.json"
-    info = {"description": "synthetic crowded images (data.pose2d.synthetic_images)", "seed": int(seed),
-            "num_images": int(num_images), "size": [w, h]}
+    info = {
+        "description": "synthetic crowded images (data.pose2d.synthetic_images)",
+        "seed": int(seed),
+        "num_images": int(num_images),
+        "size": [w, h],
+    }
     write_coco_keypoints(ann_path, records, image_root=image_dir, info=info)
     return ann_path
 
 
 # --- preview ----------------------------------------------------------------------------------------
+
 
 def draw_annotations(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     """A copy of image (H, W, 3) with boxes (N, 4), limbs and joints (N, 23, 3): green seen, red hidden."""
@@ -457,13 +514,20 @@ def draw_annotations(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray
                 cv2.line(out, _ipt(kps[a, :2]), _ipt(kps[b, :2]), (0, 255, 255), 1, cv2.LINE_AA)
         for x, y, v in kps:
             if v > 0:
-                cv2.circle(out, _ipt(np.array([x, y])), 3, (0, 220, 0) if v >= 2 else (0, 0, 255),
-                           -1 if v >= 2 else 1, cv2.LINE_AA)
+                cv2.circle(
+                    out,
+                    _ipt(np.array([x, y])),
+                    3,
+                    (0, 220, 0) if v >= 2 else (0, 0, 255),
+                    -1 if v >= 2 else 1,
+                    cv2.LINE_AA,
+                )
     return out
 
 
-def save_preview(out_png: str | Path, ann_file: str | Path, image_dir: str | Path, count: int = 6,
-                 columns: int = 3) -> Path:
+def save_preview(
+    out_png: str | Path, ann_file: str | Path, image_dir: str | Path, count: int = 6, columns: int = 3
+) -> Path:
     """Save a PNG grid of the first `count` images of a COCO-23 file with their labels drawn."""
     records = load_coco23(ann_file, image_dir)[:count]
     if not records:
@@ -477,7 +541,7 @@ def save_preview(out_png: str | Path, ann_file: str | Path, image_dir: str | Pat
     h, w = tiles[0].shape[:2]
     tiles = [cv2.resize(t, (w, h)) for t in tiles]
     tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % columns)
-    grid = np.vstack([np.hstack(tiles[r:r + columns]) for r in range(0, len(tiles), columns)])
+    grid = np.vstack([np.hstack(tiles[r : r + columns]) for r in range(0, len(tiles), columns)])
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out_png), grid):
@@ -486,6 +550,7 @@ def save_preview(out_png: str | Path, ann_file: str | Path, image_dir: str | Pat
 
 
 # --- CLI --------------------------------------------------------------------------------------------
+
 
 def _size(text: str) -> tuple[int, int]:
     """'640x480' -> (640, 480)."""
@@ -504,15 +569,21 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--size", type=_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
     parser.add_argument("--persons", type=int, nargs=2, default=(4, 12), metavar=("MIN", "MAX"))
-    parser.add_argument("--height-px", type=float, nargs=2, metavar=("MIN", "MAX"),
-                        help="person height range in pixels (default: 1/6 to 5/8 of the image height)")
+    parser.add_argument(
+        "--height-px",
+        type=float,
+        nargs=2,
+        metavar=("MIN", "MAX"),
+        help="person height range in pixels (default: 1/6 to 5/8 of the image height)",
+    )
     parser.add_argument("--preview", type=Path, help="also save a PNG grid of the first 6 images here")
     args = parser.parse_args(argv)
     if args.num_images < 1:
         parser.error("--num-images must be >= 1")
     try:
-        options = ImageOptions(size=args.size, persons=tuple(args.persons),
-                               height_px=tuple(args.height_px) if args.height_px else None)
+        options = ImageOptions(
+            size=args.size, persons=tuple(args.persons), height_px=tuple(args.height_px) if args.height_px else None
+        )
     except ValueError as exc:
         parser.error(str(exc))
     ann = generate_dataset(args.out, args.num_images, args.seed, options)

@@ -12,6 +12,7 @@ another epoch's draws. A flip mirrors the WHOLE image and ALL persons (left/righ
 crops; ``affine_inv`` maps crop pixels back to that (possibly flipped) image. Images are RGB, normalised
 with the ImageNet mean and std.
 """
+
 from __future__ import annotations
 
 from collections import OrderedDict
@@ -22,12 +23,19 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
-from data.pose2d.coco_keypoints import training_persons
-from data.pose2d.crop_transforms import (CropAugmentation, box_to_center_scale, crop_affine, flip_keypoints,
-                                  flip_points, sample_augmentation)
 from data.keypoints import NUM_JOINTS
+from data.pose2d.coco_keypoints import training_persons
+from data.pose2d.crop_transforms import (
+    CropAugmentation,
+    box_to_center_scale,
+    crop_affine,
+    flip_keypoints,
+    flip_points,
+    sample_augmentation,
+)
 from data.pose2d.records import ImageRecord
-if TYPE_CHECKING:   # annotation only: the codec (a stage, layer 3) is given by the caller
+
+if TYPE_CHECKING:  # annotation only: the codec (a stage, layer 3) is given by the caller
     from models.heatmap_codec import MultiModalHeatmapCodec
 
 IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
@@ -60,10 +68,19 @@ class TopDownDataset(Dataset):
     DataLoader worker.
     """
 
-    def __init__(self, records: list[ImageRecord], codec: MultiModalHeatmapCodec,
-                 input_size: tuple[int, int] = (192, 256), augment: CropAugmentation | None = None,
-                 train: bool = True, min_keypoints: int = 1, use_det_boxes: bool = False,
-                 padding: float = 1.25, seed: int = 0, cache_size: int = 32) -> None:
+    def __init__(
+        self,
+        records: list[ImageRecord],
+        codec: MultiModalHeatmapCodec,
+        input_size: tuple[int, int] = (192, 256),
+        augment: CropAugmentation | None = None,
+        train: bool = True,
+        min_keypoints: int = 1,
+        use_det_boxes: bool = False,
+        padding: float = 1.25,
+        seed: int = 0,
+        cache_size: int = 32,
+    ) -> None:
         self.input_size = (int(input_size[0]), int(input_size[1]))
         if self.input_size != codec.input_size:
             raise ValueError(f"dataset input_size {self.input_size} differs from the codec's {codec.input_size}")
@@ -79,11 +96,15 @@ class TopDownDataset(Dataset):
         samples = []
         for r, record in enumerate(self.records):
             if det_boxes:
-                samples += [(r, -1, box, float(score), float(box[2] * box[3]))
-                            for box, score in zip(record.det_boxes, record.det_scores)]
+                samples += [
+                    (r, -1, box, float(score), float(box[2] * box[3]))
+                    for box, score in zip(record.det_boxes, record.det_scores)
+                ]
             else:
-                samples += [(r, int(p), record.boxes[p], 1.0, float(record.areas[p]))
-                            for p in training_persons(record, min_keypoints)]
+                samples += [
+                    (r, int(p), record.boxes[p], 1.0, float(record.areas[p]))
+                    for p in training_persons(record, min_keypoints)
+                ]
         return samples
 
     def set_epoch(self, epoch: int) -> None:
@@ -130,18 +151,30 @@ class TopDownDataset(Dataset):
             center = flip_points(center, image.shape[1])
         scale = scale * scale_mult
         affine = crop_affine(center, scale, rotation, self.input_size)
-        crop = cv2.warpAffine(image, affine, self.input_size, flags=cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0))
+        crop = cv2.warpAffine(
+            image,
+            affine,
+            self.input_size,
+            flags=cv2.INTER_LINEAR,
+            borderMode=cv2.BORDER_CONSTANT,
+            borderValue=(0, 0, 0),
+        )
         if own >= 0:
             target, weight = self.codec.encode_crop(keypoints, own, affine, record.labelled)
         else:
             w, h = self.codec.heatmap_size
             target, weight = np.zeros((NUM_JOINTS, h, w), np.float32), np.zeros(NUM_JOINTS, np.float32)
-        return {"image": normalize_image(crop), "target": torch.from_numpy(target),
-                "weight": torch.from_numpy(weight),
-                "affine_inv": torch.from_numpy(crop_affine(center, scale, rotation, self.input_size, inverse=True)),
-                "image_id": record.image_id, "box": torch.from_numpy(np.asarray(box, dtype=np.float64)),
-                "area": area, "score": score, "flipped": flip}
+        return {
+            "image": normalize_image(crop),
+            "target": torch.from_numpy(target),
+            "weight": torch.from_numpy(weight),
+            "affine_inv": torch.from_numpy(crop_affine(center, scale, rotation, self.input_size, inverse=True)),
+            "image_id": record.image_id,
+            "box": torch.from_numpy(np.asarray(box, dtype=np.float64)),
+            "area": area,
+            "score": score,
+            "flipped": flip,
+        }
 
 
 class EpochSampler(Sampler[int]):
@@ -160,11 +193,14 @@ class EpochSampler(Sampler[int]):
 
     def indices(self) -> np.ndarray:
         """This rank's indices (K,) of the current epoch, from the start position."""
-        order = (np.random.default_rng([self.seed, self.epoch]).permutation(self.size) if self.shuffle
-                 else np.arange(self.size))
+        order = (
+            np.random.default_rng([self.seed, self.epoch]).permutation(self.size)
+            if self.shuffle
+            else np.arange(self.size)
+        )
         total = -(-self.size // self.world_size) * self.world_size
         order = np.resize(order, total) if self.size else order
-        return order[self.rank::self.world_size][self.start:]
+        return order[self.rank :: self.world_size][self.start :]
 
     def __iter__(self) -> Iterator[int]:
         return iter(self.indices().tolist())

@@ -14,6 +14,7 @@ phase 0) are rounded from the normal-gait curves of J. Perry, "Gait Analysis" (1
 Local body frame: x forward, y left, z up; the origin is the ground point below the mid-hip. A person
 at ground position (x, y) with heading theta faces (cos theta, sin theta).
 """
+
 from __future__ import annotations
 
 import math
@@ -31,24 +32,31 @@ STATURE_RANGE_M = (1.52, 1.95)
 PROPORTION_SD = 0.02  # relative SD of every segment fraction, clipped at 2 SD
 
 # Segment lengths as fractions of stature (see the module docstring).
-FRACTIONS: Mapping[str, float] = MappingProxyType({
-    "thigh": 0.530 - 0.285,         # hip -> knee
-    "shin": 0.285 - 0.039,          # knee -> ankle
-    "ankle_height": 0.039,          # ankle above the sole
-    "heel_back": 0.025,             # ankle -> back of the heel, horizontally
-    "big_toe": 0.125,               # ankle -> big toe tip, forward (foot length ~ .15 H)
-    "small_toe": 0.100,             # ankle -> small toe, forward
-    "big_toe_medial": 0.010,        # big toe towards the midline of the foot
-    "small_toe_lateral": 0.030,     # small toe away from the midline of the foot
-    "torso": 0.818 - 0.530,         # hip -> shoulder, vertically
-    "shoulder_width": 0.220,        # between the shoulder joint centres
-    "hip_width": 0.110,             # between the hip joint centres
-    "upper_arm": 0.186,
-    "forearm": 0.146,
-    "ear_up": 0.107, "ear_half_width": 0.0425, "ear_forward": 0.005,   # from the shoulder centre
-    "eye_up": 0.122, "eye_half_width": 0.019, "eye_forward": 0.050,
-    "nose_up": 0.100, "nose_forward": 0.065,
-})
+FRACTIONS: Mapping[str, float] = MappingProxyType(
+    {
+        "thigh": 0.530 - 0.285,  # hip -> knee
+        "shin": 0.285 - 0.039,  # knee -> ankle
+        "ankle_height": 0.039,  # ankle above the sole
+        "heel_back": 0.025,  # ankle -> back of the heel, horizontally
+        "big_toe": 0.125,  # ankle -> big toe tip, forward (foot length ~ .15 H)
+        "small_toe": 0.100,  # ankle -> small toe, forward
+        "big_toe_medial": 0.010,  # big toe towards the midline of the foot
+        "small_toe_lateral": 0.030,  # small toe away from the midline of the foot
+        "torso": 0.818 - 0.530,  # hip -> shoulder, vertically
+        "shoulder_width": 0.220,  # between the shoulder joint centres
+        "hip_width": 0.110,  # between the hip joint centres
+        "upper_arm": 0.186,
+        "forearm": 0.146,
+        "ear_up": 0.107,
+        "ear_half_width": 0.0425,
+        "ear_forward": 0.005,  # from the shoulder centre
+        "eye_up": 0.122,
+        "eye_half_width": 0.019,
+        "eye_forward": 0.050,
+        "nose_up": 0.100,
+        "nose_forward": 0.065,
+    }
+)
 
 # Normal-gait keyframes over one stride of one leg (phase 0 = heel strike, ~0.62 = toe off).
 _HIP_KEYS = ((0.0, 0.12, 0.30, 0.50, 0.62, 0.73, 0.87, 1.0), (30, 26, 5, -15, -2, 15, 32, 30))
@@ -56,12 +64,12 @@ _KNEE_KEYS = ((0.0, 0.12, 0.35, 0.50, 0.62, 0.73, 0.87, 1.0), (5, 18, 5, 20, 40,
 _FOOT_PITCH_KEYS = ((0.0, 0.10, 0.45, 0.62, 0.75, 0.90, 1.0), (14, 0, 0, -34, -11, 11, 14))  # toes up +
 
 _STAND_KNEE_DEG = 3.0
-_STAND_LEG_ABDUCTION = 0.037     # rad; feet ~6 cm wider than the hips
-_WALK_LEG_ADDUCTION = -0.045     # rad; step width ~10 cm
-_TOE_OUT = 0.10                  # rad of foot yaw away from the midline
-_ARM_ABDUCTION = 0.14            # rad; keeps the hands off the hips
-_ARM_SWING_GAIN = 0.6            # arm flexion per degree of opposite-leg hip flexion
-_WALK_LEAN = 0.05                # rad of forward trunk lean while walking
+_STAND_LEG_ABDUCTION = 0.037  # rad; feet ~6 cm wider than the hips
+_WALK_LEG_ADDUCTION = -0.045  # rad; step width ~10 cm
+_TOE_OUT = 0.10  # rad of foot yaw away from the midline
+_ARM_ABDUCTION = 0.14  # rad; keeps the hands off the hips
+_ARM_SWING_GAIN = 0.6  # arm flexion per degree of opposite-leg hip flexion
+_WALK_LEAN = 0.05  # rad of forward trunk lean while walking
 
 
 @dataclass(frozen=True)
@@ -87,8 +95,7 @@ def mean_body(stature: float = STATURE_MEAN_M) -> BodyShape:
 def sample_body(rng: np.random.Generator) -> BodyShape:
     """One random adult body: stature ~ N(1.70, 0.09) clipped, fractions jittered by 2 %."""
     stature = float(np.clip(rng.normal(STATURE_MEAN_M, STATURE_SD_M), *STATURE_RANGE_M))
-    jitter = 1.0 + np.clip(rng.normal(0.0, PROPORTION_SD, len(FRACTIONS)), -2 * PROPORTION_SD,
-                           2 * PROPORTION_SD)
+    jitter = 1.0 + np.clip(rng.normal(0.0, PROPORTION_SD, len(FRACTIONS)), -2 * PROPORTION_SD, 2 * PROPORTION_SD)
     lengths = tuple((k, float(f * stature * j)) for (k, f), j in zip(FRACTIONS.items(), jitter))
     return BodyShape(stature, lengths)
 
@@ -109,9 +116,13 @@ def _leg(b: dict[str, float], side: int, hip: float, knee: float, pitch: float, 
     ankle = knee_pos + rot_x @ shin
     # Foot points with the sole flat, then pitched (toes up > 0) and yawed outwards.
     h = b["ankle_height"]
-    foot = np.array([[b["big_toe"], -side * b["big_toe_medial"], -h],
-                     [b["small_toe"], side * b["small_toe_lateral"], -h],
-                     [-b["heel_back"], 0.0, -h]])
+    foot = np.array(
+        [
+            [b["big_toe"], -side * b["big_toe_medial"], -h],
+            [b["small_toe"], side * b["small_toe_lateral"], -h],
+            [-b["heel_back"], 0.0, -h],
+        ]
+    )
     cp, sp = math.cos(pitch), math.sin(pitch)
     foot = np.column_stack([foot[:, 0] * cp - foot[:, 2] * sp, foot[:, 1], foot[:, 0] * sp + foot[:, 2] * cp])
     cy, sy = math.cos(side * _TOE_OUT), math.sin(side * _TOE_OUT)
@@ -136,16 +147,23 @@ def local_pose(body: BodyShape, phase: float, walking: bool) -> np.ndarray:
         # The left leg is at `phase`, the right leg half a stride later.
         legs = {}
         for side, ph in ((1, phase), (-1, phase + 0.5)):
-            legs[side] = _leg(b, side, _periodic(_HIP_KEYS, ph), _periodic(_KNEE_KEYS, ph),
-                              _periodic(_FOOT_PITCH_KEYS, ph), _WALK_LEG_ADDUCTION)
+            legs[side] = _leg(
+                b,
+                side,
+                _periodic(_HIP_KEYS, ph),
+                _periodic(_KNEE_KEYS, ph),
+                _periodic(_FOOT_PITCH_KEYS, ph),
+                _WALK_LEG_ADDUCTION,
+            )
         hip_rest = math.radians(8.0)
         # Each arm swings with the opposite leg.
-        arm_flex = {side: -_ARM_SWING_GAIN * (_periodic(_HIP_KEYS, ph) - hip_rest)
-                    for side, ph in ((1, phase), (-1, phase + 0.5))}
+        arm_flex = {
+            side: -_ARM_SWING_GAIN * (_periodic(_HIP_KEYS, ph) - hip_rest)
+            for side, ph in ((1, phase), (-1, phase + 0.5))
+        }
         lean = _WALK_LEAN
     else:
-        legs = {side: _leg(b, side, 0.0, math.radians(_STAND_KNEE_DEG), 0.0, _STAND_LEG_ABDUCTION)
-                for side in (1, -1)}
+        legs = {side: _leg(b, side, 0.0, math.radians(_STAND_KNEE_DEG), 0.0, _STAND_LEG_ABDUCTION) for side in (1, -1)}
         arm_flex = {1: 0.0, -1: 0.0}
         lean = 0.0
     for side, (hip_j, knee_j, ankle_j, foot_j) in ((1, (11, 13, 15, LEFT_FOOT)), (-1, (12, 14, 16, RIGHT_FOOT))):
@@ -157,15 +175,17 @@ def local_pose(body: BodyShape, phase: float, walking: bool) -> np.ndarray:
     cl, sl = math.cos(lean), math.sin(lean)
     rot_lean = np.array([[cl, 0.0, sl], [0.0, 1.0, 0.0], [-sl, 0.0, cl]])
     shoulder_mid = rot_lean @ np.array([0.0, 0.0, b["torso"]])
-    head = np.array([
-        [b["nose_forward"], 0.0, b["nose_up"]],
-        [b["eye_forward"], b["eye_half_width"], b["eye_up"]],
-        [b["eye_forward"], -b["eye_half_width"], b["eye_up"]],
-        [b["ear_forward"], b["ear_half_width"], b["ear_up"]],
-        [b["ear_forward"], -b["ear_half_width"], b["ear_up"]],
-        [0.0, b["shoulder_width"] / 2, 0.0],
-        [0.0, -b["shoulder_width"] / 2, 0.0],
-    ])
+    head = np.array(
+        [
+            [b["nose_forward"], 0.0, b["nose_up"]],
+            [b["eye_forward"], b["eye_half_width"], b["eye_up"]],
+            [b["eye_forward"], -b["eye_half_width"], b["eye_up"]],
+            [b["ear_forward"], b["ear_half_width"], b["ear_up"]],
+            [b["ear_forward"], -b["ear_half_width"], b["ear_up"]],
+            [0.0, b["shoulder_width"] / 2, 0.0],
+            [0.0, -b["shoulder_width"] / 2, 0.0],
+        ]
+    )
     joints[[0, 1, 2, 3, 4, 5, 6]] = shoulder_mid + head @ rot_lean.T
     for side, (sh, el, wr) in ((1, (5, 7, 9)), (-1, (6, 8, 10))):
         flex = arm_flex[side]
@@ -177,8 +197,9 @@ def local_pose(body: BodyShape, phase: float, walking: bool) -> np.ndarray:
     return joints
 
 
-def pose_joints(body: BodyShape, x: float, y: float, theta: float, phase: float = 0.0,
-                walking: bool = False) -> np.ndarray:
+def pose_joints(
+    body: BodyShape, x: float, y: float, theta: float, phase: float = 0.0, walking: bool = False
+) -> np.ndarray:
     """COCO-23 world joints of a person at ground point (x, y) facing heading theta (rad): (23, 3).
 
     ``phase`` in [0, 1) is the gait phase of the left leg (0 = left heel strike); it is ignored when
@@ -195,6 +216,6 @@ def pose_joints(body: BodyShape, x: float, y: float, theta: float, phase: float 
 
 def stride_length(body: BodyShape) -> float:
     """Distance (m) one foot travels relative to the pelvis over a stride: two step lengths."""
-    front = local_pose(body, 0.0, True)[15, 0]   # left ankle at left heel strike
-    back = local_pose(body, 0.5, True)[15, 0]    # left ankle half a stride later
+    front = local_pose(body, 0.0, True)[15, 0]  # left ankle at left heel strike
+    back = local_pose(body, 0.5, True)[15, 0]  # left ankle half a stride later
     return float(2.0 * (front - back))

@@ -1,4 +1,5 @@
 """Bodies as capsules, and which joints a camera cannot see because another body is in the way."""
+
 from __future__ import annotations
 
 from types import MappingProxyType
@@ -10,20 +11,28 @@ from data.keypoints import LIMBS
 
 # Capsule radii (m) of the LIMBS segments: rough half-thicknesses of adult body parts (thigh ~15 cm,
 # calf ~10 cm, upper arm ~9 cm, forearm ~7 cm across); face segments are thin, the head sphere covers them.
-_LIMB_RADII: Mapping[frozenset[int], float] = MappingProxyType({
-    frozenset((15, 13)): 0.05, frozenset((16, 14)): 0.05,          # shins
-    frozenset((13, 11)): 0.075, frozenset((14, 12)): 0.075,        # thighs
-    frozenset((11, 12)): 0.09,                                     # pelvis
-    frozenset((5, 11)): 0.08, frozenset((6, 12)): 0.08,            # flanks
-    frozenset((5, 6)): 0.07,                                       # shoulder line
-    frozenset((5, 7)): 0.045, frozenset((6, 8)): 0.045,            # upper arms
-    frozenset((7, 9)): 0.035, frozenset((8, 10)): 0.035,           # forearms
-    frozenset((3, 5)): 0.05, frozenset((4, 6)): 0.05,              # neck sides
-})
-FACE_RADIUS_M = 0.03        # nose-eye-ear segments
-FOOT_RADIUS_M = 0.04        # ankle-heel, ankle-toe, toe-toe segments
-TORSO_RADIUS_M = 0.12       # mid-shoulder -> mid-hip capsule (chest depth ~ 23 cm)
-HEAD_RADIUS_M = 0.10        # sphere at the ear centre (head breadth ~ 15 cm, length ~ 19 cm)
+_LIMB_RADII: Mapping[frozenset[int], float] = MappingProxyType(
+    {
+        frozenset((15, 13)): 0.05,
+        frozenset((16, 14)): 0.05,  # shins
+        frozenset((13, 11)): 0.075,
+        frozenset((14, 12)): 0.075,  # thighs
+        frozenset((11, 12)): 0.09,  # pelvis
+        frozenset((5, 11)): 0.08,
+        frozenset((6, 12)): 0.08,  # flanks
+        frozenset((5, 6)): 0.07,  # shoulder line
+        frozenset((5, 7)): 0.045,
+        frozenset((6, 8)): 0.045,  # upper arms
+        frozenset((7, 9)): 0.035,
+        frozenset((8, 10)): 0.035,  # forearms
+        frozenset((3, 5)): 0.05,
+        frozenset((4, 6)): 0.05,  # neck sides
+    }
+)
+FACE_RADIUS_M = 0.03  # nose-eye-ear segments
+FOOT_RADIUS_M = 0.04  # ankle-heel, ankle-toe, toe-toe segments
+TORSO_RADIUS_M = 0.12  # mid-shoulder -> mid-hip capsule (chest depth ~ 23 cm)
+HEAD_RADIUS_M = 0.10  # sphere at the ear centre (head breadth ~ 15 cm, length ~ 19 cm)
 
 _LIMB_A = np.array([a for a, _ in LIMBS])
 _LIMB_B = np.array([b for _, b in LIMBS])
@@ -99,12 +108,16 @@ def occluded_joints(center: np.ndarray, poses: np.ndarray) -> np.ndarray:
     center = np.asarray(center, dtype=np.float64)
     ends_a, ends_b = body_capsules(poses)
     radii = capsule_radii()
-    sphere_c = (ends_a.mean(axis=1) + ends_b.mean(axis=1)) / 2                        # (P, 3)
-    reach = np.maximum(np.linalg.norm(ends_a - sphere_c[:, None], axis=-1),
-                       np.linalg.norm(ends_b - sphere_c[:, None], axis=-1)) + radii
-    sphere_r = reach.max(axis=1)                                                      # (P,)
+    sphere_c = (ends_a.mean(axis=1) + ends_b.mean(axis=1)) / 2  # (P, 3)
+    reach = (
+        np.maximum(
+            np.linalg.norm(ends_a - sphere_c[:, None], axis=-1), np.linalg.norm(ends_b - sphere_c[:, None], axis=-1)
+        )
+        + radii
+    )
+    sphere_r = reach.max(axis=1)  # (P,)
 
-    targets = poses.reshape(-1, 3)                                                    # (N, 3)
+    targets = poses.reshape(-1, 3)  # (N, 3)
     owner = np.repeat(np.arange(num), joints)
     ray = targets - center
     ray_len2 = np.maximum(np.sum(ray * ray, axis=1), 1e-12)
@@ -116,9 +129,9 @@ def occluded_joints(center: np.ndarray, poses: np.ndarray) -> np.ndarray:
     if len(rows) == 0:
         return hidden
     # Second cull, per capsule, by the sphere around each capsule.
-    cap_c = (ends_a + ends_b) / 2                                                     # (P, K, 3)
-    cap_r = np.linalg.norm(ends_b - ends_a, axis=-1) / 2 + radii                      # (P, K)
-    rel = cap_c[persons] - center                                                     # (M, K, 3)
+    cap_c = (ends_a + ends_b) / 2  # (P, K, 3)
+    cap_r = np.linalg.norm(ends_b - ends_a, axis=-1) / 2 + radii  # (P, K)
+    rel = cap_c[persons] - center  # (M, K, 3)
     ray_m = ray[rows]
     t = np.clip(np.einsum("mki,mi->mk", rel, ray_m) / ray_len2[rows, None], 0.0, 1.0)
     off = rel - t[..., None] * ray_m[:, None]

@@ -1,4 +1,5 @@
 """The options of the synthetic crowd generator (flat keys of ``configs/dataset/synthetic.yaml``)."""
+
 from __future__ import annotations
 
 import math
@@ -86,10 +87,22 @@ class SyntheticConfig:
         self.min_joints_in_view = int(self.min_joints_in_view)
         if self.camera_radius_m is not None:
             self.camera_radius_m = float(self.camera_radius_m)
-        for key in ("density", "min_spacing_m", "walking_fraction", "fps",
-                    "camera_height_m", "look_at_height_m", "focal_px", "noise_px", "noise_ref_depth_m",
-                    "noise_depth_exponent",
-                    "occluded_drop_prob", "occluded_noise_scale", "miss_rate", "fp_rate"):
+        for key in (
+            "density",
+            "min_spacing_m",
+            "walking_fraction",
+            "fps",
+            "camera_height_m",
+            "look_at_height_m",
+            "focal_px",
+            "noise_px",
+            "noise_ref_depth_m",
+            "noise_depth_exponent",
+            "occluded_drop_prob",
+            "occluded_noise_scale",
+            "miss_rate",
+            "fp_rate",
+        ):
             setattr(self, key, float(getattr(self, key)))
         self.occlusion = bool(self.occlusion)
         self.rig = str(self.rig)
@@ -110,8 +123,16 @@ class SyntheticConfig:
             ("density", self.density > 0, "must be > 0 persons per m^2"),
             ("min_spacing_m", self.min_spacing_m >= 0, "must be >= 0"),
             ("fps", self.fps > 0, "must be > 0"),
-            ("walk_speed_mps", 0 <= self.walk_speed_mps[0] <= self.walk_speed_mps[1], "must be [low, high], 0 <= low <= high"),
-            ("num_cameras", self.num_cameras >= 2 or self.rig != "ring", "must be >= 2 (triangulation needs two views)"),
+            (
+                "walk_speed_mps",
+                0 <= self.walk_speed_mps[0] <= self.walk_speed_mps[1],
+                "must be [low, high], 0 <= low <= high",
+            ),
+            (
+                "num_cameras",
+                self.num_cameras >= 2 or self.rig != "ring",
+                "must be >= 2 (triangulation needs two views)",
+            ),
             ("camera_radius_m", self.camera_radius_m is None or self.camera_radius_m > 0, "must be > 0 or null"),
             ("image_size", min(self.image_size) > 0, "must be positive (width, height)"),
             ("focal_px", self.focal_px > 0, "must be > 0"),

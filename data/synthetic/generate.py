@@ -1,15 +1,16 @@
 """Synthetic multi-view crowd sequences with ground truth: the scene, the rig and the detections."""
+
 from __future__ import annotations
 
 import numpy as np
 from tqdm import tqdm
 
+from data.geometry.camera import Rig
 from data.multiview import Frame, Sequence
 from data.synthetic.config import SyntheticConfig
 from data.synthetic.observe import observe_view
 from data.synthetic.rigs import rig_from_file, ring_rig
 from data.synthetic.scene import scene_poses, simulate_scene
-from data.geometry.camera import Rig
 
 RING_CLEARANCE_M = 4.0  # default ring radius: the area's half diagonal plus this
 PROGRESS_MIN_WORK = 200  # persons x cameras per frame from which building the frames shows a bar (on a terminal)
@@ -23,8 +24,7 @@ def build_rig(cfg: SyntheticConfig, area: tuple[float, float, float, float]) -> 
         radius = cfg.camera_radius_m
         if radius is None:
             radius = float(np.hypot(xmax - xmin, ymax - ymin)) / 2 + RING_CLEARANCE_M
-        return ring_rig(cfg.num_cameras, radius, cfg.camera_height_m, look_at,
-                        cfg.image_size, cfg.focal_px)
+        return ring_rig(cfg.num_cameras, radius, cfg.camera_height_m, look_at, cfg.image_size, cfg.focal_px)
     return rig_from_file(cfg.rig, cfg.rig_format)
 
 
@@ -41,8 +41,15 @@ def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
     poses = scene_poses(scene)
     frames = []
     seeds = render_seed.spawn(scene.num_frames)
-    for f, frame_seed in enumerate(tqdm(seeds, desc="synthetic frames", unit="frame", leave=False,
-                                        disable=None if scene.num_persons * len(rig) >= PROGRESS_MIN_WORK else True)):
+    for f, frame_seed in enumerate(
+        tqdm(
+            seeds,
+            desc="synthetic frames",
+            unit="frame",
+            leave=False,
+            disable=None if scene.num_persons * len(rig) >= PROGRESS_MIN_WORK else True,
+        )
+    ):
         rng = np.random.default_rng(frame_seed)
         ids = np.flatnonzero(scene.present[f])
         views = [observe_view(cam, poses[f, ids], ids, cfg, rng) for cam in rig]
@@ -50,10 +57,12 @@ def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
         frames.append(Frame(index=f, views=views, gt_poses=gt, gt_ids=ids.astype(np.int64)))
     meta = {
         "source": "synthetic",
-        "persistent_ids": True,          # gt_ids name the same person in every frame (identity metrics apply)
+        "persistent_ids": True,  # gt_ids name the same person in every frame (identity metrics apply)
         "config": cfg.to_dict(),
         "area": list(scene.area),
-        "persons": [{"id": i, "stature": b.stature, "walking": bool(scene.walking[:, i].any())}
-                    for i, b in enumerate(scene.bodies)],
+        "persons": [
+            {"id": i, "stature": b.stature, "walking": bool(scene.walking[:, i].any())}
+            for i, b in enumerate(scene.bodies)
+        ],
     }
     return Sequence(rig=rig, frames=frames, meta=meta)

@@ -1,16 +1,17 @@
 """What one camera's person detector reports on a synthetic frame: noisy, partly hidden 2D poses."""
+
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
+from data.geometry.camera import Camera
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from data.synthetic.body import pose_joints, sample_body
 from data.synthetic.capsules import occluded_joints
 from data.synthetic.config import SyntheticConfig
-from data.geometry.camera import Camera
 
 # Joint scores: VISIBLE_SCORE (or OCCLUDED_SCORE for a hidden joint) times exp(-err^2 / (2 s^2)) with err
 # the pixel error actually drawn and s = NOISE_SCORE_PX, plus a uniform jitter, clipped to MIN_SCORE..1.
@@ -19,22 +20,23 @@ OCCLUDED_SCORE = 0.45
 NOISE_SCORE_PX = 10.0
 SCORE_JITTER = 0.03
 MIN_SCORE = 0.05
-BBOX_MARGIN = 0.10                 # of the keypoint box size, on every side
+BBOX_MARGIN = 0.10  # of the keypoint box size, on every side
 # False positives: a random person's skeleton drawn side-on at a random place and size.
-FP_HEIGHT_FRACTION = (0.15, 0.6)   # skeleton height as a fraction of the image height
-FP_SCORE_RANGE = (0.15, 0.55)      # joint scores, uniform
-FP_JOINT_DROP = 0.2                # probability that a false-positive joint is missing
-FP_NOISE_FRACTION = 0.02           # joint jitter SD as a fraction of the skeleton height
+FP_HEIGHT_FRACTION = (0.15, 0.6)  # skeleton height as a fraction of the image height
+FP_SCORE_RANGE = (0.15, 0.55)  # joint scores, uniform
+FP_JOINT_DROP = 0.2  # probability that a false-positive joint is missing
+FP_NOISE_FRACTION = 0.02  # joint jitter SD as a fraction of the skeleton height
 
 
-def observe_view(camera: Camera, poses: np.ndarray, person_ids: np.ndarray, cfg: SyntheticConfig,
-                 rng: np.random.Generator) -> ViewDetections:
+def observe_view(
+    camera: Camera, poses: np.ndarray, person_ids: np.ndarray, cfg: SyntheticConfig, rng: np.random.Generator
+) -> ViewDetections:
     """Detections of world poses (P, 23, 3) with ids (P,) in one camera, in a shuffled order."""
     poses = np.asarray(poses, dtype=np.float64)
     num = len(poses)
     w, h = camera.size
-    uv = camera.project(poses)                                            # (P, 23, 2)
-    in_view = camera.in_view(poses)                                       # (P, 23)
+    uv = camera.project(poses)  # (P, 23, 2)
+    in_view = camera.in_view(poses)  # (P, 23)
     hidden = occluded_joints(camera.center, poses) if cfg.occlusion and num else np.zeros((num, NUM_JOINTS), bool)
     hidden &= in_view
 
@@ -65,8 +67,9 @@ def observe_view(camera: Camera, poses: np.ndarray, person_ids: np.ndarray, cfg:
         return ViewDetections.empty(NUM_JOINTS)
     order = rng.permutation(len(keypoints))
     keypoints, ids, hidden = keypoints[order], ids[order], hidden[order]
-    return ViewDetections(keypoints, bbox_from_keypoints(keypoints, (w, h)), keypoints[..., 2].mean(axis=1),
-                          ids, hidden)
+    return ViewDetections(
+        keypoints, bbox_from_keypoints(keypoints, (w, h)), keypoints[..., 2].mean(axis=1), ids, hidden
+    )
 
 
 def bbox_from_keypoints(keypoints: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
@@ -93,7 +96,7 @@ def false_positives(count: int, image_size: tuple[int, int], rng: np.random.Gene
     for n in range(count):
         walking = bool(rng.random() < 0.5)
         joints = pose_joints(sample_body(rng), 0.0, 0.0, rng.uniform(0, 2 * math.pi), rng.uniform(), walking)
-        flat = np.stack([-joints[:, 1], -joints[:, 2]], axis=1)     # seen side-on along +x, image y down
+        flat = np.stack([-joints[:, 1], -joints[:, 2]], axis=1)  # seen side-on along +x, image y down
         flat -= flat.min(axis=0)
         height_px = rng.uniform(*FP_HEIGHT_FRACTION) * h
         flat *= height_px / max(flat[:, 1].max(), 1e-9)

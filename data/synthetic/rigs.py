@@ -1,4 +1,5 @@
 """Camera rigs for synthetic scenes: a ring of cameras around the area, or a calibration file."""
+
 from __future__ import annotations
 
 import math
@@ -10,8 +11,9 @@ import numpy as np
 from data.geometry.camera import Camera, Rig
 
 
-def look_at_camera(name: str, center: Sequence[float], target: Sequence[float], image_size: tuple[int, int],
-                   focal_px: float) -> Camera:
+def look_at_camera(
+    name: str, center: Sequence[float], target: Sequence[float], image_size: tuple[int, int], focal_px: float
+) -> Camera:
     """A distortion-free camera at center (3,) looking at target (3,), image x right and y down."""
     center = np.asarray(center, dtype=np.float64)
     forward = np.asarray(target, dtype=np.float64) - center
@@ -30,8 +32,14 @@ def look_at_camera(name: str, center: Sequence[float], target: Sequence[float], 
     return Camera(name, K, np.zeros(5), R, -R @ center, (w, h))
 
 
-def ring_rig(num_cameras: int, radius: float, height: float, look_at: Sequence[float] = (0.0, 0.0, 1.0),
-             image_size: tuple[int, int] = (1280, 720), focal_px: float = 1000.0) -> Rig:
+def ring_rig(
+    num_cameras: int,
+    radius: float,
+    height: float,
+    look_at: Sequence[float] = (0.0, 0.0, 1.0),
+    image_size: tuple[int, int] = (1280, 720),
+    focal_px: float = 1000.0,
+) -> Rig:
     """Cameras "0".."V-1" evenly spaced on a circle of this radius around look_at (3,), at this height."""
     cx, cy, _ = (float(v) for v in look_at)
     cams = []

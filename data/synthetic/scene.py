@@ -1,4 +1,5 @@
 """Where the persons of a synthetic scene stand and walk, frame by frame."""
+
 from __future__ import annotations
 
 import math
@@ -10,13 +11,13 @@ from data.keypoints import NUM_JOINTS
 from data.synthetic.body import BodyShape, pose_joints, sample_body, stride_length
 from data.synthetic.config import SyntheticConfig
 
-_PACKING_LIMIT = 0.9069     # densest packing of equal discs (hexagonal)
-_PLACEMENT_BATCH = 256      # candidate points drawn at once per person
-_PLACEMENT_BATCHES = 40     # batches per person before a restart
+_PACKING_LIMIT = 0.9069  # densest packing of equal discs (hexagonal)
+_PLACEMENT_BATCH = 256  # candidate points drawn at once per person
+_PLACEMENT_BATCHES = 40  # batches per person before a restart
 _PLACEMENT_RESTARTS = 5
-_TURN_STEP = math.pi / 6    # heading change tried when the way ahead is blocked
-_HEADING_DRIFT = 0.05       # rad SD of the random heading change per frame
-_STAND_SPEED = 0.3          # m/s below which a person of the positions hook is standing
+_TURN_STEP = math.pi / 6  # heading change tried when the way ahead is blocked
+_HEADING_DRIFT = 0.05  # rad SD of the random heading change per frame
+_STAND_SPEED = 0.3  # m/s below which a person of the positions hook is standing
 
 
 @dataclass(frozen=True)
@@ -54,8 +55,9 @@ def scene_area(cfg: SyntheticConfig) -> tuple[float, float, float, float]:
     return (-half, half, -half, half)
 
 
-def place_persons(num: int, area: tuple[float, float, float, float], min_spacing: float,
-                  rng: np.random.Generator) -> np.ndarray:
+def place_persons(
+    num: int, area: tuple[float, float, float, float], min_spacing: float, rng: np.random.Generator
+) -> np.ndarray:
     """Uniform ground points in the area at least min_spacing apart (rejection sampling): (num, 2)."""
     xmin, xmax, ymin, ymax = area
     w, h = xmax - xmin, ymax - ymin
@@ -70,7 +72,7 @@ def place_persons(num: int, area: tuple[float, float, float, float], min_spacing
                 cand = rng.uniform(low, high, size=(_PLACEMENT_BATCH, 2))
                 if len(points):
                     d2 = np.sum((cand[:, None, :] - points[None]) ** 2, axis=-1).min(axis=1)
-                    ok = np.flatnonzero(d2 >= min_spacing ** 2)
+                    ok = np.flatnonzero(d2 >= min_spacing**2)
                 else:
                     ok = np.array([0])
                 if len(ok):
@@ -86,9 +88,11 @@ def place_persons(num: int, area: tuple[float, float, float, float], min_spacing
 def _crowded_message(num: int, area: tuple[float, ...], min_spacing: float) -> str:
     xmin, xmax, ymin, ymax = area
     a = (xmax - xmin) * (ymax - ymin)
-    return (f"cannot place {num} persons at least {min_spacing} m apart in the area "
-            f"[{xmin:.2f}, {xmax:.2f}] x [{ymin:.2f}, {ymax:.2f}] ({a:.1f} m^2, {num / a:.2f} persons "
-            f"per m^2): lower dataset.density or dataset.min_spacing_m, or enlarge dataset.area")
+    return (
+        f"cannot place {num} persons at least {min_spacing} m apart in the area "
+        f"[{xmin:.2f}, {xmax:.2f}] x [{ymin:.2f}, {ymax:.2f}] ({a:.1f} m^2, {num / a:.2f} persons "
+        f"per m^2): lower dataset.density or dataset.min_spacing_m, or enlarge dataset.area"
+    )
 
 
 def simulate_scene(cfg: SyntheticConfig, rng: np.random.Generator) -> SceneTrack:
@@ -102,7 +106,7 @@ def simulate_scene(cfg: SyntheticConfig, rng: np.random.Generator) -> SceneTrack
     heading = rng.uniform(0.0, 2 * math.pi, num)
     phase = rng.uniform(0.0, 1.0, num)
     walker = np.zeros(num, dtype=bool)
-    walker[rng.permutation(num)[:int(round(cfg.walking_fraction * num))]] = True
+    walker[rng.permutation(num)[: int(round(cfg.walking_fraction * num))]] = True
     speed = rng.uniform(*cfg.walk_speed_mps, num)
     strides = np.array([stride_length(b) for b in bodies])
 
@@ -113,8 +117,7 @@ def simulate_scene(cfg: SyntheticConfig, rng: np.random.Generator) -> SceneTrack
         if f > 0:
             for i in np.flatnonzero(walker):
                 step = speed[i] / cfg.fps
-                moved = _step(pos, i, heading[i] + rng.normal(0.0, _HEADING_DRIFT), step, area,
-                              cfg.min_spacing_m, rng)
+                moved = _step(pos, i, heading[i] + rng.normal(0.0, _HEADING_DRIFT), step, area, cfg.min_spacing_m, rng)
                 if moved is not None:
                     pos[i], heading[i] = moved
                     phase[i] = (phase[i] + step / strides[i]) % 1.0
@@ -123,8 +126,15 @@ def simulate_scene(cfg: SyntheticConfig, rng: np.random.Generator) -> SceneTrack
     return SceneTrack(area, bodies, positions, headings, phases, walking, np.ones((frames, num), dtype=bool))
 
 
-def _step(pos: np.ndarray, i: int, heading: float, step: float, area: tuple[float, ...],
-          min_spacing: float, rng: np.random.Generator) -> tuple[np.ndarray, float] | None:
+def _step(
+    pos: np.ndarray,
+    i: int,
+    heading: float,
+    step: float,
+    area: tuple[float, ...],
+    min_spacing: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, float] | None:
     """Next (position (2,), heading) of walker i, turning away from borders and others; None if stuck."""
     xmin, xmax, ymin, ymax = area
     others = np.delete(pos, i, axis=0)
@@ -135,7 +145,7 @@ def _step(pos: np.ndarray, i: int, heading: float, step: float, area: tuple[floa
         nxt = pos[i] + step * np.array([math.cos(h), math.sin(h)])
         if not (xmin <= nxt[0] <= xmax and ymin <= nxt[1] <= ymax):
             continue
-        if len(others) and np.min(np.sum((others - nxt) ** 2, axis=1)) < min_spacing ** 2:
+        if len(others) and np.min(np.sum((others - nxt) ** 2, axis=1)) < min_spacing**2:
             continue
         return nxt, h % (2 * math.pi)
     return None
@@ -147,7 +157,7 @@ def _track_from_positions(cfg: SyntheticConfig, area: tuple[float, ...], rng: np
     num = max((len(p) for p in cfg.positions), default=0)
     positions = np.full((frames, num, 2), np.nan)
     for f, p in enumerate(cfg.positions):
-        positions[f, :len(p)] = p
+        positions[f, : len(p)] = p
     present = np.all(np.isfinite(positions), axis=-1)
     bodies = tuple(sample_body(rng) for _ in range(num))
     strides = np.array([stride_length(b) for b in bodies])
@@ -183,6 +193,7 @@ def scene_poses(scene: SceneTrack) -> np.ndarray:
     for f in range(scene.num_frames):
         for i in np.flatnonzero(scene.present[f]):
             x, y = scene.positions[f, i]
-            out[f, i] = pose_joints(scene.bodies[i], x, y, scene.headings[f, i], scene.phases[f, i],
-                                    bool(scene.walking[f, i]))
+            out[f, i] = pose_joints(
+                scene.bodies[i], x, y, scene.headings[f, i], scene.phases[f, i], bool(scene.walking[f, i])
+            )
     return out

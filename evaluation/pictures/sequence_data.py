@@ -3,6 +3,7 @@
 Shared by the HTML viewer (:mod:`evaluation.pictures.sequence_html`) and the trajectories PNG
 (:mod:`evaluation.pictures.vis_trajectories`), so that a track has the same root and colour in both.
 """
+
 from __future__ import annotations
 
 import colorsys
@@ -16,9 +17,9 @@ from evaluation.pictures.vis_draw import person_colors
 
 HIP_JOINTS = (JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"])
 TRUNK_JOINTS = (*HIP_JOINTS, JOINT_INDEX["left_shoulder"], JOINT_INDEX["right_shoulder"])
-PALETTE_SIZE = 18   # person_colors(n) keeps one fixed palette while n <= 18
+PALETTE_SIZE = 18  # person_colors(n) keeps one fixed palette while n <= 18
 GOLDEN_RATIO = 0.618033988749895  # hue steps of the ids beyond the palette (as person_colors beyond 18)
-HUE_SATURATION, HUE_VALUES = 0.86, (0.75, 1.0)   # odd and even ids alternate in brightness
+HUE_SATURATION, HUE_VALUES = 0.86, (0.75, 1.0)  # odd and even ids alternate in brightness
 
 
 @dataclass(frozen=True)
@@ -73,8 +74,12 @@ def id_colors(ids: Iterable[int]) -> dict[int, np.ndarray]:
     if ids and ids[0] < 0:
         raise ValueError(f"ids must be >= 0, got {ids[0]}")
     palette = person_colors(PALETTE_SIZE)
-    return {i: palette[i].copy() if i < PALETTE_SIZE else
-            np.array(colorsys.hsv_to_rgb((i * GOLDEN_RATIO) % 1.0, HUE_SATURATION, HUE_VALUES[i % 2])) for i in ids}
+    return {
+        i: palette[i].copy()
+        if i < PALETTE_SIZE
+        else np.array(colorsys.hsv_to_rgb((i * GOLDEN_RATIO) % 1.0, HUE_SATURATION, HUE_VALUES[i % 2]))
+        for i in ids
+    }
 
 
 def hex_color(rgb: np.ndarray) -> str:

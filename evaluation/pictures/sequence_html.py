@@ -6,6 +6,7 @@ embedded as JSON in ``<script type="application/json" id="sequence-data">``; it 
 Coordinates are rounded to the millimetre; a sequence whose data would exceed ``max_bytes`` is shown
 every k-th frame, with k the smallest that fits (the page says so).
 """
+
 from __future__ import annotations
 
 import html
@@ -17,22 +18,30 @@ from typing import Iterable
 import numpy as np
 
 from data.formats.atomic_io import atomic_write_text
-from data.keypoints import COCO23_NAMES, LIMBS
-from evaluation.pictures.sequence_data import SequenceFrame, hex_color, id_colors, pose_roots, sequence_frames, valid_joints
 from data.geometry.camera import Camera, Rig
+from data.keypoints import COCO23_NAMES, LIMBS
+from evaluation.pictures.sequence_data import (
+    SequenceFrame,
+    hex_color,
+    id_colors,
+    pose_roots,
+    sequence_frames,
+    valid_joints,
+)
 
 TEMPLATE = Path(__file__).with_name("sequence_view.html")
 DATA_MARK = "__SEQUENCE_DATA__"
 TITLE_MARK = "__TITLE__"
 DEFAULT_MAX_MB = 20.0
-DECIMALS = 3                    # metres rounded to the millimetre
-FRUSTUM_FRACTION = 0.04         # frustum depth as a fraction of the scene's extent
+DECIMALS = 3  # metres rounded to the millimetre
+FRUSTUM_FRACTION = 0.04  # frustum depth as a fraction of the scene's extent
 GRID_STEPS_M = (0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
-GRID_MAX_LINES = 40             # per direction: the finest step of GRID_STEPS_M that keeps below it
-GRID_MARGIN_M = 1.0             # around people and cameras
+GRID_MAX_LINES = 40  # per direction: the finest step of GRID_STEPS_M that keeps below it
+GRID_MARGIN_M = 1.0  # around people and cameras
 PLAY_FPS = 10
-UNTRACKED_NOTE = ("tracking off: ids are each person's index in its frame, so a colour does not follow a "
-                  "person across frames")
+UNTRACKED_NOTE = (
+    "tracking off: ids are each person's index in its frame, so a colour does not follow a person across frames"
+)
 
 
 def _xyz(point: np.ndarray) -> list[float]:
@@ -68,13 +77,14 @@ def camera_glyph(camera: Camera, depth: float) -> dict:
     """A camera as drawn: name, centre and the four image corners' rays at ``depth`` m: corners (4, 3)."""
     w, h = camera.size
     pixels = np.array([[0.0, 0.0, 1.0], [w, 0.0, 1.0], [w, h, 1.0], [0.0, h, 1.0]])
-    rays = pixels @ np.linalg.inv(camera.K).T          # camera frame, z = 1: depth along the optical axis
+    rays = pixels @ np.linalg.inv(camera.K).T  # camera frame, z = 1: depth along the optical axis
     corners = camera.center + depth * rays @ camera.R  # R^T ray per row
     return {"name": camera.name, "center": _xyz(camera.center), "corners": [_xyz(c) for c in corners]}
 
 
-def sequence_document(frames: list[SequenceFrame], tracked: bool, rig: Rig, every: int = 1,
-                      id_note: str | None = None) -> dict:
+def sequence_document(
+    frames: list[SequenceFrame], tracked: bool, rig: Rig, every: int = 1, id_note: str | None = None
+) -> dict:
     """The JSON the page draws: frames (every k-th), limbs, cameras, grid, colours per id, initial view."""
     points = _scene_points(frames, rig)
     lo, hi = points.min(axis=0), points.max(axis=0)
@@ -86,14 +96,24 @@ def sequence_document(frames: list[SequenceFrame], tracked: bool, rig: Rig, ever
     colors = id_colors(i for f in frames for i in f.ids)
     note = id_note if id_note is not None else ("" if tracked else UNTRACKED_NOTE)
     if every > 1:
-        note = (note + "; " if note else "") + (f"one frame in {every} of {len(frames)} shown (the page's "
-                                                 "size cap: vis_sequence_max_mb, --max-mb)")
-    return {"units": "m", "keypoints": list(COCO23_NAMES), "limbs": [list(limb) for limb in LIMBS],
-            "tracked": tracked, "note": note, "every": every, "num_frames": len(frames), "fps": PLAY_FPS,
-            "colors": {str(i): hex_color(c) for i, c in colors.items()},
-            "cameras": [camera_glyph(c, FRUSTUM_FRACTION * extent) for c in rig],
-            "grid": grid_spec(points), "view": {"target": _xyz(target), "radius": round(radius, DECIMALS)},
-            "frames": [_frame_entry(f) for f in shown]}
+        note = (note + "; " if note else "") + (
+            f"one frame in {every} of {len(frames)} shown (the page's size cap: vis_sequence_max_mb, --max-mb)"
+        )
+    return {
+        "units": "m",
+        "keypoints": list(COCO23_NAMES),
+        "limbs": [list(limb) for limb in LIMBS],
+        "tracked": tracked,
+        "note": note,
+        "every": every,
+        "num_frames": len(frames),
+        "fps": PLAY_FPS,
+        "colors": {str(i): hex_color(c) for i, c in colors.items()},
+        "cameras": [camera_glyph(c, FRUSTUM_FRACTION * extent) for c in rig],
+        "grid": grid_spec(points),
+        "view": {"target": _xyz(target), "radius": round(radius, DECIMALS)},
+        "frames": [_frame_entry(f) for f in shown],
+    }
 
 
 def _embed(doc: dict) -> str:
@@ -101,8 +121,13 @@ def _embed(doc: dict) -> str:
     return json.dumps(doc, separators=(",", ":")).replace("<", "\\u003c")
 
 
-def sequence_html(frames: Iterable[tuple], rig: Rig, title: str = "sequence", max_mb: float = DEFAULT_MAX_MB,
-                  id_note: str | None = None) -> str:
+def sequence_html(
+    frames: Iterable[tuple],
+    rig: Rig,
+    title: str = "sequence",
+    max_mb: float = DEFAULT_MAX_MB,
+    id_note: str | None = None,
+) -> str:
     """The page of (frame, poses (P, 23, 4), ids (P,) or None) tuples, every k-th frame when the data
     would exceed max_mb megabytes (at least one frame is kept)."""
     seq, tracked = sequence_frames(frames)
@@ -117,8 +142,14 @@ def sequence_html(frames: Iterable[tuple], rig: Rig, title: str = "sequence", ma
         every = max(every + 1, math.ceil(every * len(data) / max(budget, 1.0)))
 
 
-def write_sequence_html(path: str | Path, frames: Iterable[tuple], rig: Rig, title: str = "sequence",
-                        max_mb: float = DEFAULT_MAX_MB, id_note: str | None = None) -> Path:
+def write_sequence_html(
+    path: str | Path,
+    frames: Iterable[tuple],
+    rig: Rig,
+    title: str = "sequence",
+    max_mb: float = DEFAULT_MAX_MB,
+    id_note: str | None = None,
+) -> Path:
     """Write the viewer of (frame, poses (P, 23, 4), ids (P,) or None) tuples atomically -> path."""
     atomic_write_text(path, sequence_html(frames, rig, title, max_mb, id_note))
     return Path(path)

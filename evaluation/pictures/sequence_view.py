@@ -5,6 +5,7 @@
 ``<run dir>/pictures/`` with ``vis_sequence=true``. Frames are (frame, poses (P, 23, 4), ids (P,) or None)
 tuples, ids None meaning tracking off (the index in the frame stands for the id).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -12,39 +13,57 @@ from pathlib import Path
 from typing import Sequence
 
 from data.formats.poses_io import read_poses3d_frames
-from evaluation.pictures.sequence_html import DEFAULT_MAX_MB, sequence_html, write_sequence_html
-from evaluation.pictures.vis_trajectories import plot_trajectories, trajectories_figure
 from data.geometry.calibration import CalibrationError, load_rig
 from data.geometry.camera import Rig
+from evaluation.pictures.sequence_html import DEFAULT_MAX_MB, sequence_html, write_sequence_html
+from evaluation.pictures.vis_trajectories import plot_trajectories, trajectories_figure
 from reconstruction.pipeline import FrameResult
 
-__all__ = ["write_sequence_html", "sequence_html", "plot_trajectories", "trajectories_figure",
-           "save_sequence_pictures", "main"]
+__all__ = [
+    "write_sequence_html",
+    "sequence_html",
+    "plot_trajectories",
+    "trajectories_figure",
+    "save_sequence_pictures",
+    "main",
+]
 
 HTML_NAME = "sequence.html"
 PNG_NAME = "trajectories.png"
-FILE_ID_NOTE = ("ids as written in {name}: track ids when the run tracked, else each person's index in its "
-                "frame")
+FILE_ID_NOTE = "ids as written in {name}: track ids when the run tracked, else each person's index in its frame"
 
 
-def save_sequence_pictures(out_dir: str | Path, results: Sequence[FrameResult], rig: Rig, title: str = "sequence",
-                           max_mb: float = DEFAULT_MAX_MB) -> list[Path]:
+def save_sequence_pictures(
+    out_dir: str | Path,
+    results: Sequence[FrameResult],
+    rig: Rig,
+    title: str = "sequence",
+    max_mb: float = DEFAULT_MAX_MB,
+) -> list[Path]:
     """sequence.html and trajectories.png of an eval.py run's results into out_dir -> their paths."""
     frames = [(r.frame, r.poses3d, r.ids) for r in results]
     out_dir = Path(out_dir)
-    return [write_sequence_html(out_dir / HTML_NAME, frames, rig, title, max_mb),
-            plot_trajectories(out_dir / PNG_NAME, frames, rig)]
+    return [
+        write_sequence_html(out_dir / HTML_NAME, frames, rig, title, max_mb),
+        plot_trajectories(out_dir / PNG_NAME, frames, rig),
+    ]
 
 
 def main(argv: list[str] | None = None) -> list[Path]:
     """Command line: the viewer (and with --png the trajectories) of a poses3d.json -> the written paths."""
-    parser = argparse.ArgumentParser(prog="python -m evaluation.pictures.sequence_view", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m evaluation.pictures.sequence_view", description=__doc__.split("\n")[0]
+    )
     parser.add_argument("poses3d", type=Path, help="poses3d.json of an eval.py run")
     parser.add_argument("cameras", type=Path, help="the calibration (cameras.json or any format load_rig reads)")
     parser.add_argument("-o", "--output", type=Path, help=f"HTML file (default: {HTML_NAME} beside poses3d)")
     parser.add_argument("--png", type=Path, help="also write the ground trajectories to this PNG")
-    parser.add_argument("--max-mb", type=float, default=DEFAULT_MAX_MB,
-                        help="above this page size, show every k-th frame (default %(default)s)")
+    parser.add_argument(
+        "--max-mb",
+        type=float,
+        default=DEFAULT_MAX_MB,
+        help="above this page size, show every k-th frame (default %(default)s)",
+    )
     parser.add_argument("--title", help="page title (default: the poses3d path)")
     args = parser.parse_args(argv)
     if not args.max_mb > 0:

@@ -4,6 +4,7 @@ Images are RGB ``uint8`` arrays (H, W, 3). A projected pixel (u, v) of a camera 
 (u * sx, v * sy) of an image that was resized from the camera size by (sx, sy) (e.g. Shelf's pictures,
 stretched from 1032x776 to 1920x1080).
 """
+
 from __future__ import annotations
 
 import math
@@ -13,13 +14,13 @@ import cv2
 import numpy as np
 from matplotlib import colormaps
 
-from data.keypoints import LIMBS
 from data.geometry.camera import Camera, Rig
+from data.keypoints import LIMBS
 
-GT_COLOR = (0, 0, 0)              # ground truth over images: thin black lines
-CANVAS_GREY = 200                 # background where a view has no image
+GT_COLOR = (0, 0, 0)  # ground truth over images: thin black lines
+CANVAS_GREY = 200  # background where a view has no image
 UNMATCHED_COLOR = (0.55, 0.55, 0.55)
-_SHIFT = 4                        # cv2 sub-pixel bits: coordinates are drawn at 1/16 px
+_SHIFT = 4  # cv2 sub-pixel bits: coordinates are drawn at 1/16 px
 
 
 def person_colors(n: int) -> np.ndarray:
@@ -43,8 +44,9 @@ def _rgb255(color: np.ndarray | tuple) -> tuple[int, int, int]:
     return tuple(int(round(255 * c)) for c in color)
 
 
-def project_skeleton(camera: Camera, pose: np.ndarray, scale: tuple[float, float] = (1.0, 1.0)
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def project_skeleton(
+    camera: Camera, pose: np.ndarray, scale: tuple[float, float] = (1.0, 1.0)
+) -> tuple[np.ndarray, np.ndarray]:
     """One 3D pose into a (resized) image: pose (J, 4) x, y, z, score -> pixels (J, 2), drawable (J,).
 
     A joint is drawable when its score is > 0, it is finite and in front of the camera within the
@@ -63,8 +65,15 @@ def _fixed(uv: np.ndarray) -> tuple[int, int]:
     return int(round(uv[0] * (1 << _SHIFT))), int(round(uv[1] * (1 << _SHIFT)))
 
 
-def draw_skeleton(image: np.ndarray, uv: np.ndarray, ok: np.ndarray, color: tuple[int, int, int],
-                  thickness: int, radius: int, limbs=LIMBS) -> None:
+def draw_skeleton(
+    image: np.ndarray,
+    uv: np.ndarray,
+    ok: np.ndarray,
+    color: tuple[int, int, int],
+    thickness: int,
+    radius: int,
+    limbs=LIMBS,
+) -> None:
     """Draw limbs and joint dots of one 2D skeleton in place: image (H, W, 3), uv (J, 2), ok (J,)."""
     for a, b in limbs:
         if ok[a] and ok[b]:
@@ -85,9 +94,13 @@ def _canvas(image: np.ndarray | None, camera: Camera) -> np.ndarray:
     return np.ascontiguousarray(image[..., :3], dtype=np.uint8).copy()
 
 
-def draw_reprojections(images: list[np.ndarray | None], rig: Rig, poses3d: np.ndarray,
-                       image_scale: list[tuple[float, float]] | None = None,
-                       gt_poses: np.ndarray | None = None) -> list[np.ndarray]:
+def draw_reprojections(
+    images: list[np.ndarray | None],
+    rig: Rig,
+    poses3d: np.ndarray,
+    image_scale: list[tuple[float, float]] | None = None,
+    gt_poses: np.ndarray | None = None,
+) -> list[np.ndarray]:
     """3D poses (P, J, 4) reprojected (with distortion) over every view: V images -> V RGB (H, W, 3).
 
     Person p has colour ``person_colors(P)[p]`` in every view; ground truth (G, J, 4), when given, is
@@ -104,7 +117,7 @@ def draw_reprojections(images: list[np.ndarray | None], rig: Rig, poses3d: np.nd
         canvas = _canvas(image, camera)
         size = min(canvas.shape[:2])
         thick, radius = max(1, round(size / 300)), max(2, round(size / 200))
-        for pose in (() if gt_poses is None else np.asarray(gt_poses, dtype=np.float64)):
+        for pose in () if gt_poses is None else np.asarray(gt_poses, dtype=np.float64):
             draw_skeleton(canvas, *project_skeleton(camera, pose, scale), GT_COLOR, max(1, thick // 2), 0)
         for pose, color in zip(poses3d, colors):
             draw_skeleton(canvas, *project_skeleton(camera, pose, scale), color, thick, radius)
@@ -124,17 +137,34 @@ def image_grid(images: list[np.ndarray], labels: list[str] | None = None, tile_w
         h = round(tile_width * im.shape[0] / im.shape[1])
         tile = cv2.resize(np.asarray(im, dtype=np.uint8), (tile_width, h), interpolation=cv2.INTER_AREA)
         r, c = divmod(i, cols)
-        grid[r * tile_h:r * tile_h + h, c * tile_width:(c + 1) * tile_width] = tile
+        grid[r * tile_h : r * tile_h + h, c * tile_width : (c + 1) * tile_width] = tile
         if labels is not None:
-            cv2.putText(grid, labels[i], (c * tile_width + 10, r * tile_h + 34), cv2.FONT_HERSHEY_SIMPLEX,
-                        1.0, (255, 255, 255), 4, cv2.LINE_AA)
-            cv2.putText(grid, labels[i], (c * tile_width + 10, r * tile_h + 34), cv2.FONT_HERSHEY_SIMPLEX,
-                        1.0, (0, 0, 0), 2, cv2.LINE_AA)
+            cv2.putText(
+                grid,
+                labels[i],
+                (c * tile_width + 10, r * tile_h + 34),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                1.0,
+                (255, 255, 255),
+                4,
+                cv2.LINE_AA,
+            )
+            cv2.putText(
+                grid,
+                labels[i],
+                (c * tile_width + 10, r * tile_h + 34),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                1.0,
+                (0, 0, 0),
+                2,
+                cv2.LINE_AA,
+            )
     return grid
 
 
-def load_view_images(folder: str | Path, rig: Rig, pattern: str = "cam{i}.png"
-                     ) -> tuple[list[np.ndarray | None], list[tuple[float, float]]]:
+def load_view_images(
+    folder: str | Path, rig: Rig, pattern: str = "cam{i}.png"
+) -> tuple[list[np.ndarray | None], list[tuple[float, float]]]:
     """One RGB image per camera, ``pattern`` formatted with i (view index) and name -> (images, scales).
 
     scales[v] = (image w / camera w, image h / camera h); a missing file gives None and (1, 1).

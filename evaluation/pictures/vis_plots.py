@@ -3,16 +3,17 @@
 Figures are built with :class:`matplotlib.figure.Figure` (no pyplot, no display, Agg canvas).
 Estimates are solid in ``person_colors``; ground truth is dashed black; cameras are markers.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
+from data.geometry.camera import Rig
 from data.keypoints import LIMBS
 from data.multiview import ViewDetections
 from evaluation.pictures.vis_draw import UNMATCHED_COLOR, person_colors
-from data.geometry.camera import Rig
 from reconstruction.matching.feet import FeetFeatures
 
 CAMERA_MARKERS = ("o", "s", "D", "v", "P", "<", ">", "h", "p", "d", "8", "H")  # "^" = camera centre
@@ -75,8 +76,9 @@ def _scene_points(poses3d, gt_poses, rig) -> np.ndarray:
     return np.concatenate(pts)
 
 
-def plot_scene_3d(poses3d: np.ndarray, gt_poses: np.ndarray | None = None, rig: Rig | None = None,
-                  title: str = "") -> Figure:
+def plot_scene_3d(
+    poses3d: np.ndarray, gt_poses: np.ndarray | None = None, rig: Rig | None = None, title: str = ""
+) -> Figure:
     """Estimates (P, J, 4) solid per person beside ground truth (G, J, 4) dashed, cameras as markers."""
     fig = Figure(figsize=(9, 8), dpi=100)
     ax = fig.add_subplot(projection="3d")
@@ -91,8 +93,9 @@ def plot_scene_3d(poses3d: np.ndarray, gt_poses: np.ndarray | None = None, rig: 
     return fig
 
 
-def plot_top_view(poses3d: np.ndarray, gt_poses: np.ndarray | None = None, rig: Rig | None = None,
-                  title: str = "") -> Figure:
+def plot_top_view(
+    poses3d: np.ndarray, gt_poses: np.ndarray | None = None, rig: Rig | None = None, title: str = ""
+) -> Figure:
     """The x-y ground plane seen from above: estimates (P, J, 4), ground truth (G, J, 4), cameras."""
     fig = Figure(figsize=(9, 8), dpi=100)
     ax = fig.add_subplot()
@@ -116,8 +119,9 @@ def feet_owner(assignment: np.ndarray, view: int, num_detections: int) -> np.nda
     return owner
 
 
-def plot_feet_on_ground(views: list[ViewDetections], rig: Rig, assignment: np.ndarray, features: list[FeetFeatures],
-                        title: str = "") -> Figure:
+def plot_feet_on_ground(
+    views: list[ViewDetections], rig: Rig, assignment: np.ndarray, features: list[FeetFeatures], title: str = ""
+) -> Figure:
     """Each detection's feet location p on z = 0, coloured by its person in the (P, V) assignment.
 
     Unmatched detections are grey crosses; the marker shape is the camera; a thin line joins the
@@ -138,13 +142,30 @@ def plot_feet_on_ground(views: list[ViewDetections], rig: Rig, assignment: np.nd
             color = colors[owner[n]] if owner[n] >= 0 else UNMATCHED_COLOR
             if feats.has_stride[n]:
                 ax.plot(*np.stack([feats.left[n], feats.right[n]]).T, color=color, linewidth=0.6, alpha=0.6)
-            ax.plot(*feats.p[n], marker="x" if owner[n] < 0 else marker, color=color, markersize=7,
-                    markerfacecolor="none" if owner[n] >= 0 else color, linestyle="none")
+            ax.plot(
+                *feats.p[n],
+                marker="x" if owner[n] < 0 else marker,
+                color=color,
+                markersize=7,
+                markerfacecolor="none" if owner[n] >= 0 else color,
+                linestyle="none",
+            )
     _camera_centres(ax, rig, 2)
-    handles = [Line2D([], [], marker=CAMERA_MARKERS[v % len(CAMERA_MARKERS)], color="black", linestyle="none",
-                      markerfacecolor="none", label=f"camera {name}") for v, name in enumerate(rig.names)]
-    handles += [Line2D([], [], marker="s", color=c, linestyle="none", label=f"person {p}")
-                for p, c in enumerate(colors)]
+    handles = [
+        Line2D(
+            [],
+            [],
+            marker=CAMERA_MARKERS[v % len(CAMERA_MARKERS)],
+            color="black",
+            linestyle="none",
+            markerfacecolor="none",
+            label=f"camera {name}",
+        )
+        for v, name in enumerate(rig.names)
+    ]
+    handles += [
+        Line2D([], [], marker="s", color=c, linestyle="none", label=f"person {p}") for p, c in enumerate(colors)
+    ]
     handles.append(Line2D([], [], marker="x", color=UNMATCHED_COLOR, linestyle="none", label="unmatched"))
     ax.legend(handles=handles, fontsize=7, loc="best", ncol=2)
     ax.set_aspect("equal", adjustable="datalim")

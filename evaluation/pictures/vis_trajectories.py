@@ -1,5 +1,6 @@
 """The tracks' ground trajectories seen from above (matplotlib): per id the x-y path of its root, start
 and end marked, the cameras with their viewing direction; colours as in the HTML viewer."""
+
 from __future__ import annotations
 
 import io
@@ -12,15 +13,15 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from data.formats.atomic_io import atomic_write_bytes
-from evaluation.pictures.sequence_data import SequenceFrame, id_colors, pose_roots, sequence_frames
 from data.geometry.camera import Rig
+from evaluation.pictures.sequence_data import SequenceFrame, id_colors, pose_roots, sequence_frames
 
 FIGSIZE_IN = (10.0, 8.0)
-DPI = 100                       # the PNG is FIGSIZE_IN * DPI pixels: (1000, 800)
+DPI = 100  # the PNG is FIGSIZE_IN * DPI pixels: (1000, 800)
 START_MARKER, END_MARKER = "o", "s"
 START_SIZE, END_SIZE = 10.0, 5.0  # points
-ARROW_FRACTION = 0.06           # a camera's viewing-direction arrow, as a fraction of the plot's extent
-LEGEND_ROWS = 30                # legend entries per column
+ARROW_FRACTION = 0.06  # a camera's viewing-direction arrow, as a fraction of the plot's extent
+LEGEND_ROWS = 30  # legend entries per column
 
 
 def ground_tracks(frames: list[SequenceFrame]) -> dict[int, np.ndarray]:
@@ -46,18 +47,29 @@ def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> F
         if not len(seen):
             continue
         if tracked:
-            ax.plot(*xy.T, color=colors[i], linewidth=1.5)     # NaN rows break the line
-        else:       # an id is an index in each frame: joining them would join different persons
+            ax.plot(*xy.T, color=colors[i], linewidth=1.5)  # NaN rows break the line
+        else:  # an id is an index in each frame: joining them would join different persons
             ax.plot(*xy.T, color=colors[i], marker=".", markersize=3, linestyle="none")
         ax.plot(*xy[seen[-1]], marker=END_MARKER, color=colors[i], markersize=END_SIZE, linestyle="none")
-        ax.plot(*xy[seen[0]], marker=START_MARKER, color=colors[i], markersize=START_SIZE, markerfacecolor="none",
-                linestyle="none")                       # a ring over the end: a standing person shows both
+        ax.plot(
+            *xy[seen[0]],
+            marker=START_MARKER,
+            color=colors[i],
+            markersize=START_SIZE,
+            markerfacecolor="none",
+            linestyle="none",
+        )  # a ring over the end: a standing person shows both
         ax.annotate(str(i), xy[seen[-1]], xytext=(4, 4), textcoords="offset points", fontsize=7, color=colors[i])
-    points = np.concatenate([np.zeros((1, 2)), *(xy[np.isfinite(xy).all(axis=1)] for xy in tracks.values()),
-                             *(c.center[None, :2] for c in rig)])
+    points = np.concatenate(
+        [
+            np.zeros((1, 2)),
+            *(xy[np.isfinite(xy).all(axis=1)] for xy in tracks.values()),
+            *(c.center[None, :2] for c in rig),
+        ]
+    )
     arrow = ARROW_FRACTION * max(float(np.ptp(points, axis=0).max()), 1.0)
     for cam in rig:
-        c, axis = cam.center, cam.R[2]                  # the optical axis in the world
+        c, axis = cam.center, cam.R[2]  # the optical axis in the world
         ax.plot(*c[:2], marker="^", color="black", markersize=7, linestyle="none")
         heading = axis[:2] / max(float(np.linalg.norm(axis[:2])), 1e-9)
         ax.annotate("", c[:2] + arrow * heading, c[:2], arrowprops=dict(arrowstyle="->", color="black"))
@@ -67,13 +79,29 @@ def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> F
     ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
     kind = "tracks" if tracked else "per-frame ids (tracking off)"
     ax.set_title(title or f"ground trajectories of the root (mid-hip), {len(tracks)} {kind}, {len(seq)} frames")
-    handles = [Line2D([], [], marker=START_MARKER, color="black", markersize=START_SIZE, markerfacecolor="none",
-                      linestyle="none", label="start"),
-               Line2D([], [], marker=END_MARKER, color="black", markersize=END_SIZE, linestyle="none", label="end"),
-               Line2D([], [], marker="^", color="black", linestyle="none", label="camera")]
+    handles = [
+        Line2D(
+            [],
+            [],
+            marker=START_MARKER,
+            color="black",
+            markersize=START_SIZE,
+            markerfacecolor="none",
+            linestyle="none",
+            label="start",
+        ),
+        Line2D([], [], marker=END_MARKER, color="black", markersize=END_SIZE, linestyle="none", label="end"),
+        Line2D([], [], marker="^", color="black", linestyle="none", label="camera"),
+    ]
     handles += [Line2D([], [], color=colors[i], linewidth=2, label=f"id {i}") for i in tracks]
-    fig.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.82, 0.92), fontsize=7,
-               ncol=math.ceil(len(handles) / LEGEND_ROWS), frameon=False)
+    fig.legend(
+        handles=handles,
+        loc="upper left",
+        bbox_to_anchor=(0.82, 0.92),
+        fontsize=7,
+        ncol=math.ceil(len(handles) / LEGEND_ROWS),
+        frameon=False,
+    )
     return fig
 
 

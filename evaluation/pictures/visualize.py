@@ -4,6 +4,7 @@
 ``frame_<n>_feet.png``; ``save_run_pictures`` picks the frame from an eval.py run. The drawing helpers
 live in :mod:`evaluation.pictures.vis_draw` (images) and :mod:`evaluation.pictures.vis_plots` (matplotlib figures).
 """
+
 from __future__ import annotations
 
 import io
@@ -20,8 +21,19 @@ from evaluation.pictures.vis_plots import plot_feet_on_ground, plot_scene_3d, pl
 from reconstruction.matching.feet import FeetMatcher
 from reconstruction.pipeline import FrameResult
 
-__all__ = ["draw_reprojections", "plot_scene_3d", "plot_top_view", "plot_feet_on_ground", "load_view_images",
-           "person_colors", "save_frame_pictures", "save_run_pictures", "write_png", "figure_png", "image_png"]
+__all__ = [
+    "draw_reprojections",
+    "plot_scene_3d",
+    "plot_top_view",
+    "plot_feet_on_ground",
+    "load_view_images",
+    "person_colors",
+    "save_frame_pictures",
+    "save_run_pictures",
+    "write_png",
+    "figure_png",
+    "image_png",
+]
 
 
 def write_png(path: str | Path, data: bytes) -> Path:
@@ -45,9 +57,15 @@ def image_png(image: np.ndarray) -> bytes:
     return data.tobytes()
 
 
-def save_frame_pictures(out_dir: str | Path, sequence: Sequence, result: FrameResult, frame: Frame,
-                        images: list[np.ndarray | None] | None = None,
-                        image_scale: list[tuple[float, float]] | None = None, matcher=None) -> list[Path]:
+def save_frame_pictures(
+    out_dir: str | Path,
+    sequence: Sequence,
+    result: FrameResult,
+    frame: Frame,
+    images: list[np.ndarray | None] | None = None,
+    image_scale: list[tuple[float, float]] | None = None,
+    matcher=None,
+) -> list[Path]:
     """The four pictures of one frame into out_dir -> their paths (views, 3d, top, feet).
 
     result.poses3d (P, 23, 4), result.assignment (P, V); frame.gt_poses (G, 23, 4) is drawn where known.
@@ -69,9 +87,15 @@ def save_frame_pictures(out_dir: str | Path, sequence: Sequence, result: FrameRe
     return paths
 
 
-def save_run_pictures(out_dir: str | Path, sequence: Sequence, results: list[FrameResult],
-                      frame: int | None = None, images_dir: str | Path | None = None,
-                      pattern: str = "cam{i}.png", matcher=None) -> list[Path]:
+def save_run_pictures(
+    out_dir: str | Path,
+    sequence: Sequence,
+    results: list[FrameResult],
+    frame: int | None = None,
+    images_dir: str | Path | None = None,
+    pattern: str = "cam{i}.png",
+    matcher=None,
+) -> list[Path]:
     """Pictures of one frame of an eval.py run (``frame`` = its index, None = the first result).
 
     With ``images_dir``, the camera images are read by :func:`load_view_images` with ``pattern``.
@@ -80,8 +104,7 @@ def save_run_pictures(out_dir: str | Path, sequence: Sequence, results: list[Fra
         raise ValueError("no reconstructed frame to draw")
     result = results[0] if frame is None else next((r for r in results if r.frame == frame), None)
     if result is None:
-        raise ValueError(f"frame {frame} is not among the reconstructed frames "
-                         f"{results[0].frame}..{results[-1].frame}")
+        raise ValueError(f"frame {frame} is not among the reconstructed frames {results[0].frame}..{results[-1].frame}")
     data = next(f for f in sequence.frames if f.index == result.frame)
     images, scales = (None, None) if images_dir is None else load_view_images(images_dir, sequence.rig, pattern)
     return save_frame_pictures(out_dir, sequence, result, data, images, scales, matcher)

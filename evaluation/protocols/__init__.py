@@ -11,6 +11,7 @@ too (it is idempotent), so a sequence built in code is scored the same way.
 
 May import every lower layer (``data``, the stages) and the rest of ``evaluation``.
 """
+
 from __future__ import annotations
 
 from typing import Callable

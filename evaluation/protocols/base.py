@@ -5,6 +5,7 @@ with its own published protocol (Shelf PCP, Panoptic AP, Wildtrack COCO AP of re
 object with this interface to ``Sequence.protocols``. eval.py feeds it every frame, prints its report
 and writes its summary into metrics.json under its name.
 """
+
 from __future__ import annotations
 
 from typing import Protocol

@@ -36,6 +36,7 @@ upper legs = hip -> knee, lower legs = knee -> ankle. Parts with an invalid GT e
 missing predicted end or an unpaired GT person makes the part wrong. The average is the mean of the 6
 part groups (the paper's 91.3 is exactly that).
 """
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -52,8 +53,21 @@ if TYPE_CHECKING:
     from reconstruction.pipeline import FrameResult
 
 PANOPTIC15_NAMES: tuple[str, ...] = (
-    "neck", "nose", "mid_hip", "left_shoulder", "left_elbow", "left_wrist", "left_hip", "left_knee",
-    "left_ankle", "right_shoulder", "right_elbow", "right_wrist", "right_hip", "right_knee", "right_ankle",
+    "neck",
+    "nose",
+    "mid_hip",
+    "left_shoulder",
+    "left_elbow",
+    "left_wrist",
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+    "right_shoulder",
+    "right_elbow",
+    "right_wrist",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
 )
 NECK, NOSE, MID_HIP = 0, 1, 2
 ROOT = (6, 12)  # root-aligned MPJPE: mean of left and right hip, the same construction on both sides
@@ -61,13 +75,22 @@ AP_THRESHOLDS_MM: tuple[int, ...] = (25, 50, 75, 100, 125, 150)
 RECALL_THRESHOLD_MM = 500
 # Table 4 joint groups (Panoptic-15 indices); "foot" is the ankle.
 MPJPE_GROUPS: dict[str, tuple[int, ...]] = {
-    "head": (1,), "shoulder": (3, 9), "elbow": (4, 10), "wrist": (5, 11), "hip": (6, 12),
-    "knee": (7, 13), "foot": (8, 14),
+    "head": (1,),
+    "shoulder": (3, 9),
+    "elbow": (4, 10),
+    "wrist": (5, 11),
+    "hip": (6, 12),
+    "knee": (7, 13),
+    "foot": (8, 14),
 }
 # Table 5 parts (Panoptic-15 joint pairs).
 PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {
-    "head": ((0, 1),), "torso": ((0, 2),), "upper_arms": ((3, 4), (9, 10)), "lower_arms": ((4, 5), (10, 11)),
-    "upper_legs": ((6, 7), (12, 13)), "lower_legs": ((7, 8), (13, 14)),
+    "head": ((0, 1),),
+    "torso": ((0, 2),),
+    "upper_arms": ((3, 4), (9, 10)),
+    "lower_arms": ((4, 5), (10, 11)),
+    "upper_legs": ((6, 7), (12, 13)),
+    "lower_legs": ((7, 8), (13, 14)),
 }
 
 
@@ -102,8 +125,9 @@ def pairwise_mpjpe(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     return np.where(count > 0, np.where(both, dist, 0.0).sum(-1) / np.maximum(count, 1), np.inf)
 
 
-def average_precision(scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, num_gt: int,
-                      threshold: float) -> tuple[float, float]:
+def average_precision(
+    scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, num_gt: int, threshold: float
+) -> tuple[float, float]:
     """VoxelPose AP and recall (fractions) at one threshold: scores, errors, gt_index (N,) -> (ap, recall).
 
     errors are each prediction's MPJPE to its nearest GT, whose sequence-wide index is gt_index.
@@ -226,8 +250,9 @@ _NUM_PARTS = len(_PART_PAIRS)
 def part_correct(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.ndarray:
     """PCP of the 10 parts of paired poses: (K, 15, 4), (K, 15, 4) -> (K, 10) of 1 / 0 / NaN (not evaluable)."""
     a, b = _PART_PAIRS[:, 0], _PART_PAIRS[:, 1]
-    err = (np.linalg.norm(pred[:, a, :3] - gt[:, a, :3], axis=-1)
-           + np.linalg.norm(pred[:, b, :3] - gt[:, b, :3], axis=-1)) / 2
+    err = (
+        np.linalg.norm(pred[:, a, :3] - gt[:, a, :3], axis=-1) + np.linalg.norm(pred[:, b, :3] - gt[:, b, :3], axis=-1)
+    ) / 2
     length = np.linalg.norm(gt[:, a, :3] - gt[:, b, :3], axis=-1)
     correct = (err <= alpha * length) & (pred[:, a, 3] > 0) & (pred[:, b, 3] > 0)
     return np.where((gt[:, a, 3] > 0) & (gt[:, b, 3] > 0), correct.astype(np.float64), np.nan)
@@ -263,25 +288,51 @@ def format_panoptic_report(summary: dict[str, float]) -> str:
     """Console tables of a summary (either evaluator's keys, or both), each metric under its protocol name."""
     lines = []
     if "mAP" in summary:
-        lines += ["VoxelPose Panoptic protocol (15 joints; AP/recall over the sequence, prediction -> nearest "
-                  "GT by MPJPE, score-ordered, TP if MPJPE < t and GT not yet taken)", "",
-                  format_table(["", *(f"@{t}mm" for t in AP_THRESHOLDS_MM), "mean"], [
-                      ["AP (%)", *(summary[f"ap@{t}"] for t in AP_THRESHOLDS_MM), summary["mAP"]],
-                      ["recall (%)", *(summary[f"recall@{t}"] for t in AP_THRESHOLDS_MM), summary["mAR"]]]), "",
-                  format_table(["metric", "value"], [
-                      [f"recall@{RECALL_THRESHOLD_MM}mm (%)", summary[f"recall@{RECALL_THRESHOLD_MM}"]],
-                      [f"MPJPE of TPs at {RECALL_THRESHOLD_MM}mm, absolute (mm)", summary["mpjpe_mm"]],
-                      ["GT persons / predictions", f"{summary['num_gt']} / {summary['num_pred']}"]]), ""]
+        lines += [
+            "VoxelPose Panoptic protocol (15 joints; AP/recall over the sequence, prediction -> nearest "
+            "GT by MPJPE, score-ordered, TP if MPJPE < t and GT not yet taken)",
+            "",
+            format_table(
+                ["", *(f"@{t}mm" for t in AP_THRESHOLDS_MM), "mean"],
+                [
+                    ["AP (%)", *(summary[f"ap@{t}"] for t in AP_THRESHOLDS_MM), summary["mAP"]],
+                    ["recall (%)", *(summary[f"recall@{t}"] for t in AP_THRESHOLDS_MM), summary["mAR"]],
+                ],
+            ),
+            "",
+            format_table(
+                ["metric", "value"],
+                [
+                    [f"recall@{RECALL_THRESHOLD_MM}mm (%)", summary[f"recall@{RECALL_THRESHOLD_MM}"]],
+                    [f"MPJPE of TPs at {RECALL_THRESHOLD_MM}mm, absolute (mm)", summary["mpjpe_mm"]],
+                    ["GT persons / predictions", f"{summary['num_gt']} / {summary['num_pred']}"],
+                ],
+            ),
+            "",
+        ]
     if "root_mpjpe_13_mm" in summary:
         groups = list(MPJPE_GROUPS)
-        lines += ["Paper Table 4 protocol: root-aligned MPJPE (mm, root = mean of the hips, Hungarian-paired persons; "
-                  "head = nose, foot = ankle)", "",
-                  format_table(["average of groups", "13 joints", *groups],
-                               [[summary["root_mpjpe_average_mm"], summary["root_mpjpe_13_mm"],
-                                 *(summary[f"root_mpjpe_{g}_mm"] for g in groups)]]), "",
-                  "Paper Table 5 protocol: PCP (%), alpha 0.5, absolute; head = neck->nose, torso = neck->mid-hip", "",
-                  format_table(["average", *PCP_PARTS], [[summary["pcp_average"],
-                                                         *(summary[f"pcp_{p}"] for p in PCP_PARTS)]])]
+        lines += [
+            "Paper Table 4 protocol: root-aligned MPJPE (mm, root = mean of the hips, Hungarian-paired persons; "
+            "head = nose, foot = ankle)",
+            "",
+            format_table(
+                ["average of groups", "13 joints", *groups],
+                [
+                    [
+                        summary["root_mpjpe_average_mm"],
+                        summary["root_mpjpe_13_mm"],
+                        *(summary[f"root_mpjpe_{g}_mm"] for g in groups),
+                    ]
+                ],
+            ),
+            "",
+            "Paper Table 5 protocol: PCP (%), alpha 0.5, absolute; head = neck->nose, torso = neck->mid-hip",
+            "",
+            format_table(
+                ["average", *PCP_PARTS], [[summary["pcp_average"], *(summary[f"pcp_{p}"] for p in PCP_PARTS)]]
+            ),
+        ]
     return "\n".join(lines)
 
 

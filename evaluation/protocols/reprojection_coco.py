@@ -30,6 +30,7 @@ reprojections"), for any sequence whose frames carry 3D ground truth:
   (up to 40 in a view of the Wildtrack crowd), so ``max_dets`` (default 100) raises that limit; max_dets = 20
   gives COCO's numbers exactly.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -40,10 +41,10 @@ import numpy as np
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
+from data.geometry.camera import Camera, Rig
 from data.keypoints import NUM_JOINTS, OKS_SIGMAS
 from data.pose2d.coco_eval import STAT_NAMES, SUBSET_JOINTS
 from evaluation.report import format_table
-from data.geometry.camera import Camera, Rig
 
 if TYPE_CHECKING:
     from data.multiview import Frame
@@ -52,10 +53,18 @@ if TYPE_CHECKING:
 COCO_MAX_DETS = 20
 _CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
 # Stat name -> (AP or AR, OKS threshold or None = mean over .50:.05:.95, area range label).
-_STATS = {"AP": ("AP", None, "all"), "AP50": ("AP", 0.5, "all"), "AP75": ("AP", 0.75, "all"),
-          "APm": ("AP", None, "medium"), "APl": ("AP", None, "large"), "AR": ("AR", None, "all"),
-          "AR50": ("AR", 0.5, "all"), "AR75": ("AR", 0.75, "all"), "ARm": ("AR", None, "medium"),
-          "ARl": ("AR", None, "large")}
+_STATS = {
+    "AP": ("AP", None, "all"),
+    "AP50": ("AP", 0.5, "all"),
+    "AP75": ("AP", 0.75, "all"),
+    "APm": ("AP", None, "medium"),
+    "APl": ("AP", None, "large"),
+    "AR": ("AR", None, "all"),
+    "AR50": ("AR", 0.5, "all"),
+    "AR75": ("AR", 0.75, "all"),
+    "ARm": ("AR", None, "medium"),
+    "ARl": ("AR", None, "large"),
+}
 
 
 def project_poses(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -87,10 +96,14 @@ def project_poses(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.nda
 def view_ground_truth(camera: Camera, gt_poses: np.ndarray, min_joints: int = 1) -> list[dict]:
     """COCO annotations of GT poses (G, 23, 4) in one view: keypoints (23, 3) (v = 2 where labelled), bbox, area."""
     keypoints, in_image, boxes, areas = project_poses(camera, gt_poses)
-    labels = np.where(in_image[..., None], np.concatenate([keypoints[..., :2], np.full(in_image.shape + (1,), 2.0)],
-                                                          axis=-1), 0.0)
-    return [{"keypoints": kp, "bbox": box, "area": float(a)}
-            for kp, labelled, box, a in zip(labels, in_image, boxes, areas) if labelled.sum() >= min_joints]
+    labels = np.where(
+        in_image[..., None], np.concatenate([keypoints[..., :2], np.full(in_image.shape + (1,), 2.0)], axis=-1), 0.0
+    )
+    return [
+        {"keypoints": kp, "bbox": box, "area": float(a)}
+        for kp, labelled, box, a in zip(labels, in_image, boxes, areas)
+        if labelled.sum() >= min_joints
+    ]
 
 
 def view_predictions(camera: Camera, poses3d: np.ndarray, min_joints: int = 1) -> list[dict]:
@@ -98,12 +111,16 @@ def view_predictions(camera: Camera, poses3d: np.ndarray, min_joints: int = 1) -
     poses3d = np.asarray(poses3d, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
     keypoints, in_image, boxes, areas = project_poses(camera, poses3d)
     scores = np.where(poses3d[..., 3] > 0, poses3d[..., 3], 0.0).mean(axis=1)
-    return [{"keypoints": kp, "score": float(s), "bbox": box, "area": float(a)}
-            for kp, visible, s, box, a in zip(keypoints, in_image, scores, boxes, areas) if visible.sum() >= min_joints]
+    return [
+        {"keypoints": kp, "score": float(s), "bbox": box, "area": float(a)}
+        for kp, visible, s, box, a in zip(keypoints, in_image, scores, boxes, areas)
+        if visible.sum() >= min_joints
+    ]
 
 
-def coco_keypoint_stats(image_ids: list[int], gt: list[dict], predictions: list[dict], subset: str = "all",
-                        max_dets: int = 100) -> dict[str, float]:
+def coco_keypoint_stats(
+    image_ids: list[int], gt: list[dict], predictions: list[dict], subset: str = "all", max_dets: int = 100
+) -> dict[str, float]:
     """pycocotools OKS AP/AR (fractions, STAT_NAMES; -1 = nothing to average) with max_dets per image.
 
     gt: {image_id, keypoints (23, 3), bbox (4,), area}; predictions: {image_id, keypoints (23, 3), score,
@@ -134,9 +151,16 @@ def _annotation(k: int, entry: dict, joints: np.ndarray) -> dict:
     """A pycocotools annotation of the subset's joints, num_keypoints counted, bbox and area as given."""
     kps = np.asarray(entry["keypoints"], dtype=np.float64).reshape(NUM_JOINTS, 3)[joints]
     bbox = [float(v) for v in entry.get("bbox", (0.0, 0.0, 0.0, 0.0))]
-    return {"id": k + 1, "image_id": int(entry["image_id"]), "category_id": 1, "iscrowd": 0,
-            "keypoints": kps.ravel().tolist(), "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0)),
-            "area": float(entry["area"]), "bbox": bbox}
+    return {
+        "id": k + 1,
+        "image_id": int(entry["image_id"]),
+        "category_id": 1,
+        "iscrowd": 0,
+        "keypoints": kps.ravel().tolist(),
+        "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0)),
+        "area": float(entry["area"]),
+        "bbox": bbox,
+    }
 
 
 def _coco(images: list[dict], annotations: list[dict]) -> COCO:
@@ -166,13 +190,16 @@ class ReprojectionCOCOProtocol:
 
     name = "reprojection_coco"
 
-    def __init__(self, rig: Rig, min_joints: int = 1, max_dets: int = 100,
-                 subsets: tuple[str, ...] = ("all", "body", "foot")) -> None:
+    def __init__(
+        self, rig: Rig, min_joints: int = 1, max_dets: int = 100, subsets: tuple[str, ...] = ("all", "body", "foot")
+    ) -> None:
         if int(min_joints) < 1 or int(max_dets) < 1:
             raise ValueError(f"reprojection COCO: min_joints ({min_joints}) and max_dets ({max_dets}) must be >= 1")
         unknown = [s for s in subsets if s not in SUBSET_JOINTS]
         if unknown:
-            raise ValueError(f"reprojection COCO: unknown subset {unknown[0]!r}, expected some of {list(SUBSET_JOINTS)}")
+            raise ValueError(
+                f"reprojection COCO: unknown subset {unknown[0]!r}, expected some of {list(SUBSET_JOINTS)}"
+            )
         self.rig, self.min_joints, self.max_dets, self.subsets = rig, int(min_joints), int(max_dets), tuple(subsets)
         self.image_ids: list[int] = []
         self.gt: list[dict] = []
@@ -190,8 +217,9 @@ class ReprojectionCOCOProtocol:
             image_id = len(self.image_ids) + 1
             self.image_ids.append(image_id)
             self.gt += [{**a, "image_id": image_id} for a in view_ground_truth(camera, frame.gt_poses, self.min_joints)]
-            self.predictions += [{**d, "image_id": image_id}
-                                 for d in view_predictions(camera, result.poses3d, self.min_joints)]
+            self.predictions += [
+                {**d, "image_id": image_id} for d in view_predictions(camera, result.poses3d, self.min_joints)
+            ]
 
     def summary(self) -> dict:
         """{subset: {stat: % or None}} for every subset, and the counts and settings."""
@@ -202,9 +230,15 @@ class ReprojectionCOCOProtocol:
             stats = coco_keypoint_stats(self.image_ids, self.gt, self.predictions, subset, self.max_dets)
             out[subset] = {k: (100.0 * v if v >= 0 else None) for k, v in stats.items()}
         per_image = np.bincount([a["image_id"] for a in self.gt], minlength=len(self.image_ids) + 1)
-        out.update(images=len(self.image_ids), gt_persons=len(self.gt), predictions=len(self.predictions),
-                   max_gt_per_image=int(per_image.max()), max_dets=self.max_dets, min_joints=self.min_joints,
-                   frames_without_gt=self.frames_without_gt)
+        out.update(
+            images=len(self.image_ids),
+            gt_persons=len(self.gt),
+            predictions=len(self.predictions),
+            max_gt_per_image=int(per_image.max()),
+            max_dets=self.max_dets,
+            min_joints=self.min_joints,
+            frames_without_gt=self.frames_without_gt,
+        )
         self._summary = out
         return out
 
@@ -218,14 +252,22 @@ def format_reprojection_report(summary: dict) -> str:
     subsets = [s for s in SUBSET_JOINTS if s in summary]
     rows = [[s, *("-" if summary[s][k] is None else summary[s][k] for k in STAT_NAMES)] for s in subsets]
     capped = summary["max_gt_per_image"] > summary["max_dets"]
-    return "\n".join([
-        "reprojection_coco (paper Table 1 protocol): COCO keypoint AP/AR (%) of the 3D poses reprojected into every view "
-        "(with distortion) against the noise-free projections of the GT poses; OKS with the COCO-23 "
-        "sigmas; one image per (frame, camera); GT area = projected GT box clipped to the image; "
-        f"score = mean joint confidence; persons with >= {summary['min_joints']} joints in the image; "
-        f"up to {summary['max_dets']} detections per image (COCO: {COCO_MAX_DETS})", "",
-        format_table(["subset", *STAT_NAMES], rows), "",
-        f"{summary['images']} images, {summary['gt_persons']} GT persons (at most {summary['max_gt_per_image']} "
-        f"in one image), {summary['predictions']} reprojected predictions"
-        + (f"; WARNING: more GT persons in an image than max_dets={summary['max_dets']}, recall is capped"
-           if capped else "")])
+    return "\n".join(
+        [
+            "reprojection_coco (paper Table 1 protocol): COCO keypoint AP/AR (%) of the 3D poses reprojected into every view "
+            "(with distortion) against the noise-free projections of the GT poses; OKS with the COCO-23 "
+            "sigmas; one image per (frame, camera); GT area = projected GT box clipped to the image; "
+            f"score = mean joint confidence; persons with >= {summary['min_joints']} joints in the image; "
+            f"up to {summary['max_dets']} detections per image (COCO: {COCO_MAX_DETS})",
+            "",
+            format_table(["subset", *STAT_NAMES], rows),
+            "",
+            f"{summary['images']} images, {summary['gt_persons']} GT persons (at most {summary['max_gt_per_image']} "
+            f"in one image), {summary['predictions']} reprojected predictions"
+            + (
+                f"; WARNING: more GT persons in an image than max_dets={summary['max_dets']}, recall is capped"
+                if capped
+                else ""
+            ),
+        ]
+    )

@@ -18,6 +18,7 @@ On a subset of frames, the headline averages those of Actors 1-3 annotated in it
 :class:`ShelfProtocol` is the dataset protocol (evaluation/protocols/base.py) that data/datasets/shelf.py
 attaches to the Shelf sequence: our COCO-23 poses beside 4D Association's stored output, same code.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,11 +30,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.io
 
-from data.keypoints import SHELF14_NAMES, coco23_to_shelf14, with_mid_hip
 from data.formats.atomic_io import atomic_write_text
 from data.formats.fourd_skeletons import load_4dassoc_skeletons
-from evaluation.pcp import PART_JOINTS, PART_NAMES, correct_parts, pcp_by_part
+from data.keypoints import SHELF14_NAMES, coco23_to_shelf14, with_mid_hip
 from evaluation.identity import IdentityEvaluator
+from evaluation.pcp import PART_JOINTS, PART_NAMES, correct_parts, pcp_by_part
 
 if TYPE_CHECKING:
     from data.multiview import Frame
@@ -45,8 +46,10 @@ PROTOCOL_NOTES = {
     "strict": "an annotated actor without any prediction counts all 10 parts wrong",
     "lenient": "frames where an annotated actor has no prediction are skipped for it",
 }
-SELECTION_NOTE = ("per GT actor, the prediction with the smallest mean distance over the 14 Shelf "
-                  "joints (not one-to-one, as VoxelPose's Shelf evaluate)")
+SELECTION_NOTE = (
+    "per GT actor, the prediction with the smallest mean distance over the 14 Shelf "
+    "joints (not one-to-one, as VoxelPose's Shelf evaluate)"
+)
 
 # SKEL19 of 4D Association (src/skel.h, BODY25 -> SKEL19 mapping): 0 pelvis, 1 neck, 2 R-hip,
 # 3 L-hip, 4 nose, 5 R-shoulder, 6 L-shoulder, 7 R-knee, 8 L-knee, 9 R-ear, 10 L-ear, 11 R-elbow,
@@ -167,8 +170,9 @@ class ShelfEvaluator:
         for name, rows in self._rows.items():
             per_actor = {a + 1: _actor_pcp(rows.get(a, [])) for a in actors}
             out[name] = {"actors": per_actor, "average": _mean_over(per_actor, ids)}
-        errors = {a + 1: 1000.0 * float(np.mean(self._errors[a])) if a in self._errors else float("nan")
-                  for a in actors}
+        errors = {
+            a + 1: 1000.0 * float(np.mean(self._errors[a])) if a in self._errors else float("nan") for a in actors
+        }
         averaged = [errors[a + 1] for a in ids]
         out["mpjpe_mm"] = {"actors": errors, "average": float(np.mean(averaged)) if averaged else float("nan")}
         return out
@@ -182,11 +186,16 @@ class ShelfEvaluator:
     def _protocol(self) -> dict:
         """The settings and frame range behind a summary."""
         frames = sorted(self._frames)
-        return {"alpha": self.alpha, "frames": len(frames),
-                "first_frame": frames[0] if frames else None, "last_frame": frames[-1] if frames else None,
-                "standard_frames": frames == list(SHELF_TEST_FRAMES),
-                "averaged_actors": [a + 1 for a in self._averaged_present()],
-                "selection": SELECTION_NOTE, **PROTOCOL_NOTES}
+        return {
+            "alpha": self.alpha,
+            "frames": len(frames),
+            "first_frame": frames[0] if frames else None,
+            "last_frame": frames[-1] if frames else None,
+            "standard_frames": frames == list(SHELF_TEST_FRAMES),
+            "averaged_actors": [a + 1 for a in self._averaged_present()],
+            "selection": SELECTION_NOTE,
+            **PROTOCOL_NOTES,
+        }
 
 
 def _actor_pcp(rows: list[np.ndarray]) -> dict[str, float]:
@@ -204,9 +213,11 @@ def _mean_over(per_actor: dict[int, dict[str, float]], ids: tuple[int, ...]) -> 
 def format_table(summary: dict, name: str) -> str:
     """Rows per protocol x actor, columns the 6 part groups, the average and MPJPE: a text table."""
     proto = summary["protocol"]
-    lines = [f"{name}: Shelf PCP, alpha {proto['alpha']}, frames {proto['first_frame']}-"
-             f"{proto['last_frame']} ({proto['frames']} frames"
-             f"{'' if proto['standard_frames'] else ', NOT the standard 300-600'}); {proto['selection']}"]
+    lines = [
+        f"{name}: Shelf PCP, alpha {proto['alpha']}, frames {proto['first_frame']}-"
+        f"{proto['last_frame']} ({proto['frames']} frames"
+        f"{'' if proto['standard_frames'] else ', NOT the standard 300-600'}); {proto['selection']}"
+    ]
     header = f"{'protocol':9}{'actor':10}{'frames':>7}" + "".join(f"{p:>12}" for p in PART_NAMES)
     lines.append(header + f"{'average':>10}{'MPJPE mm':>10}")
     averaged = proto["averaged_actors"]
@@ -228,8 +239,13 @@ def _row(protocol: str, label: str, frames: int | None, pcp: dict[str, float], m
     return f"{protocol:9}{label:10}{count:>7}{cells}{pcp['average']:10.2f}{mpjpe:10.1f}"
 
 
-def score_4dassoc_output(skel_path: str | Path, gt_path: str | Path, first_frame: int = 300,
-                         frames: list[int] | None = None, alpha: float = 0.5) -> dict:
+def score_4dassoc_output(
+    skel_path: str | Path,
+    gt_path: str | Path,
+    first_frame: int = 300,
+    frames: list[int] | None = None,
+    alpha: float = 0.5,
+) -> dict:
     """Score 4D Association's stored skel.txt (SKEL19) against gt.txt: files -> ShelfEvaluator.summary().
 
     frames: the Shelf frame numbers to score (file frame i is first_frame + i); None = all of them.
@@ -245,8 +261,10 @@ def score_4dassoc_output(skel_path: str | Path, gt_path: str | Path, first_frame
     evaluator = ShelfEvaluator(alpha)
     for i in positions:
         if not 0 <= i < len(gts):
-            raise ValueError(f"{skel_path}: frame {first_frame + i} is outside the file's {first_frame}.."
-                             f"{first_frame + len(gts) - 1}")
+            raise ValueError(
+                f"{skel_path}: frame {first_frame + i} is outside the file's {first_frame}.."
+                f"{first_frame + len(gts) - 1}"
+            )
         poses = [p for p in skels[i].values() if (p[:, 3] > 0).any()]
         if any(p.shape[0] != 19 for p in poses):
             raise ValueError(f"{skel_path}: frame {i} is not a 19-joint SKEL19 skeleton")
@@ -265,8 +283,14 @@ class ShelfProtocol:
     name = "shelf"
     predictions_file = "shelf_predictions.json"
 
-    def __init__(self, gt: dict[int, dict[int, np.ndarray]], gt_path: str | Path | None = None,
-                 baseline_path: str | Path | None = None, first_frame: int = 300, alpha: float = 0.5) -> None:
+    def __init__(
+        self,
+        gt: dict[int, dict[int, np.ndarray]],
+        gt_path: str | Path | None = None,
+        baseline_path: str | Path | None = None,
+        first_frame: int = 300,
+        alpha: float = 0.5,
+    ) -> None:
         """gt: per Shelf frame {actor id: (15, 4)}; baseline_path: skel.txt (None = no baseline)."""
         self.gt = gt
         self.gt_path, self.baseline_path = gt_path, baseline_path
@@ -274,7 +298,7 @@ class ShelfProtocol:
         self.evaluator = ShelfEvaluator(alpha)
         self.identities = IdentityEvaluator()
         self.predictions: dict[int, np.ndarray] = {}
-        self._baseline: tuple[tuple[int, ...], dict] | None = None   # (frames, summary) of the last scoring
+        self._baseline: tuple[tuple[int, ...], dict] | None = None  # (frames, summary) of the last scoring
 
     def update(self, frame: Frame, result: FrameResult) -> None:
         """Score one frame's poses3d (P, 23, 4) against the GT of frame.index; with track ids, record the id of
@@ -298,13 +322,17 @@ class ShelfProtocol:
         """{"ours": ShelfEvaluator summary, "4d_association": the same for skel.txt (when given)}."""
         out = {"ours": self.evaluator.summary()}
         if self.identities.history:
-            out["tracking"] = {**self.identities.summary(AVERAGED_ACTOR_IDS),
-                               "actors": [a + 1 for a in AVERAGED_ACTOR_IDS]}
+            out["tracking"] = {
+                **self.identities.summary(AVERAGED_ACTOR_IDS),
+                "actors": [a + 1 for a in AVERAGED_ACTOR_IDS],
+            }
         if self.baseline_path is not None and self.gt_path is not None and self.predictions:
             frames = tuple(sorted(self.predictions))
             if self._baseline is None or self._baseline[0] != frames:
-                self._baseline = frames, score_4dassoc_output(self.baseline_path, self.gt_path, self.first_frame,
-                                                              list(frames), self.alpha)
+                self._baseline = (
+                    frames,
+                    score_4dassoc_output(self.baseline_path, self.gt_path, self.first_frame, list(frames), self.alpha),
+                )
             out["4d_association"] = self._baseline[1]
         return out
 
@@ -312,18 +340,23 @@ class ShelfProtocol:
         """A protocol header line, our table and 4D Association's, and the headline comparison."""
         summary = self.summary()
         proto = summary["ours"]["protocol"]
-        lines = [f"Shelf protocol: frames {proto['first_frame']}-{proto['last_frame']} ({proto['frames']}), "
-                 f"PCP alpha {self.alpha} over 10 parts, headline = mean of actors "
-                 f"{', '.join(map(str, proto['averaged_actors']))}; {SELECTION_NOTE}",
-                 "", format_table(summary["ours"], "ours")]
+        lines = [
+            f"Shelf protocol: frames {proto['first_frame']}-{proto['last_frame']} ({proto['frames']}), "
+            f"PCP alpha {self.alpha} over 10 parts, headline = mean of actors "
+            f"{', '.join(map(str, proto['averaged_actors']))}; {SELECTION_NOTE}",
+            "",
+            format_table(summary["ours"], "ours"),
+        ]
         if "4d_association" in summary:
             lines += ["", format_table(summary["4d_association"], "4D Association stored output, same code")]
         lines += ["", _headline(summary)]
         if "tracking" in summary:
             t = summary["tracking"]
-            lines.append(f"Tracking, actors 1-3 (the track id of the prediction each actor takes): {t['id_switches']} "
-                         f"identity switches, {t['idf1_like']:.1f} % of actor-frames with their most frequent id, "
-                         f"{t['fragmentations']} fragmentations")
+            lines.append(
+                f"Tracking, actors 1-3 (the track id of the prediction each actor takes): {t['id_switches']} "
+                f"identity switches, {t['idf1_like']:.1f} % of actor-frames with their most frequent id, "
+                f"{t['fragmentations']} fragmentations"
+            )
         return "\n".join(lines)
 
     def write(self, out_dir: str | Path) -> Path:
@@ -331,12 +364,16 @@ class ShelfProtocol:
         frames = []
         for frame, pred in sorted(self.predictions.items()):
             chosen = {str(a + 1): select_prediction(pred, np.asarray(g)[:, :3])[0] for a, g in self.gt[frame].items()}
-            frames.append({"frame": frame, "chosen_for_actor": chosen,
-                           "poses": [[_point(p) for p in pose] for pose in pred]})
-        doc = {"joints": [*SHELF14_NAMES, "mid_hip"], "units": "m",
-               "note": "our COCO-23 poses as scored by the Shelf protocol; null = missing joint; "
-                       "chosen_for_actor: the pose each GT actor (1-4) took, -1 none",
-               "frames": frames}
+            frames.append(
+                {"frame": frame, "chosen_for_actor": chosen, "poses": [[_point(p) for p in pose] for pose in pred]}
+            )
+        doc = {
+            "joints": [*SHELF14_NAMES, "mid_hip"],
+            "units": "m",
+            "note": "our COCO-23 poses as scored by the Shelf protocol; null = missing joint; "
+            "chosen_for_actor: the pose each GT actor (1-4) took, -1 none",
+            "frames": frames,
+        }
         path = Path(out_dir) / self.predictions_file
         atomic_write_text(path, json.dumps(doc))
         return path

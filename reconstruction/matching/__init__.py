@@ -3,6 +3,7 @@ persons: ``matcher(views, rig) -> assignment`` with assignment (P, V) int, the d
 in view v or -1. Each matcher is a small callable class configured from ``configs/matching/*.yaml``.
 May import ``data`` (layers 1-2) and the other stages; never ``evaluation`` or the entry points.
 """
+
 from reconstruction.matching.assignment import assignment_from_labels
 from reconstruction.matching.epipolar import EpipolarMatcher
 from reconstruction.matching.evidence import EvidenceMatcher
@@ -11,4 +12,12 @@ from reconstruction.matching.feet_epipolar import FeetEpipolarMatcher
 from reconstruction.matching.oracle import OracleMatcher
 from reconstruction.matching.ransac import RansacMatcher
 
-__all__ = ["EpipolarMatcher", "EvidenceMatcher", "FeetEpipolarMatcher", "FeetMatcher", "OracleMatcher", "RansacMatcher", "assignment_from_labels"]
+__all__ = [
+    "EpipolarMatcher",
+    "EvidenceMatcher",
+    "FeetEpipolarMatcher",
+    "FeetMatcher",
+    "OracleMatcher",
+    "RansacMatcher",
+    "assignment_from_labels",
+]

@@ -1,4 +1,5 @@
 """The assignment array shared by all matchers: (P, V) detection indices, -1 where absent."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,4 +24,3 @@ def assignment_from_labels(labels: list[np.ndarray], min_views: int = 2) -> np.n
             row[v] = det
     rows = [people[k] for k in sorted(people) if np.sum(people[k] >= 0) >= min_views]
     return np.stack(rows) if rows else np.zeros((0, V), dtype=np.int64)
-

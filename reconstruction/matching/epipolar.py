@@ -10,19 +10,19 @@ Each pair is solved as a gated linear assignment and all pairs' edges are merged
 cheaper edges first, exactly like the feet matcher. The shared pieces of the joint-based baselines
 (undistorted confident joints, the pairwise solve-and-merge loop, the unmatched counters) live here.
 """
+
 from __future__ import annotations
 
 from collections import Counter
 
 import numpy as np
 
-from data.multiview import ViewDetections
 from data.geometry.camera import Camera, Rig
+from data.multiview import ViewDetections
 from reconstruction.matching.merge import match_pairs
 
 TOO_FEW_JOINTS = "too_few_joints"  # fewer than min_common_joints joints with score >= min_score
 NO_COUNTERPART = "no_counterpart"  # enough joints, but ended in no person of >= min_views views
-
 
 
 def undistorted_joints(view: ViewDetections, camera: Camera, min_score: float) -> tuple[np.ndarray, np.ndarray]:
@@ -44,7 +44,7 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 def fundamental_matrix(camera_a: Camera, camera_b: Camera) -> np.ndarray:
     """F with x_b^T F x_a = 0 for undistorted pixels of the same world point, unit Frobenius norm: (3, 3)."""
-    R = camera_b.R @ camera_a.R.T                 # camera a frame -> camera b frame
+    R = camera_b.R @ camera_a.R.T  # camera a frame -> camera b frame
     t = camera_b.t - R @ camera_a.t
     F = np.linalg.inv(camera_b.K).T @ skew(t) @ R @ np.linalg.inv(camera_a.K)
     return F / np.linalg.norm(F)
@@ -53,11 +53,12 @@ def fundamental_matrix(camera_a: Camera, camera_b: Camera) -> np.ndarray:
 def _line_distance(lines: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distance of points to lines: lines (Nl, J, 3), points (Np, J, 2) -> (Nl, Np, J), defined (Nl, 1, J)."""
     norm = np.hypot(lines[..., 0], lines[..., 1])
-    defined = norm > 1e-12                        # a point at the epipole has no epipolar line
+    defined = norm > 1e-12  # a point at the epipole has no epipolar line
     unit = lines / np.where(defined, norm, 1.0)[..., None]
     # broadcasting, not einsum: einsum's per-joint batched dot is ~10x slower at crowd sizes
-    dist = np.abs(unit[:, None, :, 0] * points[None, :, :, 0] + unit[:, None, :, 1] * points[None, :, :, 1]
-                  + unit[:, None, :, 2])
+    dist = np.abs(
+        unit[:, None, :, 0] * points[None, :, :, 0] + unit[:, None, :, 1] * points[None, :, :, 1] + unit[:, None, :, 2]
+    )
     return dist, defined[:, None, :]
 
 
@@ -68,14 +69,15 @@ def epipolar_distances(uv_a: np.ndarray, uv_b: np.ndarray, F: np.ndarray) -> tup
     """
     ha = np.concatenate([uv_a, np.ones(uv_a.shape[:-1] + (1,))], axis=-1)
     hb = np.concatenate([uv_b, np.ones(uv_b.shape[:-1] + (1,))], axis=-1)
-    in_b, ok_b = _line_distance(ha @ F.T, uv_b)           # lines of a's joints in view b
-    in_a, ok_a = _line_distance(hb @ F, uv_a)             # lines of b's joints in view a
+    in_b, ok_b = _line_distance(ha @ F.T, uv_b)  # lines of a's joints in view b
+    in_a, ok_a = _line_distance(hb @ F, uv_a)  # lines of b's joints in view a
     defined = ok_b & ok_a.transpose(1, 0, 2)
     return np.where(defined, (in_b + in_a.transpose(1, 0, 2)) / 2, 0.0), defined
 
 
-def epipolar_affinity(uv_a: np.ndarray, ok_a: np.ndarray, uv_b: np.ndarray, ok_b: np.ndarray, F: np.ndarray,
-                      min_common_joints: int = 3) -> np.ndarray:
+def epipolar_affinity(
+    uv_a: np.ndarray, ok_a: np.ndarray, uv_b: np.ndarray, ok_b: np.ndarray, F: np.ndarray, min_common_joints: int = 3
+) -> np.ndarray:
     """Mean symmetric epipolar distance over common joints: (Na, J, 2), (Na, J), (Nb, J, 2), (Nb, J) -> (Na, Nb).
 
     +inf where fewer than ``min_common_joints`` joints are confident in both detections.
@@ -107,8 +109,9 @@ class EpipolarMatcher:
     (all frames since construction).
     """
 
-    def __init__(self, min_score: float = 0.2, min_common_joints: int = 3, gate: float = 30.0,
-                 min_views: int = 2) -> None:
+    def __init__(
+        self, min_score: float = 0.2, min_common_joints: int = 3, gate: float = 30.0, min_views: int = 2
+    ) -> None:
         if int(min_common_joints) < 1 or int(min_views) < 1 or not float(gate) > 0:
             raise ValueError("min_common_joints and min_views must be >= 1 and gate > 0")
         self.min_score, self.min_common_joints = float(min_score), int(min_common_joints)

@@ -28,6 +28,7 @@ wrongly.
 The body term is computed in compiled loops (:mod:`.evidence_kernels`) that stop as soon as a pair
 fails (the feet term first), so the unrelated pairs of a crowd cost a joint or two each.
 """
+
 from __future__ import annotations
 
 from collections import Counter
@@ -37,20 +38,20 @@ from itertools import combinations
 import numpy as np
 from scipy.stats import chi2
 
-from data.multiview import ViewDetections
 from data.geometry.camera import Rig
+from data.multiview import ViewDetections
 from reconstruction.compile_notice import compile_notice
-from reconstruction.solver.map_estimation import joint_sigma
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence_kernels import merge_linked, pair_chi2
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.feet_uncertainty import mahalanobis_distances
 from reconstruction.matching.merge import _as_edges, pair_edges, solve_pair
+from reconstruction.solver.map_estimation import joint_sigma
 from reconstruction.solver.person_prior import chi2_medians
 
-TOO_LITTLE_EVIDENCE = "too_little_evidence"      # no usable foot and fewer than min_dof usable joints
-NON_FINITE_KEYPOINTS = "non_finite_keypoints"    # ... and some keypoints were NaN / inf (treated as missing)
-CALIBRATION_SAMPLE = 400                         # mutual best pairs enough for the median of the noise calibration
+TOO_LITTLE_EVIDENCE = "too_little_evidence"  # no usable foot and fewer than min_dof usable joints
+NON_FINITE_KEYPOINTS = "non_finite_keypoints"  # ... and some keypoints were NaN / inf (treated as missing)
+CALIBRATION_SAMPLE = 400  # mutual best pairs enough for the median of the noise calibration
 
 
 def calibrated(body: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
@@ -66,8 +67,9 @@ def gate_limits(reject_rate: float, max_dof: int) -> np.ndarray:
     return np.where(dof > 0, chi2.ppf(1.0 - reject_rate, np.maximum(dof, 1)), np.inf)
 
 
-def joint_variances(view: ViewDetections, camera, min_score: float, sigma_model: tuple[float, float, float, float]
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def joint_variances(
+    view: ViewDetections, camera, min_score: float, sigma_model: tuple[float, float, float, float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Undistorted pixels (N, J, 2), pixel variances (N, J) (0 = unusable) and any-non-finite (N,) of a view;
     sigma_model = (c, sigma_min, sigma_px, score_power) of :func:`joint_sigma`."""
     kp = np.asarray(view.keypoints, dtype=np.float64)
@@ -77,7 +79,7 @@ def joint_variances(view: ViewDetections, camera, min_score: float, sigma_model:
     ok = finite & (kp[..., 2] >= min_score)
     kp = np.where(ok[..., None], kp, 0.0)
     sigma = joint_sigma(kp, np.nan_to_num(view.bboxes, nan=0.0, posinf=0.0, neginf=0.0), *sigma_model)
-    var = np.where(ok & np.isfinite(sigma), sigma ** 2, 0.0)
+    var = np.where(ok & np.isfinite(sigma), sigma**2, 0.0)
     uv = camera.undistort_points(kp[..., :2]) if len(kp) else kp[..., :2]
     return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), var, bad
 
@@ -131,24 +133,46 @@ class EvidenceMatcher:
     by reason in ``last_unmatched_reasons`` and ``unmatched_reasons``.
     """
 
-    def __init__(self, reject_rate: float = 1e-3, evidence_per_dof: float = 2.0, min_dof: int = 2,
-                 min_score: float = 0.2, c: float = 0.016, sigma_min: float = 1.0, sigma_px: float = 5.2,
-                 score_power: float = 1.27, min_views: int = 2,
-                 feet: dict | None = None, calibrate: bool = True, max_noise_scale: float = 4.0,
-                 min_calibration_pairs: int = 5, outlier_sd: float = 12.0, link_scale: float = 2.0) -> None:
+    def __init__(
+        self,
+        reject_rate: float = 1e-3,
+        evidence_per_dof: float = 2.0,
+        min_dof: int = 2,
+        min_score: float = 0.2,
+        c: float = 0.016,
+        sigma_min: float = 1.0,
+        sigma_px: float = 5.2,
+        score_power: float = 1.27,
+        min_views: int = 2,
+        feet: dict | None = None,
+        calibrate: bool = True,
+        max_noise_scale: float = 4.0,
+        min_calibration_pairs: int = 5,
+        outlier_sd: float = 12.0,
+        link_scale: float = 2.0,
+    ) -> None:
         if not 0 < reject_rate < 1 or int(min_dof) < 1 or int(min_views) < 1:
-            raise ValueError(f"need 0 < reject_rate < 1, min_dof >= 1, min_views >= 1; got {reject_rate}, "
-                             f"{min_dof}, {min_views}")
+            raise ValueError(
+                f"need 0 < reject_rate < 1, min_dof >= 1, min_views >= 1; got {reject_rate}, {min_dof}, {min_views}"
+            )
         if min(evidence_per_dof, c, sigma_min, sigma_px, score_power) < 0 or max(c, sigma_min, sigma_px) == 0:
-            raise ValueError("evidence_per_dof, c, sigma_min, sigma_px, score_power must be >= 0, and c, sigma_min, "
-                             "sigma_px not all 0")
+            raise ValueError(
+                "evidence_per_dof, c, sigma_min, sigma_px, score_power must be >= 0, and c, sigma_min, "
+                "sigma_px not all 0"
+            )
         self.reject_rate, self.evidence_per_dof = float(reject_rate), float(evidence_per_dof)
         self.min_dof, self.min_score, self.min_views = int(min_dof), float(min_score), int(min_views)
-        self.c, self.sigma_min, self.sigma_px, self.score_power = float(c), float(sigma_min), float(sigma_px), \
-            float(score_power)
+        self.c, self.sigma_min, self.sigma_px, self.score_power = (
+            float(c),
+            float(sigma_min),
+            float(sigma_px),
+            float(score_power),
+        )
         if not max_noise_scale >= 1 or int(min_calibration_pairs) < 1:
-            raise ValueError(f"need max_noise_scale >= 1 and min_calibration_pairs >= 1, got {max_noise_scale}, "
-                             f"{min_calibration_pairs}")
+            raise ValueError(
+                f"need max_noise_scale >= 1 and min_calibration_pairs >= 1, got {max_noise_scale}, "
+                f"{min_calibration_pairs}"
+            )
         self.calibrate, self.max_noise_scale = bool(calibrate), float(max_noise_scale)
         self.min_calibration_pairs = int(min_calibration_pairs)
         if not outlier_sd > 0:
@@ -159,7 +183,7 @@ class EvidenceMatcher:
         self.link_scale = float(link_scale)
         self.last_noise_scale = 1.0
         self._fundamentals: dict[tuple[int, int, int], tuple[Rig, np.ndarray]] = {}
-        with compile_notice("evidence matcher"):   # one line while numba compiles (first run)
+        with compile_notice("evidence matcher"):  # one line while numba compiles (first run)
             warm_up()
         self.feet = FeetMatcher(min_views=min_views, **{"pixel_sigma": 5.0, **(feet or {})})
         self.last_unmatched_reasons: Counter[str] = Counter()
@@ -169,7 +193,7 @@ class EvidenceMatcher:
         """F of a view pair of the rig, computed once per rig: (3, 3)."""
         key = (id(rig), a, b)
         if key not in self._fundamentals:
-            self._fundamentals[key] = (rig, fundamental_matrix(rig[a], rig[b]))   # keeps rig alive: id stays unique
+            self._fundamentals[key] = (rig, fundamental_matrix(rig[a], rig[b]))  # keeps rig alive: id stays unique
         return self._fundamentals[key][1]
 
     def pair_evidence(self, views: list[ViewDetections], rig: Rig):
@@ -184,8 +208,8 @@ class EvidenceMatcher:
         joints = [joint_variances(v, cam, self.min_score, model) for v, cam in zip(views, rig)]
         J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
         limits = gate_limits(self.reject_rate, J + 2)
-        loosest = self.max_noise_scale ** 2 if self.calibrate else 1.0
-        link2 = self.link_scale ** 2     # the widest test any later step applies (complete linkage)
+        loosest = self.max_noise_scale**2 if self.calibrate else 1.0
+        link2 = self.link_scale**2  # the widest test any later step applies (complete linkage)
 
         def evidence(a: int, b: int, scale2: float = loosest) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             fa, fb = feats[a], feats[b]
@@ -193,10 +217,21 @@ class EvidenceMatcher:
             feet = np.where(fa.has_p[:, None] & fb.has_p[None, :], feet, np.nan)
             out = np.empty((len(fa), len(fb)))
             dof = np.empty((len(fa), len(fb)), dtype=np.int64)
-            pair_chi2(joints[a][0], joints[a][1], joints[b][0], joints[b][1], self._fundamental(rig, a, b),
-                      np.ascontiguousarray(feet), limits * link2, self.min_dof, self.outlier_sd ** 2, scale2, out,
-                      dof)
-            body = (out - np.where(np.isfinite(feet), feet, 0.0)) * scale2       # model units; inf = rejected
+            pair_chi2(
+                joints[a][0],
+                joints[a][1],
+                joints[b][0],
+                joints[b][1],
+                self._fundamental(rig, a, b),
+                np.ascontiguousarray(feet),
+                limits * link2,
+                self.min_dof,
+                self.outlier_sd**2,
+                scale2,
+                out,
+                dof,
+            )
+            body = (out - np.where(np.isfinite(feet), feet, 0.0)) * scale2  # model units; inf = rejected
             return body, dof, feet
 
         return evidence, feats, joints
@@ -213,9 +248,9 @@ class EvidenceMatcher:
         linked = np.zeros((offsets[-1], offsets[-1]), dtype=bool)
         for a, b, body, dof, feet in pairs:
             d2 = calibrated(body, feet, scale2)
-            block = d2 <= limits[dof] * self.link_scale ** 2
-            linked[offsets[a]:offsets[a + 1], offsets[b]:offsets[b + 1]] = block
-            linked[offsets[b]:offsets[b + 1], offsets[a]:offsets[a + 1]] = block.T
+            block = d2 <= limits[dof] * self.link_scale**2
+            linked[offsets[a] : offsets[a + 1], offsets[b] : offsets[b + 1]] = block
+            linked[offsets[b] : offsets[b + 1], offsets[a] : offsets[a + 1]] = block.T
             ok = d2 <= limits[dof]
             if not ok.any():
                 continue
@@ -235,8 +270,10 @@ class EvidenceMatcher:
         as soon as the link test fails.
         """
         # neighbours first ((0, 1), (1, 2), ..., then (0, 2), ...): the sample covers every view early
-        view_pairs = sorted(((a, b) for a, b in combinations(range(len(counts)), 2) if counts[a] and counts[b]),
-                            key=lambda ab: (ab[1] - ab[0], ab[0]))
+        view_pairs = sorted(
+            ((a, b) for a, b in combinations(range(len(counts)), 2) if counts[a] and counts[b]),
+            key=lambda ab: (ab[1] - ab[0], ab[0]),
+        )
         pairs, ratios = [], []
         if self.calibrate:
             for a, b in view_pairs:
@@ -245,17 +282,17 @@ class EvidenceMatcher:
                 if len(ratios) >= CALIBRATION_SAMPLE:
                     break
         scale2 = self.noise_scale2(ratios) if self.calibrate else 1.0
-        pairs += [(a, b, *evidence(a, b, scale2)) for a, b in view_pairs[len(pairs):]]
+        pairs += [(a, b, *evidence(a, b, scale2)) for a, b in view_pairs[len(pairs) :]]
         return pairs, scale2
 
     def calibration_ratios(self, body: np.ndarray, dof: np.ndarray, feet: np.ndarray) -> list[float]:
         """Body chi^2 / median(chi^2(body dof)) of a view pair's mutual best partners under the loosest test."""
         if not np.isfinite(body).any():
             return []
-        loose = calibrated(body, feet, self.max_noise_scale ** 2)
+        loose = calibrated(body, feet, self.max_noise_scale**2)
         cost = np.where(np.isfinite(loose), 0.5 * loose - self.evidence_per_dof * dof, np.inf)
         best_b, best_a = np.argmin(cost, axis=1), np.argmin(cost, axis=0)
-        rows = np.flatnonzero(best_a[best_b] == np.arange(len(cost)))                  # mutual best partners
+        rows = np.flatnonzero(best_a[best_b] == np.arange(len(cost)))  # mutual best partners
         rows = rows[np.isfinite(cost[rows, best_b[rows]])]
         cols = best_b[rows]
         body_dof = dof[rows, cols] - 2 * np.isfinite(feet[rows, cols])
@@ -270,7 +307,7 @@ class EvidenceMatcher:
         """
         if len(ratios) < self.min_calibration_pairs:
             return 1.0
-        return float(np.clip(np.median(ratios), self.max_noise_scale ** -2, self.max_noise_scale ** 2))
+        return float(np.clip(np.median(ratios), self.max_noise_scale**-2, self.max_noise_scale**2))
 
     def _count_reasons(self, assignment: np.ndarray, usable: list[np.ndarray], joints: list) -> None:
         """Unmatched detections by reason: too little evidence (with NaN keypoints, or not) or no counterpart."""
@@ -292,5 +329,6 @@ def _finite(view: ViewDetections) -> ViewDetections:
     if np.isfinite(kp).all():
         return view
     finite = np.isfinite(kp).all(axis=-1, keepdims=True)
-    return ViewDetections(np.where(finite, kp, 0.0), np.nan_to_num(view.bboxes), view.scores, view.person_ids,
-                          view.occluded)
+    return ViewDetections(
+        np.where(finite, kp, 0.0), np.nan_to_num(view.bboxes), view.scores, view.person_ids, view.occluded
+    )

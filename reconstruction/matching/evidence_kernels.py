@@ -4,6 +4,7 @@ Each pair's body evidence is a sum over the joints both detections see of the Sa
 epipolar geometry, added to the feet term; the loop stops as soon as a pair cannot pass its gate any
 more, so unrelated pairs (most of a crowd's) cost one or two joints each.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,8 +33,20 @@ def _masks(var: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.ndarray, F: np.ndarray,
-              feet_d2: np.ndarray, limits: np.ndarray, min_dof: int, cap: float, body_scale2: float, chi2_out: np.ndarray, dof_out: np.ndarray) -> None:
+def pair_chi2(
+    uv_a: np.ndarray,
+    var_a: np.ndarray,
+    uv_b: np.ndarray,
+    var_b: np.ndarray,
+    F: np.ndarray,
+    feet_d2: np.ndarray,
+    limits: np.ndarray,
+    min_dof: int,
+    cap: float,
+    body_scale2: float,
+    chi2_out: np.ndarray,
+    dof_out: np.ndarray,
+) -> None:
     """Chi-square feet + body / body_scale2 and degrees of freedom of every pair (i, j); inf where rejected.
 
     uv_a (Na, J, 2) undistorted pixels, var_a (Na, J) pixel variances (0 = joint not usable), the same for
@@ -44,13 +57,13 @@ def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.n
     """
     Na, J = var_a.shape
     Nb = var_b.shape[0]
-    la = np.empty((Na, J, 3))                 # epipolar lines of a's joints in view b
+    la = np.empty((Na, J, 3))  # epipolar lines of a's joints in view b
     for i in range(Na):
         for k in range(J):
             x, y = uv_a[i, k, 0], uv_a[i, k, 1]
             for r in range(3):
                 la[i, k, r] = F[r, 0] * x + F[r, 1] * y + F[r, 2]
-    lb = np.empty((Nb, J, 3))                 # lines of b's joints in view a: F^T x_b
+    lb = np.empty((Nb, J, 3))  # lines of b's joints in view a: F^T x_b
     for j in range(Nb):
         for k in range(J):
             x, y = uv_b[j, k, 0], uv_b[j, k, 1]
@@ -65,7 +78,7 @@ def pair_chi2(uv_a: np.ndarray, var_a: np.ndarray, uv_b: np.ndarray, var_b: np.n
             if not np.isnan(feet):
                 dof = 2
                 d2 = feet
-                if d2 > limits[2 + J]:              # the cheap test: no body evidence can save these feet
+                if d2 > limits[2 + J]:  # the cheap test: no body evidence can save these feet
                     chi2_out[i, j] = np.inf
                     dof_out[i, j] = 2
                     continue

@@ -7,6 +7,7 @@ into persons, cheaper edges first, never two detections of one view in a person.
 is either the paper's Euclidean distance (metres) or, by default, a Mahalanobis distance (standard
 deviations) under each point's propagated pixel noise (see :mod:`.feet_uncertainty`).
 """
+
 from __future__ import annotations
 
 from collections import Counter
@@ -14,19 +15,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from data.geometry.camera import Camera, Rig
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
-from data.geometry.camera import Camera, Rig
-from reconstruction.matching.feet_uncertainty import (joint_sigmas, joints_on_planes, location_covariance,
-                                                      mahalanobis_distances, mean_covariance)
+from reconstruction.matching.feet_uncertainty import (
+    joint_sigmas,
+    joints_on_planes,
+    location_covariance,
+    mahalanobis_distances,
+    mean_covariance,
+)
 from reconstruction.matching.merge import match_pairs
 
 FOOT_RULES = ("lowest", "mean")
 SPACES = ("ground", "image")
 METRICS = ("euclidean", "mahalanobis")
-NO_FOOT_JOINTS = "no_foot_joints"          # no foot joint (nor ankle, with the fallback) above min_score
+NO_FOOT_JOINTS = "no_foot_joints"  # no foot joint (nor ankle, with the fallback) above min_score
 FEET_ABOVE_HORIZON = "feet_above_horizon"  # scored foot joints exist, but none meets the ground in front
-NO_COUNTERPART = "no_counterpart"          # has feet, but ended in no person of >= min_views views
+NO_COUNTERPART = "no_counterpart"  # has feet, but ended in no person of >= min_views views
 _FOOT_COLUMNS = (*LEFT_FOOT, *RIGHT_FOOT, LEFT_ANKLE, RIGHT_ANKLE)  # gathered order: 3 + 3 + 2
 
 
@@ -51,9 +57,15 @@ class FeetFeatures:
         return len(self.p)
 
 
-def features_from_feet(left: np.ndarray, right: np.ndarray, has_left: np.ndarray,
-                       has_right: np.ndarray, reason: np.ndarray | None = None,
-                       cov_left: np.ndarray | None = None, cov_right: np.ndarray | None = None) -> FeetFeatures:
+def features_from_feet(
+    left: np.ndarray,
+    right: np.ndarray,
+    has_left: np.ndarray,
+    has_right: np.ndarray,
+    reason: np.ndarray | None = None,
+    cov_left: np.ndarray | None = None,
+    cov_right: np.ndarray | None = None,
+) -> FeetFeatures:
     """Location and stride from two feet: (N, 2), (N, 2), (N,), (N,) [, reason (N,), covariances
     (N, 2, 2) x2] -> FeetFeatures. With one foot only, p is that foot and the stride is unknown.
     """
@@ -67,13 +79,15 @@ def features_from_feet(left: np.ndarray, right: np.ndarray, has_left: np.ndarray
     has_p = has_left | has_right
     if reason is None:
         reason = np.where(has_p, "", NO_FOOT_JOINTS)
-    cov = None if cov_left is None or cov_right is None else \
-        location_covariance(cov_left, cov_right, has_left, has_right)
+    cov = (
+        None if cov_left is None or cov_right is None else location_covariance(cov_left, cov_right, has_left, has_right)
+    )
     return FeetFeatures(left, right, has_left, has_right, p, v, has_p, both, np.asarray(reason, dtype=str), cov)
 
 
-def _select_foot(ground: np.ndarray, cov: np.ndarray, y: np.ndarray, valid: np.ndarray,
-                 rule: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _select_foot(
+    ground: np.ndarray, cov: np.ndarray, y: np.ndarray, valid: np.ndarray, rule: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One foot point per detection: ground (N, K, 2), cov (N, K, 2, 2), image y (N, K), valid (N, K)
     -> point (N, 2), its covariance (N, 2, 2), ok (N,)."""
     ok = valid.any(axis=1)
@@ -85,9 +99,17 @@ def _select_foot(ground: np.ndarray, cov: np.ndarray, y: np.ndarray, valid: np.n
     return total / np.maximum(valid.sum(axis=1), 1)[:, None], mean_covariance(cov, valid), ok
 
 
-def feet_features(keypoints: np.ndarray, camera: Camera, rule: str = "mean", min_score: float = 0.2,
-                  ankle_fallback: bool = True, pixel_sigma: float | None = None, ankle_height_m: float = 0.07,
-                  foot_joint_height_m: float = 0.0, sigma_score_power: float = 0.0) -> FeetFeatures:
+def feet_features(
+    keypoints: np.ndarray,
+    camera: Camera,
+    rule: str = "mean",
+    min_score: float = 0.2,
+    ankle_fallback: bool = True,
+    pixel_sigma: float | None = None,
+    ankle_height_m: float = 0.07,
+    foot_joint_height_m: float = 0.0,
+    sigma_score_power: float = 0.0,
+) -> FeetFeatures:
     """Ground-plane feet (m) of N detections: keypoints (N, 23, 3) distorted pixels + score -> FeetFeatures.
 
     A foot is its joints (big toe, small toe, heel) with score > min_score: the one lowest in the
@@ -126,8 +148,7 @@ def feet_features(keypoints: np.ndarray, camera: Camera, rule: str = "mean", min
             ok = ok | use_ankle
         feet.append((point, point_cov, ok))
     considered = scored if ankle_fallback else scored[:, :6]
-    reason = np.where(feet[0][2] | feet[1][2], "",
-                      np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))
+    reason = np.where(feet[0][2] | feet[1][2], "", np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))
     covs = (feet[0][1], feet[1][1]) if pixel_sigma is not None else (None, None)
     return features_from_feet(feet[0][0], feet[1][0], feet[0][2], feet[1][2], reason, *covs)
 
@@ -147,13 +168,21 @@ def to_image(features: FeetFeatures, camera: Camera) -> FeetFeatures:
     feet = np.stack([features.left, features.right], axis=1)
     front = camera.depth(np.concatenate([feet, np.zeros_like(feet[..., :1])], axis=-1)) > 0
     uv = camera.ground_to_image(feet, distort=False)
-    return features_from_feet(uv[:, 0], uv[:, 1], features.has_left & front[:, 0],
-                              features.has_right & front[:, 1], features.reason)
+    return features_from_feet(
+        uv[:, 0], uv[:, 1], features.has_left & front[:, 0], features.has_right & front[:, 1], features.reason
+    )
 
 
-def edge_costs(fa: FeetFeatures, fb: FeetFeatures, k1: float = 1.0, k2: float = 0.5, k3: float = 0.25,
-               unknown_stride_cost: float = 0.1, metric: str = "euclidean",
-               floor_m: float = 0.05) -> np.ndarray:
+def edge_costs(
+    fa: FeetFeatures,
+    fb: FeetFeatures,
+    k1: float = 1.0,
+    k2: float = 0.5,
+    k3: float = 0.25,
+    unknown_stride_cost: float = 0.1,
+    metric: str = "euclidean",
+    floor_m: float = 0.05,
+) -> np.ndarray:
     """Eq. 4 between two views' feet in one space: (Na,), (Nb,) -> cost (Na, Nb), +inf without a location.
 
     c = k1 |p_a - p_b| + k2 | |v_a| - |v_b| | + k3 |v_a x v_b| / (|v_a| |v_b|). Where either stride is
@@ -182,9 +211,9 @@ def edge_costs(fa: FeetFeatures, fb: FeetFeatures, k1: float = 1.0, k2: float = 
 
 def metric_defaults(metric: str) -> tuple[float, float, float, float]:
     """Default (k2, k3, gate, unknown_stride_cost) of a ground-space location metric."""
-    if metric == "mahalanobis":   # location in standard deviations; stride terms off (mostly noise)
+    if metric == "mahalanobis":  # location in standard deviations; stride terms off (mostly noise)
         return 0.0, 0.0, 3.0, 0.0
-    return 0.5, 0.25, 0.6, 0.1    # metres: the paper's Eq. 4
+    return 0.5, 0.25, 0.6, 0.1  # metres: the paper's Eq. 4
 
 
 class FeetMatcher:
@@ -203,16 +232,32 @@ class FeetMatcher:
     at least that much more; 0 keeps every gated pair, as the paper does.
     """
 
-    def __init__(self, k1: float = 1.0, k2: float | None = None, k3: float | None = None,
-                 gate: float | None = None, space: str = "ground", foot_rule: str = "mean",
-                 min_score: float = 0.2, ankle_fallback: bool = True, min_views: int = 2,
-                 unknown_stride_cost: float | None = None, location_metric: str | None = None,
-                 pixel_sigma: float = 3.0, ground_sigma_floor: float = 0.1, ankle_height_m: float = 0.07,
-                 foot_joint_height_m: float = 0.0, sigma_score_power: float = 0.0, margin: float = 0.0) -> None:
+    def __init__(
+        self,
+        k1: float = 1.0,
+        k2: float | None = None,
+        k3: float | None = None,
+        gate: float | None = None,
+        space: str = "ground",
+        foot_rule: str = "mean",
+        min_score: float = 0.2,
+        ankle_fallback: bool = True,
+        min_views: int = 2,
+        unknown_stride_cost: float | None = None,
+        location_metric: str | None = None,
+        pixel_sigma: float = 3.0,
+        ground_sigma_floor: float = 0.1,
+        ankle_height_m: float = 0.07,
+        foot_joint_height_m: float = 0.0,
+        sigma_score_power: float = 0.0,
+        margin: float = 0.0,
+    ) -> None:
         metric = location_metric or ("euclidean" if space == "image" else "mahalanobis")
         if space not in SPACES or foot_rule not in FOOT_RULES or metric not in METRICS:
-            raise ValueError(f"need space in {SPACES}, foot_rule in {FOOT_RULES}, location_metric in "
-                             f"{METRICS}; got {space!r}, {foot_rule!r}, {metric!r}")
+            raise ValueError(
+                f"need space in {SPACES}, foot_rule in {FOOT_RULES}, location_metric in "
+                f"{METRICS}; got {space!r}, {foot_rule!r}, {metric!r}"
+            )
         if space == "image" and (gate is None or unknown_stride_cost is None or metric != "euclidean"):
             raise ValueError("space='image' costs are Euclidean pixels: give gate and unknown_stride_cost in pixels")
         d_k2, d_k3, d_gate, d_unknown = metric_defaults(metric)
@@ -235,22 +280,39 @@ class FeetMatcher:
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         sigma = self.pixel_sigma if self.location_metric == "mahalanobis" else None
-        return [feet_features(v.keypoints, cam, self.foot_rule, self.min_score, self.ankle_fallback, sigma,
-                              self.ankle_height_m, self.foot_joint_height_m, self.sigma_score_power)
-                for v, cam in zip(views, rig)]
+        return [
+            feet_features(
+                v.keypoints,
+                cam,
+                self.foot_rule,
+                self.min_score,
+                self.ankle_fallback,
+                sigma,
+                self.ankle_height_m,
+                self.foot_joint_height_m,
+                self.sigma_score_power,
+            )
+            for v, cam in zip(views, rig)
+        ]
 
     def pair_cost(self, fa: FeetFeatures, fb: FeetFeatures, camera_a: Camera) -> np.ndarray:
         """Edge costs of a view pair (a < b) in the configured space: (Na,), (Nb,) -> (Na, Nb)."""
         if self.space == "image":
             fa, fb = to_image(fa, camera_a), to_image(fb, camera_a)
-        return edge_costs(fa, fb, self.k1, self.k2, self.k3, self.unknown_stride_cost, self.location_metric,
-                          self.ground_sigma_floor)
+        return edge_costs(
+            fa, fb, self.k1, self.k2, self.k3, self.unknown_stride_cost, self.location_metric, self.ground_sigma_floor
+        )
 
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
         feats = self.features(views, rig)
-        assignment = match_pairs(lambda a, b: self.pair_cost(feats[a], feats[b], rig[a]),
-                                 [len(v) for v in views], self.gate, self.min_views, self.margin)
+        assignment = match_pairs(
+            lambda a, b: self.pair_cost(feats[a], feats[b], rig[a]),
+            [len(v) for v in views],
+            self.gate,
+            self.min_views,
+            self.margin,
+        )
         reasons = Counter(str(r) for f in feats for r in f.reason if r)
         unplaced = sum(int(f.has_p.sum()) for f in feats) - int(np.sum(assignment >= 0))
         if unplaced:

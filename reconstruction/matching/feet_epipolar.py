@@ -18,21 +18,27 @@ feet are hidden are still matched by the rest of their body, at the price of an 
 feet were wrong often enough to lower precision by 10-35 points in benchmarks/matching.py, while on
 Shelf (4 people) missing_feet_cost=2 gains 0.4 PCP (configs/experiment/shelf.yaml).
 """
+
 from __future__ import annotations
 
 from collections import Counter
 
 import numpy as np
 
-from data.multiview import ViewDetections
 from data.geometry.camera import Rig
-from reconstruction.matching.epipolar import (TOO_FEW_JOINTS, epipolar_affinity, fundamental_matrix,
-                                              undistorted_joints)
+from data.multiview import ViewDetections
+from reconstruction.matching.epipolar import TOO_FEW_JOINTS, epipolar_affinity, fundamental_matrix, undistorted_joints
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import match_pairs
 
-def combined_cost(feet_cost: np.ndarray, epipolar_px: np.ndarray, epipolar_sigma_px: float,
-                  missing_feet: np.ndarray | None = None, missing_feet_cost: float | None = None) -> np.ndarray:
+
+def combined_cost(
+    feet_cost: np.ndarray,
+    epipolar_px: np.ndarray,
+    epipolar_sigma_px: float,
+    missing_feet: np.ndarray | None = None,
+    missing_feet_cost: float | None = None,
+) -> np.ndarray:
     """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), +inf where either is.
 
     Where ``missing_feet`` (Na, Nb) is True and ``missing_feet_cost`` is given, that cost replaces feet.
@@ -53,13 +59,22 @@ class FeetEpipolarMatcher:
     out of every person, by reason, are kept in ``last_unmatched_reasons`` and ``unmatched_reasons``.
     """
 
-    def __init__(self, epipolar_sigma_px: float = 5.0, gate: float = 5.0, min_score: float = 0.2,
-                 min_common_joints: int = 3, min_views: int = 2, missing_feet_cost: float | None = None,
-                 feet: dict | None = None, margin: float = 0.0) -> None:
+    def __init__(
+        self,
+        epipolar_sigma_px: float = 5.0,
+        gate: float = 5.0,
+        min_score: float = 0.2,
+        min_common_joints: int = 3,
+        min_views: int = 2,
+        missing_feet_cost: float | None = None,
+        feet: dict | None = None,
+        margin: float = 0.0,
+    ) -> None:
         feet = {"pixel_sigma": 5.0, **(feet or {})}
         if feet.get("location_metric", "mahalanobis") != "mahalanobis" or feet.get("space", "ground") != "ground":
-            raise ValueError("feet_epipolar needs the feet cost in standard deviations: "
-                             "location_metric=mahalanobis, space=ground")
+            raise ValueError(
+                "feet_epipolar needs the feet cost in standard deviations: location_metric=mahalanobis, space=ground"
+            )
         if not epipolar_sigma_px > 0 or not gate > 0 or int(min_common_joints) < 1 or int(min_views) < 1:
             raise ValueError("epipolar_sigma_px and gate must be > 0, min_common_joints and min_views >= 1")
         if not margin >= 0:
@@ -69,7 +84,11 @@ class FeetEpipolarMatcher:
         self.missing_feet_cost = None if missing_feet_cost is None else float(missing_feet_cost)
         self.feet = FeetMatcher(min_views=min_views, **feet)
         self.epipolar_sigma_px, self.gate, self.margin = float(epipolar_sigma_px), float(gate), float(margin)
-        self.min_score, self.min_common_joints, self.min_views = float(min_score), int(min_common_joints), int(min_views)
+        self.min_score, self.min_common_joints, self.min_views = (
+            float(min_score),
+            int(min_common_joints),
+            int(min_views),
+        )
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()
 
@@ -80,8 +99,7 @@ class FeetEpipolarMatcher:
 
         def cost(a: int, b: int) -> np.ndarray:
             feet = self.feet.pair_cost(feats[a], feats[b], rig[a])
-            epi = epipolar_affinity(*joints[a], *joints[b], fundamental_matrix(rig[a], rig[b]),
-                                    self.min_common_joints)
+            epi = epipolar_affinity(*joints[a], *joints[b], fundamental_matrix(rig[a], rig[b]), self.min_common_joints)
             missing = ~feats[a].has_p[:, None] | ~feats[b].has_p[None, :]
             return combined_cost(feet, epi, self.epipolar_sigma_px, missing, self.missing_feet_cost)
 
@@ -96,7 +114,7 @@ class FeetEpipolarMatcher:
         for f, (_, ok) in zip(feats, joints):
             enough = ok.sum(axis=1) >= self.min_common_joints
             no_feet = ~f.has_p if self.missing_feet_cost is None else np.zeros(len(f), dtype=bool)
-            reasons.update(str(r) for r in f.reason[no_feet] if r)      # feet required and missing
+            reasons.update(str(r) for r in f.reason[no_feet] if r)  # feet required and missing
             reasons[TOO_FEW_JOINTS] += int(np.sum(~no_feet & ~enough))
             usable += int(np.sum(~no_feet & enough))
         reasons[NO_COUNTERPART] = usable - int(np.sum(assignment >= 0))

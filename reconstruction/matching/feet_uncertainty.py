@@ -10,6 +10,7 @@ differences, so the covariance holds in distorted pixels. The location cost betw
 the distance in standard deviations ``sqrt(dp^T (S_a + S_b + s0^2 I)^-1 dp)``, s0 a floor in metres
 for what the model leaves out (foot size, joints above the ground, calibration).
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -19,7 +20,7 @@ import numpy as np
 from data.geometry.camera import Camera, apply_homography
 
 _DIFF_STEP_PX = 0.5  # central-difference step of the undistortion Jacobian
-_TINY = 1e-12        # relative size under which a homography's H[2, 2] counts as 0
+_TINY = 1e-12  # relative size under which a homography's H[2, 2] counts as 0
 
 
 def normalized(H: np.ndarray) -> np.ndarray:
@@ -69,13 +70,17 @@ def undistortion_jacobian(camera: Camera, uv: np.ndarray) -> np.ndarray:
     eye = np.broadcast_to(np.eye(2), uv.shape[:-1] + (2, 2))
     if not camera.has_distortion or uv.size == 0:
         return eye.copy()
-    cols = [(camera.undistort_points(uv + _DIFF_STEP_PX * e) - camera.undistort_points(uv - _DIFF_STEP_PX * e))
-            / (2 * _DIFF_STEP_PX) for e in np.eye(2)]
+    cols = [
+        (camera.undistort_points(uv + _DIFF_STEP_PX * e) - camera.undistort_points(uv - _DIFF_STEP_PX * e))
+        / (2 * _DIFF_STEP_PX)
+        for e in np.eye(2)
+    ]
     return np.stack(cols, axis=-1)
 
 
-def joints_on_planes(camera: Camera, uv: np.ndarray, heights: np.ndarray,
-                     sigma_px: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def joints_on_planes(
+    camera: Camera, uv: np.ndarray, heights: np.ndarray, sigma_px: float | np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Distorted pixels (N, K, 2) of joints at heights (K,) m -> plane (X, Y) (N, K, 2), depth (N, K)
     of that 3D point in the camera, and the (X, Y) covariance (N, K, 2, 2) if sigma_px (scalar or
     (N, K) px) is given. Joints at the height of the camera's centre get NaN (no point on that plane);
@@ -109,8 +114,9 @@ def joint_sigmas(score: np.ndarray, sigma_px: float, score_power: float = 0.0) -
     return float(sigma_px) * score ** -float(score_power)
 
 
-def location_covariance(cov_left: np.ndarray, cov_right: np.ndarray, has_left: np.ndarray,
-                        has_right: np.ndarray) -> np.ndarray:
+def location_covariance(
+    cov_left: np.ndarray, cov_right: np.ndarray, has_left: np.ndarray, has_right: np.ndarray
+) -> np.ndarray:
     """Covariance of p = mean of the present feet (independent): (N, 2, 2) x2, (N,) x2 -> (N, 2, 2)."""
     both = (np.asarray(has_left) & np.asarray(has_right))[:, None, None]
     cl = np.where(np.asarray(has_left)[:, None, None], cov_left, 0.0)
@@ -121,11 +127,12 @@ def location_covariance(cov_left: np.ndarray, cov_right: np.ndarray, has_left: n
 def mean_covariance(cov: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Covariance of the mean of the valid points (independent): (N, K, 2, 2), (N, K) -> (N, 2, 2)."""
     n = np.maximum(np.asarray(valid).sum(axis=1), 1)
-    return np.where(valid[..., None, None], cov, 0.0).sum(axis=1) / (n ** 2)[:, None, None]
+    return np.where(valid[..., None, None], cov, 0.0).sum(axis=1) / (n**2)[:, None, None]
 
 
-def mahalanobis_distances(pa: np.ndarray, pb: np.ndarray, cov_a: np.ndarray, cov_b: np.ndarray,
-                          floor_m: float = 0.05) -> np.ndarray:
+def mahalanobis_distances(
+    pa: np.ndarray, pb: np.ndarray, cov_a: np.ndarray, cov_b: np.ndarray, floor_m: float = 0.05
+) -> np.ndarray:
     """sqrt(dp^T (S_a + S_b + floor^2 I)^-1 dp) for all pairs: (Na, 2), (Nb, 2), (Na, 2, 2), (Nb, 2, 2)
     -> (Na, Nb) distances in standard deviations."""
     pa, pb = np.asarray(pa, dtype=np.float64), np.asarray(pb, dtype=np.float64)

@@ -5,6 +5,7 @@ A matcher scores the detections of every view pair (l < m), solves each pair wit
 with :func:`merge_edges`, which resolves cross-view conflicts giving priority to cheaper edges
 (paper Sec. 3.2, "Solver").
 """
+
 from __future__ import annotations
 
 from itertools import combinations
@@ -59,7 +60,7 @@ def swap_regret(cost: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndar
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
     if len(rows) == 0:
         return np.zeros(0)
-    sub = cost[np.ix_(rows, cols)]                    # (K, K): sub[k, l] = cost(rows[k], cols[l])
+    sub = cost[np.ix_(rows, cols)]  # (K, K): sub[k, l] = cost(rows[k], cols[l])
     own = np.diag(sub).copy()
     swap = sub + sub.T - own[:, None] - own[None, :]
     np.fill_diagonal(swap, np.inf)
@@ -73,14 +74,14 @@ def swap_regret(cost: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndar
     return regret
 
 
-def pair_edges(view_a: int, view_b: int, rows: np.ndarray, cols: np.ndarray,
-               cost: np.ndarray) -> np.ndarray:
+def pair_edges(view_a: int, view_b: int, rows: np.ndarray, cols: np.ndarray, cost: np.ndarray) -> np.ndarray:
     """Edges of one solved view pair: rows (K,), cols (K,), cost (Na, Nb) -> (K, 5) see EDGE_COLUMNS."""
     rows = np.asarray(rows, dtype=np.int64)
     cols = np.asarray(cols, dtype=np.int64)
     k = len(rows)
-    return np.column_stack([np.full(k, view_a), rows, np.full(k, view_b), cols,
-                            np.asarray(cost, dtype=np.float64)[rows, cols]]).astype(np.float64)
+    return np.column_stack(
+        [np.full(k, view_a), rows, np.full(k, view_b), cols, np.asarray(cost, dtype=np.float64)[rows, cols]]
+    ).astype(np.float64)
 
 
 class _Components:
@@ -147,8 +148,9 @@ def merge_edges(edges: np.ndarray, num_detections: list[int], min_views: int = 2
     return _components_to_assignment(comps, view_of, offsets, min_views)
 
 
-def _components_to_assignment(comps: _Components, view_of: np.ndarray, offsets: np.ndarray,
-                              min_views: int) -> np.ndarray:
+def _components_to_assignment(
+    comps: _Components, view_of: np.ndarray, offsets: np.ndarray, min_views: int
+) -> np.ndarray:
     """(P, V) rows of the components with >= min_views views, by smallest global index."""
     V = len(offsets) - 1
     rows: dict[int, np.ndarray] = {}
@@ -161,8 +163,9 @@ def _components_to_assignment(comps: _Components, view_of: np.ndarray, offsets: 
     return np.stack(kept) if kept else np.zeros((0, V), dtype=np.int64)
 
 
-def match_pairs(pair_cost: PairCost, num_detections: list[int], gate: float, min_views: int,
-                margin: float = 0.0) -> np.ndarray:
+def match_pairs(
+    pair_cost: PairCost, num_detections: list[int], gate: float, min_views: int, margin: float = 0.0
+) -> np.ndarray:
     """Gated assignment of every view pair (a < b), then the cheapest-first merge: -> (P, V).
 
     ``pair_cost(a, b)`` returns the (N_a, N_b) cost of the view pair, +inf where not allowed;

@@ -1,10 +1,11 @@
 """The oracle matcher: detections grouped by their ground-truth identity (the ablations' upper bound)."""
+
 from __future__ import annotations
 
 import numpy as np
 
-from data.multiview import ViewDetections
 from data.geometry.camera import Rig
+from data.multiview import ViewDetections
 from reconstruction.matching.assignment import assignment_from_labels
 
 
@@ -17,6 +18,8 @@ class OracleMatcher:
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
         if sum(len(v) for v in views) and all(np.all(v.person_ids < 0) for v in views):
-            raise ValueError("matching=oracle needs ground-truth identities (person_ids), "
-                             "and this dataset has none; choose another matcher")
+            raise ValueError(
+                "matching=oracle needs ground-truth identities (person_ids), "
+                "and this dataset has none; choose another matcher"
+            )
         return assignment_from_labels([v.person_ids for v in views], self.min_views)

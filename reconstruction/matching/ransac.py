@@ -35,15 +35,16 @@ with fewer than ``min_common_joints`` of them the pair costs +inf:
 Cost: (Na, Nb, iterations, 23) float32 arrays per view pair; about 0.15 s per frame for 20 people
 and 0.5-0.8 s for 50 people in 5 views with the defaults, on one CPU core.
 """
+
 from __future__ import annotations
 
 from collections import Counter
 
 import numpy as np
 
+from data.geometry.camera import Camera, Rig
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
-from data.geometry.camera import Camera, Rig
 from reconstruction.matching.epipolar import undistorted_joints, unmatched_counts
 from reconstruction.matching.merge import match_pairs
 
@@ -73,19 +74,20 @@ def world_rays(uv: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     return np.where(ok[..., None], rays / np.where(ok, along, 1.0)[..., None], 0.0), ok
 
 
-def midpoint_depths(rays_a: np.ndarray, rays_b: np.ndarray, center_a: np.ndarray,
-                    center_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def midpoint_depths(
+    rays_a: np.ndarray, rays_b: np.ndarray, center_a: np.ndarray, center_b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Depths of the closest points of two rays: (Na, J, 3), (Nb, J, 3), (3,), (3,) -> lam_a, lam_b (Na, Nb, J).
 
     NaN where the rays are (nearly) parallel.
     """
     w = center_a - center_b
-    aa = np.sum(rays_a ** 2, axis=-1)[:, None]              # (Na, 1, J)
-    cc = np.sum(rays_b ** 2, axis=-1)[None]                 # (1, Nb, J)
-    bb = np.einsum("ajk,bjk->abj", rays_a, rays_b)          # (Na, Nb, J)
+    aa = np.sum(rays_a**2, axis=-1)[:, None]  # (Na, 1, J)
+    cc = np.sum(rays_b**2, axis=-1)[None]  # (1, Nb, J)
+    bb = np.einsum("ajk,bjk->abj", rays_a, rays_b)  # (Na, Nb, J)
     dd = (rays_a @ w)[:, None]
     ee = (rays_b @ w)[None]
-    denom = aa * cc - bb ** 2
+    denom = aa * cc - bb**2
     ok = denom > 1e-12 * aa * cc
     safe = np.where(ok, denom, 1.0)
     lam_a = np.where(ok, (bb * ee - cc * dd) / safe, np.nan)
@@ -98,12 +100,13 @@ def sample_masks(common: np.ndarray, keys: np.ndarray, sample_size: int) -> np.n
     key = np.where(common[:, :, None, :], keys[None, None], np.inf)
     if sample_size > key.shape[-1]:
         return np.zeros(key.shape, dtype=bool)
-    kth = np.partition(key, sample_size - 1, axis=-1)[..., sample_size - 1:sample_size]
+    kth = np.partition(key, sample_size - 1, axis=-1)[..., sample_size - 1 : sample_size]
     return (key <= kth) & np.isfinite(key)
 
 
-def transfer_errors(depth: np.ndarray, rays_from: np.ndarray, center_from: np.ndarray, camera_to: Camera,
-                    uv_to: np.ndarray) -> np.ndarray:
+def transfer_errors(
+    depth: np.ndarray, rays_from: np.ndarray, center_from: np.ndarray, camera_to: Camera, uv_to: np.ndarray
+) -> np.ndarray:
     """Pixel error of joints moved along their rays to a depth and projected into another camera.
 
     depth (Na, Nb, T); rays_from (world, unit depth) broadcastable to (Na, Nb, 1, J, 3) and uv_to (the
@@ -112,8 +115,8 @@ def transfer_errors(depth: np.ndarray, rays_from: np.ndarray, center_from: np.nd
     float32 (pixel errors good to about 1e-3 px) because this is the matcher's inner loop.
     """
     P = camera_to.P
-    origin = (P @ np.append(center_from, 1.0)).astype(np.float32)            # image of the ray origin (3,)
-    q = (rays_from @ P[:, :3].T).astype(np.float32)                           # image of the ray direction
+    origin = (P @ np.append(center_from, 1.0)).astype(np.float32)  # image of the ray origin (3,)
+    q = (rays_from @ P[:, :3].T).astype(np.float32)  # image of the ray direction
     uv_to = np.asarray(uv_to, dtype=np.float32)
     d = depth.astype(np.float32)[..., None]
     hz = origin[2] + d * q[..., 2]
@@ -132,9 +135,17 @@ class RansacMatcher:
     ``last_unmatched_reasons`` (last frame) and ``unmatched_reasons`` (all frames since construction).
     """
 
-    def __init__(self, min_score: float = 0.2, min_common_joints: int = 3, sample_size: int = 2,
-                 iterations: int = 20, inlier_px: float = 40.0, gate: float = 0.5, seed: int = 0,
-                 min_views: int = 2) -> None:
+    def __init__(
+        self,
+        min_score: float = 0.2,
+        min_common_joints: int = 3,
+        sample_size: int = 2,
+        iterations: int = 20,
+        inlier_px: float = 40.0,
+        gate: float = 0.5,
+        seed: int = 0,
+        min_views: int = 2,
+    ) -> None:
         if int(sample_size) < 1 or int(iterations) < 1 or int(min_views) < 1:
             raise ValueError("sample_size, iterations and min_views must be >= 1")
         if int(min_common_joints) < int(sample_size):
@@ -152,15 +163,23 @@ class RansacMatcher:
         """The random joint orders of one call, as sort keys: -> (iterations, J)."""
         return np.random.default_rng(self.seed).random((self.iterations, num_joints))
 
-    def pair_cost(self, uv_a: np.ndarray, ok_a: np.ndarray, uv_b: np.ndarray, ok_b: np.ndarray,
-                  camera_a: Camera, camera_b: Camera, keys: np.ndarray) -> np.ndarray:
+    def pair_cost(
+        self,
+        uv_a: np.ndarray,
+        ok_a: np.ndarray,
+        uv_b: np.ndarray,
+        ok_b: np.ndarray,
+        camera_a: Camera,
+        camera_b: Camera,
+        keys: np.ndarray,
+    ) -> np.ndarray:
         """MSAC cost of every candidate pair: (Na, J, 2), (Na, J), (Nb, J, 2), (Nb, J), keys (T, J) -> (Na, Nb)."""
         (rays_a, fwd_a), (rays_b, fwd_b) = world_rays(uv_a, camera_a), world_rays(uv_b, camera_b)
         lam_a, lam_b = midpoint_depths(rays_a, rays_b, camera_a.center, camera_b.center)
         common = (ok_a & fwd_a)[:, None] & (ok_b & fwd_b)[None] & np.isfinite(lam_a)
         count = common.sum(axis=-1)
         sample = sample_masks(common, keys, self.sample_size)
-        depth_a = np.where(sample, lam_a[:, :, None], 0.0).sum(-1) / self.sample_size    # (Na, Nb, T)
+        depth_a = np.where(sample, lam_a[:, :, None], 0.0).sum(-1) / self.sample_size  # (Na, Nb, T)
         depth_b = np.where(sample, lam_b[:, :, None], 0.0).sum(-1) / self.sample_size
         valid = (depth_a > 0) & (depth_b > 0) & (sample.sum(-1) == self.sample_size)
         a_to_b = transfer_errors(depth_a, rays_a[:, None, None], camera_a.center, camera_b, uv_b[None, :, None])

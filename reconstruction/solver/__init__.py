@@ -8,7 +8,7 @@ path), ``pose_init`` (the starting poses), ``person_prior`` (bone-length prior),
 (left/right swap repair). Layer 3: may import ``data`` (layers 1-2) and the other stages' lower helpers,
 never ``evaluation`` or the entry points.
 """
-from reconstruction.solver.map_solver import (MAPReconstruction, MLEMAPReconstruction, MLEReconstruction,
-                                              solve_poses)
+
+from reconstruction.solver.map_solver import MAPReconstruction, MLEMAPReconstruction, MLEReconstruction, solve_poses
 
 __all__ = ["MAPReconstruction", "MLEMAPReconstruction", "MLEReconstruction", "solve_poses"]

@@ -6,6 +6,7 @@ eliminates the joints of all persons at once in the order of an :func:`eliminati
 many persons: a handful of vectorised 3x3 operations per level). Both report, per person and joint
 block, whether the system was positive definite.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -33,11 +34,12 @@ def graph_components(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> tup
 
 def spd_solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     """Cholesky solve of a symmetric (n, n) system: -> x (n,), whether A was positive definite."""
-    _, x, info = lapack.dposv(A.T, b, overwrite_a=1)    # symmetric: A.T is F-ordered, no copy; A is scratch
+    _, x, info = lapack.dposv(A.T, b, overwrite_a=1)  # symmetric: A.T is F-ordered, no copy; A is scratch
     return x, info == 0
 
 
-_DIAG3 = (np.arange(3), np.arange(3))                 # the diagonal entries of blocks stored first
+_DIAG3 = (np.arange(3), np.arange(3))  # the diagonal entries of blocks stored first
+
 
 @dataclass(frozen=True)
 class Level:
@@ -49,16 +51,16 @@ class Level:
     by -L_ai A_ic with L_ai = A_ai A_ii^-1.
     """
 
-    pivots: np.ndarray        # (k,) joints
-    pair_pivot: np.ndarray    # (m,) position in pivots of each pair's pivot
-    pair_joint: np.ndarray    # (m,) the neighbour a
-    pair_block: np.ndarray    # (m,) block (a, i)
-    pair_sum: np.ndarray | None   # (k, m) 1 where pair belongs to pivot (sums L^T x per pivot); None: one each
-    joint_targets: np.ndarray     # (u,) distinct neighbours
+    pivots: np.ndarray  # (k,) joints
+    pair_pivot: np.ndarray  # (m,) position in pivots of each pair's pivot
+    pair_joint: np.ndarray  # (m,) the neighbour a
+    pair_block: np.ndarray  # (m,) block (a, i)
+    pair_sum: np.ndarray | None  # (k, m) 1 where pair belongs to pivot (sums L^T x per pivot); None: one each
+    joint_targets: np.ndarray  # (u,) distinct neighbours
     joint_sum: np.ndarray | None  # (u, m) 1 where pair has that neighbour (sums rhs updates); None: one each
-    tri_pair: np.ndarray          # (t,) pair (i, a) of each triple
-    tri_block: np.ndarray         # (t,) block (i, c)
-    block_targets: np.ndarray     # (v,) distinct blocks (a, c) updated
+    tri_pair: np.ndarray  # (t,) pair (i, a) of each triple
+    tri_block: np.ndarray  # (t,) block (i, c)
+    block_targets: np.ndarray  # (v,) distinct blocks (a, c) updated
     block_sum: np.ndarray | None  # (v, t) 1 where triple updates that block; None: one each
 
 
@@ -87,7 +89,7 @@ def elimination_plan(num_joints: int, edges: tuple[tuple[int, int], ...]) -> Eli
     """
     adj: list[set[int]] = [set() for _ in range(num_joints)]
     E = len(edges)
-    block: dict[tuple[int, int], int] = {}     # diagonal blocks, edges (a, b), edges (b, a), then fill-in
+    block: dict[tuple[int, int], int] = {}  # diagonal blocks, edges (a, b), edges (b, a), then fill-in
     for e, (a, b) in enumerate(edges):
         block[(int(a), int(b))], block[(int(b), int(a))] = num_joints + e, num_joints + E + e
         adj[a].add(int(b))
@@ -132,12 +134,19 @@ def _level(chosen: list[int], pairs: list, triples: list, block: dict) -> Level:
     targets = [block[(pairs[p][2], c)] if pairs[p][2] != c else c for p, _, c in triples]
     joints, joint_of = np.unique(pair_joint, return_inverse=True)
     blocks, block_of = np.unique(np.array(targets, dtype=np.int64), return_inverse=True)
-    return Level(np.array(chosen, dtype=np.int64), np.array([k for k, _, _ in pairs], dtype=np.int64), pair_joint,
-                 np.array([block[(a, i)] for _, i, a in pairs], dtype=np.int64),
-                 _indicator(np.array([k for k, _, _ in pairs], dtype=np.int64), len(chosen)), joints,
-                 _indicator(joint_of, len(joints)), np.array([p for p, _, _ in triples], dtype=np.int64),
-                 np.array([block[(i, c)] for _, i, c in triples], dtype=np.int64), blocks,
-                 _indicator(block_of, len(blocks)))
+    return Level(
+        np.array(chosen, dtype=np.int64),
+        np.array([k for k, _, _ in pairs], dtype=np.int64),
+        pair_joint,
+        np.array([block[(a, i)] for _, i, a in pairs], dtype=np.int64),
+        _indicator(np.array([k for k, _, _ in pairs], dtype=np.int64), len(chosen)),
+        joints,
+        _indicator(joint_of, len(joints)),
+        np.array([p for p, _, _ in triples], dtype=np.int64),
+        np.array([block[(i, c)] for _, i, c in triples], dtype=np.int64),
+        blocks,
+        _indicator(block_of, len(blocks)),
+    )
 
 
 def _indicator(rows: np.ndarray, n: int) -> np.ndarray | None:
@@ -149,8 +158,14 @@ def _indicator(rows: np.ndarray, n: int) -> np.ndarray | None:
     return out
 
 
-def solve_blocks(plan: EliminationPlan, diag: np.ndarray, off: np.ndarray, rhs: np.ndarray,
-                 damping: np.ndarray | None = None, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def solve_blocks(
+    plan: EliminationPlan,
+    diag: np.ndarray,
+    off: np.ndarray,
+    rhs: np.ndarray,
+    damping: np.ndarray | None = None,
+    check: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
     """Solve b block-sparse symmetric systems by block elimination -> x (3, J, b), pivots positive definite (J, b).
 
     Batch last: diag (3, 3, J, b) diagonal blocks, plus damping (J, b) times I if given; off
@@ -164,9 +179,9 @@ def solve_blocks(plan: EliminationPlan, diag: np.ndarray, off: np.ndarray, rhs: 
     blk[:, :, :J] = diag
     if damping is not None:
         blk[_DIAG3[0], _DIAG3[1], :J] += damping
-    blk[:, :, J:J + E] = off
-    blk[:, :, J + E:J + 2 * E] = off.transpose(1, 0, 2, 3)
-    blk[:, :, J + 2 * E:] = 0.0
+    blk[:, :, J : J + E] = off
+    blk[:, :, J + E : J + 2 * E] = off.transpose(1, 0, 2, 3)
+    blk[:, :, J + 2 * E :] = 0.0
     r = rhs.copy()
     pd = np.ones((J, b), dtype=bool)
     factors = []
@@ -176,15 +191,15 @@ def solve_blocks(plan: EliminationPlan, diag: np.ndarray, off: np.ndarray, rhs: 
             pd[lv.pivots] = ok
         L = None
         if len(lv.pair_joint):
-            L = _mul(blk[:, :, lv.pair_block], inv[:, :, lv.pair_pivot])                 # L_ai = A_ai A_ii^-1
+            L = _mul(blk[:, :, lv.pair_block], inv[:, :, lv.pair_pivot])  # L_ai = A_ai A_ii^-1
             update = _mul(L[:, :, lv.tri_pair], blk[:, :, lv.tri_block])
             blk[:, :, lv.block_targets] -= _sum_rows(lv.block_sum, update)
-            rhs_update = np.einsum("ijmb,jmb->imb", L, r[:, lv.pivots[lv.pair_pivot]])     # L_ai r_i
+            rhs_update = np.einsum("ijmb,jmb->imb", L, r[:, lv.pivots[lv.pair_pivot]])  # L_ai r_i
             r[:, lv.joint_targets] -= _sum_rows(lv.joint_sum, rhs_update)
         factors.append((inv, L))
     x = np.zeros((3, J, b))
     for lv, (inv, L) in zip(reversed(plan.levels), reversed(factors)):
-        y = np.einsum("ijkb,jkb->ikb", inv, r[:, lv.pivots])                               # A_ii^-1 r_i
+        y = np.einsum("ijkb,jkb->ikb", inv, r[:, lv.pivots])  # A_ii^-1 r_i
         if L is not None:
             y -= _sum_rows(lv.pair_sum, np.einsum("ijmb,imb->jmb", L, x[:, lv.pair_joint]))  # - sum_a L_ai^T x_a
         x[:, lv.pivots] = y
@@ -203,8 +218,15 @@ def _mul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return np.einsum("ij...,jk...->ik...", A, B)
 
 
-def solve_dense(diag: np.ndarray, off: np.ndarray, edges: np.ndarray, rhs: np.ndarray, ranges: list[tuple[int, int]],
-                run: np.ndarray, damping: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def solve_dense(
+    diag: np.ndarray,
+    off: np.ndarray,
+    edges: np.ndarray,
+    rhs: np.ndarray,
+    ranges: list[tuple[int, int]],
+    run: np.ndarray,
+    damping: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Solve the same systems as :func:`solve_blocks` by assembling each component densely -> x (3, J, b), pd (b, C).
 
     ranges[c] = (first, end) joints of component c (contiguous, no edge between components); run
@@ -220,7 +242,7 @@ def solve_dense(diag: np.ndarray, off: np.ndarray, edges: np.ndarray, rhs: np.nd
         if damping is not None:
             D = D.copy()
             D[_DIAG3] += damping[s:e, rows]
-        if e - s == 1:                                  # a joint without bones: vectorised 3x3 solve
+        if e - s == 1:  # a joint without bones: vectorised 3x3 solve
             inv, pd[rows, c] = inverse_3x3(D[:, :, 0])
             x[rows, s] = np.einsum("ijb,jb->bi", inv, rhs[:, s, rows])
             continue

@@ -6,6 +6,7 @@ tests), but each one in compiled loops, so its time is arithmetic rather than nu
 a few tens of microseconds per person. The plan (elimination order, fill-in, block storage) is built
 once per bone graph and cached.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -13,10 +14,10 @@ from functools import lru_cache
 
 import numpy as np
 
+from reconstruction.solver import pose_kernels
 from reconstruction.solver.block_solver import graph_components
 from reconstruction.solver.lm_solver import LMResult
 from reconstruction.solver.map_estimation import PoseProblem
-from reconstruction.solver import pose_kernels
 
 
 @dataclass(frozen=True)
@@ -27,17 +28,17 @@ class SolverPlan:
     first (leaves, then chains), which keeps the fill-in of the COCO-23 skeleton to a few blocks.
     """
 
-    pos_joint: np.ndarray        # (J,) joint at each position
-    comp_start: np.ndarray       # (C + 1,) first position of each component, then J
-    comp_bones_ptr: np.ndarray   # (C + 1,) CSR of the bones of each component
+    pos_joint: np.ndarray  # (J,) joint at each position
+    comp_start: np.ndarray  # (C + 1,) first position of each component, then J
+    comp_bones_ptr: np.ndarray  # (C + 1,) CSR of the bones of each component
     comp_bones: np.ndarray
-    comp_slots_ptr: np.ndarray   # (C + 1,) CSR of the block storage indices of each component
+    comp_slots_ptr: np.ndarray  # (C + 1,) CSR of the block storage indices of each component
     comp_slots: np.ndarray
-    bone_pa: np.ndarray          # (L,) positions of each bone's ends
+    bone_pa: np.ndarray  # (L,) positions of each bone's ends
     bone_pb: np.ndarray
-    bone_slot: np.ndarray        # (L,) storage index of each bone's off-diagonal block
-    slot: np.ndarray             # (J, J) storage index of block (i, j), i >= j, -1 where structurally zero
-    later_ptr: np.ndarray        # (J + 1,) CSR of the positions i > k with a block (i, k)
+    bone_slot: np.ndarray  # (L,) storage index of each bone's off-diagonal block
+    slot: np.ndarray  # (J, J) storage index of block (i, j), i >= j, -1 where structurally zero
+    later_ptr: np.ndarray  # (J + 1,) CSR of the positions i > k with a block (i, k)
     later_idx: np.ndarray
 
 
@@ -90,10 +91,20 @@ def solver_plan(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> SolverPl
     bone_comp = comp_of[pa] if len(pairs) else np.zeros(0, dtype=np.int64)
     bones = np.argsort(bone_comp, kind="stable").astype(np.int64)
     as_int = lambda a: np.asarray(a, dtype=np.int64)  # noqa: E731
-    return SolverPlan(as_int(pos_joint), as_int(comp_start),
-                      as_int(np.searchsorted(bone_comp[bones], np.arange(len(comps) + 1))), bones,
-                      as_int(comp_slots_ptr), as_int(comp_slots), pa, pb,
-                      slot[np.maximum(pa, pb), np.minimum(pa, pb)], slot, as_int(later_ptr), as_int(later_idx))
+    return SolverPlan(
+        as_int(pos_joint),
+        as_int(comp_start),
+        as_int(np.searchsorted(bone_comp[bones], np.arange(len(comps) + 1))),
+        bones,
+        as_int(comp_slots_ptr),
+        as_int(comp_slots),
+        pa,
+        pb,
+        slot[np.maximum(pa, pb), np.minimum(pa, pb)],
+        slot,
+        as_int(later_ptr),
+        as_int(later_idx),
+    )
 
 
 def person_bones(problem: PoseProblem, on: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
@@ -104,8 +115,15 @@ def person_bones(problem: PoseProblem, on: np.ndarray, P: int) -> tuple[np.ndarr
     return np.ascontiguousarray(ref), np.ascontiguousarray(weight)
 
 
-def solve_poses_compiled(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, xtol: float = 1e-6,
-                         ftol: float = 1e-10, gtol: float = 1e-10, tau: float = 1e-3) -> tuple[np.ndarray, LMResult]:
+def solve_poses_compiled(
+    problem: PoseProblem,
+    X0: np.ndarray,
+    max_iterations: int = 15,
+    xtol: float = 1e-6,
+    ftol: float = 1e-10,
+    gtol: float = 1e-10,
+    tau: float = 1e-3,
+) -> tuple[np.ndarray, LMResult]:
     """Minimise the problem's cost from X0 (P, J, 3) -> (P, J, 3) and the LMResult of the (P, C) problems.
 
     Bones of weight 0 for every person are dropped (they would only join components); bone_ref and
@@ -122,12 +140,34 @@ def solve_poses_compiled(problem: PoseProblem, X0: np.ndarray, max_iterations: i
     status = np.zeros((P, C), dtype=np.int64)
     if P:
         pose_kernels.solve_all(
-            X, np.ascontiguousarray(problem.proj, dtype=np.float64), np.ascontiguousarray(problem.uv, dtype=np.float64),
+            X,
+            np.ascontiguousarray(problem.proj, dtype=np.float64),
+            np.ascontiguousarray(problem.uv, dtype=np.float64),
             np.ascontiguousarray(problem.inv_sigma, dtype=np.float64),
-            np.ascontiguousarray(problem.anchor, dtype=np.float64), float(problem.anchor_weight) ** 2,
-            pose_kernels.ROBUST_CODES[problem.robust], float(problem.robust_scale) ** 2,
+            np.ascontiguousarray(problem.anchor, dtype=np.float64),
+            float(problem.anchor_weight) ** 2,
+            pose_kernels.ROBUST_CODES[problem.robust],
+            float(problem.robust_scale) ** 2,
             *person_bones(problem, on, P),
-            plan.pos_joint, plan.comp_start, plan.comp_bones_ptr, plan.comp_bones, plan.comp_slots_ptr,
-            plan.comp_slots, plan.bone_pa, plan.bone_pb, plan.bone_slot, plan.slot, plan.later_ptr, plan.later_idx,
-            int(max_iterations), float(xtol), float(ftol), float(gtol), float(tau), cost, iterations, status)
+            plan.pos_joint,
+            plan.comp_start,
+            plan.comp_bones_ptr,
+            plan.comp_bones,
+            plan.comp_slots_ptr,
+            plan.comp_slots,
+            plan.bone_pa,
+            plan.bone_pb,
+            plan.bone_slot,
+            plan.slot,
+            plan.later_ptr,
+            plan.later_idx,
+            int(max_iterations),
+            float(xtol),
+            float(ftol),
+            float(gtol),
+            float(tau),
+            cost,
+            iterations,
+            status,
+        )
     return X, LMResult(X.reshape(P, 3 * J), cost, iterations, status)

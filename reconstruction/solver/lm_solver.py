@@ -25,6 +25,7 @@ The linear systems of 3D poses are block-sparse (3x3 blocks per joint, coupled a
 reconstruction/solver/block_solver.py solves them: densely per person for a few persons, by a batched
 block elimination for many.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
@@ -40,7 +41,7 @@ CostFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 # Status codes per problem.
 RUNNING, CONVERGED_STEP, CONVERGED_COST, CONVERGED_GRADIENT, STALLED, MAX_ITERATIONS = 0, 1, 2, 3, 4, 5
 MAX_DAMPING = 1e16  # relative to max diag(H): no step can reduce the cost any more
-SWITCH_RHO = 0.25   # gain ratio of an accepted safe step after which the exact model is used
+SWITCH_RHO = 0.25  # gain ratio of an accepted safe step after which the exact model is used
 MIN_DAMPING_FACTOR = 1.0 / 3.0  # Nielsen: an accepted step shrinks mu by at most this factor
 COMPRESS_BELOW = 0.8  # drop the stopped units when at most this share of the batch runs (else keep stepping 0)
 
@@ -103,8 +104,15 @@ class _State:
         return _State(*(getattr(self, f.name)[keep] for f in fields(self)))
 
 
-def minimize(x0: np.ndarray, model: Model, max_iterations: int = 50, xtol: float = 1e-6, ftol: float = 1e-10,
-             gtol: float = 1e-10, tau: float = 1e-3) -> LMResult:
+def minimize(
+    x0: np.ndarray,
+    model: Model,
+    max_iterations: int = 50,
+    xtol: float = 1e-6,
+    ftol: float = 1e-10,
+    gtol: float = 1e-10,
+    tau: float = 1e-3,
+) -> LMResult:
     """Minimise the B x C independent costs of a model from x0 (B, N) -> LMResult.
 
     A problem stops when a safe step (accepted or not) has max |h| <= xtol (units of x), when an
@@ -120,10 +128,18 @@ def minimize(x0: np.ndarray, model: Model, max_iterations: int = 50, xtol: float
     scale = model.max_diagonal(lin)
     scale = np.where(scale > 0, scale, 1.0)
     status = np.where(seg.max(np.abs(lin.g)) <= gtol, CONVERGED_GRADIENT, RUNNING)
-    s = _State(x.copy(), np.array(lin.cost, dtype=np.float64), tau * scale, np.full(scale.shape, 2.0), scale,
-               np.zeros(scale.shape, dtype=bool), status, np.zeros(scale.shape, dtype=np.int64))
+    s = _State(
+        x.copy(),
+        np.array(lin.cost, dtype=np.float64),
+        tau * scale,
+        np.full(scale.shape, 2.0),
+        scale,
+        np.zeros(scale.shape, dtype=bool),
+        status,
+        np.zeros(scale.shape, dtype=np.int64),
+    )
     out = _State(x, s.f.copy(), s.mu, s.nu, s.scale, s.exact, s.status.copy(), s.iterations.copy())
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):    # non-finite trials are rejected
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # non-finite trials are rejected
         for _ in range(int(max_iterations)):
             run = s.status == RUNNING
             keep = run.any(axis=1)
@@ -139,19 +155,25 @@ def minimize(x0: np.ndarray, model: Model, max_iterations: int = 50, xtol: float
             trial = model.trial(x_new, act)
             predicted = 0.5 * seg.sum(h * (s.mu[:, seg.comp_of] * h - lin.g))
             actual = s.f - trial.cost
-            h_max = seg.max(np.abs(h))                                                   # NaN if h has a NaN
+            h_max = seg.max(np.abs(h))  # NaN if h has a NaN
             rho = actual / predicted
             ok = run & (predicted > 0) & (rho > 0) & np.isfinite(trial.cost + h_max)
-            s.exact &= ~used                            # a failed exact step is retried with the safe model
+            s.exact &= ~used  # a failed exact step is retried with the safe model
             if ok.any():
                 s.mu = np.where(ok, s.mu * np.maximum(MIN_DAMPING_FACTOR, 1.0 - (2.0 * rho - 1.0) ** 3), s.mu)
                 s.nu[ok] = 2.0
                 s.exact = np.where(ok, (rho >= SWITCH_RHO) & model.has_exact, s.exact)
                 s.x = np.where(ok[:, seg.comp_of], x_new, s.x)
                 lin = model.accept(lin, trial, x_new, act, ok)
-                done = np.where(h_max <= xtol, CONVERGED_STEP,
-                                np.where(actual <= ftol * np.maximum(s.f, 0.0), CONVERGED_COST,
-                                         np.where(seg.max(np.abs(lin.g)) <= gtol, CONVERGED_GRADIENT, RUNNING)))
+                done = np.where(
+                    h_max <= xtol,
+                    CONVERGED_STEP,
+                    np.where(
+                        actual <= ftol * np.maximum(s.f, 0.0),
+                        CONVERGED_COST,
+                        np.where(seg.max(np.abs(lin.g)) <= gtol, CONVERGED_GRADIENT, RUNNING),
+                    ),
+                )
                 s.f = np.where(ok, lin.cost, s.f)
                 s.status = np.where(ok, done, s.status)
             rej = run & ~ok & ~used
@@ -170,9 +192,9 @@ class _Segments:
 
     def __init__(self, starts: np.ndarray, N: int) -> None:
         self.starts = starts
-        self.comp_of = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, N)))   # (N,)
+        self.comp_of = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, N)))  # (N,)
         self.one = len(starts) == 1
-        self.indicator = (self.comp_of[:, None] == np.arange(len(starts))).astype(float)   # (N, C)
+        self.indicator = (self.comp_of[:, None] == np.arange(len(starts))).astype(float)  # (N, C)
 
     def max(self, a: np.ndarray) -> np.ndarray:
         """Max per component."""
@@ -188,8 +210,12 @@ class _Segments:
 def _store(out: _State, s: _State, act: np.ndarray, mask: np.ndarray) -> None:
     """Write the state of the active units where mask (a,) into the full-batch output."""
     idx = act[mask]
-    out.x[idx], out.f[idx], out.status[idx], out.iterations[idx] = \
-        s.x[mask], s.f[mask], s.status[mask], s.iterations[mask]
+    out.x[idx], out.f[idx], out.status[idx], out.iterations[idx] = (
+        s.x[mask],
+        s.f[mask],
+        s.status[mask],
+        s.iterations[mask],
+    )
 
 
 # --- dense callbacks --------------------------------------------------------------------------------
@@ -217,8 +243,12 @@ class DenseModel:
         out = self._linearize(x, idx)
         He = np.asarray(out[3], dtype=np.float64) if len(out) > 3 and out[3] is not None else None
         self.has_exact = np.array([He is not None])
-        return _Dense(np.asarray(out[0], dtype=np.float64)[:, None], np.asarray(out[1], dtype=np.float64),
-                      np.asarray(out[2], dtype=np.float64), He)
+        return _Dense(
+            np.asarray(out[0], dtype=np.float64)[:, None],
+            np.asarray(out[1], dtype=np.float64),
+            np.asarray(out[2], dtype=np.float64),
+            He,
+        )
 
     def trial(self, x: np.ndarray, idx: np.ndarray) -> _Dense:
         """Only the cost of a trial point."""
@@ -258,9 +288,16 @@ class DenseModel:
         return h, used[:, None]
 
 
-def levenberg_marquardt(x0: np.ndarray, linearize: Linearize, cost: CostFn, max_iterations: int = 50,
-                        xtol: float = 1e-6, ftol: float = 1e-10, gtol: float = 1e-10,
-                        tau: float = 1e-3) -> LMResult:
+def levenberg_marquardt(
+    x0: np.ndarray,
+    linearize: Linearize,
+    cost: CostFn,
+    max_iterations: int = 50,
+    xtol: float = 1e-6,
+    ftol: float = 1e-10,
+    gtol: float = 1e-10,
+    tau: float = 1e-3,
+) -> LMResult:
     """Minimise B independent costs from x0 (B, N) given by callbacks over a subset idx of the batch -> LMResult.
 
     ``linearize(x (b, N), idx (b,)) -> (cost (b,), H (b, N, N), g (b, N)[, H_exact (b, N, N) | None])``

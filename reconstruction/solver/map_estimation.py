@@ -21,6 +21,7 @@ uv the projection), that of a bone residual is -/+ w_l u^T on Q_a / Q_b (u the u
 J^T J and J^T r are assembled block by block (3 x 3 per joint and per bone), never as a dense Jacobian;
 the solver's arrays (:class:`PoseBatch`, :class:`Blocks`) keep the persons on their last axis.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
@@ -29,8 +30,8 @@ import numpy as np
 
 ROBUST_LOSSES = ("none", "huber", "cauchy")
 EPS_DEPTH = 1e-6  # m; projections of points behind a camera are clamped to this depth
-BLOCK_DIAG = (np.arange(3), np.arange(3))      # diagonal entries of 3x3 blocks stored first: (3, 3, ...) -> (3, ...)
-_SYM6 = np.array([0, 1, 2, 4, 5, 8])           # the distinct entries of a flat symmetric 3x3 matrix ...
+BLOCK_DIAG = (np.arange(3), np.arange(3))  # diagonal entries of 3x3 blocks stored first: (3, 3, ...) -> (3, ...)
+_SYM6 = np.array([0, 1, 2, 4, 5, 8])  # the distinct entries of a flat symmetric 3x3 matrix ...
 _SYM9 = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # ... and back to all 9
 
 
@@ -38,13 +39,13 @@ _SYM9 = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # ... and back to all 9
 class PoseProblem:
     """The least-squares problem of P persons with J joints each (shapes in the field comments)."""
 
-    proj: np.ndarray          # (V, 3, 4) projection matrices of undistorted pixels
-    uv: np.ndarray            # (V, P, J, 2) observed undistorted pixels (anything where unseen)
-    inv_sigma: np.ndarray     # (V, P, J) 1 / sigma (1/px), 0 where the joint is not seen
-    bone_pairs: np.ndarray    # (L, 2) joint indices of each bone; L may be 0
-    bone_ref: np.ndarray      # (L,) reference lengths (m), or (P, L): one table per person
-    bone_weight: np.ndarray   # (L,) or (P, L) prior_weight / sigma_l (1/m); 0 switches a bone off
-    anchor: np.ndarray        # (P, J, 3) Tikhonov anchor (m)
+    proj: np.ndarray  # (V, 3, 4) projection matrices of undistorted pixels
+    uv: np.ndarray  # (V, P, J, 2) observed undistorted pixels (anything where unseen)
+    inv_sigma: np.ndarray  # (V, P, J) 1 / sigma (1/px), 0 where the joint is not seen
+    bone_pairs: np.ndarray  # (L, 2) joint indices of each bone; L may be 0
+    bone_ref: np.ndarray  # (L,) reference lengths (m), or (P, L): one table per person
+    bone_weight: np.ndarray  # (L,) or (P, L) prior_weight / sigma_l (1/m); 0 switches a bone off
+    anchor: np.ndarray  # (P, J, 3) Tikhonov anchor (m)
     anchor_weight: float = 1e-3
     robust: str = "none"
     robust_scale: float = 3.0
@@ -54,8 +55,9 @@ class PoseProblem:
         if len(idx) == self.inv_sigma.shape[1] and (len(idx) == 0 or idx[-1] == len(idx) - 1):
             return self
         per_person = {k: getattr(self, k)[idx] for k in ("bone_ref", "bone_weight") if np.ndim(getattr(self, k)) == 2}
-        return replace(self, uv=self.uv[:, idx], inv_sigma=self.inv_sigma[:, idx], anchor=self.anchor[idx],
-                       **per_person)
+        return replace(
+            self, uv=self.uv[:, idx], inv_sigma=self.inv_sigma[:, idx], anchor=self.anchor[idx], **per_person
+        )
 
     @property
     def per_person_bones(self) -> bool:
@@ -68,13 +70,20 @@ class PoseProblem:
         new = np.full(self.inv_sigma.shape[2], -1)
         new[idx] = np.arange(len(idx))
         keep = np.all(new[self.bone_pairs] >= 0, axis=1) if len(self.bone_pairs) else np.zeros(0, bool)
-        return replace(self, uv=self.uv[:, :, idx], inv_sigma=self.inv_sigma[:, :, idx], anchor=self.anchor[:, idx],
-                       bone_pairs=new[self.bone_pairs[keep]].reshape(-1, 2), bone_ref=self.bone_ref[keep],
-                       bone_weight=self.bone_weight[keep])
+        return replace(
+            self,
+            uv=self.uv[:, :, idx],
+            inv_sigma=self.inv_sigma[:, :, idx],
+            anchor=self.anchor[:, idx],
+            bone_pairs=new[self.bone_pairs[keep]].reshape(-1, 2),
+            bone_ref=self.bone_ref[keep],
+            bone_weight=self.bone_weight[keep],
+        )
 
 
-def joint_sigma(poses2d: np.ndarray, bboxes: np.ndarray, c: float, sigma_min: float, sigma_px: float = 0.0,
-                score_power: float = 1.0) -> np.ndarray:
+def joint_sigma(
+    poses2d: np.ndarray, bboxes: np.ndarray, c: float, sigma_min: float, sigma_px: float = 0.0, score_power: float = 1.0
+) -> np.ndarray:
     """Pixel SD of every 2D joint, max(sigma_min, sqrt(sigma_px^2 + (c sqrt(w h))^2) / score^score_power):
     (V, P, J, 3), (V, P, 4) -> (V, P, J) (any leading shape).
 
@@ -107,8 +116,11 @@ def robust_rho(z: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray, np.nda
         small = z <= 1.0
         zz = np.where(small, 1.0, z)
         sq = np.sqrt(zz)
-        return (np.where(small, z, 2.0 * sq - 1.0), np.where(small, 1.0, 1.0 / sq),
-                np.where(small, 0.0, -0.5 / (sq * zz)))
+        return (
+            np.where(small, z, 2.0 * sq - 1.0),
+            np.where(small, 1.0, 1.0 / sq),
+            np.where(small, 0.0, -0.5 / (sq * zz)),
+        )
     if kind == "cauchy":
         return np.log1p(z), 1.0 / (1.0 + z), -1.0 / (1.0 + z) ** 2
     raise ValueError(f"robust loss must be one of {ROBUST_LOSSES}, got {kind!r}")
@@ -117,7 +129,7 @@ def robust_rho(z: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray, np.nda
 def _project_xy(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixel x, y and clamped depth of 3D joints in every view: (P, J, 3), (V, 3, 4) -> 3 x (V, P, J)."""
     P, J, _ = X.shape
-    hom = np.matmul(proj[:, :, :3], X.reshape(-1, 3).T) + proj[:, :, 3:]                     # (V, 3, P*J)
+    hom = np.matmul(proj[:, :, :3], X.reshape(-1, 3).T) + proj[:, :, 3:]  # (V, 3, P*J)
     depth = np.maximum(hom[:, 2], EPS_DEPTH)
     shape = (len(proj), P, J)
     return (hom[:, 0] / depth).reshape(shape), (hom[:, 1] / depth).reshape(shape), depth.reshape(shape)
@@ -147,9 +159,9 @@ def residual_vector(X: np.ndarray, problem: PoseProblem) -> np.ndarray:
 
 def _robust_scaling(r: np.ndarray, problem: "PoseProblem | SharedTerms") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Robust cost terms, residual scale and Jacobian scale of raw residuals: (...) -> 3 x (...)."""
-    C2 = problem.robust_scale ** 2
-    rho, d1, d2 = robust_rho(r ** 2 / C2, problem.robust)
-    j_scale = np.sqrt(np.maximum(d1 + 2.0 * d2 * r ** 2 / C2, np.finfo(float).eps))
+    C2 = problem.robust_scale**2
+    rho, d1, d2 = robust_rho(r**2 / C2, problem.robust)
+    j_scale = np.sqrt(np.maximum(d1 + 2.0 * d2 * r**2 / C2, np.finfo(float).eps))
     return C2 * rho, d1 / j_scale, j_scale
 
 
@@ -164,8 +176,9 @@ def cost(X: np.ndarray, problem: PoseProblem) -> np.ndarray:
     else:
         lik = _robust_scaling(r[0], problem)[0] + _robust_scaling(r[1], problem)[0]
     anchor = problem.anchor_weight * (X - problem.anchor)
-    return 0.5 * (lik.sum(axis=(0, 2)) + (_bone_geometry(X, problem)[2] ** 2).sum(axis=1)
-                  + (anchor ** 2).sum(axis=(1, 2)))
+    return 0.5 * (
+        lik.sum(axis=(0, 2)) + (_bone_geometry(X, problem)[2] ** 2).sum(axis=1) + (anchor**2).sum(axis=(1, 2))
+    )
 
 
 @dataclass(frozen=True)
@@ -173,15 +186,15 @@ class SharedTerms:
     """What a batch's persons share: view matrices, bones and loss settings (built once per problem)."""
 
     num_views: int
-    proj_rows: np.ndarray      # (3V, 3) row k of view v's M at k V + v: proj_rows @ X + proj_t = (x, y, z) x V
-    proj_t: np.ndarray         # (3V, 1) the matching translations
-    H_mat: np.ndarray          # (6, 5V) 5 coefficients per view -> the 6 distinct entries of J^T J
-    g_mat: np.ndarray          # (3, 3V) 3 coefficients per view -> J^T r
-    bone_pairs: np.ndarray     # (L, 2)
-    bone_ref: np.ndarray       # (L, 1)
-    bone_weight: np.ndarray    # (L, 1)
-    incidence: np.ndarray      # (J, L) 1 where joint j is an end of bone l
-    signed: np.ndarray         # (J, L) +1 at the first end, -1 at the second
+    proj_rows: np.ndarray  # (3V, 3) row k of view v's M at k V + v: proj_rows @ X + proj_t = (x, y, z) x V
+    proj_t: np.ndarray  # (3V, 1) the matching translations
+    H_mat: np.ndarray  # (6, 5V) 5 coefficients per view -> the 6 distinct entries of J^T J
+    g_mat: np.ndarray  # (3, 3V) 3 coefficients per view -> J^T r
+    bone_pairs: np.ndarray  # (L, 2)
+    bone_ref: np.ndarray  # (L, 1)
+    bone_weight: np.ndarray  # (L, 1)
+    incidence: np.ndarray  # (J, L) 1 where joint j is an end of bone l
+    signed: np.ndarray  # (J, L) +1 at the first end, -1 at the second
     anchor_weight: float
     robust: str
     robust_scale: float
@@ -195,19 +208,29 @@ class SharedTerms:
         outer = lambda a, b: (a[:, :, None] * b[:, None, :]).reshape(V, 9)[:, _SYM6]  # noqa: E731
         # J^T J of view v = sum of 5 coefficients x [M0 M0^T, M1 M1^T, M0 M2^T + M2 M0^T, M1 M2^T + M2 M1^T, M2 M2^T]
         # and J^T r = 3 coefficients x the rows M0, M1, M2 (see _likelihood_terms); column k V + v
-        H_mat = np.stack([outer(m0, m0), outer(m1, m1), outer(m0, m2) + outer(m2, m0), outer(m1, m2) + outer(m2, m1),
-                          outer(m2, m2)])                                                   # (5, V, 6)
+        H_mat = np.stack(
+            [outer(m0, m0), outer(m1, m1), outer(m0, m2) + outer(m2, m0), outer(m1, m2) + outer(m2, m1), outer(m2, m2)]
+        )  # (5, V, 6)
         pairs = np.asarray(problem.bone_pairs, dtype=np.int64).reshape(-1, 2)
         J, L = problem.inv_sigma.shape[2], len(pairs)
         incidence, signed = np.zeros((J, L)), np.zeros((J, L))
         incidence[pairs[:, 0], np.arange(L)] = incidence[pairs[:, 1], np.arange(L)] = 1.0
         signed[pairs[:, 0], np.arange(L)], signed[pairs[:, 1], np.arange(L)] = 1.0, -1.0
-        return cls(V, np.ascontiguousarray(M.transpose(1, 0, 2).reshape(3 * V, 3)),
-                   np.ascontiguousarray(t.T.reshape(3 * V, 1)), np.ascontiguousarray(H_mat.reshape(5 * V, 6).T),
-                   np.ascontiguousarray(M.transpose(2, 1, 0).reshape(3, 3 * V)), pairs,
-                   np.asarray(problem.bone_ref, dtype=np.float64).reshape(L, 1),
-                   np.asarray(problem.bone_weight, dtype=np.float64).reshape(L, 1), incidence, signed,
-                   float(problem.anchor_weight), problem.robust, float(problem.robust_scale))
+        return cls(
+            V,
+            np.ascontiguousarray(M.transpose(1, 0, 2).reshape(3 * V, 3)),
+            np.ascontiguousarray(t.T.reshape(3 * V, 1)),
+            np.ascontiguousarray(H_mat.reshape(5 * V, 6).T),
+            np.ascontiguousarray(M.transpose(2, 1, 0).reshape(3, 3 * V)),
+            pairs,
+            np.asarray(problem.bone_ref, dtype=np.float64).reshape(L, 1),
+            np.asarray(problem.bone_weight, dtype=np.float64).reshape(L, 1),
+            incidence,
+            signed,
+            float(problem.anchor_weight),
+            problem.robust,
+            float(problem.robust_scale),
+        )
 
 
 @dataclass(frozen=True)
@@ -230,10 +253,18 @@ class PoseBatch:
         uv, w = np.asarray(problem.uv, dtype=np.float64), np.asarray(problem.inv_sigma, dtype=np.float64)
         anchor, shared = np.asarray(problem.anchor, dtype=np.float64), SharedTerms.of(problem)
         if per_joint:
-            return cls(uv.transpose(3, 0, 1, 2).reshape(2, V, 1, P * J), w.reshape(V, 1, P * J),
-                       anchor.reshape(P * J, 3).T.reshape(3, 1, P * J), shared)
-        return cls(np.ascontiguousarray(uv.transpose(3, 0, 2, 1)), np.ascontiguousarray(w.transpose(0, 2, 1)),
-                   np.ascontiguousarray(anchor.transpose(2, 1, 0)), shared)
+            return cls(
+                uv.transpose(3, 0, 1, 2).reshape(2, V, 1, P * J),
+                w.reshape(V, 1, P * J),
+                anchor.reshape(P * J, 3).T.reshape(3, 1, P * J),
+                shared,
+            )
+        return cls(
+            np.ascontiguousarray(uv.transpose(3, 0, 2, 1)),
+            np.ascontiguousarray(w.transpose(0, 2, 1)),
+            np.ascontiguousarray(anchor.transpose(2, 1, 0)),
+            shared,
+        )
 
     def take(self, idx: np.ndarray) -> "PoseBatch":
         """The batch of a subset of persons: idx (b,) -> PoseBatch with P = b."""
@@ -244,12 +275,12 @@ class PoseBatch:
 class Blocks:
     """Costs and the normal equations of a batch in 3x3 blocks, batch last (see :func:`linear_blocks`)."""
 
-    joint_cost: np.ndarray    # (J, P) likelihood and anchor cost of each joint
-    bone_cost: np.ndarray     # (L, P) prior cost of each bone
-    g: np.ndarray             # (3, J, P) gradient J^T r
-    diag: np.ndarray          # (3, 3, J, P) diagonal blocks of the safe H
-    K: np.ndarray             # (3, 3, L, P) bone blocks of the safe H: +K on both ends' diagonal blocks, -K between
-    K_rest: np.ndarray        # (3, 3, L, P) exact minus safe bone blocks (0 where the prior is locally convex)
+    joint_cost: np.ndarray  # (J, P) likelihood and anchor cost of each joint
+    bone_cost: np.ndarray  # (L, P) prior cost of each bone
+    g: np.ndarray  # (3, J, P) gradient J^T r
+    diag: np.ndarray  # (3, 3, J, P) diagonal blocks of the safe H
+    K: np.ndarray  # (3, 3, L, P) bone blocks of the safe H: +K on both ends' diagonal blocks, -K between
+    K_rest: np.ndarray  # (3, 3, L, P) exact minus safe bone blocks (0 where the prior is locally convex)
 
     def take(self, idx: np.ndarray) -> "Blocks":
         """The blocks of a subset of the batch (indices or a mask)."""
@@ -269,7 +300,7 @@ def _likelihood_terms(X: np.ndarray, batch: PoseBatch) -> tuple[np.ndarray, np.n
     V, n = sh.num_views, J * P
     hom = (sh.proj_rows @ X.reshape(3, n) + sh.proj_t).reshape(3, V, n)
     inv_depth = 1.0 / np.maximum(hom[2], EPS_DEPTH)
-    p = hom[:2] * inv_depth                                                             # (2, V, n)
+    p = hom[:2] * inv_depth  # (2, V, n)
     w = batch.w.reshape(V, n)
     r = (batch.uv.reshape(2, V, n) - p) * w
     s = w * inv_depth
@@ -290,11 +321,14 @@ def _likelihood_terms(X: np.ndarray, batch: PoseBatch) -> tuple[np.ndarray, np.n
     e = np.multiply(r, -s, out=coef_g[:2])
     coef_g[2] = -(e[0] * p[0] + e[1] * p[1])
     H = (sh.H_mat @ coef_H.reshape(5 * V, n))[_SYM9].reshape(3, 3, J, P)
-    tau2 = sh.anchor_weight ** 2
+    tau2 = sh.anchor_weight**2
     H[BLOCK_DIAG] += tau2
     dx = X - batch.anchor
-    return cost.reshape(J, P) + 0.5 * tau2 * np.einsum("kjp,kjp->jp", dx, dx), H, \
-        (sh.g_mat @ coef_g.reshape(3 * V, n)).reshape(3, J, P) + tau2 * dx
+    return (
+        cost.reshape(J, P) + 0.5 * tau2 * np.einsum("kjp,kjp->jp", dx, dx),
+        H,
+        (sh.g_mat @ coef_g.reshape(3 * V, n)).reshape(3, J, P) + tau2 * dx,
+    )
 
 
 def _bone_terms(X: np.ndarray, sh: SharedTerms) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -302,7 +336,7 @@ def _bone_terms(X: np.ndarray, sh: SharedTerms) -> tuple[np.ndarray, np.ndarray,
 
     The second-order term of bone l is curv_l (I - u u^T) with curv_l = w_l^2 (1 - b_ref_l / n_l).
     """
-    d = X[:, sh.bone_pairs[:, 0]] - X[:, sh.bone_pairs[:, 1]]                          # (3, L, P)
+    d = X[:, sh.bone_pairs[:, 0]] - X[:, sh.bone_pairs[:, 1]]  # (3, L, P)
     n = np.sqrt(np.einsum("klp,klp->lp", d, d))
     safe_n = np.maximum(n, 1e-12)
     u = d / safe_n
@@ -310,8 +344,12 @@ def _bone_terms(X: np.ndarray, sh: SharedTerms) -> tuple[np.ndarray, np.ndarray,
     if np.any(degenerate):
         u[:, degenerate] = np.array([0.0, 0.0, 1.0])[:, None]
     r = sh.bone_weight * (sh.bone_ref - n)
-    return 0.5 * r * r, (-sh.bone_weight * r) * u, u[:, None] * u[None], \
-        sh.bone_weight ** 2 * (1.0 - sh.bone_ref / safe_n)
+    return (
+        0.5 * r * r,
+        (-sh.bone_weight * r) * u,
+        u[:, None] * u[None],
+        sh.bone_weight**2 * (1.0 - sh.bone_ref / safe_n),
+    )
 
 
 def linear_blocks(X: np.ndarray, batch: PoseBatch) -> Blocks:
@@ -327,7 +365,7 @@ def linear_blocks(X: np.ndarray, batch: PoseBatch) -> Blocks:
     g += sh.signed @ grad
     # K = w^2 u u^T + max(curv, 0) (I - u u^T), K_rest = min(curv, 0) (I - u u^T)
     positive, negative = np.maximum(curv, 0.0), np.minimum(curv, 0.0)
-    K = (sh.bone_weight ** 2 - positive) * uu
+    K = (sh.bone_weight**2 - positive) * uu
     K[BLOCK_DIAG] += positive
     K_rest = -negative * uu
     K_rest[BLOCK_DIAG] += negative
@@ -350,8 +388,9 @@ def assemble(diag: np.ndarray, K: np.ndarray, bone_pairs: np.ndarray) -> np.ndar
     if len(bone_pairs):
         a, b = bone_pairs[:, 0], bone_pairs[:, 1]
         # a joint pair joined by two bones would need a sum here; bone tables have one bone per pair
-        out[:, block_index(np.concatenate([a, b]), np.concatenate([b, a]), J)] = \
+        out[:, block_index(np.concatenate([a, b]), np.concatenate([b, a]), J)] = (
             -np.concatenate([K, K], axis=2).transpose(3, 2, 0, 1).reshape(P, -1)
+        )
     return out.reshape(P, 3 * J, 3 * J)
 
 
@@ -367,8 +406,7 @@ def batch_last(X: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(X, dtype=np.float64).transpose(2, 1, 0))
 
 
-def linearize(X: np.ndarray, problem: PoseProblem
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+def linearize(X: np.ndarray, problem: PoseProblem) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """Cost (P,), safe H (P, 3J, 3J), g = J^T r (P, 3J) and exact H (P, 3J, 3J) or None without bones.
 
     Both H are J^T J plus a second-order term of the bone prior, per bone
@@ -388,8 +426,9 @@ def linearize(X: np.ndarray, problem: PoseProblem
     return f, H_safe, blocks.g.transpose(2, 1, 0).reshape(P, 3 * J), H_exact
 
 
-def normal_equations(X: np.ndarray, problem: PoseProblem, model: str = "gauss_newton"
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def normal_equations(
+    X: np.ndarray, problem: PoseProblem, model: str = "gauss_newton"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cost (P,), H (P, 3J, 3J) and g = J^T r (P, 3J) at X (P, J, 3); model "gauss_newton" (H = J^T J),
     "safe" or "exact" (see :func:`linearize`)."""
     if model not in ("gauss_newton", "safe", "exact"):
@@ -409,7 +448,7 @@ def _gauss_newton_H(X: np.ndarray, problem: PoseProblem) -> np.ndarray:
     _, J, P = Xs.shape
     if len(sh.bone_pairs) == 0:
         return assemble(diag, np.zeros((3, 3, 0, P)), sh.bone_pairs)
-    K = sh.bone_weight ** 2 * _bone_terms(Xs, sh)[2]
+    K = sh.bone_weight**2 * _bone_terms(Xs, sh)[2]
     diag = diag + (sh.incidence @ K.reshape(9, -1, P)).reshape(3, 3, J, P)
     return assemble(diag, K, sh.bone_pairs)
 

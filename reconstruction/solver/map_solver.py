@@ -31,6 +31,7 @@ single_view_score x the mean score of its views; an unseen joint placed by the p
 body gets unseen_score; joints seen in fewer than output_min_views views are output as 0 (x, y, z and
 score), as the DLT does. A person without a single usable triangulated joint is output as all 0.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -42,22 +43,41 @@ import numpy as np
 
 from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from data.geometry.camera import Rig
+from data.geometry.triangulation import triangulate_dlt
 from reconstruction.compile_notice import compile_notice
-from reconstruction.solver.block_solver import (EliminationPlan, elimination_plan, graph_components, inverse_3x3,
-                                         solve_blocks, solve_dense)
+from reconstruction.solver.block_solver import (
+    EliminationPlan,
+    elimination_plan,
+    graph_components,
+    inverse_3x3,
+    solve_blocks,
+    solve_dense,
+)
 from reconstruction.solver.compiled_solver import solve_poses_compiled
 from reconstruction.solver.lm_solver import LMResult, minimize
-from reconstruction.solver.map_estimation import (BLOCK_DIAG, ROBUST_LOSSES, Blocks, PoseBatch, PoseProblem, joint_sigma,
-                                          linear_blocks)
-from reconstruction.solver.person_prior import (bone_groups, bone_variances, joint_information, noise_scale,
-                                         person_bone_lengths, proportion_sds)
+from reconstruction.solver.map_estimation import (
+    BLOCK_DIAG,
+    ROBUST_LOSSES,
+    Blocks,
+    PoseBatch,
+    PoseProblem,
+    joint_sigma,
+    linear_blocks,
+)
+from reconstruction.solver.person_prior import (
+    bone_groups,
+    bone_variances,
+    joint_information,
+    noise_scale,
+    person_bone_lengths,
+    proportion_sds,
+)
 from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.solver.side_swaps import apply_swaps, find_swaps
-from data.geometry.triangulation import triangulate_dlt
 
 SOLVERS = ("compiled", "numpy")
-BONE_PRIORS = ("adaptive", "population")   # each person's own bone lengths (person_prior.py) | the table's means
-NOISE_SCALES = ("estimate", "model")       # 2D sigma = model x the person's estimated scale | the model alone
+BONE_PRIORS = ("adaptive", "population")  # each person's own bone lengths (person_prior.py) | the table's means
+NOISE_SCALES = ("estimate", "model")  # 2D sigma = model x the person's estimated scale | the model alone
 BONE_GROUPS = bone_groups()
 # MLE poses (P, J, 4) -> each person's bone lengths from earlier frames (P, L) m and their standard errors (P, L)
 Skeletons = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -74,15 +94,15 @@ def bone_components(num_joints: int, bone_pairs: np.ndarray) -> list[np.ndarray]
 class GraphLayout:
     """The solver's view of a bone graph: joints reordered so that every component is contiguous."""
 
-    order: np.ndarray         # (J,) original joint at each solver position (components by first joint)
-    starts: np.ndarray        # (C,) first solver position of each component
-    ranges: list              # [(first, end)] solver positions of each component
-    pairs: np.ndarray         # (L, 2) bones in solver positions, in the input order
-    joint_comp: np.ndarray    # (J,) component of each solver position
-    var_comp: np.ndarray      # (3J,) component of each variable
-    bone_comp: np.ndarray     # (L,) component of each bone
-    has_bones: np.ndarray     # (C,) bool
-    bone_onehot: np.ndarray   # (L, C)
+    order: np.ndarray  # (J,) original joint at each solver position (components by first joint)
+    starts: np.ndarray  # (C,) first solver position of each component
+    ranges: list  # [(first, end)] solver positions of each component
+    pairs: np.ndarray  # (L, 2) bones in solver positions, in the input order
+    joint_comp: np.ndarray  # (J,) component of each solver position
+    var_comp: np.ndarray  # (3J,) component of each variable
+    bone_comp: np.ndarray  # (L,) component of each bone
+    has_bones: np.ndarray  # (C,) bool
+    bone_onehot: np.ndarray  # (L, C)
     plan: EliminationPlan
 
 
@@ -99,9 +119,18 @@ def graph_layout(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> GraphLa
     bone_comp = joint_comp[solver_pairs[:, 0]]
     onehot = np.zeros((len(bone_comp), len(comps)))
     onehot[np.arange(len(bone_comp)), bone_comp] = 1.0
-    return GraphLayout(order, starts, [(int(s), int(s + n)) for s, n in zip(starts, sizes)], solver_pairs, joint_comp,
-                       np.repeat(joint_comp, 3), bone_comp, np.bincount(bone_comp, minlength=len(comps)) > 0, onehot,
-                       elimination_plan(num_joints, tuple(map(tuple, solver_pairs.tolist()))))
+    return GraphLayout(
+        order,
+        starts,
+        [(int(s), int(s + n)) for s, n in zip(starts, sizes)],
+        solver_pairs,
+        joint_comp,
+        np.repeat(joint_comp, 3),
+        bone_comp,
+        np.bincount(bone_comp, minlength=len(comps)) > 0,
+        onehot,
+        elimination_plan(num_joints, tuple(map(tuple, solver_pairs.tolist()))),
+    )
 
 
 @dataclass
@@ -149,13 +178,19 @@ class PoseModel:
         """The trial's blocks for the accepted components, the old ones elsewhere."""
         if ok.all():
             return trial
-        joint, bone = ok.T[self.layout.joint_comp], ok.T[self.layout.bone_comp]                # (J, b), (L, b)
+        joint, bone = ok.T[self.layout.joint_comp], ok.T[self.layout.bone_comp]  # (J, b), (L, b)
         old, new = lin.blocks, trial.blocks
-        blocks = Blocks(np.where(joint, new.joint_cost, old.joint_cost), np.where(bone, new.bone_cost, old.bone_cost),
-                        np.where(joint, new.g, old.g), np.where(joint, new.diag, old.diag),
-                        np.where(bone, new.K, old.K), np.where(bone, new.K_rest, old.K_rest))
-        return _PoseLin(np.where(ok, trial.cost, lin.cost), np.where(ok[:, self.layout.var_comp], trial.g, lin.g),
-                        blocks)
+        blocks = Blocks(
+            np.where(joint, new.joint_cost, old.joint_cost),
+            np.where(bone, new.bone_cost, old.bone_cost),
+            np.where(joint, new.g, old.g),
+            np.where(joint, new.diag, old.diag),
+            np.where(bone, new.K, old.K),
+            np.where(bone, new.K_rest, old.K_rest),
+        )
+        return _PoseLin(
+            np.where(ok, trial.cost, lin.cost), np.where(ok[:, self.layout.var_comp], trial.g, lin.g), blocks
+        )
 
     def take(self, lin: _PoseLin, keep: np.ndarray) -> _PoseLin:
         """The persons where keep (bool mask or indices)."""
@@ -163,26 +198,27 @@ class PoseModel:
 
     def max_diagonal(self, lin: _PoseLin) -> np.ndarray:
         """max diag(H) per component, (b, C)."""
-        d = lin.blocks.diag[BLOCK_DIAG].max(axis=0)                                               # (J, b)
+        d = lin.blocks.diag[BLOCK_DIAG].max(axis=0)  # (J, b)
         return np.maximum.reduceat(d, self.layout.starts, axis=0).T
 
     def step(self, lin: _PoseLin, mu: np.ndarray, exact: np.ndarray, run: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Damped steps (b, 3J) and whether each problem used the exact model (b, C)."""
         h, pd = self._solve(lin.blocks, mu, exact, run)
         fail = exact & ~pd
-        if fail.any():                                  # exact model not positive definite: the safe one
+        if fail.any():  # exact model not positive definite: the safe one
             rows = np.flatnonzero(fail.any(axis=1))
             exact = exact & ~fail
             h_rows, pd_rows = self._solve(lin.blocks.take(rows), mu[rows], exact[rows], fail[rows])
-            redo = fail[rows][:, self.layout.joint_comp].T                                    # (J, r)
+            redo = fail[rows][:, self.layout.joint_comp].T  # (J, r)
             h[:, :, rows] = np.where(redo, h_rows, h[:, :, rows])
             pd[rows] = np.where(fail[rows], pd_rows, pd[rows])
         h = h.transpose(2, 1, 0).reshape(len(mu), -1)
         h[(run & ~pd)[:, self.layout.var_comp]] = np.nan
         return h, exact
 
-    def _solve(self, blocks: Blocks, mu: np.ndarray, exact: np.ndarray, run: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def _solve(
+        self, blocks: Blocks, mu: np.ndarray, exact: np.ndarray, run: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(M + mu I) h = -g per problem -> h (3, J, b) (0 where not run), positive definite (b, C)."""
         lay = self.layout
         diag, K = blocks.diag, blocks.K
@@ -198,8 +234,9 @@ class PoseModel:
         return h, np.logical_and.reduceat(pd, lay.starts, axis=0).T
 
 
-def solve_poses(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, xtol: float = 1e-6,
-                ftol: float = 1e-10) -> tuple[np.ndarray, list[LMResult]]:
+def solve_poses(
+    problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10
+) -> tuple[np.ndarray, list[LMResult]]:
     """Minimise the problem's cost from X0 (P, J, 3) -> (P, J, 3) and the LMResult (problems per person and component).
 
     The cost separates over persons and over the connected components of the bone graph (COCO-23:
@@ -211,11 +248,14 @@ def solve_poses(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, 
     P, J, _ = X0.shape
     if P == 0:
         return X0.copy(), []
-    if problem.per_person_bones:   # the batched reference solver shares one table: one person at a time
+    if problem.per_person_bones:  # the batched reference solver shares one table: one person at a time
         L = len(problem.bone_pairs)
-        problem = replace(problem, bone_ref=np.broadcast_to(problem.bone_ref, (P, L)),
-                          bone_weight=np.broadcast_to(problem.bone_weight, (P, L)))
-        parts = [solve_poses(_person_problem(problem, p), X0[p:p + 1], max_iterations, xtol, ftol) for p in range(P)]
+        problem = replace(
+            problem,
+            bone_ref=np.broadcast_to(problem.bone_ref, (P, L)),
+            bone_weight=np.broadcast_to(problem.bone_weight, (P, L)),
+        )
+        parts = [solve_poses(_person_problem(problem, p), X0[p : p + 1], max_iterations, xtol, ftol) for p in range(P)]
         return np.concatenate([x for x, _ in parts]), [r for _, rs in parts for r in rs]
     on = problem.bone_weight > 0
     pairs = problem.bone_pairs[on].reshape(-1, 2)
@@ -228,20 +268,25 @@ def solve_poses(problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, 
     ordered = np.array_equal(layout.order, np.arange(J))
     if not ordered:
         problem = problem.joints(layout.order)
-    result = minimize(X0[:, layout.order].reshape(P, 3 * J), PoseModel(PoseBatch.of(problem), layout),
-                      max_iterations, xtol, ftol)
+    result = minimize(
+        X0[:, layout.order].reshape(P, 3 * J), PoseModel(PoseBatch.of(problem), layout), max_iterations, xtol, ftol
+    )
     X = result.x.reshape(P, J, 3)
     return (X if ordered else X[:, np.argsort(layout.order)]), [result]
 
 
 def _person_problem(problem: PoseProblem, p: int) -> PoseProblem:
     """The problem of person p alone, with its own (L,) bone table."""
-    return replace(problem.take(np.array([p])), bone_ref=np.asarray(problem.bone_ref[p]),
-                   bone_weight=np.asarray(problem.bone_weight[p]))
+    return replace(
+        problem.take(np.array([p])),
+        bone_ref=np.asarray(problem.bone_ref[p]),
+        bone_weight=np.asarray(problem.bone_weight[p]),
+    )
 
 
-def combine_estimates(mean: np.ndarray, sd: np.ndarray, other: np.ndarray, other_sd: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def combine_estimates(
+    mean: np.ndarray, sd: np.ndarray, other: np.ndarray, other_sd: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Precision-weighted combination of two independent estimates, either ignored where its value or SD is
     NaN / inf: (P, L) x4 -> mean (P, L), SD (P, L) (the first mean and SD inf where neither has any)."""
     first = np.isfinite(mean) & np.isfinite(sd) & (sd > 0)
@@ -254,15 +299,20 @@ def combine_estimates(mean: np.ndarray, sd: np.ndarray, other: np.ndarray, other
         return np.where(w > 0, combined, mean), np.where(w > 0, 1.0 / np.sqrt(w), np.inf)
 
 
-def output_confidence(dlt_conf: np.ndarray, poses2d: np.ndarray, placed: np.ndarray, output_min_views: int,
-                      single_view_score: float, unseen_score: float) -> np.ndarray:
+def output_confidence(
+    dlt_conf: np.ndarray,
+    poses2d: np.ndarray,
+    placed: np.ndarray,
+    output_min_views: int,
+    single_view_score: float,
+    unseen_score: float,
+) -> np.ndarray:
     """Confidence of each reconstructed joint (see the module docstring): (P, J), (V, P, J, 3), (P,) -> (P, J)."""
     finite = np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
     score = np.where(finite, np.clip(poses2d[..., 2], 0, None), 0.0)
     views = (score > 0).sum(axis=0)
     mean_score = score.sum(axis=0) / np.maximum(views, 1)
-    conf = np.where(dlt_conf > 0, dlt_conf,
-                    np.where(views > 0, single_view_score * mean_score, unseen_score))
+    conf = np.where(dlt_conf > 0, dlt_conf, np.where(views > 0, single_view_score * mean_score, unseen_score))
     return np.where((views >= output_min_views) & placed[:, None], conf, 0.0)
 
 
@@ -274,15 +324,18 @@ def warm_up() -> None:
     """
     J = len(MEAN_POSE)
     M = np.hstack([np.eye(3), [[0.0], [0.0], [5.0]]])
-    proj = np.stack([M, M @ np.diag([1.0, -1.0, -1.0, 1.0])])               # two views facing each other
+    proj = np.stack([M, M @ np.diag([1.0, -1.0, -1.0, 1.0])])  # two views facing each other
     hom = np.einsum("vab,jb->vja", proj, np.hstack([MEAN_POSE, np.ones((J, 1))]))[:, None]
     poses2d = np.concatenate([hom[..., :2] / hom[..., 2:], np.ones(hom.shape[:-1] + (1,))], axis=-1)
     X, _ = initial_poses(triangulate_dlt(poses2d, proj), poses2d, proj)
     X = reinitialise_outliers(X, poses2d, proj)
     for weight in (np.zeros(len(BONE_PAIRS)), np.ones(len(BONE_PAIRS))):
         for robust in ROBUST_LOSSES:
-            solve_poses_compiled(PoseProblem(proj, poses2d[..., :2], poses2d[..., 2], BONE_PAIRS, BONE_MEAN, weight,
-                                             X, robust=robust), X, max_iterations=2)
+            solve_poses_compiled(
+                PoseProblem(proj, poses2d[..., :2], poses2d[..., 2], BONE_PAIRS, BONE_MEAN, weight, X, robust=robust),
+                X,
+                max_iterations=2,
+            )
 
 
 class MAPReconstruction:
@@ -301,14 +354,32 @@ class MAPReconstruction:
     output_min_views, single_view_score, unseen_score (output confidence).
     """
 
-    def __init__(self, c: float = 0.016, sigma_min: float = 1.0, prior_weight: float = 1.0,
-                 bone_table: str | Path | Mapping | None = None, robust: str = "none", robust_scale: float = 3.0,
-                 anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
-                 min_views: int = 2, output_min_views: int = 0, single_view_score: float = 0.5,
-                 unseen_score: float = 0.1, mle_first: bool = False, solver: str = "compiled",
-                 bone_prior: str = "adaptive", noise_scale: str = "estimate", bone_tie_sd_m: float = 0.03,
-                 min_noise_scale: float = 0.01, sigma_px: float = 5.2, score_power: float = 1.27,
-                 fix_swaps: bool = True) -> None:
+    def __init__(
+        self,
+        c: float = 0.016,
+        sigma_min: float = 1.0,
+        prior_weight: float = 1.0,
+        bone_table: str | Path | Mapping | None = None,
+        robust: str = "none",
+        robust_scale: float = 3.0,
+        anchor_weight: float = 1e-3,
+        max_iterations: int = 15,
+        xtol: float = 1e-6,
+        ftol: float = 1e-10,
+        min_views: int = 2,
+        output_min_views: int = 0,
+        single_view_score: float = 0.5,
+        unseen_score: float = 0.1,
+        mle_first: bool = False,
+        solver: str = "compiled",
+        bone_prior: str = "adaptive",
+        noise_scale: str = "estimate",
+        bone_tie_sd_m: float = 0.03,
+        min_noise_scale: float = 0.01,
+        sigma_px: float = 5.2,
+        score_power: float = 1.27,
+        fix_swaps: bool = True,
+    ) -> None:
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
         if robust not in ROBUST_LOSSES:
@@ -316,15 +387,21 @@ class MAPReconstruction:
         for key, value in (("robust_scale", robust_scale), ("max_iterations", max_iterations)):
             if not value > 0:
                 raise ValueError(f"{key} must be > 0, got {value}")
-        for key, value in (("c", c), ("sigma_min", sigma_min), ("prior_weight", prior_weight),
-                           ("anchor_weight", anchor_weight)):
+        for key, value in (
+            ("c", c),
+            ("sigma_min", sigma_min),
+            ("prior_weight", prior_weight),
+            ("anchor_weight", anchor_weight),
+        ):
             if not value >= 0:
                 raise ValueError(f"{key} must be >= 0, got {value}")
         if sigma_min == 0 and c == 0 and sigma_px == 0:
             raise ValueError("c, sigma_px and sigma_min cannot all be 0")
         if bone_prior not in BONE_PRIORS or noise_scale not in NOISE_SCALES:
-            raise ValueError(f"bone_prior must be one of {BONE_PRIORS} and noise_scale one of {NOISE_SCALES}, "
-                             f"got {bone_prior!r}, {noise_scale!r}")
+            raise ValueError(
+                f"bone_prior must be one of {BONE_PRIORS} and noise_scale one of {NOISE_SCALES}, "
+                f"got {bone_prior!r}, {noise_scale!r}"
+            )
         if not bone_tie_sd_m > 0 or not min_noise_scale > 0:
             raise ValueError(f"bone_tie_sd_m and min_noise_scale must be > 0, got {bone_tie_sd_m}, {min_noise_scale}")
         self.bone_prior, self.noise_scale = bone_prior, noise_scale
@@ -335,7 +412,7 @@ class MAPReconstruction:
         self.sigma_px, self.score_power = float(sigma_px), float(score_power)
         self.fix_swaps, self.last_swaps = bool(fix_swaps), 0
         self._variance_inputs: tuple = ((0, 0), None)  # what last_joint_variance is computed from, on demand
-        self.takes_skeletons = self.bone_prior == "adaptive"     # the tracker's bone lengths refine the prior
+        self.takes_skeletons = self.bone_prior == "adaptive"  # the tracker's bone lengths refine the prior
         self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))  # (P, L) m measured by the last MLE, NaN unmeasured
         self._bone_measurements: np.ndarray | None = None
         self._mle_information: np.ndarray | None = None
@@ -348,11 +425,12 @@ class MAPReconstruction:
         self.single_view_score, self.unseen_score = float(single_view_score), float(unseen_score)
         self.mle_first = bool(mle_first)
         self.solver = solver
-        with compile_notice("MAP solver"):   # one line while numba compiles (first run)
+        with compile_notice("MAP solver"):  # one line while numba compiles (first run)
             warm_up()
 
-    def problem(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
-                prior: bool) -> PoseProblem:
+    def problem(
+        self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, anchor: np.ndarray, prior: bool
+    ) -> PoseProblem:
         """The least-squares problem of undistorted poses: (V, P, J, 3), (V, P, 4), (V, 3, 4), (P, J, 3) -> PoseProblem."""
         return self._problem(*self._observations(poses2d_und, bboxes), proj, anchor, prior)
 
@@ -361,22 +439,39 @@ class MAPReconstruction:
         sigma = joint_sigma(poses2d_und, bboxes, self.c, self.sigma_min, self.sigma_px, self.score_power)
         return np.nan_to_num(poses2d_und[..., :2]), np.where(np.isfinite(sigma), 1.0 / sigma, 0.0)
 
-    def _problem(self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
-                 prior: bool) -> PoseProblem:
+    def _problem(
+        self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray, prior: bool
+    ) -> PoseProblem:
         """The problem of observations (see _observations) anchored at (P, J, 3), with or without the prior."""
         weight = self.prior_weight / self.bone_std if prior else np.zeros(len(BONE_PAIRS))
-        return PoseProblem(proj, uv, inv_sigma, BONE_PAIRS, self.bone_mean, weight, anchor, self.anchor_weight,
-                           self.robust, self.robust_scale)
+        return PoseProblem(
+            proj,
+            uv,
+            inv_sigma,
+            BONE_PAIRS,
+            self.bone_mean,
+            weight,
+            anchor,
+            self.anchor_weight,
+            self.robust,
+            self.robust_scale,
+        )
 
-    def solve(self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, stages: tuple[bool, ...],
-              skeletons: Skeletons | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def solve(
+        self,
+        poses2d_und: np.ndarray,
+        bboxes: np.ndarray,
+        proj: np.ndarray,
+        stages: tuple[bool, ...],
+        skeletons: Skeletons | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Swaps undone (fix_swaps), DLT, then one solve per stage (True = with the prior): -> X (P, J, 3),
         DLT (P, J, 4), placed (P,). ``skeletons``: the persons' own bone lengths from earlier frames (a
         tracker's), asked with the MLE poses (see :meth:`_person_problem`)."""
         bboxes = np.asarray(bboxes, dtype=np.float64)
         dlt = triangulate_dlt(poses2d_und, proj, self.min_views)
         uv, inv_sigma = self._observations(poses2d_und, bboxes)
-        if self.fix_swaps:                                      # left / right swaps of the detector, undone
+        if self.fix_swaps:  # left / right swaps of the detector, undone
             swaps = find_swaps(poses2d_und, inv_sigma, proj, dlt if self.min_views == 2 else None)
             self.last_swaps = len(swaps)
             if swaps:
@@ -398,10 +493,13 @@ class MAPReconstruction:
         for k, prior in enumerate(stages):
             if k == 0:
                 problem = self._problem(uv, inv_sigma, proj, Xp, prior)
-            else:                                   # after the MLE: outliers re-initialised, the person's prior
+            else:  # after the MLE: outliers re-initialised, the person's prior
                 mle, Xp = Xp, reinitialise_outliers(Xp, und, proj)
-                problem = (self._person_problem(uv, inv_sigma, proj, Xp, mle, skeletons) if prior
-                           else self._problem(uv, inv_sigma, proj, Xp, False))
+                problem = (
+                    self._person_problem(uv, inv_sigma, proj, Xp, mle, skeletons)
+                    if prior
+                    else self._problem(uv, inv_sigma, proj, Xp, False)
+                )
             Xp, _ = solve_fn(problem, Xp, self.max_iterations, self.xtol, self.ftol)
         X = X.copy()
         X[idx] = Xp
@@ -429,45 +527,60 @@ class MAPReconstruction:
         (P, J, 3), (V, P, J, 2), (V, P, J), (V, 3, 4) -> (P, J). The likelihood's information (at the MLE poses
         where the MAP had them), plus for a joint
         seen in one view the bone tie along every axis (the prior fixes its depth); inf for a joint no view sees."""
-        info = self._mle_information       # at the MLE poses, with the person's noise scale (the MAP is close)
+        info = self._mle_information  # at the MLE poses, with the person's noise scale (the MAP is close)
         if info is None or len(info) != len(X):
-            scale = (noise_scale(X, uv, inv_sigma, proj, self.min_noise_scale) if self.noise_scale == "estimate"
-                     else np.ones(len(X)))
+            scale = (
+                noise_scale(X, uv, inv_sigma, proj, self.min_noise_scale)
+                if self.noise_scale == "estimate"
+                else np.ones(len(X))
+            )
             info = joint_information(X, proj, inv_sigma / scale[None, :, None])
         views = (inv_sigma > 0).sum(axis=0)
-        tie = np.where(views == 1, 1.0 / self.bone_tie_sd_m ** 2, 0.0) if self.prior_weight > 0 else 0.0 * views
+        tie = np.where(views == 1, 1.0 / self.bone_tie_sd_m**2, 0.0) if self.prior_weight > 0 else 0.0 * views
         info = info + tie[..., None, None] * np.eye(3)
         cov, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
         var = (cov[0, 0] + cov[1, 1] + cov[2, 2]) / 3
         return np.where((views >= 1 + (tie == 0)) & np.isfinite(var) & (var > 0), var, np.inf)
 
-    def _person_problem(self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray,
-                        mle: np.ndarray, skeletons: Skeletons | None = None) -> PoseProblem:
+    def _person_problem(
+        self,
+        uv: np.ndarray,
+        inv_sigma: np.ndarray,
+        proj: np.ndarray,
+        anchor: np.ndarray,
+        mle: np.ndarray,
+        skeletons: Skeletons | None = None,
+    ) -> PoseProblem:
         """The MAP problem after an MLE solve (P, J, 3): each person's noise scale and bone table (person_prior.py).
 
         With ``skeletons`` (MLE poses (P, J, 4) -> the person's bone lengths (P, L) measured in earlier frames and
         their standard errors (P, L), NaN / inf where unknown), each bone's measurement in this frame is combined
         with the earlier frames' by precision before the population prior is applied, once: a person followed
         for a while is fitted with their own skeleton."""
-        scale = (noise_scale(mle, uv, inv_sigma, proj, self.min_noise_scale) if self.noise_scale == "estimate"
-                 else np.ones(len(mle)))
+        scale = (
+            noise_scale(mle, uv, inv_sigma, proj, self.min_noise_scale)
+            if self.noise_scale == "estimate"
+            else np.ones(len(mle))
+        )
         inv_sigma = inv_sigma / scale[None, :, None]
         if self.bone_prior == "population":
             return self._problem(uv, inv_sigma, proj, anchor, True)
         info = joint_information(mle, proj, inv_sigma)
-        self._mle_information = info            # the joints' information, kept for last_joint_variance
+        self._mle_information = info  # the joints' information, kept for last_joint_variance
         measured = (inv_sigma > 0).sum(axis=0) >= 2
         lengths, variances = bone_variances(mle, info, BONE_PAIRS, measured)
         self._bone_measurements = np.where(np.isfinite(variances), lengths, np.nan)
-        if skeletons is not None:        # this frame's measurement and the earlier frames' as one
+        if skeletons is not None:  # this frame's measurement and the earlier frames' as one
             own, se = skeletons(np.concatenate([mle, measured[..., None].astype(np.float64)], axis=-1))
             lengths, sd = combine_estimates(lengths, np.sqrt(variances), own, se)
-            variances = sd ** 2
-        mean, sd = person_bone_lengths(lengths, variances, self.bone_mean, self.proportion_sd, self.bone_tie_sd_m,
-                                       BONE_GROUPS)
-        weight = self.prior_weight / np.sqrt(sd ** 2 + self.bone_tie_sd_m ** 2)
-        return PoseProblem(proj, uv, inv_sigma, BONE_PAIRS, mean, weight, anchor, self.anchor_weight, self.robust,
-                           self.robust_scale)
+            variances = sd**2
+        mean, sd = person_bone_lengths(
+            lengths, variances, self.bone_mean, self.proportion_sd, self.bone_tie_sd_m, BONE_GROUPS
+        )
+        weight = self.prior_weight / np.sqrt(sd**2 + self.bone_tie_sd_m**2)
+        return PoseProblem(
+            proj, uv, inv_sigma, BONE_PAIRS, mean, weight, anchor, self.anchor_weight, self.robust, self.robust_scale
+        )
 
     def stages(self) -> tuple[bool, ...]:
         """The solves this reconstruction runs after the DLT (True = with the bone prior). A person-adaptive
@@ -475,8 +588,9 @@ class MAPReconstruction:
         adaptive = self.bone_prior == "adaptive" or self.noise_scale == "estimate"
         return (False, True) if self.mle_first or (adaptive and self.prior_weight > 0) else (True,)
 
-    def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig, skeletons: Skeletons | None = None
-                 ) -> np.ndarray:
+    def __call__(
+        self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig, skeletons: Skeletons | None = None
+    ) -> np.ndarray:
         """Reconstruct matched persons: (V, P, J, 3), (V, P, 4) -> (P, J, 4); skeletons: see :meth:`solve`."""
         und = rig.undistort(poses2d)
         P, J = und.shape[1:3]
@@ -485,8 +599,9 @@ class MAPReconstruction:
             self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))
             return np.zeros((0, J, 4))
         X, dlt, placed = self.solve(und, bboxes, rig.projection_matrices(), self.stages(), skeletons)
-        conf = output_confidence(dlt[..., 3], und, placed, self.output_min_views, self.single_view_score,
-                                 self.unseen_score)
+        conf = output_confidence(
+            dlt[..., 3], und, placed, self.output_min_views, self.single_view_score, self.unseen_score
+        )
         return np.concatenate([np.where(conf[..., None] > 0, X, 0.0), conf[..., None]], axis=-1)
 
 
@@ -502,16 +617,44 @@ class MLEMAPReconstruction(MAPReconstruction):
 class MLEReconstruction(MAPReconstruction):
     """DLT, then the maximum-likelihood refinement of Eq. 6 alone (no prior; joints stay independent)."""
 
-    def __init__(self, c: float = 0.016, sigma_min: float = 1.0, robust: str = "none", robust_scale: float = 3.0,
-                 anchor_weight: float = 1e-3, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10,
-                 min_views: int = 2, output_min_views: int = 2, single_view_score: float = 0.5,
-                 unseen_score: float = 0.1, solver: str = "compiled", sigma_px: float = 5.2,
-                 score_power: float = 1.27, fix_swaps: bool = True) -> None:
-        super().__init__(c=c, sigma_min=sigma_min, sigma_px=sigma_px, score_power=score_power, prior_weight=0.0,
-                         fix_swaps=fix_swaps, robust=robust, robust_scale=robust_scale,
-                         anchor_weight=anchor_weight, max_iterations=max_iterations, xtol=xtol, ftol=ftol,
-                         min_views=min_views, output_min_views=output_min_views,
-                         single_view_score=single_view_score, unseen_score=unseen_score, solver=solver)
+    def __init__(
+        self,
+        c: float = 0.016,
+        sigma_min: float = 1.0,
+        robust: str = "none",
+        robust_scale: float = 3.0,
+        anchor_weight: float = 1e-3,
+        max_iterations: int = 15,
+        xtol: float = 1e-6,
+        ftol: float = 1e-10,
+        min_views: int = 2,
+        output_min_views: int = 2,
+        single_view_score: float = 0.5,
+        unseen_score: float = 0.1,
+        solver: str = "compiled",
+        sigma_px: float = 5.2,
+        score_power: float = 1.27,
+        fix_swaps: bool = True,
+    ) -> None:
+        super().__init__(
+            c=c,
+            sigma_min=sigma_min,
+            sigma_px=sigma_px,
+            score_power=score_power,
+            prior_weight=0.0,
+            fix_swaps=fix_swaps,
+            robust=robust,
+            robust_scale=robust_scale,
+            anchor_weight=anchor_weight,
+            max_iterations=max_iterations,
+            xtol=xtol,
+            ftol=ftol,
+            min_views=min_views,
+            output_min_views=output_min_views,
+            single_view_score=single_view_score,
+            unseen_score=unseen_score,
+            solver=solver,
+        )
 
     def stages(self) -> tuple[bool, ...]:
         """One solve without the prior."""

@@ -22,6 +22,7 @@ Two estimates, both from the maximum-likelihood joints X (P, J, 3) of a frame:
   stature as measured by their other bones. This two-stage (empirical Bayes) form replaces bone length
   unknowns in the solver: the solve keeps its per-bone structure and its speed.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,9 +32,9 @@ from data.bone_lengths import BONE_NAMES
 from reconstruction.solver.block_solver import inverse_3x3
 from reconstruction.solver.map_estimation import EPS_DEPTH
 
-STATURE_SD = 0.053          # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
-PROPORTION_SD = 0.02        # relative SD of one bone group's length given the stature (left = right)
-OUTLIER_SD = 3.0            # a bone measured this many SD from its posterior is dropped and the posterior redone
+STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
+PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
+OUTLIER_SD = 3.0  # a bone measured this many SD from its posterior is dropped and the posterior redone
 _CHI2_MEDIANS = np.concatenate([[np.nan], chi2.median(np.arange(1, 64))])
 
 
@@ -55,20 +56,21 @@ def joint_information(X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray) ->
     xy, z = project(X, proj)
     M = proj[:, :, :3]
     info = np.zeros(X.shape[:2] + (3, 3))
-    for k in range(2):       # d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint
+    for k in range(2):  # d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint
         rows = (M[:, None, None, k, :] - xy[..., k, None] * M[:, None, None, 2, :]) * (inv_sigma / z)[..., None]
         info += np.sum(rows[..., :, None] * rows[..., None, :], axis=0)
     return info
 
 
-def noise_scale(X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray,
-                floor: float = 0.01) -> np.ndarray:
+def noise_scale(
+    X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, floor: float = 0.01
+) -> np.ndarray:
     """Each person's 2D noise over the sigma model, robustly from MLE residuals: (P, J, 3), (V, P, J, 2),
     (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views."""
     xy, _ = project(X, proj)
     seen = inv_sigma > 0
-    r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma ** 2, 0.0)       # (V, P, J)
-    rss, views = r2.sum(axis=0), seen.sum(axis=0)                                     # (P, J)
+    r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma**2, 0.0)  # (V, P, J)
+    rss, views = r2.sum(axis=0), seen.sum(axis=0)  # (P, J)
     ok = views >= 2
     ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)  # valid first
     n = ok.sum(axis=1)
@@ -87,8 +89,9 @@ def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:
     return np.array([order[k] for k in keys], dtype=np.int64)
 
 
-def bone_variances(X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def bone_variances(
+    X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Bone lengths (P, L) of X (P, J, 3) and their variances (P, L) from the joints' information (P, J, 3, 3)
     (in the units of the actual noise); inf where an end is not ``measured`` (P, J) bool or not fixed in
     every direction."""
@@ -108,21 +111,28 @@ def bone_variances(X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured:
     return n, np.where(ok, var, np.inf)
 
 
-def proportion_sds(bone_ref: np.ndarray, bone_std: np.ndarray, placement_sd: float, stature_sd: float = STATURE_SD
-                   ) -> np.ndarray:
+def proportion_sds(
+    bone_ref: np.ndarray, bone_std: np.ndarray, placement_sd: float, stature_sd: float = STATURE_SD
+) -> np.ndarray:
     """Relative SD of each bone given the stature, from a table's population SDs: (L,), (L,) -> (L,).
 
     The table's variance is stature + proportion + keypoint placement (``placement_sd``, m); what the
     stature and the placement leave of it is the proportion's (0 where nothing is left). The default
     table (data/bone_lengths.py) gives about 2 %.
     """
-    rest = np.asarray(bone_std, dtype=np.float64) ** 2 - placement_sd ** 2 - (stature_sd * np.asarray(bone_ref)) ** 2
+    rest = np.asarray(bone_std, dtype=np.float64) ** 2 - placement_sd**2 - (stature_sd * np.asarray(bone_ref)) ** 2
     return np.sqrt(np.maximum(rest, 0.0)) / np.maximum(bone_ref, 1e-9)
 
 
-def person_bone_lengths(lengths: np.ndarray, variances: np.ndarray, bone_ref: np.ndarray, proportion_sd: np.ndarray,
-                        tie_sd: float, groups: np.ndarray, stature_sd: float = STATURE_SD
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def person_bone_lengths(
+    lengths: np.ndarray,
+    variances: np.ndarray,
+    bone_ref: np.ndarray,
+    proportion_sd: np.ndarray,
+    tie_sd: float,
+    groups: np.ndarray,
+    stature_sd: float = STATURE_SD,
+) -> tuple[np.ndarray, np.ndarray]:
     """Posterior mean and SD of each person's bones (see the module docstring): measured lengths (P, L), their
     variances (P, L) (inf = unmeasured), population means (L,), relative proportion SDs (L,), tie SD (m),
     groups (L,) -> (P, L), (P, L)."""
@@ -133,14 +143,14 @@ def person_bone_lengths(lengths: np.ndarray, variances: np.ndarray, bone_ref: np
     A[np.arange(L), 1 + groups] = bone_ref * proportion_sd
     y = lengths - bone_ref
     use = np.isfinite(variances) & np.isfinite(lengths)
-    for _ in range(2):                                    # once, then without the outlying bones
-        noise = np.where(use, variances, 0.0) + tie_sd ** 2
-        w = np.where(use, 1.0 / noise, 0.0)                                                  # (P, L)
-        precision = np.eye(1 + G) + (A.T[None] * w[:, None, :]) @ A                        # (P, 1 + G, 1 + G)
+    for _ in range(2):  # once, then without the outlying bones
+        noise = np.where(use, variances, 0.0) + tie_sd**2
+        w = np.where(use, 1.0 / noise, 0.0)  # (P, L)
+        precision = np.eye(1 + G) + (A.T[None] * w[:, None, :]) @ A  # (P, 1 + G, 1 + G)
         cov = np.linalg.inv(precision)
-        theta = (cov @ (A.T @ (w * np.where(use, y, 0.0)).T).T[..., None])[..., 0]          # (P, 1 + G)
+        theta = (cov @ (A.T @ (w * np.where(use, y, 0.0)).T).T[..., None])[..., 0]  # (P, 1 + G)
         mean = bone_ref + theta @ A.T
-        var = np.sum((A[None] @ cov) * A[None], axis=-1)                                   # (P, L)
+        var = np.sum((A[None] @ cov) * A[None], axis=-1)  # (P, L)
         z = np.abs(np.where(use, lengths, mean) - mean) / np.sqrt(noise + var)
         outlier = use & (z > OUTLIER_SD)
         if not outlier.any():

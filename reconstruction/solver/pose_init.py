@@ -15,6 +15,7 @@ consistent with its observation. The rotation is a full 3D Kabsch fit when at le
 
 The per-person work runs in compiled (numba) loops: a frame of a few persons costs microseconds.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,8 +24,8 @@ from numba import njit
 from data.bone_lengths import MEAN_POSE
 
 FULL_FIT_MIN_JOINTS = 6
-GROSS_OUTLIER_M = 1.5   # from the mean body translated to the median joint: wrong by any pose
-OUTLIER_M = 0.75        # from the fitted body: beyond a walking stride or a raised arm
+GROSS_OUTLIER_M = 1.5  # from the mean body translated to the median joint: wrong by any pose
+OUTLIER_M = 0.75  # from the fitted body: beyond a walking stride or a raised arm
 _MIN_RAY_DEPTH_M = 0.1
 
 
@@ -64,12 +65,12 @@ def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: n
     if count >= FULL_FIT_MIN_JOINTS:
         U, S, Vt = np.linalg.svd(cov)
         full = S[1] > 1e-3 * max(S[0], 1e-12)
-    if full:                                                                # Kabsch: R = V diag(1, 1, det) U^T
+    if full:  # Kabsch: R = V diag(1, 1, det) U^T
         det = np.sign(np.linalg.det(U @ Vt))
         V = Vt.T.copy()
         V[:, 2] *= det if det != 0.0 else 1.0
         R = V @ U.T
-    else:                                                                   # rotation about z only
+    else:  # rotation about z only
         angle = np.arctan2(cross, dot)
         R[0, 0], R[0, 1], R[1, 0], R[1, 1] = np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle)
     for j in range(J):
@@ -114,8 +115,9 @@ def _distance(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def _inliers(points: np.ndarray, known: np.ndarray, score: np.ndarray, proj: np.ndarray,
-             template: np.ndarray) -> np.ndarray:
+def _inliers(
+    points: np.ndarray, known: np.ndarray, score: np.ndarray, proj: np.ndarray, template: np.ndarray
+) -> np.ndarray:
     """Known joints that are not gross outliers: (P, J, 3), (P, J), scores (V, P, J), (V, 3, 4) -> (P, J)."""
     P, J = known.shape
     ok = known.copy()
@@ -140,8 +142,9 @@ def _inliers(points: np.ndarray, known: np.ndarray, score: np.ndarray, proj: np.
 
 
 @njit(cache=True)
-def _onto_rays(guess: np.ndarray, xy: np.ndarray, score: np.ndarray, Minv: np.ndarray,
-               centre: np.ndarray) -> np.ndarray:
+def _onto_rays(
+    guess: np.ndarray, xy: np.ndarray, score: np.ndarray, Minv: np.ndarray, centre: np.ndarray
+) -> np.ndarray:
     """Point of the best-scored view's ray closest to each guess (P, J, 3); unseen joints keep theirs."""
     out = guess.copy()
     P, J = guess.shape[:2]
@@ -156,7 +159,7 @@ def _onto_rays(guess: np.ndarray, xy: np.ndarray, score: np.ndarray, Minv: np.nd
             d1 = M[1, 0] * u + M[1, 1] * w + M[1, 2]
             d2 = M[2, 0] * u + M[2, 1] * w + M[2, 2]
             t = ((g[0] - c[0]) * d0 + (g[1] - c[1]) * d1 + (g[2] - c[2]) * d2) / (d0 * d0 + d1 * d1 + d2 * d2)
-            t = max(t, _MIN_RAY_DEPTH_M)                                       # in front of the camera
+            t = max(t, _MIN_RAY_DEPTH_M)  # in front of the camera
             out[p, j, 0], out[p, j, 1], out[p, j, 2] = c[0] + t * d0, c[1] + t * d1, c[2] + t * d2
     return out
 
@@ -172,12 +175,14 @@ def _views(poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 def fit_mean_body(points: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The mean body aligned to each person's known joints: (P, J, 3), (P, J) bool -> (P, J, 3), placed (P,)."""
-    return _fit_bodies(np.ascontiguousarray(points, dtype=np.float64), np.asarray(known, dtype=bool),
-                       MEAN_POSE[: points.shape[1]])
+    return _fit_bodies(
+        np.ascontiguousarray(points, dtype=np.float64), np.asarray(known, dtype=bool), MEAN_POSE[: points.shape[1]]
+    )
 
 
-def _start(points: np.ndarray, known: np.ndarray, poses2d: np.ndarray, proj: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray]:
+def _start(
+    points: np.ndarray, known: np.ndarray, poses2d: np.ndarray, proj: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Inliers of points kept, every other joint from the fitted body moved onto its ray -> (P, J, 3), placed (P,)."""
     xy, score, Minv, centre = _views(poses2d, proj)
     points = np.ascontiguousarray(points, dtype=np.float64)

@@ -10,16 +10,26 @@ by a block Cholesky in the elimination order of a :class:`reconstruction.solver.
 
 Status codes are those of :mod:`reconstruction.solver.lm_solver`.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from reconstruction.solver.lm_solver import (CONVERGED_COST, CONVERGED_GRADIENT, CONVERGED_STEP, MAX_DAMPING, MAX_ITERATIONS,
-                                      MIN_DAMPING_FACTOR, RUNNING, STALLED, SWITCH_RHO)
+from reconstruction.solver.lm_solver import (
+    CONVERGED_COST,
+    CONVERGED_GRADIENT,
+    CONVERGED_STEP,
+    MAX_DAMPING,
+    MAX_ITERATIONS,
+    MIN_DAMPING_FACTOR,
+    RUNNING,
+    STALLED,
+    SWITCH_RHO,
+)
 
 ROBUST_CODES = {"none": 0, "huber": 1, "cauchy": 2}
-_EPS_DEPTH = 1e-6       # m, as reconstruction.solver.map_estimation
+_EPS_DEPTH = 1e-6  # m, as reconstruction.solver.map_estimation
 _EPS = np.finfo(np.float64).eps
 
 
@@ -27,13 +37,13 @@ _EPS = np.finfo(np.float64).eps
 def _robust(r: float, kind: int, C2: float) -> tuple[float, float, float]:
     """Cost term C^2 rho(r^2 / C^2), residual scale and Jacobian scale of one raw residual (scipy's rho)."""
     z = r * r / C2
-    if kind == 1:                                        # huber
+    if kind == 1:  # huber
         if z <= 1.0:
             rho, d1, d2 = z, 1.0, 0.0
         else:
             sq = np.sqrt(z)
             rho, d1, d2 = 2.0 * sq - 1.0, 1.0 / sq, -0.5 / (sq * z)
-    else:                                                # cauchy
+    else:  # cauchy
         rho, d1, d2 = np.log1p(z), 1.0 / (1.0 + z), -1.0 / ((1.0 + z) * (1.0 + z))
     j_scale = np.sqrt(max(d1 + 2.0 * d2 * z, _EPS))
     return C2 * rho, d1 / j_scale, j_scale
@@ -54,9 +64,22 @@ def _add_outer(A: np.ndarray, s: float, a0: float, a1: float, a2: float) -> None
 
 
 @njit(cache=True, inline="always")
-def _likelihood_terms(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarray, proj: np.ndarray,
-                      uv: np.ndarray, w: np.ndarray, anchor: np.ndarray, tau2: float, robust: int, C2: float,
-                      D: np.ndarray, g: np.ndarray) -> float:
+def _likelihood_terms(
+    x: np.ndarray,
+    s: int,
+    e: int,
+    p: int,
+    pos_joint: np.ndarray,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w: np.ndarray,
+    anchor: np.ndarray,
+    tau2: float,
+    robust: int,
+    C2: float,
+    D: np.ndarray,
+    g: np.ndarray,
+) -> float:
     """Likelihood + anchor cost of positions s:e; writes their blocks D (J, 3, 3) and gradients g (J, 3)."""
     V = proj.shape[0]
     cost = 0.0
@@ -102,8 +125,18 @@ def _likelihood_terms(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarr
 
 
 @njit(cache=True, inline="always")
-def _bone_terms(x: np.ndarray, bones: np.ndarray, bone_pa: np.ndarray, bone_pb: np.ndarray, ref: np.ndarray,
-                bw: np.ndarray, D: np.ndarray, g: np.ndarray, K: np.ndarray, Kr: np.ndarray) -> float:
+def _bone_terms(
+    x: np.ndarray,
+    bones: np.ndarray,
+    bone_pa: np.ndarray,
+    bone_pb: np.ndarray,
+    ref: np.ndarray,
+    bw: np.ndarray,
+    D: np.ndarray,
+    g: np.ndarray,
+    K: np.ndarray,
+    Kr: np.ndarray,
+) -> float:
     """Prior cost of the bones; adds their gradients to g and safe blocks K to D, writes K and Kr (L, 3, 3)."""
     cost = 0.0
     for l in bones:
@@ -143,10 +176,29 @@ def _bone_terms(x: np.ndarray, bones: np.ndarray, bone_pa: np.ndarray, bone_pb: 
 
 
 @njit(cache=True)
-def linearize(x: np.ndarray, s: int, e: int, p: int, pos_joint: np.ndarray, proj: np.ndarray, uv: np.ndarray,
-              w: np.ndarray, anchor: np.ndarray, tau2: float, robust: int, C2: float, bones: np.ndarray,
-              bone_pa: np.ndarray, bone_pb: np.ndarray, ref: np.ndarray, bw: np.ndarray, D: np.ndarray,
-              g: np.ndarray, K: np.ndarray, Kr: np.ndarray) -> float:
+def linearize(
+    x: np.ndarray,
+    s: int,
+    e: int,
+    p: int,
+    pos_joint: np.ndarray,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w: np.ndarray,
+    anchor: np.ndarray,
+    tau2: float,
+    robust: int,
+    C2: float,
+    bones: np.ndarray,
+    bone_pa: np.ndarray,
+    bone_pb: np.ndarray,
+    ref: np.ndarray,
+    bw: np.ndarray,
+    D: np.ndarray,
+    g: np.ndarray,
+    K: np.ndarray,
+    Kr: np.ndarray,
+) -> float:
     """Cost, gradient g (J, 3), safe diagonal blocks D (J, 3, 3) and bone blocks K, Kr (L, 3, 3) of positions s:e.
 
     x (J, 3) holds the joints at solver positions; person p of uv (V, P, J, 2), w (V, P, J) (1/sigma,
@@ -196,9 +248,22 @@ def _upper_solve(L: np.ndarray, y: np.ndarray) -> None:
 
 
 @njit(cache=True, inline="always")
-def _assemble(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray, mu: float, exact: bool,
-              bones: np.ndarray, bone_pa: np.ndarray, bone_pb: np.ndarray, bone_slot: np.ndarray, slot: np.ndarray,
-              slots: np.ndarray, B: np.ndarray) -> None:
+def _assemble(
+    s: int,
+    e: int,
+    D: np.ndarray,
+    K: np.ndarray,
+    Kr: np.ndarray,
+    mu: float,
+    exact: bool,
+    bones: np.ndarray,
+    bone_pa: np.ndarray,
+    bone_pb: np.ndarray,
+    bone_slot: np.ndarray,
+    slot: np.ndarray,
+    slots: np.ndarray,
+    B: np.ndarray,
+) -> None:
     """Blocks of M + mu I of positions s:e into B (n_blocks, 3, 3): M safe, or exact (+ Kr on the bones)."""
     for q in slots:
         B[q, :, :] = 0.0
@@ -219,15 +284,14 @@ def _assemble(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray, mu: 
 
 
 @njit(cache=True, inline="always")
-def _factorize(s: int, e: int, slot: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray,
-               B: np.ndarray) -> bool:
+def _factorize(s: int, e: int, slot: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray, B: np.ndarray) -> bool:
     """Right-looking block Cholesky of positions s:e in place (B holds L); False if not positive definite."""
     for k in range(s, e):
         Lkk = B[slot[k, k]]
         if not _cholesky3(Lkk):
             return False
         for t in range(later_ptr[k], later_ptr[k + 1]):
-            A = B[slot[later_idx[t], k]]                # L_ik = A_ik Lkk^-T: each row solves Lkk x = row
+            A = B[slot[later_idx[t], k]]  # L_ik = A_ik Lkk^-T: each row solves Lkk x = row
             for r in range(3):
                 _lower_solve(Lkk, A[r])
         for t in range(later_ptr[k], later_ptr[k + 1]):
@@ -243,19 +307,27 @@ def _factorize(s: int, e: int, slot: np.ndarray, later_ptr: np.ndarray, later_id
 
 
 @njit(cache=True, inline="always")
-def _substitute(s: int, e: int, g: np.ndarray, slot: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray,
-                B: np.ndarray, h: np.ndarray) -> None:
+def _substitute(
+    s: int,
+    e: int,
+    g: np.ndarray,
+    slot: np.ndarray,
+    later_ptr: np.ndarray,
+    later_idx: np.ndarray,
+    B: np.ndarray,
+    h: np.ndarray,
+) -> None:
     """h (J, 3) = -(L L^T)^-1 g on positions s:e, L the factor in B."""
     for k in range(s, e):
         h[k, 0], h[k, 1], h[k, 2] = -g[k, 0], -g[k, 1], -g[k, 2]
-    for k in range(s, e):                               # L y = -g
+    for k in range(s, e):  # L y = -g
         _lower_solve(B[slot[k, k]], h[k])
         for t in range(later_ptr[k], later_ptr[k + 1]):
             i = later_idx[t]
             Li = B[slot[i, k]]
             for r in range(3):
                 h[i, r] -= Li[r, 0] * h[k, 0] + Li[r, 1] * h[k, 1] + Li[r, 2] * h[k, 2]
-    for k in range(e - 1, s - 1, -1):                   # L^T h = y
+    for k in range(e - 1, s - 1, -1):  # L^T h = y
         for t in range(later_ptr[k], later_ptr[k + 1]):
             i = later_idx[t]
             Li = B[slot[i, k]]
@@ -265,10 +337,26 @@ def _substitute(s: int, e: int, g: np.ndarray, slot: np.ndarray, later_ptr: np.n
 
 
 @njit(cache=True)
-def solve_component(s: int, e: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray, g: np.ndarray, mu: float,
-                    exact: bool, bones: np.ndarray, bone_pa: np.ndarray, bone_pb: np.ndarray, bone_slot: np.ndarray,
-                    slot: np.ndarray, slots: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray,
-                    B: np.ndarray, h: np.ndarray) -> bool:
+def solve_component(
+    s: int,
+    e: int,
+    D: np.ndarray,
+    K: np.ndarray,
+    Kr: np.ndarray,
+    g: np.ndarray,
+    mu: float,
+    exact: bool,
+    bones: np.ndarray,
+    bone_pa: np.ndarray,
+    bone_pb: np.ndarray,
+    bone_slot: np.ndarray,
+    slot: np.ndarray,
+    slots: np.ndarray,
+    later_ptr: np.ndarray,
+    later_idx: np.ndarray,
+    B: np.ndarray,
+    h: np.ndarray,
+) -> bool:
     """(M + mu I) h = -g on positions s:e by block Cholesky (M exact or safe) -> h (J, 3); False if not PD.
 
     D (J, 3, 3), K and Kr (L, 3, 3) from :func:`linearize`; slots: the block storage indices of this
@@ -302,12 +390,38 @@ def _max_diagonal(D: np.ndarray, s: int, e: int) -> float:
 
 
 @njit(cache=True)
-def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, anchor: np.ndarray, tau2: float,
-              robust: int, C2: float, ref: np.ndarray, bw: np.ndarray, pos_joint: np.ndarray, comp_start: np.ndarray,
-              comp_bones_ptr: np.ndarray, comp_bones: np.ndarray, comp_slots_ptr: np.ndarray, comp_slots: np.ndarray,
-              bone_pa: np.ndarray, bone_pb: np.ndarray, bone_slot: np.ndarray, slot: np.ndarray,
-              later_ptr: np.ndarray, later_idx: np.ndarray, max_iterations: int, xtol: float, ftol: float,
-              gtol: float, tau: float, cost_out: np.ndarray, it_out: np.ndarray, status_out: np.ndarray) -> None:
+def solve_all(
+    X: np.ndarray,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w: np.ndarray,
+    anchor: np.ndarray,
+    tau2: float,
+    robust: int,
+    C2: float,
+    ref: np.ndarray,
+    bw: np.ndarray,
+    pos_joint: np.ndarray,
+    comp_start: np.ndarray,
+    comp_bones_ptr: np.ndarray,
+    comp_bones: np.ndarray,
+    comp_slots_ptr: np.ndarray,
+    comp_slots: np.ndarray,
+    bone_pa: np.ndarray,
+    bone_pb: np.ndarray,
+    bone_slot: np.ndarray,
+    slot: np.ndarray,
+    later_ptr: np.ndarray,
+    later_idx: np.ndarray,
+    max_iterations: int,
+    xtol: float,
+    ftol: float,
+    gtol: float,
+    tau: float,
+    cost_out: np.ndarray,
+    it_out: np.ndarray,
+    status_out: np.ndarray,
+) -> None:
     """Levenberg-Marquardt of every (person, component) problem; X (P, J, 3) is updated in place (original order).
 
     ref, bw (P, L): each person's bone reference lengths and weights. cost_out, it_out, status_out (P, C)
@@ -327,10 +441,31 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
             x[k] = X[p, pos_joint[k]]
         for c in range(C):
             s, e = comp_start[c], comp_start[c + 1]
-            bones = comp_bones[comp_bones_ptr[c]:comp_bones_ptr[c + 1]]
-            slots = comp_slots[comp_slots_ptr[c]:comp_slots_ptr[c + 1]]
-            f = linearize(x, s, e, p, pos_joint, proj, uv, w, anchor, tau2, robust, C2, bones, bone_pa, bone_pb,
-                          ref_p, bw_p, D, g, K, Kr)
+            bones = comp_bones[comp_bones_ptr[c] : comp_bones_ptr[c + 1]]
+            slots = comp_slots[comp_slots_ptr[c] : comp_slots_ptr[c + 1]]
+            f = linearize(
+                x,
+                s,
+                e,
+                p,
+                pos_joint,
+                proj,
+                uv,
+                w,
+                anchor,
+                tau2,
+                robust,
+                C2,
+                bones,
+                bone_pa,
+                bone_pb,
+                ref_p,
+                bw_p,
+                D,
+                g,
+                K,
+                Kr,
+            )
             scale = _max_diagonal(D, s, e)
             scale = scale if scale > 0.0 else 1.0
             status = CONVERGED_GRADIENT if _abs_max(g, s, e) <= gtol else RUNNING
@@ -341,25 +476,82 @@ def solve_all(X: np.ndarray, proj: np.ndarray, uv: np.ndarray, w: np.ndarray, an
                 used = False
                 ok = False
                 if exact:
-                    ok = solve_component(s, e, D, K, Kr, g, mu, True, bones, bone_pa, bone_pb, bone_slot, slot, slots,
-                                         later_ptr, later_idx, B, h)
+                    ok = solve_component(
+                        s,
+                        e,
+                        D,
+                        K,
+                        Kr,
+                        g,
+                        mu,
+                        True,
+                        bones,
+                        bone_pa,
+                        bone_pb,
+                        bone_slot,
+                        slot,
+                        slots,
+                        later_ptr,
+                        later_idx,
+                        B,
+                        h,
+                    )
                     used = ok
-                if not ok and not solve_component(s, e, D, K, Kr, g, mu, False, bones, bone_pa, bone_pb, bone_slot,
-                                                  slot, slots, later_ptr, later_idx, B, h):
+                if not ok and not solve_component(
+                    s,
+                    e,
+                    D,
+                    K,
+                    Kr,
+                    g,
+                    mu,
+                    False,
+                    bones,
+                    bone_pa,
+                    bone_pb,
+                    bone_slot,
+                    slot,
+                    slots,
+                    later_ptr,
+                    later_idx,
+                    B,
+                    h,
+                ):
                     h[s:e] = np.nan
                 predicted = 0.0
                 for k in range(s, e):
                     for i in range(3):
                         predicted += 0.5 * h[k, i] * (mu * h[k, i] - g[k, i])
                         x_new[k, i] = x[k, i] + h[k, i]
-                h_max = _abs_max(h, s, e) if not np.isnan(predicted) else np.nan   # NaN step: never accepted
-                f_t = linearize(x_new, s, e, p, pos_joint, proj, uv, w, anchor, tau2, robust, C2, bones, bone_pa,
-                                bone_pb, ref_p, bw_p, D_t, g_t, K_t, Kr_t)
+                h_max = _abs_max(h, s, e) if not np.isnan(predicted) else np.nan  # NaN step: never accepted
+                f_t = linearize(
+                    x_new,
+                    s,
+                    e,
+                    p,
+                    pos_joint,
+                    proj,
+                    uv,
+                    w,
+                    anchor,
+                    tau2,
+                    robust,
+                    C2,
+                    bones,
+                    bone_pa,
+                    bone_pb,
+                    ref_p,
+                    bw_p,
+                    D_t,
+                    g_t,
+                    K_t,
+                    Kr_t,
+                )
                 actual = f - f_t
                 rho = actual / predicted if predicted != 0.0 else np.nan
                 accept = predicted > 0.0 and rho > 0.0 and np.isfinite(f_t + h_max)
                 if used:
-                    exact = False                       # a failed exact step is retried with the safe model
+                    exact = False  # a failed exact step is retried with the safe model
                 if accept:
                     mu *= max(MIN_DAMPING_FACTOR, 1.0 - (2.0 * rho - 1.0) ** 3)
                     nu = 2.0

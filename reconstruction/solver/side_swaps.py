@@ -8,28 +8,34 @@ two detections as given is compared with that of the two exchanged. The view who
 it most is swapped when the exchange leaves at most ``ratio`` of the chi-square and the chi-square as
 given exceeds ``min_chi2`` (in units of the 2D noise).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
+from data.geometry.triangulation import triangulate_dlt
 from data.keypoints import FLIP_PAIRS
 from reconstruction.solver.person_prior import project
-from data.geometry.triangulation import triangulate_dlt
-
 
 
 def _chi2s(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> tuple[np.ndarray, np.ndarray]:
     """Chi-square of joint pairs as given and exchanged: (V, P, J, 2) x2, (V, P, J), left / right indices (an
     int or (K,)) -> (V, P) or (V, P, K) x2."""
-    d = lambda a, b: np.sum((uv[:, :, a] - xy[:, :, b]) ** 2, axis=-1)              # noqa: E731
+    d = lambda a, b: np.sum((uv[:, :, a] - xy[:, :, b]) ** 2, axis=-1)  # noqa: E731
     given = w2[..., left] * d(left, left) + w2[..., right] * d(right, right)
     exchanged = w2[..., right] * d(right, left) + w2[..., left] * d(left, right)
     return given, exchanged
 
 
-def find_swaps(poses2d: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, full: np.ndarray | None = None,
-               pairs: tuple[tuple[int, int], ...] = FLIP_PAIRS, ratio: float = 0.25,
-               min_chi2: float = 18.0) -> list[tuple[int, int, int, int]]:
+def find_swaps(
+    poses2d: np.ndarray,
+    inv_sigma: np.ndarray,
+    proj: np.ndarray,
+    full: np.ndarray | None = None,
+    pairs: tuple[tuple[int, int], ...] = FLIP_PAIRS,
+    ratio: float = 0.25,
+    min_chi2: float = 18.0,
+) -> list[tuple[int, int, int, int]]:
     """(view, person, left, right) to exchange: poses2d (V, P, J, 3) undistorted px + score, inv_sigma (V, P, J)
     1 / sigma (0 unseen), proj (V, 3, 4); full (P, J, 4): the DLT from all views, if already computed.
 
@@ -40,30 +46,30 @@ def find_swaps(poses2d: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, ful
     V = len(proj)
     if V < 3 or poses2d.shape[1] == 0:
         return []
-    w2 = inv_sigma ** 2
+    w2 = inv_sigma**2
     uv = poses2d[..., :2]
     full = triangulate_dlt(poses2d, proj, 2) if full is None else full
     xy, _ = project(full[..., :3], proj)
     seen = inv_sigma > 0
     left, right = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-    given, exchanged = _chi2s(uv, xy, w2, left, right)                                # (V, P, pairs)
+    given, exchanged = _chi2s(uv, xy, w2, left, right)  # (V, P, pairs)
     # a swap reprojects worse than its exchange even from the DLT it pulls (only the exchange test below
     # needs the other views alone)
     bad = ((given > min_chi2) & (exchanged < given) & seen[..., left] & seen[..., right]).any(axis=0)
-    bad &= (full[:, left, 3] > 0) & (full[:, right, 3] > 0)                           # (P, pairs)
+    bad &= (full[:, left, 3] > 0) & (full[:, right, 3] > 0)  # (P, pairs)
     persons, which = np.nonzero(bad)
     cand = [(int(p), int(left[k]), int(right[k])) for p, k in zip(persons, which)]
     if not cand:
         return []
     person, joints = np.array([c[0] for c in cand]), np.array([c[1:] for c in cand])  # (K,), (K, 2)
-    sub = poses2d[:, person[:, None], joints]                                         # (V, K, 2, 3)
-    sub_w2 = w2[:, person[:, None], joints]                                           # (V, K, 2)
+    sub = poses2d[:, person[:, None], joints]  # (V, K, 2, 3)
+    sub_w2 = w2[:, person[:, None], joints]  # (V, K, 2)
     K = len(cand)
-    others = np.repeat(sub[:, None], V, axis=1)                                       # (V, V, K, 2, 3): without view u
+    others = np.repeat(sub[:, None], V, axis=1)  # (V, V, K, 2, 3): without view u
     others[np.arange(V), np.arange(V), ..., 2] = 0.0
-    X = triangulate_dlt(others.reshape(V, V * K, 2, 3), proj, 2).reshape(V, K, 2, 4)   # one DLT for all V variants
-    pxy = np.stack([project(X[v, ..., :3], proj[v:v + 1])[0][0] for v in range(V)])  # (V, K, 2, 2)
-    g, e = _chi2s(sub[..., :2], pxy, sub_w2, 0, 1)                                   # (V, K)
+    X = triangulate_dlt(others.reshape(V, V * K, 2, 3), proj, 2).reshape(V, K, 2, 4)  # one DLT for all V variants
+    pxy = np.stack([project(X[v, ..., :3], proj[v : v + 1])[0][0] for v in range(V)])  # (V, K, 2, 2)
+    g, e = _chi2s(sub[..., :2], pxy, sub_w2, 0, 1)  # (V, K)
     ok = (sub_w2 > 0).all(axis=-1) & (X[..., 3] > 0).all(axis=-1) & (g > min_chi2) & (e < ratio * g)
     gains = np.where(ok, g - e, -np.inf)
     best = np.argmax(gains, axis=0)
