@@ -9,7 +9,7 @@ switches (per 100 GT person-frames), the share of GT person-frames whose predict
 most frequent track id (IDF1-like, %), fragmentations, MPJPE (mm; Shelf: strict PCP %) with tracking on
 and off, and the tracker's ms per frame, the whole pipeline's (matching + reconstruction + tracking)
 with tracking on and off, and what tracking adds (the tracker, the joints' variances and the skeleton
-look-up inside the MAP), one core.
+look-up inside the MAP), one core; timings are medians of ``--repeats`` interleaved on / off runs.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import argparse  # noqa: E402
 import copy  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+import numpy as np  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
 from hydra.utils import instantiate  # noqa: E402
 
@@ -92,13 +93,20 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser.add_argument("--data", default="../shared/data")
     parser.add_argument("--sets", default="shelf,panoptic,crowd")
     parser.add_argument("--crowd-frames", type=int, default=50)
+    parser.add_argument("--repeats", type=int, default=3, help="on / off runs, interleaved, for the timing medians")
     args = parser.parse_args(argv)
     rows = []
     with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
         for label, overrides in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items():
             sequence = instantiate(compose("eval", overrides=overrides).dataset, _convert_="all")
-            on, shelf_on, ms_track, ms_on = run(sequence, compose("eval", overrides=[*overrides, "tracking=on"]))
-            off, shelf_off, _, ms_off = run(sequence, compose("eval", overrides=[*overrides, "tracking=off"]))
+            cfg_on = compose("eval", overrides=[*overrides, "tracking=on"])
+            cfg_off = compose("eval", overrides=[*overrides, "tracking=off"])
+            timings = []
+            for _ in range(max(args.repeats, 1)):  # interleaved: the machine's state is shared by both
+                on, shelf_on, ms_track, ms_on = run(sequence, cfg_on)
+                off, shelf_off, _, ms_off = run(sequence, cfg_off)
+                timings.append((ms_track, ms_on, ms_off))
+            ms_track, ms_on, ms_off = np.median(np.array(timings), axis=0)
             if shelf_on:
                 ident = shelf_on["tracking"]
                 quality = [
