@@ -403,9 +403,10 @@ class Tracker:
         predicted = st.position + dt[:, None, None] * self._body_velocity(st)[:, None, :]
         gate = self.max_distance_m + self.gate_growth_m * (dt - 1.0)
         live = np.where(st.live.any(axis=1, keepdims=True), st.live, st.seen)
-        cost = np.minimum(
-            mean_distances(predicted, live, poses3d, gate.max()), mean_distances(st.position, live, poses3d, gate.max())
+        both = mean_distances(  # the prediction and the last position in one pass: (2T, P)
+            np.concatenate([predicted, st.position]), np.concatenate([live, live]), poses3d, gate.max()
         )
+        cost = np.minimum(both[: len(st)], both[len(st) :])
         cost = np.where(cost <= gate[:, None], cost, np.inf)
         if not np.isfinite(cost).any():
             return none, none
