@@ -75,8 +75,7 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))  # protocols: evaluation/protocols
     t_data = time.perf_counter() - t0
     check_sequence(cfg, sequence)
-    tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None  # tracking=off: none
-    pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
+    pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
     stage_s = sequence.meta.get("stage_seconds", {})  # e.g. 2D grouping done while loading
     report.timings = {"dataset": t_data - sum(stage_s.values()), **stage_s, **report.timings}

@@ -133,8 +133,7 @@ def detectable_persons(sequence) -> tuple[int, int]:
 def run_row(sequence, cfg) -> list:
     """One table row's values: the pipeline of cfg on a fresh copy of the sequence."""
     sequence = copy.deepcopy(sequence)
-    tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
-    pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
+    pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), progress=False)
     m, frames = report.metrics, max(len(sequence.frames), 1)
     ms = (

@@ -74,8 +74,7 @@ def run(sequence, cfg) -> tuple[dict, dict, float, float]:
     """Metrics, Shelf summary, tracker and whole-pipeline (matching + reconstruction + tracking) ms per frame
     of one configuration."""
     sequence = copy.deepcopy(sequence)
-    tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
-    pipeline = MultiViewPipeline(sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
+    pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), progress=False)
     n = max(len(sequence.frames), 1)
     total = sum(report.timings.get(k, 0.0) for k in ("matching", "reconstruction", "tracking"))

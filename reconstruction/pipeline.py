@@ -5,9 +5,10 @@ from __future__ import annotations
 import time
 from collections import defaultdict
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Any, Callable, Protocol
 
 import numpy as np
+from hydra.utils import instantiate
 
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
@@ -75,6 +76,13 @@ class MultiViewPipeline:
         self.reconstructor = reconstructor
         self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
+
+    @classmethod
+    def from_config(cls, cfg: Any, rig: Rig) -> "MultiViewPipeline":
+        """The pipeline of an eval.yaml config: cfg.matching, cfg.reconstruction and, unless tracking=off (a
+        group entry without ``_target_``), cfg.tracking, each built by Hydra's instantiate."""
+        tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
+        return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
 
     def _reconstruct(self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray) -> np.ndarray:
         """The reconstruction of a frame: (V, P, J, 3), (V, P, 4) -> (P, J, 4); a reconstruction that takes

@@ -42,7 +42,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from data.bone_lengths import BONE_PAIRS
+from data.bone_lengths import BONE_PAIRS, bone_lengths
 
 MAD_TO_SD = 1.4826  # SD of a normal distribution per median absolute deviation
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
@@ -174,9 +174,8 @@ class TrackState:
 
 def bone_lengths_of(poses3d: np.ndarray) -> np.ndarray:
     """Bone lengths of poses, NaN where an end is missing: (P, J, 4) -> (P, L) m."""
-    a, b = BONE_PAIRS[:, 0], BONE_PAIRS[:, 1]
-    ok = (poses3d[:, a, 3] > 0) & (poses3d[:, b, 3] > 0)
-    return np.where(ok, np.linalg.norm(poses3d[:, a, :3] - poses3d[:, b, :3], axis=-1), np.nan)
+    ok = (poses3d[:, BONE_PAIRS[:, 0], 3] > 0) & (poses3d[:, BONE_PAIRS[:, 1], 3] > 0)
+    return np.where(ok, bone_lengths(poses3d), np.nan)
 
 
 def _core_mask(joints: int) -> np.ndarray:
@@ -221,7 +220,7 @@ def _pair_mean_distance(a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np
 
 
 class Tracker:
-    """Frame-by-frame tracker of 3D poses; ``update(frame, poses3d (P, J, 4)) -> ids (P,)``."""
+    """Frame-by-frame tracker of 3D poses: ``update(frame, poses3d (P, J, 4), ...) -> Tracked(ids (P,), poses3d)``."""
 
     def __init__(
         self,
@@ -500,7 +499,8 @@ class Tracker:
         self, st: TrackState, tracks: np.ndarray, dt: np.ndarray, poses3d: np.ndarray, variance: np.ndarray
     ) -> None:
         """The smoother of each joint: a random walk whose process variance follows the innovations (a joint the
-        reconstruction does not see moves with the body), updated with the reconstruction's joint (its variance):
+        reconstruction does not see moves on with its motion-filter velocity), updated with the reconstruction's
+        joint (its variance):
         tracks (K,), dt (K, 1), poses (K, J, 4), variances (K, J); st changed in place."""
         obs = poses3d[..., 3] > 0
         fresh = obs & ~st.seen[tracks]

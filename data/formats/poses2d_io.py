@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from data.formats.atomic_io import atomic_write_text
+from data.formats.strict_json import unique_keys
 from data.keypoints import COCO23_NAMES, NUM_JOINTS
 from data.multiview import ViewDetections
 
@@ -140,20 +141,10 @@ def _check_values(where: str, det: tuple, size: tuple[int, int] | None) -> tuple
     return np.concatenate([keypoints[:, :2], np.minimum(scores, 1.0)[:, None]], axis=1), bbox, min(score, 1.0), pid
 
 
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict:
-    """object_pairs_hook: the object as a dict; ValueError naming a key given twice."""
-    out: dict = {}
-    for key, value in pairs:
-        if key in out:
-            raise ValueError(f"key {key!r} appears twice in one object")
-        out[key] = value
-    return out
-
-
 def _load(path: Path) -> list:
     """The top-level, non-empty list of a poses2d.json file."""
     try:
-        doc = json.loads(path.read_text(), object_pairs_hook=_unique_keys)
+        doc = json.loads(path.read_text(), object_pairs_hook=unique_keys)
     except FileNotFoundError:
         raise Poses2DError(f"{path}: poses2d.json not found") from None
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:  # JSONDecodeError is a ValueError

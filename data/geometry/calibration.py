@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from data.formats.atomic_io import atomic_write_text
+from data.formats.strict_json import DuplicateKey, unique_keys
 from data.geometry.camera import Camera, Rig
 
 WILDTRACK_CAMERAS = ("CVLab1", "CVLab2", "CVLab3", "CVLab4", "IDIAP1", "IDIAP2", "IDIAP3")
@@ -133,20 +134,6 @@ def _camera(
     return Camera(name, K, dist, R, t, (int(w), int(h)))
 
 
-class _DuplicateKey(ValueError):
-    """A key that appears twice in one JSON object (json keeps the last one silently)."""
-
-
-def unique_keys(pairs: list[tuple[str, Any]]) -> dict:
-    """object_pairs_hook for json.load: the object as a dict; _DuplicateKey naming a repeated key."""
-    out: dict = {}
-    for key, value in pairs:
-        if key in out:
-            raise _DuplicateKey(key)
-        out[key] = value
-    return out
-
-
 def _read_json(path: str | Path) -> Any:
     """Parsed JSON of a calibration file; CalibrationError when missing, unreadable or with a key twice."""
     try:
@@ -154,7 +141,7 @@ def _read_json(path: str | Path) -> Any:
             return json.load(f, object_pairs_hook=unique_keys)
     except FileNotFoundError:
         raise _error(path, None, None, "calibration file not found") from None
-    except _DuplicateKey as exc:
+    except DuplicateKey as exc:
         raise _error(
             path,
             None,

@@ -412,6 +412,7 @@ class MAPReconstruction:
         self.sigma_px, self.score_power = float(sigma_px), float(score_power)
         self.fix_swaps, self.last_swaps = bool(fix_swaps), 0
         self._variance_inputs: tuple = ((0, 0), None)  # what last_joint_variance is computed from, on demand
+        self._variance: np.ndarray | None = None
         self.takes_skeletons = self.bone_prior == "adaptive"  # the tracker's bone lengths refine the prior
         self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))  # (P, L) m measured by the last MLE, NaN unmeasured
         self._bone_measurements: np.ndarray | None = None
@@ -484,6 +485,7 @@ class MAPReconstruction:
         idx = np.flatnonzero(placed)
         if len(idx) == 0:
             self._variance_inputs = (X.shape[:2], None)
+            self._variance = None
             self.last_bone_lengths = np.full((len(X), len(BONE_PAIRS)), np.nan)
             return X, dlt, placed
         und, uv, inv_sigma = poses2d_und[:, idx], uv[:, idx], inv_sigma[:, idx]
@@ -504,6 +506,7 @@ class MAPReconstruction:
         X = X.copy()
         X[idx] = Xp
         self._variance_inputs = (X.shape[:2], (idx, Xp, uv, inv_sigma, proj))
+        self._variance = None
         self.last_bone_lengths = np.full((len(X), len(BONE_PAIRS)), np.nan)
         if self._bone_measurements is not None:
             self.last_bone_lengths[idx] = self._bone_measurements
@@ -514,19 +517,17 @@ class MAPReconstruction:
         """Per-axis variance (P, J) m^2 of every joint of the last call (see :meth:`_joint_variance`; inf for a
         person not placed), computed when asked (a tracker's measurement noise) and kept."""
         shape, inputs = self._variance_inputs
-        if isinstance(inputs, np.ndarray) or inputs is None:
-            return np.full(shape, np.inf) if inputs is None else inputs
-        idx, X, uv, inv_sigma, proj = inputs
-        out = np.full(shape, np.inf)
-        out[idx] = self._joint_variance(X, uv, inv_sigma, proj)
-        self._variance_inputs = (shape, out)
-        return out
+        if self._variance is None:
+            self._variance = np.full(shape, np.inf)
+            if inputs is not None:
+                idx, X, uv, inv_sigma, proj = inputs
+                self._variance[idx] = self._joint_variance(X, uv, inv_sigma, proj)
+        return self._variance
 
     def _joint_variance(self, X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray) -> np.ndarray:
         """Per-axis variance (m^2, a third of the covariance's trace) of every joint, at each person's noise scale:
         (P, J, 3), (V, P, J, 2), (V, P, J), (V, 3, 4) -> (P, J). The likelihood's information (at the MLE poses
-        where the MAP had them), plus for a joint
-        seen in one view the bone tie along every axis (the prior fixes its depth); inf for a joint no view sees."""
+        where the MAP had them), plus for a joint seen in one view the bone tie along every axis (the prior fixes its depth); inf for a joint no view sees."""
         info = self._mle_information  # at the MLE poses, with the person's noise scale (the MAP is close)
         if info is None or len(info) != len(X):
             scale = (
@@ -596,6 +597,7 @@ class MAPReconstruction:
         P, J = und.shape[1:3]
         if P == 0:
             self._variance_inputs = ((0, J), None)
+            self._variance = None
             self.last_bone_lengths = np.zeros((0, len(BONE_PAIRS)))
             return np.zeros((0, J, 4))
         X, dlt, placed = self.solve(und, bboxes, rig.projection_matrices(), self.stages(), skeletons)
