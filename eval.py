@@ -1,5 +1,5 @@
 """Evaluate the multi-view pipeline: ``python eval.py [dataset=synthetic] [matching=oracle] ...``,
-or a 2D checkpoint of train.py: ``python eval.py checkpoint=<.ckpt/.pth> [pose2d.ann_file=...]``.
+or a 2D checkpoint of train.py: ``python eval.py checkpoint=<.ckpt/.pth> [coco2d.ann_file=...]``.
 
 Builds the dataset's sequence, matches persons across views, reconstructs them in 3D, prints the
 metrics with their protocol and the time of each stage, and writes poses3d.json, metrics.json and the
@@ -149,12 +149,12 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
     except (FileNotFoundError, ValueError) as err:
         raise SystemExit(f"error: {err}") from None
     text = (
-        f"{cfg.checkpoint} ({cfg.pose2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person "
+        f"{cfg.checkpoint} ({cfg.coco2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person "
         "area\n" + "\n".join(f"  {k:8s} {v:.4f}" + _why_missing(k, v) for k, v in metrics.items())
     )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
     print(
-        f"{text}\n\nWrote {out_dir / cfg.pose2d.output}, {cfg.pose2d.results_file}, {cfg.metrics_file} and "
+        f"{text}\n\nWrote {out_dir / cfg.coco2d.output}, {cfg.coco2d.results_file}, {cfg.metrics_file} and "
         f"{cfg.report_file}"
     )
     return metrics

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -49,12 +50,19 @@ class Frame:
     """One multi-view frame: detections per view (rig order) and, where known, 3D ground truth.
 
     gt_poses (P, J, 4): x, y, z (m, world) and validity (1 = annotated); gt_ids (P,).
+    images: where the cameras' images are known (dataset=images, dataset=synthetic with render=true), a
+    callable returning them, per view in rig order (H, W, 3) uint8 BGR at the calibration's image size;
+    read only when called, so a long sequence holds no pixels. ``views`` then holds the ground-truth 2D
+    (render) or nothing (images) until a 2D stage fills it. image_ids: per view, the COCO image id of
+    that image (the key of a detections file, detector=file).
     """
 
     index: int
     views: list[ViewDetections]
     gt_poses: np.ndarray | None = None
     gt_ids: np.ndarray | None = None
+    images: Callable[[], list[np.ndarray]] | None = None
+    image_ids: list[int] | None = None
 
 
 @dataclass

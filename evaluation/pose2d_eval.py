@@ -173,9 +173,9 @@ def _view(dets: list[dict]) -> ViewDetections:
 
 
 def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
-    """Evaluate cfg.checkpoint on cfg.pose2d's set; write the COCO results, poses2d.json and metrics.json
+    """Evaluate cfg.checkpoint on cfg.coco2d's set; write the COCO results, poses2d.json and metrics.json
     into out_dir -> {"AP_all", "AR_all", "AP_body", ...} (-1 where the set has no such joint)."""
-    pose2d, out_dir = cfg.pose2d, Path(out_dir)
+    pose2d, out_dir = cfg.coco2d, Path(out_dir)
     device = select_device(pose2d.device)
     model, train_cfg = load_trained_model(cfg.checkpoint, device)
     codec = build_codec(train_cfg)

@@ -95,7 +95,7 @@ def test_eval_py_evaluates_a_checkpoint_and_writes_poses2d(checkpoint, tmp_path)
         image.update(frame=300, camera=f"cam{n}")
     ann = tmp_path / "val_views.json"
     ann.write_text(json.dumps(doc))
-    cfg = eval_config([f"checkpoint={ckpt}", f"pose2d.ann_file={ann}", f"pose2d.image_dir={root / 'val' / 'images'}"])
+    cfg = eval_config([f"checkpoint={ckpt}", f"coco2d.ann_file={ann}", f"coco2d.image_dir={root / 'val' / 'images'}"])
     metrics = eval_script.run_pose2d(cfg, tmp_path)
     assert set(metrics) == {f"{m}_{s}" for m in ("AP", "AR") for s in ("all", "body", "foot")}
     results = json.loads((tmp_path / "keypoints_results.json").read_text())
@@ -113,7 +113,7 @@ def test_eval_py_evaluates_a_checkpoint_and_writes_poses2d(checkpoint, tmp_path)
 
 def test_eval_py_single_decoding_matches_train_validation(checkpoint, tmp_path):
     ckpt, root = checkpoint
-    metrics = eval_script.run_pose2d(eval_config([f"checkpoint={ckpt}", "pose2d.decode=single"]), tmp_path)
+    metrics = eval_script.run_pose2d(eval_config([f"checkpoint={ckpt}", "coco2d.decode=single"]), tmp_path)
     # the checkpoint's own validation set by default, decoded as train.py's validation decodes it
     stored = json.loads((ckpt.parent.parent / "metrics.json").read_text())["metrics"]
     for key, value in metrics.items():
