@@ -326,7 +326,7 @@ def validate(
     grid_images: int = 4,
     progress: bool = False,
 ) -> Validation:
-    """Loss and COCO OKS AP/AR (subsets all, body, foot) of the model on a plain (unshuffled) loader."""
+    """Loss, COCO OKS AP/AR (subsets all, body, foot) and AP50/AP75/APm/APl (all) of the model on a plain (unshuffled) loader."""
     model.eval()
     predictions: list[dict] = []
     total, count, grid = 0.0, 0, None
@@ -343,6 +343,8 @@ def validate(
     for subset in AP_SUBSETS:
         stats = evaluate_keypoints(records, predictions, subset) if predictions else {"AP": -1.0, "AR": -1.0}
         metrics[f"AP_{subset}"], metrics[f"AR_{subset}"] = stats["AP"], stats["AR"]
+        if subset == "all":  # the COCO breakdown of the headline number: OKS 0.5 / 0.75, medium / large persons
+            metrics.update({f"{k}_all": stats.get(k, -1.0) for k in ("AP50", "AP75", "APm", "APl")})
     return Validation(metrics, predictions, grid)
 
 

@@ -99,3 +99,25 @@ def test_sample_augmentation_respects_ranges_and_probabilities():
     assert abs((rotation != 0).mean() - 0.6) < 0.03 and abs(flip.mean() - 0.5) < 0.03
     no_aug = sample_augmentation(rng, CropAugmentation(0.0, 0.0, 0.0, 0.0))
     assert no_aug == (1.0, 0.0, False)
+
+
+def test_box_shift_and_colour_jitter_known_answers_and_geometry_unchanged():
+    from data.pose2d.photometric import JitterDraw, jitter_colour, sample_jitter, shift_box
+
+    box = np.array([10.0, 20.0, 40.0, 80.0])
+    moved = shift_box(box, JitterDraw(shift=(0.5, -0.25)))
+    np.testing.assert_allclose(moved, [30.0, 0.0, 40.0, 80.0])
+    np.testing.assert_allclose(box, [10.0, 20.0, 40.0, 80.0])  # the caller's box is not modified
+    rgb = np.full((4, 4, 3), 100, np.uint8)
+    np.testing.assert_array_equal(jitter_colour(rgb, JitterDraw(brightness=1.5)), 150)
+    np.testing.assert_array_equal(jitter_colour(rgb, JitterDraw()), rgb)
+    grey_stays_grey = jitter_colour(rgb, JitterDraw(saturation=2.0, hue_deg=40))
+    np.testing.assert_array_equal(grey_stays_grey, rgb)
+    red = np.zeros((2, 2, 3), np.uint8)
+    red[..., 0] = 200
+    hue_turned = jitter_colour(red, JitterDraw(hue_deg=120))  # red -> green
+    assert hue_turned[0, 0, 1] > 150 and hue_turned[0, 0, 0] < 30
+    draws = [sample_jitter(np.random.default_rng(i), 0.05, 0.2, 10.0) for i in range(500)]
+    shifts = np.array([d.shift for d in draws])
+    assert np.abs(shifts).max() <= 0.1 + 1e-12 and 0.03 < shifts.std() < 0.06
+    assert all(0.8 <= d.brightness <= 1.2 and abs(d.hue_deg) <= 10 for d in draws)

@@ -523,3 +523,15 @@ def test_mu_lambda_multirun_writes_checkpoints_and_tensorboard(synthetic_root, t
         checkpoint = read_checkpoint(run_dir / "checkpoints" / "last.ckpt")
         assert checkpoint["global_step"] == 2 and checkpoint["config"]["loss"]["mu"] == float(mu)
         assert checkpoint["config"]["model"]["depth"] == 18 and (run_dir / "val_predictions.json").is_file()
+
+
+def test_box_and_colour_jitter_leave_the_geometric_draws_unchanged(wholebody):
+    codec = MultiModalHeatmapCodec((192, 256), (48, 64))
+    plain = TopDownDataset(wholebody, codec, (192, 256), augment=CropAugmentation(), seed=3)
+    jittered = TopDownDataset(
+        wholebody, codec, (192, 256), augment=CropAugmentation(shift_factor=0.1, colour_factor=0.3), seed=3
+    )
+    assert [plain.augmentation(i) for i in range(len(plain))] == [jittered.augmentation(i) for i in range(len(plain))]
+    assert plain.jitter(0) is None and jittered.jitter(0) is not None
+    a, b = plain[0], jittered[0]
+    assert a["image"].shape == b["image"].shape and not torch.equal(a["image"], b["image"])

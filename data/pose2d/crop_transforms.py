@@ -95,12 +95,18 @@ class CropAugmentation:
     scale_factor: std of the scale multiplier around 1, clipped to 1 +- scale_factor.
     rotation_factor: std of the rotation in degrees, clipped to +- 2 rotation_factor, applied with
     probability rotation_prob (else 0). flip_prob: probability of a horizontal flip.
+    shift_factor: std of the box centre shift as a fraction of the box width / height (a detector's error).
+    colour_factor: brightness, contrast and saturation factors drawn in 1 +- colour_factor; hue_deg: hue
+    shift drawn in +- hue_deg (data/pose2d/photometric.py). 0 turns each off.
     """
 
     scale_factor: float = 0.25
     rotation_factor: float = 30.0
     rotation_prob: float = 0.6
     flip_prob: float = 0.5
+    shift_factor: float = 0.0
+    colour_factor: float = 0.0
+    hue_deg: float = 0.0
 
 
 def sample_augmentation(

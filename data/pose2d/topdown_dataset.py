@@ -33,6 +33,7 @@ from data.pose2d.crop_transforms import (
     flip_points,
     sample_augmentation,
 )
+from data.pose2d.photometric import JitterDraw, jitter_colour, sample_jitter, shift_box
 from data.pose2d.records import ImageRecord
 
 if TYPE_CHECKING:  # annotation only: the codec (a stage, layer 3) is given by the caller
@@ -137,13 +138,22 @@ class TopDownDataset(Dataset):
         rng = np.random.default_rng([self.seed, self.epoch, int(index)])
         return sample_augmentation(rng, self.augment)
 
+    def jitter(self, index: int) -> JitterDraw | None:
+        """Box shift and colour draw of sample ``index`` in the current epoch; None when both are off."""
+        a = self.augment
+        if a is None or not (a.shift_factor or a.colour_factor or a.hue_deg):
+            return None
+        rng = np.random.default_rng([self.seed, self.epoch, int(index), 1])  # own stream: geometry unchanged
+        return sample_jitter(rng, a.shift_factor, a.colour_factor, a.hue_deg)
+
     def __getitem__(self, index: int) -> dict:
         r, own, box, score, area = self.samples[index]
         record = self.records[r]
         image = self.read_image(r)
         keypoints = record.keypoints
         aspect = self.input_size[0] / self.input_size[1]
-        center, scale = box_to_center_scale(box, aspect, self.padding)
+        jitter = self.jitter(index)
+        center, scale = box_to_center_scale(box if jitter is None else shift_box(box, jitter), aspect, self.padding)
         scale_mult, rotation, flip = self.augmentation(index)
         if flip:
             image = cv2.flip(image, 1)
@@ -159,6 +169,8 @@ class TopDownDataset(Dataset):
             borderMode=cv2.BORDER_CONSTANT,
             borderValue=(0, 0, 0),
         )
+        if jitter is not None:
+            crop = jitter_colour(crop, jitter)
         if own >= 0:
             target, weight = self.codec.encode_crop(keypoints, own, affine, record.labelled)
         else:
