@@ -17,7 +17,7 @@ import torchvision
 from torch import Tensor, nn
 from torchvision.models.resnet import BasicBlock, Bottleneck
 
-from models.tv_weights import download_state_dict, read_state_dict
+from models.tv_weights import check_state_fits, download_state_dict, read_state_dict
 
 log = logging.getLogger(__name__)
 
@@ -90,18 +90,7 @@ def load_trunk_state(model: ResNet, state: dict[str, Tensor], source: str) -> li
     """
     state = {k: v for k, v in state.items() if not k.startswith("fc.")}
     own = model.state_dict()
-    missing = sorted(k for k in own if k not in state and not _is_se_key(k))
-    unexpected = sorted(k for k in state if k not in own)
-    wrong_shape = sorted(
-        f"{k}: file {tuple(v.shape)} vs model {tuple(own[k].shape)}"
-        for k, v in state.items()
-        if k in own and tuple(v.shape) != tuple(own[k].shape)
-    )
-    if missing or unexpected or wrong_shape:
-        raise ValueError(
-            f"{source} does not fit a ResNet-{model.depth} trunk: missing keys {missing}, "
-            f"unexpected keys {unexpected}, wrong shapes {wrong_shape}"
-        )
+    check_state_fits(own, state, source, f"a ResNet-{model.depth} trunk", may_miss=_is_se_key)
     model.load_state_dict(state, strict=False)
     new_keys = sorted(k for k in own if k not in state)
     if new_keys:

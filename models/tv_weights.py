@@ -56,3 +56,27 @@ def read_state_dict(path: str | Path) -> dict[str, Tensor]:
     if not isinstance(state, dict) or not all(isinstance(v, Tensor) for v in state.values()):
         raise WeightsUnavailable(f"{path}: expected a state dict (name -> tensor), got {type(state).__name__}")
     return state
+
+
+def _listed(names: list[str], shown: int = 8) -> str:
+    """At most ``shown`` names, then how many there are in all."""
+    return str(names[:shown]) + (f" ... ({len(names)} in all)" if len(names) > shown else "")
+
+
+def check_state_fits(
+    own: dict[str, Tensor], state: dict[str, Tensor], source: str, what: str, may_miss: Callable[[str], bool]
+) -> None:
+    """ValueError naming ``source`` unless ``state`` has every key of ``own`` (except those ``may_miss``), no
+    other key, and the same shapes."""
+    missing = sorted(k for k in own if k not in state and not may_miss(k))
+    unexpected = sorted(k for k in state if k not in own)
+    wrong_shape = sorted(
+        f"{k}: file {tuple(v.shape)} vs model {tuple(own[k].shape)}"
+        for k, v in state.items()
+        if k in own and tuple(v.shape) != tuple(own[k].shape)
+    )
+    if missing or unexpected or wrong_shape:
+        raise ValueError(
+            f"{source} does not fit {what}: missing keys {_listed(missing)}, unexpected keys {_listed(unexpected)}, "
+            f"wrong shapes {_listed(wrong_shape)}"
+        )
