@@ -174,6 +174,8 @@ SHELF14_TO_COCO23 = np.array([-1, -1, -1, -1, -1, 9, 8, 10, 7, 11, 6, 3, 2, 4, 1
 # CrowdPose-14: 0 LSho 1 RSho 2 LElb 3 RElb 4 LWri 5 RWri 6 LHip 7 RHip 8 LKnee 9 RKnee 10 LAnk
 # 11 RAnk 12 head top 13 neck.
 CROWDPOSE14_TO_COCO23 = np.array([-1, -1, -1, -1, -1, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, -1, -1, -1, -1, -1, -1])
+# COCO-17 (COCO keypoints, torchvision's Keypoint R-CNN): the body joints of COCO-23, no feet.
+COCO17_TO_COCO23 = np.array([*range(17), -1, -1, -1, -1, -1, -1])
 # COCO-23 -> Shelf-14 for the 12 limb joints; the two head joints are built by coco23_to_shelf14.
 COCO23_TO_SHELF14_LIMBS = np.array([16, 14, 12, 11, 13, 15, 10, 8, 6, 5, 7, 9])
 

@@ -13,7 +13,9 @@ from pathlib import Path
 from torch import Tensor, nn
 
 from data.keypoints import NUM_JOINTS
-from models.resnet import ResNet, load_pretrained
+from models.resnet import ResNet, load_imagenet, load_pretrained
+
+IMAGENET = "imagenet"  # model.pretrained value: torchvision's default ImageNet weights of the depth
 
 
 class DUC(nn.Module):
@@ -32,14 +34,20 @@ class DUC(nn.Module):
 
 
 class FastPose(nn.Module):
-    """Single-person pose network: (B, 3, H, W) crops -> (B, num_joints, H/4, W/4) heatmaps."""
+    """Single-person pose network: (B, 3, H, W) crops -> (B, num_joints, H/4, W/4) heatmaps.
+
+    pretrained: None (random trunk), ``"imagenet"`` (torchvision's weights API, downloaded into torch's
+    cache; offline one line) or the path of a torchvision ImageNet ResNet state-dict file.
+    """
 
     def __init__(
         self, depth: int = 50, num_joints: int = NUM_JOINTS, se: bool = False, pretrained: str | Path | None = None
     ) -> None:
         super().__init__()
         self.preact = ResNet(depth, se=se)
-        if pretrained:
+        if pretrained == IMAGENET:
+            load_imagenet(self.preact)
+        elif pretrained:
             load_pretrained(self.preact, pretrained)
         c = self.preact.out_channels // 4
         self.shuffle1 = nn.PixelShuffle(2)

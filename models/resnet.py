@@ -1,30 +1,27 @@
-"""ResNet trunk (18/34/50/101/152) with torchvision's parameter names, optional squeeze-excitation.
+"""ResNet trunk (18/34/50/101/152): torchvision's ResNet without its classifier, optional squeeze-excitation.
 
-The module tree mirrors torchvision's ``ResNet`` (``conv1``, ``bn1``, ``layer1`` ... ``layer4``, blocks
-with ``conv{1,2[,3]}``, ``bn{...}``, ``downsample.{0,1}``) so a torchvision ImageNet checkpoint loads
-with ``load_pretrained``. The classifier (``avgpool``, ``fc``) is left out: the trunk returns the
-stride-32 feature map.
+The trunk is ``torchvision.models.resnet<depth>(weights=None)`` minus ``avgpool`` and ``fc``, so its state
+dict has torchvision's names (``conv1``, ``bn1``, ``layer1`` ... ``layer4``) and returns the stride-32
+feature map. ``se=True`` adds a squeeze-excitation gate to every block as ``<block>.se`` (``fc.0``, ``fc.2``),
+applied to the output of the block's last BatchNorm, before the residual sum. Weights: ``load_pretrained``
+(a local torchvision ImageNet state dict) or ``load_imagenet`` (torchvision's weights API).
 """
 
 from __future__ import annotations
 
+import functools
 import logging
-import pickle
 from pathlib import Path
 
-import torch
+import torchvision
 from torch import Tensor, nn
+from torchvision.models.resnet import BasicBlock, Bottleneck
+
+from models.tv_weights import check_state_fits, download_state_dict, read_state_dict
 
 log = logging.getLogger(__name__)
 
-# depth -> (block kind, blocks per stage)
-_ARCH: dict[int, tuple[str, tuple[int, int, int, int]]] = {
-    18: ("basic", (2, 2, 2, 2)),
-    34: ("basic", (3, 4, 6, 3)),
-    50: ("bottleneck", (3, 4, 6, 3)),
-    101: ("bottleneck", (3, 4, 23, 3)),
-    152: ("bottleneck", (3, 8, 36, 3)),
-}
+DEPTHS = (18, 34, 50, 101, 152)
 SE_REDUCTION = 16
 
 
@@ -45,71 +42,17 @@ class SELayer(nn.Module):
         return x * gate[:, :, None, None]
 
 
-def _conv3x3(cin: int, cout: int, stride: int = 1) -> nn.Conv2d:
-    return nn.Conv2d(cin, cout, kernel_size=3, stride=stride, padding=1, bias=False)
+def _gate_output(se: SELayer, module: nn.Module, inputs: tuple, output: Tensor) -> Tensor:
+    """Forward hook of a block's last BatchNorm: its output through the block's SE gate."""
+    return se(output)
 
 
-def _conv1x1(cin: int, cout: int, stride: int = 1) -> nn.Conv2d:
-    return nn.Conv2d(cin, cout, kernel_size=1, stride=stride, bias=False)
-
-
-class BasicBlock(nn.Module):
-    """Two 3x3 convolutions with an identity (or 1x1 projection) shortcut."""
-
-    expansion = 1
-
-    def __init__(
-        self, cin: int, planes: int, stride: int = 1, downsample: nn.Module | None = None, se: bool = False
-    ) -> None:
-        super().__init__()
-        self.conv1 = _conv3x3(cin, planes, stride)
-        self.bn1 = nn.BatchNorm2d(planes)
-        self.relu = nn.ReLU(inplace=True)
-        self.conv2 = _conv3x3(planes, planes)
-        self.bn2 = nn.BatchNorm2d(planes)
-        if se:
-            self.se = SELayer(planes)
-        self.downsample = downsample
-
-    def forward(self, x: Tensor) -> Tensor:
-        """(B, cin, H, W) -> (B, planes, H/stride, W/stride)."""
-        out = self.relu(self.bn1(self.conv1(x)))
-        out = self.bn2(self.conv2(out))
-        if hasattr(self, "se"):
-            out = self.se(out)
-        shortcut = x if self.downsample is None else self.downsample(x)
-        return self.relu(out + shortcut)
-
-
-class Bottleneck(nn.Module):
-    """1x1 reduce, 3x3 (carrying the stride, as torchvision's v1.5), 1x1 expand by 4, plus shortcut."""
-
-    expansion = 4
-
-    def __init__(
-        self, cin: int, planes: int, stride: int = 1, downsample: nn.Module | None = None, se: bool = False
-    ) -> None:
-        super().__init__()
-        self.conv1 = _conv1x1(cin, planes)
-        self.bn1 = nn.BatchNorm2d(planes)
-        self.conv2 = _conv3x3(planes, planes, stride)
-        self.bn2 = nn.BatchNorm2d(planes)
-        self.conv3 = _conv1x1(planes, planes * self.expansion)
-        self.bn3 = nn.BatchNorm2d(planes * self.expansion)
-        self.relu = nn.ReLU(inplace=True)
-        if se:
-            self.se = SELayer(planes * self.expansion)
-        self.downsample = downsample
-
-    def forward(self, x: Tensor) -> Tensor:
-        """(B, cin, H, W) -> (B, 4 * planes, H/stride, W/stride)."""
-        out = self.relu(self.bn1(self.conv1(x)))
-        out = self.relu(self.bn2(self.conv2(out)))
-        out = self.bn3(self.conv3(out))
-        if hasattr(self, "se"):
-            out = self.se(out)
-        shortcut = x if self.downsample is None else self.downsample(x)
-        return self.relu(out + shortcut)
+def add_squeeze_excitation(block: BasicBlock | Bottleneck) -> None:
+    """Give a torchvision block an SE gate (``block.se``) on the output of its last BatchNorm."""
+    last_bn = block.bn3 if isinstance(block, Bottleneck) else block.bn2
+    block.se = SELayer(last_bn.num_features)
+    # a partial (not a closure) so that copy.deepcopy of the trunk gates with the copied SE module
+    last_bn.register_forward_hook(functools.partial(_gate_output, block.se))
 
 
 class ResNet(nn.Module):
@@ -117,40 +60,17 @@ class ResNet(nn.Module):
 
     def __init__(self, depth: int = 50, se: bool = False) -> None:
         super().__init__()
-        if depth not in _ARCH:
-            raise ValueError(f"ResNet depth must be one of {sorted(_ARCH)}, got {depth}")
-        kind, counts = _ARCH[depth]
-        block = BasicBlock if kind == "basic" else Bottleneck
+        if depth not in DEPTHS:
+            raise ValueError(f"ResNet depth must be one of {list(DEPTHS)}, got {depth}")
+        net = torchvision.models.get_model(f"resnet{depth}", weights=None)
         self.depth, self.se = depth, se
-        self.conv1 = nn.Conv2d(3, 64, kernel_size=7, stride=2, padding=3, bias=False)
-        self.bn1 = nn.BatchNorm2d(64)
-        self.relu = nn.ReLU(inplace=True)
-        self.maxpool = nn.MaxPool2d(kernel_size=3, stride=2, padding=1)
-        self._cin = 64
-        self.layer1 = self._make_layer(block, 64, counts[0], 1, se)
-        self.layer2 = self._make_layer(block, 128, counts[1], 2, se)
-        self.layer3 = self._make_layer(block, 256, counts[2], 2, se)
-        self.layer4 = self._make_layer(block, 512, counts[3], 2, se)
-        self.out_channels = 512 * block.expansion
-        self._init_weights()
-
-    def _make_layer(self, block: type, planes: int, count: int, stride: int, se: bool) -> nn.Sequential:
-        downsample = None
-        cout = planes * block.expansion
-        if stride != 1 or self._cin != cout:
-            downsample = nn.Sequential(_conv1x1(self._cin, cout, stride), nn.BatchNorm2d(cout))
-        layers = [block(self._cin, planes, stride, downsample, se)]
-        self._cin = cout
-        layers += [block(self._cin, planes, se=se) for _ in range(count - 1)]
-        return nn.Sequential(*layers)
-
-    def _init_weights(self) -> None:
-        for m in self.modules():
-            if isinstance(m, nn.Conv2d):
-                nn.init.kaiming_normal_(m.weight, mode="fan_out", nonlinearity="relu")
-            elif isinstance(m, nn.BatchNorm2d):
-                nn.init.ones_(m.weight)
-                nn.init.zeros_(m.bias)
+        self.conv1, self.bn1, self.relu, self.maxpool = net.conv1, net.bn1, net.relu, net.maxpool
+        self.layer1, self.layer2, self.layer3, self.layer4 = net.layer1, net.layer2, net.layer3, net.layer4
+        self.out_channels = net.fc.in_features
+        if se:
+            for layer in (self.layer1, self.layer2, self.layer3, self.layer4):
+                for block in layer:
+                    add_squeeze_excitation(block)
 
     def forward(self, x: Tensor) -> Tensor:
         """(B, 3, H, W) -> (B, out_channels, H/32, W/32)."""
@@ -162,35 +82,29 @@ def _is_se_key(name: str) -> bool:
     return ".se." in name
 
 
-def load_pretrained(model: ResNet, path: str | Path) -> list[str]:
-    """Load a torchvision ImageNet state dict from ``path`` into ``model``; returns the SE keys left new.
+def load_trunk_state(model: ResNet, state: dict[str, Tensor], source: str) -> list[str]:
+    """Load a torchvision ImageNet state dict into ``model``; returns the SE keys left new.
 
     ``fc.*`` keys are dropped; every other key must match a trunk key with the same shape, and every
-    trunk key except the squeeze-excitation ones must be present, else a ``ValueError`` names the file.
+    trunk key except the squeeze-excitation ones must be present, else a ``ValueError`` names ``source``.
     """
-    path = Path(path)
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except (OSError, RuntimeError, ValueError, EOFError, pickle.UnpicklingError) as exc:
-        raise ValueError(f"cannot read pretrained weights from {path}: {exc}") from exc
-    if not isinstance(state, dict) or not all(isinstance(v, Tensor) for v in state.values()):
-        raise ValueError(f"{path}: expected a state dict (name -> tensor), got {type(state).__name__}")
     state = {k: v for k, v in state.items() if not k.startswith("fc.")}
     own = model.state_dict()
-    missing = sorted(k for k in own if k not in state and not _is_se_key(k))
-    unexpected = sorted(k for k in state if k not in own)
-    wrong_shape = sorted(
-        f"{k}: file {tuple(v.shape)} vs model {tuple(own[k].shape)}"
-        for k, v in state.items()
-        if k in own and tuple(v.shape) != tuple(own[k].shape)
-    )
-    if missing or unexpected or wrong_shape:
-        raise ValueError(
-            f"{path} does not fit a ResNet-{model.depth} trunk: missing keys {missing}, "
-            f"unexpected keys {unexpected}, wrong shapes {wrong_shape}"
-        )
+    check_state_fits(own, state, source, f"a ResNet-{model.depth} trunk", may_miss=_is_se_key)
     model.load_state_dict(state, strict=False)
     new_keys = sorted(k for k in own if k not in state)
     if new_keys:
-        log.info("%s: %d squeeze-excitation keys newly initialised", path, len(new_keys))
+        log.info("%s: %d squeeze-excitation keys newly initialised", source, len(new_keys))
     return new_keys
+
+
+def load_pretrained(model: ResNet, path: str | Path) -> list[str]:
+    """Load a torchvision ImageNet state dict file into ``model`` (checks of ``load_trunk_state``)."""
+    return load_trunk_state(model, read_state_dict(path), str(path))
+
+
+def load_imagenet(model: ResNet, key: str = "model.pretrained") -> list[str]:
+    """Load torchvision's default ImageNet weights of the trunk's depth (e.g. ResNet50_Weights.IMAGENET1K_V2)
+    through the weights API; offline, one ``WeightsUnavailable`` line naming ``key``."""
+    weights = torchvision.models.get_model_weights(f"resnet{model.depth}").DEFAULT
+    return load_trunk_state(model, download_state_dict(weights, key), str(weights))

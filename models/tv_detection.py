@@ -1,0 +1,88 @@
+"""torchvision detection models (Faster R-CNN, RetinaNet, SSD, FCOS, Keypoint R-CNN) built by name with
+weights ``coco | <state-dict file> | null``, and run on the cameras' BGR uint8 images."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+import torchvision
+from torch import Tensor, nn
+
+from data.config_checks import fail
+from models.tv_weights import check_state_fits, read_state_dict, with_download
+
+COCO = "coco"  # weights value: the model's DEFAULT weights through torchvision's weights API
+
+
+def resolve_device(name: str, key: str) -> torch.device:
+    """'auto' -> cuda when available, else cpu; 'cpu', 'cuda', 'cuda:N' checked against this machine."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError):
+        fail(key, name, "must be auto, cpu, cuda or cuda:N")
+    if device.type == "cuda" and not torch.cuda.is_available():
+        fail(key, name, "CUDA is not available on this machine (use auto or cpu)")
+    return device
+
+
+def detection_builder(name: str, key: str) -> Callable[..., nn.Module]:
+    """torchvision's builder of detection model ``name``; a ConfigError naming ``key`` and the known names."""
+    known = torchvision.models.list_models(module=torchvision.models.detection)
+    if name not in known:
+        fail(key, name, f"not a torchvision detection model (known: {', '.join(sorted(known))})")
+    return torchvision.models.get_model_builder(name)
+
+
+def load_detection_state(model: nn.Module, path: str | Path) -> None:
+    """Load a state-dict file into a detection model built with weights=None; ValueError naming the file.
+
+    BatchNorm ``num_batches_tracked`` may be absent (torchvision's COCO files hold frozen BatchNorm): in eval
+    mode a BatchNorm with the file's statistics computes what the frozen one does (eps 1e-5; the v1 Faster
+    R-CNN and RetinaNet COCO builds set eps 0, so their own files differ by that eps: use ``coco`` with the
+    file in torch's cache for the exact build)."""
+    state = read_state_dict(path)
+    what = f"torchvision's {type(model).__name__}"
+    check_state_fits(model.state_dict(), state, str(path), what, may_miss=lambda k: k.endswith("num_batches_tracked"))
+    model.load_state_dict(state, strict=False)
+
+
+def build_detection_model(
+    name: str, weights: str | None, group: str, **kwargs: object
+) -> tuple[nn.Module, list[str] | None]:
+    """(model in eval mode, its category names when known) for weights ``coco`` (the DEFAULT weights through
+    the weights API; offline one line naming ``<group>.weights``), a state-dict file, or None (random, for
+    tests). ``kwargs`` go to the builder (e.g. min_size, box_detections_per_img)."""
+    builder = detection_builder(name, f"{group}.model")
+    if weights == COCO:
+        default = torchvision.models.get_model_weights(name).DEFAULT
+        model = with_download(lambda: builder(weights=default, **kwargs), default, f"{group}.weights")
+        return model.eval(), list(default.meta["categories"])
+    model = builder(weights=None, weights_backbone=None, **kwargs)
+    if weights is not None:
+        load_detection_state(model, weights)
+    return model.eval(), None
+
+
+def image_tensor(image: np.ndarray, index: int) -> Tensor:
+    """(H, W, 3) uint8 BGR -> (3, H, W) float32 RGB in [0, 1], torchvision's detection input."""
+    if not (isinstance(image, np.ndarray) and image.ndim == 3 and image.shape[2] == 3 and image.dtype == np.uint8):
+        got = f"{image.shape} {image.dtype}" if isinstance(image, np.ndarray) else type(image).__name__
+        raise ValueError(f"image of view {index}: expected an (H, W, 3) uint8 BGR array, got {got}")
+    rgb = np.ascontiguousarray(image[:, :, ::-1])
+    return torch.from_numpy(rgb).permute(2, 0, 1).float().div_(255.0)
+
+
+def detect(model: nn.Module, images: list[np.ndarray], batch_size: int, device: torch.device) -> list[dict]:
+    """torchvision's per-image output dicts (tensors moved to the cpu) for (H, W, 3) uint8 BGR ``images``."""
+    outputs: list[dict] = []
+    with torch.inference_mode():
+        for start in range(0, len(images), batch_size):
+            chunk = images[start : start + batch_size]
+            batch = [image_tensor(img, start + i).to(device) for i, img in enumerate(chunk)]
+            outputs += [{k: v.cpu() for k, v in out.items()} for out in model(batch)]
+    return outputs
