@@ -16,6 +16,7 @@ import numpy as np
 import torch
 import torch.distributed as dist
 from hydra.core.hydra_config import HydraConfig
+from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
@@ -46,6 +47,7 @@ from models.training import (
     train_one_epoch,
     validate,
 )
+from models.tv_weights import WeightsUnavailable
 from run_folders import register_resolvers
 
 log = logging.getLogger(__name__)
@@ -211,8 +213,12 @@ def main(cfg: DictConfig) -> dict:
             choices = checkpoint.get("choices")
             log.info("resuming %s with its stored config", cfg.resume)
         return run(cfg, Path(hydra_cfg.runtime.output_dir), checkpoint, choices)["metrics"]
-    except (FileNotFoundError, ConfigError, CheckpointError) as err:
+    except (FileNotFoundError, ConfigError, CheckpointError, WeightsUnavailable) as err:
         raise SystemExit(f"error: {err}") from None
+    except InstantiationException as err:  # e.g. model.pretrained=imagenet on a machine that cannot download
+        if isinstance(err.__cause__, (FileNotFoundError, ValueError)):
+            raise SystemExit(f"error: {err.__cause__}") from None
+        raise
 
 
 register_resolvers()  # ${run_id:} in the run folder names, before hydra.main composes the config
