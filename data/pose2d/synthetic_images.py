@@ -1,12 +1,10 @@
 """Synthetic crowded images with COCO-23 keypoints, for training the 2D model on a CPU.
 
 Each image shows a crowd from :mod:`data.synthetic` (bodies with COCO-23 joints) seen by one low
-camera, so that people hide each other. Bodies are the capsules of :mod:`data.synthetic.capsules`,
-projected as tapered capsules, shaded in three layers and painted far to near (persons, then their
-parts) over a random textured background. A joint is labelled v = 2 when the painted pixel under it
-belongs to a body part of its own person that carries it and no other body is in the way (the capsule
-occlusion test), v = 1 when it is hidden (by another person, or by its own body or head), and
-v = 0 (x = y = 0) outside the image. The box is that of the person's painted pixels, area = w * h.
+camera, so that people hide each other, drawn over a random textured background by the drawing path
+of :mod:`data.pose2d.render` (capsule bodies, shading, shadows, floor lines, grain), which also gives the
+labels: v = 2 seen, v = 1 hidden, v = 0 (x = y = 0) outside the image; the box is that of the person's
+painted pixels, area = w * h. Multi-view crowd images of the 3D scene: :mod:`data.pose2d.multiview_images`.
 
 CLI: ``python -m data.pose2d.synthetic_images --out DIR --num-images N --seed S [--size 640x480]`` writes
 ``DIR/images/NNNNNN.jpg`` and ``DIR/annotations.json``; read them with
@@ -29,24 +27,27 @@ from data.geometry.camera import Camera
 from data.keypoints import LIMBS, NUM_JOINTS
 from data.pose2d.coco_keypoints import load_coco23, write_coco_keypoints
 from data.pose2d.records import ImageRecord
+from data.pose2d.render import (
+    MAX_PERSONS,
+    backdrop,
+    draw_ground_lines,
+    draw_shadows,
+    finish,
+    grain_field,
+    ipt,
+    paint_persons,
+    painting_order,
+    person_labels,
+    random_colour,
+    sample_look,
+    smooth_field,
+    view_person,
+)
 from data.synthetic.body import pose_joints, sample_body
-from data.synthetic.capsules import HEAD_RADIUS_M, body_capsules, capsule_radii, occluded_joints
 from data.synthetic.rigs import look_at_camera
 
-# Part groups that get one clothing colour per person.
-SHIRT, SLEEVE, TROUSERS, SHIN, SHOES, SKIN, HAIR = range(7)
-SKIN_TONES = np.array([(185, 205, 240), (150, 180, 225), (110, 150, 205), (80, 115, 170), (50, 75, 120)], float)
-HAIR_TONES = np.array([(20, 20, 25), (30, 45, 70), (40, 80, 130), (120, 170, 210), (140, 140, 140)], float)
-SHADE_LAYERS = ((1.0, 0.0, 0.62), (0.78, 0.10, 0.84), (0.45, 0.30, 1.0))  # (radius, light shift, brightness)
-FACE_VISIBLE_COS = -0.2  # a face joint is seen while cos(joint - head centre, camera - head centre) >= this
 STATURE_M = 1.7  # stature used to turn the wanted pixel height into a depth
 MIN_SPACING_M = 0.5
-HAIR_BACK_M, HAIR_UP_M, HAIR_RADIUS_M = 0.03, 0.015, 0.095
-SUBPIXEL_SHIFT = 3  # fixed-point bits of the polygon coordinates
-MAX_PERSONS = 1000  # the uint16 part-owner map holds persons x 28 parts
-
-_HEAD = len(LIMBS) + 1  # index of the head sphere in body_capsules
-_HAIR = len(LIMBS) + 2  # the hair sphere, appended after the capsules
 
 
 @dataclass(frozen=True)
@@ -92,46 +93,6 @@ class SyntheticImage:
 
 
 # --- scene ------------------------------------------------------------------------------------------
-
-
-def _part_groups() -> np.ndarray:
-    """Colour group (K,) of every capsule of body_capsules, then the hair; -1: face segments, not drawn."""
-    groups = []
-    for a, b in LIMBS:
-        lo, hi = min(a, b), max(a, b)
-        if hi >= 17:
-            groups.append(SHOES)
-        elif hi <= 4:
-            groups.append(-1)
-        elif lo <= 4:
-            groups.append(SKIN)  # neck sides
-        elif (lo, hi) in ((13, 15), (14, 16)):
-            groups.append(SHIN)
-        elif lo >= 11:
-            groups.append(TROUSERS)  # thighs, pelvis
-        elif (lo, hi) in ((7, 9), (8, 10)):
-            groups.append(SLEEVE)
-        else:
-            groups.append(SHIRT)  # flanks, shoulders, upper arms
-    return np.array(groups + [SHIRT, SKIN, HAIR])
-
-
-def _owns(groups: np.ndarray) -> np.ndarray:
-    """Which joints each drawn part of (K,) groups carries: (K, 23) bool.
-
-    A limb capsule carries its two ends, the torso its corners, the head the face, the hair the ears.
-    """
-    owned = [(a, b) for a, b in LIMBS] + [(5, 6, 11, 12), (0, 1, 2, 3, 4), (3, 4)]
-    owns = np.zeros((len(groups), NUM_JOINTS), dtype=bool)
-    for k, joints in enumerate(owned):
-        owns[k, list(joints)] = True
-    return owns
-
-
-PART_GROUPS = _part_groups()
-OWNS = _owns(PART_GROUPS)
-PART_GROUPS.flags.writeable = False
-OWNS.flags.writeable = False
 
 
 def sample_camera(rng: np.random.Generator, size: tuple[int, int]) -> Camera:
@@ -190,38 +151,13 @@ def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions
 # --- background -------------------------------------------------------------------------------------
 
 
-def _smooth_field(rng: np.random.Generator, size: tuple[int, int], cells: int, low: float, high: float) -> np.ndarray:
-    """A smooth random colour field (H, W, 3) uint8, upsampled from a coarse grid (cubic, then linear)."""
-    w, h = size
-    coarse = rng.uniform(low, high, (cells, cells + 1, 3)).astype(np.float32)
-    middle = cv2.resize(coarse, (max(w // 8, 1), max(h // 8, 1)), interpolation=cv2.INTER_CUBIC)
-    return cv2.resize(np.clip(middle, 0, 255).astype(np.uint8), (w, h), interpolation=cv2.INTER_LINEAR)
-
-
 def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
-    """A textured background (H, W, 3) uint8: smooth colours, stripes, blobs, a tiled floor below the horizon."""
+    """A textured background (H, W, 3) uint8: a backdrop, and a tiled floor below the horizon."""
     w, h = camera.size
-    image = _smooth_field(rng, (w, h), int(rng.integers(2, 7)), 30, 230)
-    for _ in range(int(rng.integers(0, 8))):  # stripes and bars
-        p0 = rng.uniform([-w, -h], [2 * w, 2 * h])
-        p1 = p0 + rng.normal(0, w, 2)
-        cv2.line(image, _ipt(p0), _ipt(p1), _colour(rng), int(rng.integers(2, 40)), cv2.LINE_AA)
-    for _ in range(int(rng.integers(3, 20))):  # blobs
-        axes = (int(rng.integers(4, w // 6)), int(rng.integers(4, h // 6)))
-        cv2.ellipse(
-            image,
-            _ipt(rng.uniform([0, 0], [w, h])),
-            axes,
-            float(rng.uniform(0, 180)),
-            0,
-            360,
-            _colour(rng),
-            -1,
-            cv2.LINE_AA,
-        )
+    image = backdrop(rng, (w, h))
     horizon = int(np.clip(camera.project(np.array([1e4, 0.0, 0.0]))[1], 0, h))
     if horizon < h:
-        floor = _smooth_field(rng, (w, h - horizon), 3, 40, 200)
+        floor = smooth_field(rng, (w, h - horizon), 3, 40, 200)
         image[horizon:] = cv2.addWeighted(image[horizon:], 0.3, floor, 0.7, 0.0)
         _draw_floor_grid(image, camera, rng)
     return image
@@ -230,7 +166,7 @@ def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
 def _draw_floor_grid(image: np.ndarray, camera: Camera, rng: np.random.Generator) -> None:
     """Tile lines of the ground plane z = 0 in perspective, 1..30 m ahead, in place on (H, W, 3)."""
     tile = rng.uniform(0.4, 2.0)
-    colour = _colour(rng)
+    colour = random_colour(rng)
     near, far, side = 1.0, 30.0, 30.0
     ys = np.arange(-side, side, tile)
     xs = np.arange(near, far, tile)
@@ -240,198 +176,7 @@ def _draw_floor_grid(image: np.ndarray, camera: Camera, rng: np.random.Generator
             np.stack([np.stack([xs, np.full_like(xs, -side)], 1), np.stack([xs, np.full_like(xs, side)], 1)], 1),
         ]
     )
-    uv = np.round(np.clip(camera.project(np.concatenate([ends, np.zeros(ends.shape[:2] + (1,))], -1)), -1e5, 1e5))
-    for (u0, v0), (u1, v1) in uv.astype(np.int64).tolist():
-        cv2.line(image, (u0, v0), (u1, v1), colour, 1, cv2.LINE_AA)
-
-
-def _colour(rng: np.random.Generator) -> tuple[float, float, float]:
-    """A random BGR colour."""
-    return tuple(float(c) for c in rng.uniform(0, 255, 3))
-
-
-def _ipt(p: np.ndarray) -> tuple[int, int]:
-    """An integer pixel point of a (2,) array, clamped to a range cv2 accepts."""
-    q = np.clip(np.round(p), -1e5, 1e5)
-    return int(q[0]), int(q[1])
-
-
-# --- bodies -----------------------------------------------------------------------------------------
-
-
-def _person_colours(rng: np.random.Generator) -> np.ndarray:
-    """BGR colour (7, 3) of each part group of one person: shirt, sleeve, trousers, shin, shoes, skin, hair."""
-    skin = SKIN_TONES[rng.integers(len(SKIN_TONES))] * rng.uniform(0.9, 1.1)
-    shirt = rng.uniform(20, 240, 3)
-    trousers = rng.uniform(15, 200, 3)
-    sleeve = shirt if rng.random() < 0.6 else skin
-    shin = trousers if rng.random() < 0.8 else skin
-    shoes = rng.uniform(10, 120, 3)
-    hair = HAIR_TONES[rng.integers(len(HAIR_TONES))] * rng.uniform(0.8, 1.2)
-    return np.clip(np.array([shirt, sleeve, trousers, shin, shoes, skin, hair]), 0, 255)
-
-
-def capsule_outlines(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray, n: int = 7) -> np.ndarray:
-    """Outlines of tapered 2D capsules from a (..., 2) radius ra (...) to b (..., 2) radius rb: (..., 2n, 2).
-
-    A point capsule (a = b) is a circle.
-    """
-    d = b - a
-    length = np.linalg.norm(d, axis=-1, keepdims=True)
-    unit = np.where(length > 1e-6, d / np.maximum(length, 1e-6), [1.0, 0.0])
-    perp = np.stack([-unit[..., 1], unit[..., 0]], axis=-1)
-    t = np.linspace(-math.pi / 2, math.pi / 2, n)[:, None]
-    front = np.cos(t) * unit[..., None, :] + np.sin(t) * perp[..., None, :]  # (..., n, 2)
-    return np.concatenate(
-        [b[..., None, :] + rb[..., None, None] * front, a[..., None, :] - ra[..., None, None] * front], axis=-2
-    )
-
-
-def _fixed(points: np.ndarray) -> np.ndarray:
-    """Pixel coordinates (..., 2) as int32 fixed point with SUBPIXEL_SHIFT fractional bits."""
-    return np.round(np.clip(points, -1e5, 1e5) * (1 << SUBPIXEL_SHIFT)).astype(np.int32)
-
-
-@dataclass
-class _PersonView:
-    """One person as the camera sees it: shading layer outlines (K, L, 2n, 2) fixed point, part depths
-    (K,), joint pixels uv (23, 2), face joints seen (23,), facing the camera, eye dot radius (px)."""
-
-    outlines: np.ndarray
-    depth: np.ndarray
-    uv: np.ndarray
-    face_seen: np.ndarray
-    facing: bool
-    dot_px: float
-    person_depth: float
-
-
-def _view_person(camera: Camera, joints: np.ndarray, light: np.ndarray) -> _PersonView:
-    """Project one person's (23, 3) capsules plus a hair sphere, and its joints, into the camera."""
-    ends_a, ends_b = (e[0] for e in body_capsules(joints[None]))
-    head = ends_a[_HEAD]
-    to_cam = camera.center - head
-    forward = joints[0] - head
-    forward[2] = 0.0
-    forward /= max(np.linalg.norm(forward), 1e-9)
-    hair = head - HAIR_BACK_M * forward + np.array([0.0, 0.0, HAIR_UP_M])
-    ends_a, ends_b = np.vstack([ends_a, hair]), np.vstack([ends_b, hair])
-    radii = np.append(capsule_radii(), HAIR_RADIUS_M)
-    focal = camera.K[0, 0]
-    da, db = camera.depth(ends_a), camera.depth(ends_b)
-    ra, rb = np.maximum(focal * radii / da, 1.0), np.maximum(focal * radii / db, 1.0)
-    scale = np.array([f for f, _, _ in SHADE_LAYERS])
-    shift = np.array([s for _, s, _ in SHADE_LAYERS])[None, :, None] * np.maximum(ra, rb)[:, None, None] * light
-    outlines = capsule_outlines(
-        camera.project(ends_a)[:, None] + shift,
-        camera.project(ends_b)[:, None] + shift,
-        ra[:, None] * scale,
-        rb[:, None] * scale,
-    )
-    rel = joints - head
-    cos = rel @ to_cam / np.maximum(np.linalg.norm(rel, axis=1) * np.linalg.norm(to_cam), 1e-12)
-    face_seen = np.ones(NUM_JOINTS, dtype=bool)
-    face_seen[:5] = cos[:5] >= FACE_VISIBLE_COS
-    return _PersonView(
-        _fixed(outlines),
-        (da + db) / 2,
-        camera.project(joints),
-        face_seen,
-        bool(forward @ to_cam > 0),
-        max(0.12 * focal * HEAD_RADIUS_M / da[_HEAD], 0.8),
-        float(np.mean(camera.depth(joints))),
-    )
-
-
-def _draw_person(
-    image: np.ndarray,
-    owner: np.ndarray,
-    view: _PersonView,
-    colours: np.ndarray,
-    first_id: int,
-    rng: np.random.Generator,
-) -> None:
-    """Paint one person's parts far to near in place; the owner map gets first_id + part index."""
-    groups = PART_GROUPS
-    bright = np.array([b for _, _, b in SHADE_LAYERS])
-    tint = rng.uniform(0.92, 1.08, len(groups))
-    layer_colours = np.clip(colours[groups][:, None] * tint[:, None, None] * bright[None, :, None], 0, 255).tolist()
-    for k in np.argsort(-view.depth, kind="stable"):
-        if groups[k] < 0:
-            continue
-        cv2.fillConvexPoly(owner, view.outlines[k, 0], int(first_id + k), cv2.LINE_8, SUBPIXEL_SHIFT)
-        for layer, colour in enumerate(layer_colours[k]):
-            cv2.fillConvexPoly(image, view.outlines[k, layer], colour, cv2.LINE_AA, SUBPIXEL_SHIFT)
-        if k == _HEAD and view.facing:
-            _draw_face(image, view, colours[SKIN])
-
-
-def _draw_face(image: np.ndarray, view: _PersonView, skin: np.ndarray) -> None:
-    """Eyes and nose dots on a head that faces the camera, in place."""
-    for j, colour, size in ((1, (30, 30, 30), 1.0), (2, (30, 30, 30), 1.0), (0, (skin * 0.7).tolist(), 1.4)):
-        if view.face_seen[j]:
-            centre = _fixed(view.uv[j])
-            cv2.circle(
-                image,
-                (int(centre[0]), int(centre[1])),
-                int(round(view.dot_px * size * (1 << SUBPIXEL_SHIFT))),
-                colour,
-                -1,
-                cv2.LINE_AA,
-                SUBPIXEL_SHIFT,
-            )
-
-
-def _draw_shadows(image: np.ndarray, camera: Camera, poses: np.ndarray) -> None:
-    """Darken the ground under every person (P, 23, 3), a disc of 0.3 m radius, in place."""
-    t = np.linspace(0, 2 * math.pi, 16, endpoint=False)
-    mask = np.zeros(image.shape[:2], np.uint8)
-    for joints in poses:
-        foot = joints[[15, 16, 19, 22], :2].mean(axis=0)
-        ring = np.column_stack([foot[0] + 0.3 * np.cos(t), foot[1] + 0.3 * np.sin(t), np.zeros_like(t)])
-        if np.all(camera.depth(ring) > 0.1):
-            cv2.fillConvexPoly(mask, _fixed(camera.project(ring)), 1, cv2.LINE_8, SUBPIXEL_SHIFT)
-    shade = mask > 0
-    image[shade] = (image[shade] * 0.6).astype(np.uint8)
-
-
-# --- labels -----------------------------------------------------------------------------------------
-
-
-def _labels(
-    camera: Camera, poses: np.ndarray, views: list[_PersonView], owner: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Keypoints (P, 23, 3) x, y, v and boxes (P, 4) of the painted persons (see the module docstring)."""
-    w, h = camera.size
-    num, parts = len(poses), len(PART_GROUPS)
-    uv = np.array([v.uv for v in views]).reshape(num, NUM_JOINTS, 2)
-    inside = (uv[..., 0] >= 0) & (uv[..., 0] <= w - 1) & (uv[..., 1] >= 0) & (uv[..., 1] <= h - 1)
-    inside &= camera.depth(poses) > 0
-    px = np.clip(np.round(uv).astype(np.int64), 0, [w - 1, h - 1])
-    top = owner[px[..., 1], px[..., 0]].astype(np.int64) - 1  # part id, -1 = none
-    top_person = np.where(top >= 0, top // parts, -1)
-    top_part = np.where(top >= 0, top % parts, 0)
-    hidden = occluded_joints(camera.center, poses) if num else np.zeros((0, NUM_JOINTS), bool)
-    face_seen = np.array([v.face_seen for v in views]).reshape(num, NUM_JOINTS)
-    seen = (top_person == np.arange(num)[:, None]) & OWNS[top_part, np.arange(NUM_JOINTS)] & face_seen & ~hidden
-    keypoints = np.concatenate([np.round(uv, 2), np.where(seen, 2.0, 1.0)[..., None]], axis=-1)
-    keypoints[~inside] = 0.0
-    return keypoints, _painted_boxes(owner, num, parts)
-
-
-def _painted_boxes(owner: np.ndarray, num: int, parts: int) -> np.ndarray:
-    """Boxes (P, 4) x, y, w, h of each person's painted pixels of an owner map (H, W); zeros if none."""
-    ys, xs = np.nonzero(owner)
-    person = (owner[ys, xs].astype(np.int64) - 1) // parts
-    rows = np.zeros((num, owner.shape[0]), dtype=bool)
-    cols = np.zeros((num, owner.shape[1]), dtype=bool)
-    rows[person, ys] = True
-    cols[person, xs] = True
-    boxes = np.zeros((num, 4))
-    for p in np.flatnonzero(rows.any(axis=1)):
-        r, c = np.flatnonzero(rows[p]), np.flatnonzero(cols[p])
-        boxes[p] = (c[0], r[0], c[-1] + 1 - c[0], r[-1] + 1 - r[0])
-    return boxes
+    draw_ground_lines(image, camera, ends, colour)
 
 
 # --- images -----------------------------------------------------------------------------------------
@@ -445,27 +190,22 @@ def synthetic_image(
     poses = sample_crowd(rng, camera, options)
     background = render_background(rng, camera)
     image = background.copy()
-    _draw_shadows(image, camera, poses)
-    w, h = options.size
-    owner = np.zeros((h, w), np.uint16)
+    draw_shadows(image, camera, poses)
     light = rng.normal(size=2) * [1.0, 0.5]
     light[1] = -abs(light[1])  # highlights towards the top
     light /= max(float(np.linalg.norm(light)), 1e-9)
-    views = [_view_person(camera, joints, light) for joints in poses]
-    for p in np.argsort([-v.person_depth for v in views], kind="stable"):
-        _draw_person(image, owner, views[p], _person_colours(rng), 1 + p * len(PART_GROUPS), rng)
-    keypoints, boxes = _labels(camera, poses, views, owner)
+    views = [view_person(camera, joints, light) for joints in poses]
+    looks: list = [None] * len(views)
+    for p in painting_order(views):  # drawn in painting order: the stream of the earlier generator
+        looks[p] = sample_look(rng)
+    owner = paint_persons(image, views, looks, options.size)
+    keypoints, boxes = person_labels(camera, poses, views, owner)
+    keypoints[..., :2] = np.round(keypoints[..., :2], 2)
     keep = (boxes[:, 2] > 0) & np.any(keypoints[..., 2] > 0, axis=1)
-    grain = rng.normal(0, rng.uniform(1, 5), (h // 2, w // 2)).astype(np.float32)
-    grain = cv2.resize(cv2.merge([grain] * 3), (w, h))
+    grain = grain_field(rng, options.size)
     return SyntheticImage(
-        _finish(image, grain), keypoints[keep], boxes[keep], _finish(background, grain) if with_background else None
+        finish(image, grain), keypoints[keep], boxes[keep], finish(background, grain) if with_background else None
     )
-
-
-def _finish(image: np.ndarray, grain: np.ndarray) -> np.ndarray:
-    """Add grain (H, W, 3) float32 to an image (H, W, 3) uint8: a new (H, W, 3) uint8, saturated."""
-    return cv2.add(image, grain, dtype=cv2.CV_8U)
 
 
 def image_rng(seed: int, index: int) -> np.random.Generator:
@@ -511,12 +251,12 @@ def draw_annotations(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray
         cv2.rectangle(out, (x, y), (x + bw, y + bh), (255, 200, 0), 1)
         for a, b in LIMBS:
             if kps[a, 2] > 0 and kps[b, 2] > 0:
-                cv2.line(out, _ipt(kps[a, :2]), _ipt(kps[b, :2]), (0, 255, 255), 1, cv2.LINE_AA)
+                cv2.line(out, ipt(kps[a, :2]), ipt(kps[b, :2]), (0, 255, 255), 1, cv2.LINE_AA)
         for x, y, v in kps:
             if v > 0:
                 cv2.circle(
                     out,
-                    _ipt(np.array([x, y])),
+                    ipt(np.array([x, y])),
                     3,
                     (0, 220, 0) if v >= 2 else (0, 0, 255),
                     -1 if v >= 2 else 1,

@@ -1,0 +1,137 @@
+"""The frames of one camera on disk: a folder of images, a video file, or a single image.
+
+A folder's frames are its image files in natural order (``img2`` before ``img10``), each named by its
+stem; a video's frames are read with OpenCV (``cv2.VideoCapture``, seeking by frame index); a single
+image is one frame. Frames are read only when asked for, as (H, W, 3) uint8 BGR. A source that cannot
+be opened, or a frame that cannot be read, raises :class:`ImageSourceError`, one line naming the path.
+"""
+
+from __future__ import annotations
+
+import glob
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".jp2")
+VIDEO_SUFFIXES = (".avi", ".mp4", ".mkv", ".mov", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv", ".mts", ".ts")
+KINDS = ("folder", "video", "image")
+
+
+class ImageSourceError(ValueError):
+    """A folder, video or image that is missing or cannot be read; the message names the path."""
+
+
+@dataclass(frozen=True)
+class ImageSource:
+    """One camera's frames: kind "folder" (files, natural order), "video" or "image" (files = (path,))."""
+
+    path: Path
+    kind: str
+    files: tuple[Path, ...]
+    num_frames: int
+
+    @property
+    def names(self) -> list[str]:
+        """The name of every frame: a folder's file stems; a video's or an image's frame positions."""
+        if self.kind == "folder":
+            return [f.stem for f in self.files]
+        return [str(i) for i in range(self.num_frames)]
+
+    def file_name(self, position: int) -> str:
+        """The file that holds frame ``position``: its image file, or the video."""
+        return str(self.files[position] if self.kind == "folder" else self.path)
+
+    def read(self, position: int) -> np.ndarray:
+        """Frame ``position`` (0-based) as (H, W, 3) uint8 BGR."""
+        if not 0 <= position < self.num_frames:
+            raise ImageSourceError(f"{self.path}: no frame {position} (it has {self.num_frames})")
+        if self.kind == "video":
+            return read_video_frame(self.path, position)
+        return read_image(self.files[0] if self.kind == "image" else self.files[position])
+
+    def frame_size(self) -> tuple[int, int]:
+        """The (w, h) of the first frame (a video's from its header)."""
+        if self.kind == "video":
+            capture = _open_video(self.path)
+            try:
+                return int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT))
+            finally:
+                capture.release()
+        h, w = self.read(0).shape[:2]
+        return w, h
+
+
+def open_source(path: str | Path, pattern: str | None = None) -> ImageSource:
+    """The source at ``path``: a folder (its image files, or those matching a glob ``pattern`` inside it), a
+    video file (by suffix, VIDEO_SUFFIXES) or an image file."""
+    path = Path(path)
+    if path.is_dir():
+        candidates = [Path(p) for p in glob.glob(str(path / pattern))] if pattern else list(path.iterdir())
+        files = sorted((f for f in candidates if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES), key=natural_key)
+        if not files:
+            what = f"matching {pattern!r}" if pattern else f"({', '.join(IMAGE_SUFFIXES)})"
+            raise ImageSourceError(f"{path}: no image files {what} in this folder")
+        return ImageSource(path, "folder", tuple(files), len(files))
+    if not path.is_file():
+        raise ImageSourceError(f"{path}: no such folder, video or image")
+    if path.suffix.lower() in VIDEO_SUFFIXES:
+        return ImageSource(path, "video", (path,), video_frame_count(path))
+    if path.suffix.lower() in IMAGE_SUFFIXES:
+        return ImageSource(path, "image", (path,), 1)
+    raise ImageSourceError(f"{path}: not a folder, a video ({', '.join(VIDEO_SUFFIXES)}) or an image file")
+
+
+def natural_key(path: Path) -> list:
+    """Sort key of a file name with its digit runs compared as numbers ('img2' < 'img10')."""
+    return [(0, int(part), "") if part.isdigit() else (1, 0, part) for part in re.split(r"(\d+)", path.name)]
+
+
+def read_image(path: Path) -> np.ndarray:
+    """One image file as (H, W, 3) uint8 BGR (grey and 16-bit images converted)."""
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise ImageSourceError(f"{path}: cannot read this image (missing, unreadable or not an image)")
+    return image
+
+
+def _open_video(path: Path) -> cv2.VideoCapture:
+    """An opened capture of the video, or ImageSourceError naming it."""
+    capture = cv2.VideoCapture(str(path))
+    if not capture.isOpened():
+        capture.release()
+        raise ImageSourceError(f"{path}: OpenCV cannot open this video (codec or file broken?)")
+    return capture
+
+
+def video_frame_count(path: Path) -> int:
+    """The number of frames of a video: its header's count, else counted by reading through it."""
+    capture = _open_video(path)
+    try:
+        count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        if count <= 0:  # containers without a frame count in the header
+            count = 0
+            while capture.grab():
+                count += 1
+    finally:
+        capture.release()
+    if count == 0:
+        raise ImageSourceError(f"{path}: this video holds no frame OpenCV can read")
+    return count
+
+
+def read_video_frame(path: Path, index: int) -> np.ndarray:
+    """Frame ``index`` (0-based) of a video as (H, W, 3) uint8 BGR, seeking by frame index."""
+    capture = _open_video(path)
+    try:
+        if index > 0:
+            capture.set(cv2.CAP_PROP_POS_FRAMES, index)
+        ok, image = capture.read()
+    finally:
+        capture.release()
+    if not ok or image is None:
+        raise ImageSourceError(f"{path}: cannot read frame {index} of this video")
+    return image

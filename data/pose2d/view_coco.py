@@ -1,0 +1,77 @@
+"""Per-view COCO keypoint documents of multi-view frames, for per-view COCO AP/AR of 2D poses.
+
+:func:`ground_truth_document` turns frames whose ``views`` hold ground-truth 2D (dataset=synthetic with
+render=true) into a COCO keypoint ground truth (images + annotations with v flags 2 seen / 1 hidden /
+0 unlabelled, bbox, area = w * h) and :func:`results` turns predicted views into COCO results; both are
+keyed by the frames' ``image_ids`` and are what :func:`data.pose2d.coco_eval.evaluate_keypoints` takes.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from data.geometry.camera import Rig
+from data.keypoints import NUM_JOINTS
+from data.multiview import Frame, ViewDetections
+from data.pose2d.coco_keypoints import coco23_document
+from data.pose2d.records import ImageRecord
+
+
+def ground_truth_records(frames: Sequence[Frame], rig: Rig) -> list[ImageRecord]:
+    """One ImageRecord per frame and view (file ``<frame:06d>_<camera>.jpg``) of the frames' ground-truth
+    views (V ViewDetections of (N, 23, 3) keypoints, (N, 23) occluded flags, (N, 4) boxes): v = 2 seen,
+    1 hidden, 0 unlabelled; area = w * h."""
+    records = []
+    for frame in frames:
+        for v, (cam, view) in enumerate(zip(rig, _views(frame, rig))):
+            flags = np.where(view.keypoints[..., 2] > 0, np.where(view.occluded, 1.0, 2.0), 0.0)
+            xy = np.where(flags[..., None] > 0, view.keypoints[..., :2], 0.0)
+            name = f"{int(frame.index):06d}_{cam.name}.jpg"
+            keypoints = np.concatenate([xy, flags[..., None]], axis=-1)
+            areas = view.bboxes[:, 2] * view.bboxes[:, 3]
+            records.append(ImageRecord(frame.image_ids[v], name, *cam.size, keypoints, view.bboxes, areas))
+    return records
+
+
+def ground_truth_document(frames: Sequence[Frame], rig: Rig) -> dict:
+    """The COCO-23 keypoint document (images with frame and camera, annotations, categories) of
+    :func:`ground_truth_records`."""
+    doc = coco23_document(ground_truth_records(frames, rig))
+    where = [(int(frame.index), cam.name) for frame in frames for cam in rig]
+    for image, (frame, camera) in zip(doc["images"], where):
+        image.update(frame=frame, camera=camera)
+    return doc
+
+
+def results(frames: Sequence[Frame], rig: Rig, views: Sequence[Sequence[ViewDetections]] | None = None) -> list[dict]:
+    """COCO keypoint results (image_id, category_id, keypoints 69 numbers x, y, score, score, bbox) of
+    predicted views, per frame V ViewDetections (N, 23, 3); ``views`` None = the frames' own views."""
+    out = []
+    for f, frame in enumerate(frames):
+        predicted = _views(frame, rig) if views is None else list(views[f])
+        if len(predicted) != len(rig):
+            raise ValueError(f"frame {frame.index}: {len(predicted)} predicted views for {len(rig)} cameras")
+        for v, view in enumerate(predicted):
+            for n in range(len(view)):
+                out.append(
+                    {
+                        "image_id": int(frame.image_ids[v]),
+                        "category_id": 1,
+                        "keypoints": view.keypoints[n].reshape(NUM_JOINTS * 3).tolist(),
+                        "score": float(view.scores[n]),
+                        "bbox": [float(b) for b in view.bboxes[n]],
+                    }
+                )
+    return out
+
+
+def _views(frame: Frame, rig: Rig) -> list[ViewDetections]:
+    """The frame's views, checked against the rig and its image ids."""
+    if frame.image_ids is None or len(frame.image_ids) != len(rig) or len(frame.views) != len(rig):
+        raise ValueError(f"frame {frame.index}: needs one view and one image id per camera of the rig ({len(rig)})")
+    for v, view in enumerate(frame.views):
+        if view.keypoints.shape[1:] != (NUM_JOINTS, 3):
+            raise ValueError(f"frame {frame.index}, camera {rig[v].name!r}: keypoints must be COCO-23 (N, 23, 3)")
+    return list(frame.views)
