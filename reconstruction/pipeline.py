@@ -105,9 +105,11 @@ class MultiViewPipeline:
         )
         t2 = time.perf_counter()
         ids = None
-        if self.tracker is not None:  # the reconstruction's joint variances and bones, where it has them
-            variance = _of_frame(getattr(self.reconstructor, "last_joint_variance", None), len(poses3d))
-            bones = _of_frame(getattr(self.reconstructor, "last_bone_lengths", None), len(poses3d))
+        if self.tracker is not None:  # the reconstruction's joint variances and bones of this frame, where it has them
+            variance, bones = None, None
+            if len(assignment):  # else the reconstruction did not run: what it holds is another frame's
+                variance = _of_frame(getattr(self.reconstructor, "last_joint_variance", None), len(poses3d))
+                bones = _of_frame(getattr(self.reconstructor, "last_bone_lengths", None), len(poses3d))
             ids, poses3d = self.tracker.update(frame.index, poses3d, variance, bones)
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1

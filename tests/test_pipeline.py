@@ -52,3 +52,20 @@ def test_poses3d_json_round_trip(tmp_path):
     assert doc["units"] == "m" and doc["frames"][0]["poses"][1]["views"] == {"a": 1, "b": 2}
     np.testing.assert_allclose(read_poses3d(tmp_path / "p.json")[300], poses, atol=1e-6)
     assert not list(tmp_path.glob(".*tmp"))
+
+
+def test_default_pipeline_with_tracking_runs_frames_without_any_person():
+    """A frame with no detection (a camera image with nobody in it) before and after a frame with people."""
+    from hydra import compose, initialize
+
+    from data.synthetic import SyntheticConfig, generate_sequence
+
+    sequence = generate_sequence(SyntheticConfig(num_frames=2, num_persons=3))
+    with initialize(config_path="../configs", version_base="1.3"):
+        cfg = compose("eval", overrides=["tracking=on"])
+    pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
+    empty = Frame(0, [ViewDetections.empty() for _ in sequence.rig])
+    assert len(pipeline(empty).poses3d) == 0
+    people = pipeline(Frame(1, sequence.frames[1].views))
+    assert len(people.poses3d) == 3 and len(people.ids) == 3
+    assert len(pipeline(Frame(2, [ViewDetections.empty() for _ in sequence.rig])).poses3d) == 0
