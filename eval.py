@@ -23,15 +23,18 @@ from omegaconf.errors import MissingMandatoryValue
 
 from data.config_checks import ConfigError, check_bool, check_int, check_number
 from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
-from data.formats.poses2d_io import Poses2DError
+from data.formats.poses2d_io import Poses2DError, write_poses2d
 from data.formats.poses_io import write_poses3d
 from data.geometry.calibration import CalibrationError
 from data.geometry.check_rig import RigWarning
+from data.multiview import Sequence
 from evaluation.pictures.sequence_view import save_sequence_pictures
 from evaluation.pictures.visualize import save_run_pictures
+from evaluation.pose2d_views import estimate_2d, format_view_metrics, view_metrics
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
+from models.front_end import Pose2DFrontEnd
 from reconstruction.pipeline import MultiViewPipeline
 from run_folders import register_resolvers
 
@@ -75,10 +78,14 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))  # protocols: evaluation/protocols
     t_data = time.perf_counter() - t0
     check_sequence(cfg, sequence)
+    sequence, front_timings, view_report = run_2d_stage(cfg, sequence, out_dir)
     pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
     stage_s = sequence.meta.get("stage_seconds", {})  # e.g. 2D grouping done while loading
-    report.timings = {"dataset": t_data - sum(stage_s.values()), **stage_s, **report.timings}
+    report.timings = {"dataset": t_data - sum(stage_s.values()), **stage_s, **front_timings, **report.timings}
+    if view_report is not None:
+        report.metrics.update(view_report[0])
+        report.protocol_reports.insert(0, view_report[1])
 
     frames = ((r.frame, r.poses3d, r.assignment, r.ids) for r in report.results)
     write_poses3d(out_dir / cfg.output, frames, sequence.rig.names)
@@ -103,7 +110,8 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
         f"{len(sequence.rig)} cameras\n{format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation))}"
     )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
-    print(f"\n{text}\n\nWrote {out_dir / cfg.output}, {cfg.metrics_file} and {cfg.report_file}")
+    written = f"{out_dir / cfg.output}, " + (f"{cfg.poses2d_output}, " if front_timings else "")
+    print(f"\n{text}\n\nWrote {written}{cfg.metrics_file} and {cfg.report_file}")
     if cfg.vis:
         try:
             pictures = save_run_pictures(
@@ -129,6 +137,23 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
         )
         print("Pictures over time: " + ", ".join(str(p) for p in pictures))
     return report
+
+
+def run_2d_stage(
+    cfg: DictConfig, sequence: Sequence, out_dir: Path
+) -> tuple[Sequence, dict[str, float], tuple[dict, str] | None]:
+    """With a 2D stage (pose2d=sppe | keypointrcnn): the sequence with the predicted 2D poses (written to
+    cfg.poses2d_output), the stage timings and, where the frames carry ground-truth 2D (render=true), the per-view
+    COCO AP/AR and its printed line. Without one: the sequence as it is, no timings, None."""
+    front_end = Pose2DFrontEnd.from_config(cfg, sequence)
+    if front_end is None:
+        return sequence, {}, None
+    estimated, gt_views = estimate_2d(sequence, front_end, cfg.progress)
+    write_poses2d(out_dir / cfg.poses2d_output, {f.index: f.views for f in estimated.frames}, sequence.rig.names)
+    if gt_views is None:
+        return estimated, front_end.timings, None
+    metrics = view_metrics(estimated, gt_views)
+    return estimated, front_end.timings, (metrics, format_view_metrics(metrics, len(gt_views) * len(sequence.rig)))
 
 
 def _why_missing(name: str, value: float) -> str:

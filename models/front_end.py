@@ -9,11 +9,13 @@ detecting and estimating 2D poses add up in ``timings`` (the same stage names ev
 from __future__ import annotations
 
 import time
-from typing import Callable, Protocol
+from typing import Any, Callable, Protocol
 
 import numpy as np
+from hydra.utils import instantiate
 
-from data.multiview import Frame, ViewDetections
+from data.config_checks import ConfigError
+from data.multiview import Frame, Sequence, ViewDetections
 
 PersonDetector = Callable[[list[np.ndarray], Frame], list[np.ndarray]]
 
@@ -53,3 +55,29 @@ class Pose2DFrontEnd:
         if self.detector is not None:
             self.timings["detector"] += t2 - t1
         return views
+
+    @classmethod
+    def from_config(cls, cfg: Any, sequence: Sequence) -> "Pose2DFrontEnd | None":
+        """The front end of an eval.yaml config (cfg.pose2d, cfg.detector, built by Hydra's instantiate) for
+        ``sequence``; None for pose2d=none (the dataset gives the 2D poses). A 2D stage without images, or
+        images without a 2D stage, stops with a ConfigError naming the key."""
+        has_images = bool(sequence.frames) and sequence.frames[0].images is not None
+        if not cfg.pose2d.get("_target_"):
+            if has_images and not any(len(v) for f in sequence.frames for v in f.views):
+                raise ConfigError(
+                    "pose2d=none: the dataset gives images, not 2D poses; choose a 2D stage: pose2d=sppe "
+                    "pose2d.checkpoint=<train.py checkpoint> [detector=gt|file|torchvision], or pose2d=keypointrcnn"
+                )
+            return None
+        if not has_images:
+            raise ConfigError(
+                "pose2d: a 2D stage reads camera images; this dataset has none (dataset=images, or dataset=synthetic "
+                "dataset.render=true)"
+            )
+        pose2d = instantiate(cfg.pose2d)
+        detector = instantiate(cfg.detector) if pose2d.needs_boxes else None
+        if hasattr(detector, "check_image_ids"):  # detector=file: every entry names an image of the dataset
+            detector.check_image_ids({i for f in sequence.frames for i in (f.image_ids or [])})
+        if hasattr(detector, "set_file_sizes") and "coco_images" in sequence.meta:
+            detector.set_file_sizes({im["id"]: (im["width"], im["height"]) for im in sequence.meta["coco_images"]})
+        return cls(pose2d, detector)

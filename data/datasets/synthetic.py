@@ -38,4 +38,5 @@ def load_synthetic(render: bool = False, render_seed: int | None = None, **optio
         f"Synthetic crowd (seed {cfg.seed}), rendered (render seed {seed}): {persons}, {rig}, "
         f"views = the render's ground-truth 2D"
     )
+    sequence.meta["views_are_ground_truth"] = True  # what a 2D stage's predictions are scored against
     return sequence

@@ -30,6 +30,12 @@ class FileDetector:
         boxes = with_scores(dets.boxes[keep], dets.scores[keep])
         ids = dets.image_ids[keep]
         self._boxes: dict[int, np.ndarray] = {int(i): boxes[ids == i] for i in np.unique(ids)}
+        self._file_sizes: dict[int, tuple[int, int]] = {}
+
+    def set_file_sizes(self, sizes: dict[int, tuple[int, int]]) -> None:
+        """The (w, h) of the image files the detections were made on, by image id: their boxes are rescaled to
+        the images the pipeline sees (a dataset that resizes frames to the calibration size)."""
+        self._file_sizes = {int(k): (int(w), int(h)) for k, (w, h) in sizes.items()}
 
     def check_image_ids(self, known: set[int]) -> None:
         """ValueError naming the first entry (file order) whose image id is not in ``known``."""
@@ -45,10 +51,18 @@ class FileDetector:
         return self._boxes.get(int(image_id), no_boxes()).copy()
 
     def __call__(self, images: list[np.ndarray] | None, frame: Frame) -> list[np.ndarray]:
-        """Per view (N, 5) x, y, w, h, score for ``frame.image_ids``; the images are not looked at."""
+        """Per view (N, 5) x, y, w, h, score for ``frame.image_ids``; the images (V of (H, W, 3)) only give the
+        size the boxes are rescaled to, from the file sizes of :meth:`set_file_sizes`."""
         if frame.image_ids is None:
             raise ValueError(
                 f"{self.path}: frame {frame.index} has no image ids; detector=file needs a dataset that numbers "
                 "its images (COCO image ids)"
             )
-        return [self.boxes_of(image_id) for image_id in frame.image_ids]
+        boxes = [self.boxes_of(image_id) for image_id in frame.image_ids]
+        if images is None or not self._file_sizes:
+            return boxes
+        for b, image, image_id in zip(boxes, images, frame.image_ids):
+            w, h = self._file_sizes.get(int(image_id), (image.shape[1], image.shape[0]))
+            b[:, [0, 2]] *= image.shape[1] / w
+            b[:, [1, 3]] *= image.shape[0] / h
+        return boxes

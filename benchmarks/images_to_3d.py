@@ -1,0 +1,117 @@
+"""Images to 3D on a rendered synthetic scene: the SPPE's 2D poses beside the render's ground-truth 2D.
+
+Run from the repository root (after training, e.g. ``python train.py +experiment=train_synthetic``):
+
+    python -m benchmarks.images_to_3d --checkpoint <run>/checkpoints/best.pth [--frames 20] [--persons 10]
+                                      [--cameras 5] [--out FILE.md] [--rows gt2d,sppe,...]
+
+Scene: ``dataset=synthetic dataset.render=true`` (the default ring of cameras, 1280 x 720, persons walking
+and standing); every row runs the same frames through ``eval.py``'s ``run`` with the default matching,
+MAP and tracking. Rows: ``gt2d`` (the 2D poses are the render's ground truth, exact: the upper bound of any
+2D stage), ``sppe`` (person boxes of the render, ``detector=gt``, then the SPPE with flip test),
+``sppe_jitter`` (boxes moved and scaled by 10 % sd, a detector's error), ``sppe_noflip`` (no flip test) and
+``simulated`` (the simulated 2D detections of ``render=false``, 2 px noise: the reference of the
+synthetic benchmarks). Columns: per-view COCO OKS AP (COCO-23 sigmas, pycocotools, all 23 / body 17 /
+foot 6 joints, against the render's labels with hidden joints v=1); absolute MPJPE (mm, all 23 joints,
+GT-matched one-to-one within 0.5 m, no root alignment); PCP (%, alpha 0.5, 10 parts); GT persons found
+(%); time per frame of the 2D stage (images + detector + SPPE) and of the rest (matching, MAP, tracking).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import tempfile
+from pathlib import Path
+
+from hydra import compose, initialize_config_dir
+
+from data.formats.atomic_io import atomic_write_text
+from evaluation.report import format_table
+from run_folders import register_resolvers
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
+ROWS = {
+    "gt2d": ("2D = render's ground truth (upper bound)", ["dataset.render=true"]),
+    "sppe": ("SPPE, flip test, boxes of the render", ["dataset.render=true", "pose2d=sppe", "detector=gt"]),
+    "sppe_jitter": (
+        "SPPE, flip test, boxes jittered 10 %",
+        ["dataset.render=true", "pose2d=sppe", "detector=gt", "detector.jitter=0.1"],
+    ),
+    "sppe_noflip": (
+        "SPPE, no flip test, boxes of the render",
+        ["dataset.render=true", "pose2d=sppe", "detector=gt", "pose2d.flip_test=false"],
+    ),
+    "simulated": ("simulated detections, 2 px (render=false)", []),
+}
+TWO_D_STAGES = ("images", "detector", "pose2d")
+
+
+def run_row(overrides: list[str]) -> tuple[dict, dict]:
+    """eval.py's run on the composed config -> (metrics, timings in s); its printed report is swallowed."""
+    import eval as eval_script  # the entry point's run(), so the benchmark measures what a user runs
+
+    with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose("eval", overrides=["progress=false", *overrides])
+    with tempfile.TemporaryDirectory() as out, contextlib.redirect_stdout(io.StringIO()):
+        report = eval_script.run(cfg, Path(out))
+    return report.metrics, report.timings
+
+
+def table_row(name: str, metrics: dict, timings: dict, frames: int) -> list:
+    """One printed row of a run's metrics and timings."""
+    ap = [metrics.get(f"pose2d_AP_{s}") for s in ("all", "body", "foot")]
+    two_d = sum(timings.get(k, 0.0) for k in TWO_D_STAGES)
+    rest = sum(timings.get(k, 0.0) for k in ("matching", "reconstruction", "tracking"))
+    return [
+        name,
+        *("-" if a is None else f"{a:.3f}" for a in ap),
+        metrics["mpjpe_mm"],
+        metrics["pcp_average"],
+        metrics["recall"],
+        1000 * two_d / frames,
+        1000 * rest / frames,
+    ]
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--checkpoint", help="a train.py checkpoint (.pth / .ckpt); needed by the sppe rows")
+    parser.add_argument("--frames", type=int, default=20)
+    parser.add_argument("--persons", type=int, default=10)
+    parser.add_argument("--cameras", type=int, default=5)
+    parser.add_argument("--rows", default=",".join(ROWS), help=f"comma-separated, of {', '.join(ROWS)}")
+    parser.add_argument("--out", help="also write the table (markdown) here")
+    args = parser.parse_args(argv)
+    register_resolvers()
+    rows = [r.strip() for r in args.rows.split(",") if r.strip()]
+    unknown = [r for r in rows if r not in ROWS]
+    if unknown:
+        parser.error(f"unknown rows {unknown}; choose from {list(ROWS)}")
+    if any(r.startswith("sppe") for r in rows) and not args.checkpoint:
+        parser.error("the sppe rows need --checkpoint")
+    scene = [f"dataset.num_frames={args.frames}", f"dataset.num_persons={args.persons}"]
+    scene.append(f"dataset.num_cameras={args.cameras}")
+    table = []
+    for row in rows:
+        name, overrides = ROWS[row]
+        if row.startswith("sppe"):
+            overrides = [*overrides, f"pose2d.checkpoint={args.checkpoint}"]
+        metrics, timings = run_row(scene + overrides)
+        table.append(table_row(name, metrics, timings, args.frames))
+        print(f"{name}: done", flush=True)
+    header = ["2D source", "AP all", "AP body", "AP foot", "MPJPE mm", "PCP %", "found %", "2D ms/frame"]
+    text = (
+        f"Rendered synthetic scene: {args.persons} persons, {args.cameras} ring cameras 1280 x 720, "
+        f"{args.frames} frames; default matching + MAP + tracking; AP per view (COCO-23 OKS), MPJPE absolute "
+        f"(all 23 joints, GT-matched), PCP alpha 0.5\n\n"
+        + format_table([*header, "3D ms/frame"], table, floatfmt=".2f")
+    )
+    print(text)
+    if args.out:
+        atomic_write_text(args.out, text + "\n")
+
+
+if __name__ == "__main__":
+    main()
