@@ -25,13 +25,11 @@ from typing import Any, Mapping
 
 import numpy as np
 import torch
-from torch import nn
 
 from data.config_checks import ConfigError, is_int, is_number
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from data.pose2d.box_crops import crop_boxes, normalize_crops
-from models.heatmap_codec import MultiModalHeatmapCodec
 from models.heatmap_inference import predict_heatmaps
 from models.pose_decoding import DECODERS, associate_by_image, joint_candidates, person_scores, single_peaks
 from models.pose_nms import find_duplicates, merge_joints
@@ -77,13 +75,13 @@ def _fail(key: str, value: Any, what: str) -> None:
 
 
 def nms_threshold(pose_nms_cfg: Mapping | None) -> float | None:
-    """The pose_nms config block {enabled, oks} -> the OKS threshold, None when off (or no block)."""
+    """The pose_nms config block {enabled, oks} -> the OKS threshold, None when off; no block: on, OKS 0.7."""
     if pose_nms_cfg is None:
-        return None
+        return SppeOptions.pose_nms_oks
     enabled = pose_nms_cfg.get("enabled", True)
     if not isinstance(enabled, bool):
         _fail("pose_nms.enabled", enabled, "must be true or false")
-    return pose_nms_cfg.get("oks", 0.7) if enabled else None
+    return pose_nms_cfg.get("oks", SppeOptions.pose_nms_oks) if enabled else None
 
 
 class SppeStage:
@@ -107,34 +105,9 @@ class SppeStage:
         options = SppeOptions(
             flip_test, decode, threshold, top_m, dist_thresh, batch_size, amp, nms_threshold(pose_nms)
         )
-        torch_device = _device(device)
-        model, train_cfg = load_trained_model(checkpoint, torch_device)
-        self._configure(model, build_codec(train_cfg), float(train_cfg.data.padding), torch_device, options)
-
-    @classmethod
-    def from_network(
-        cls,
-        model: nn.Module,
-        codec: MultiModalHeatmapCodec,
-        padding: float = 1.25,
-        device: str = "cpu",
-        options: SppeOptions | None = None,
-    ) -> "SppeStage":
-        """The stage around a network already built (in eval mode), e.g. random weights for a benchmark."""
-        stage = cls.__new__(cls)
-        torch_device = _device(device)
-        stage._configure(model.to(torch_device).eval(), codec, padding, torch_device, options or SppeOptions())
-        return stage
-
-    def _configure(
-        self,
-        model: nn.Module,
-        codec: MultiModalHeatmapCodec,
-        padding: float,
-        device: torch.device,
-        options: SppeOptions,
-    ) -> None:
-        self.model, self.codec, self.padding, self.device, self.options = model, codec, padding, device, options
+        self.device = _device(device)
+        self.model, train_cfg = load_trained_model(checkpoint, self.device)
+        self.codec, self.padding, self.options = build_codec(train_cfg), float(train_cfg.data.padding), options
         self.last_timings: dict[str, float] = {}  # seconds of the last call: crop, network, decode
 
     def __call__(self, images: list[np.ndarray], boxes: list[np.ndarray]) -> list[ViewDetections]:
