@@ -5,10 +5,12 @@ the target codec (input size, sigma). Every person box (ground truth, or a detec
 without augmentation and decoded either with one peak per joint (``decode=single``, as train.py's
 validation) or as the paper's joint-candidate SPPE does (``decode=association``): up to ``top_m`` local
 maxima per joint (models.candidates), then CrowdPose's global joint association over all boxes of an
-image (models.joint_association), so two boxes never claim one joint. Outputs: COCO OKS AP/AR (all 23,
-body 17, foot 6) through data.pose2d.coco_eval, the COCO results file and poses2d.json for the
-multi-view pipeline (``eval.py dataset=files dataset.poses2d=...``). An image entry of the annotation
-file may carry ``frame`` and ``camera``; without them the frame is the image id and the camera "0".
+image (models.joint_association), so two boxes never claim one joint; with ``flip_test`` the mirrored
+crop's heatmaps are averaged in first. Flip test and decoding are the SPPE stage's own code
+(models.heatmap_inference, models.pose_decoding). Outputs: COCO OKS AP/AR (all 23, body 17, foot 6)
+through data.pose2d.coco_eval, the COCO results file and poses2d.json for the multi-view pipeline
+(``eval.py dataset=files dataset.poses2d=...``). An image entry of the annotation file may carry ``frame``
+and ``camera``; without them the frame is the image id and the camera "0".
 """
 
 from __future__ import annotations
@@ -20,8 +22,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from torch import nn
 from torch.utils.data import DataLoader
 
@@ -32,22 +33,11 @@ from data.multiview import ViewDetections
 from data.pose2d.coco_eval import evaluate_keypoints, write_coco_results
 from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.pose2d.topdown_dataset import EpochSampler, TopDownDataset
-from models.candidates import candidates_to_image, find_candidates
-from models.checkpoint_io import read_checkpoint
 from models.heatmap_codec import MultiModalHeatmapCodec
-from models.joint_association import associate_joints
+from models.heatmap_inference import predict_heatmaps
+from models.pose_decoding import DECODERS, associate_by_image, joint_candidates, person_scores
+from models.trained_model import load_trained_model
 from models.training import AP_SUBSETS, build_codec, decode_predictions, select_device
-
-DECODERS = ("single", "association")
-
-
-def load_trained_model(path: str | Path, device: torch.device) -> tuple[nn.Module, DictConfig]:
-    """The network of a train.py checkpoint or weights file, in eval mode on device, and its training config."""
-    checkpoint = read_checkpoint(path)  # a missing or damaged file -> FileNotFoundError / CheckpointError
-    train_cfg = OmegaConf.create(checkpoint["config"])
-    model = instantiate(train_cfg.model, pretrained=None)  # the weights come from the checkpoint
-    model.load_state_dict(checkpoint["model"])
-    return model.to(device).eval(), train_cfg
 
 
 def build_eval_dataset(
@@ -81,39 +71,30 @@ def decode_candidates(
 ) -> list[dict]:
     """Heatmaps (B, 23, h, w) of a batch -> B crops {image_id, box (4,), score, candidates (23, M, 3) x, y,
     score in image pixels}: the top-M local maxima of each joint channel."""
-    xy, scores = find_candidates(heatmaps, threshold=threshold, top_m=top_m)
-    stride = np.array(codec.input_size, dtype=np.float64) / np.array(codec.heatmap_size)
-    image_xy = candidates_to_image(xy, batch["affine_inv"].numpy(), stride)
+    candidates = joint_candidates(codec, heatmaps, batch["affine_inv"], threshold, top_m)
     return [
         {
             "image_id": int(batch["image_id"][i]),
             "box": batch["box"][i].numpy(),
             "score": float(batch["score"][i]),
-            "candidates": np.concatenate([image_xy[i], scores[i, ..., None]], -1),
+            "candidates": candidates[i],
         }
-        for i in range(len(xy))
+        for i in range(len(candidates))
     ]
 
 
 def associate_crops(crops: list[dict]) -> list[dict]:
     """Crops of :func:`decode_candidates` -> one prediction per crop {image_id, keypoints (23, 3), score, bbox},
     joints assigned by the global joint association over the crops of each image; order kept."""
-    by_image: dict[int, list[int]] = defaultdict(list)
-    for i, crop in enumerate(crops):
-        by_image[crop["image_id"]].append(i)
-    out: list[dict | None] = [None] * len(crops)
-    for indices in by_image.values():
-        cands = np.stack([crops[i]["candidates"] for i in indices])  # (P, 23, M, 3)
-        boxes = np.stack([crops[i]["box"] for i in indices])
-        keypoints = associate_joints(cands[..., :2], cands[..., 2], boxes)  # (P, 23, 3)
-        for i, kps in zip(indices, keypoints):
-            out[i] = {
-                "image_id": crops[i]["image_id"],
-                "keypoints": kps,
-                "bbox": crops[i]["box"],
-                "score": crops[i]["score"] * float(kps[:, 2].mean()),
-            }
-    return out  # type: ignore[return-value]
+    if not crops:
+        return []
+    boxes = np.stack([c["box"] for c in crops])
+    keypoints = associate_by_image(np.stack([c["candidates"] for c in crops]), boxes, [c["image_id"] for c in crops])
+    scores = person_scores(np.array([c["score"] for c in crops]), keypoints)
+    return [
+        {"image_id": c["image_id"], "keypoints": k, "bbox": c["box"], "score": float(s)}
+        for c, k, s in zip(crops, keypoints, scores)
+    ]
 
 
 @torch.no_grad()
@@ -125,13 +106,16 @@ def predict(
     decode: str = "association",
     threshold: float = 0.1,
     top_m: int = 3,
+    flip_test: bool = True,
 ) -> list[dict]:
-    """Predictions {image_id, keypoints (23, 3), score, bbox (4,)} for every crop of the loader, in its order."""
+    """Predictions {image_id, keypoints (23, 3), score, bbox (4,)} for every crop of the loader, in its order;
+    flip_test averages in the mirrored crops' heatmaps (models/heatmap_inference.py)."""
     if decode not in DECODERS:
         raise ValueError(f"decode must be one of {DECODERS}, got {decode!r}")
     predictions, crops = [], []
     for batch in loader:
-        heatmaps = model(batch["image"].to(device)).float().cpu()
+        images = batch["image"].to(device)
+        heatmaps = predict_heatmaps(model, images, max(len(images), 1), flip_test).cpu()
         if decode == "single":
             predictions += decode_predictions(codec, heatmaps, batch)
         else:
@@ -186,7 +170,7 @@ def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
         sampler=EpochSampler(len(dataset), shuffle=False),
         num_workers=pose2d.num_workers,
     )
-    predictions = predict(model, loader, codec, device, pose2d.decode, pose2d.threshold, pose2d.top_m)
+    predictions = predict(model, loader, codec, device, pose2d.decode, pose2d.threshold, pose2d.top_m, pose2d.flip_test)
     metrics: dict[str, Any] = {}
     for subset in AP_SUBSETS:
         stats = evaluate_keypoints(dataset.records, predictions, subset) if predictions else {"AP": -1, "AR": -1}
@@ -202,6 +186,7 @@ def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
                 "ann_file": str(ann_file),
                 "crops": len(dataset),
                 "decode": pose2d.decode,
+                "flip_test": pose2d.flip_test,
                 "cameras": cameras,
             },
             indent=2,

@@ -18,6 +18,13 @@ A matched person gets the position and score of its own best candidate in its no
 score 0, as CrowdPose keeps only matched joints; the position is kept because COCO's OKS uses the
 coordinates of every predicted keypoint, whatever its score. A person with no candidate gets (0, 0, 0).
 Exact ties between matchings are broken by scipy, i.e. by person order.
+
+Vectorised: the links of all joint types are one array and one connected-components call; a joint type
+where no node is claimed by two persons needs no matching (each person takes its best candidate, which
+is what the matching would give), so scipy's Hungarian runs only on the joint types with a shared node.
+The node columns are in the order of the per-joint formulation (first candidate in person, slot order),
+so ties break as they did there (benchmarks/reference_decoding.py, the earlier loop, is the test's
+reference).
 """
 
 from __future__ import annotations
@@ -26,7 +33,6 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial.distance import cdist
 
 from data.keypoints import NUM_JOINTS, OKS_SIGMAS
 
@@ -50,45 +56,101 @@ def associate_joints(
         if n_joints != NUM_JOINTS:
             raise ValueError(f"give sigmas for {n_joints} joints (defaults exist for {NUM_JOINTS})")
         sigmas = OKS_SIGMAS
-    sigmas = np.asarray(sigmas, dtype=np.float64)
     box_scale = np.sqrt(np.clip(boxes[:, 2] * boxes[:, 3], 0.0, None))
-    out = np.zeros((n_persons, n_joints, 3))
-    for j in range(n_joints):
-        out[:, j] = associate_joint(xy[:, j], scores[:, j], dist_thresh * sigmas[j] * box_scale)
-    return out
-
-
-def joint_nodes(points: np.ndarray, owners: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Cluster candidates into joint nodes: points (C, 2), owners (C,) person ids, radii (C,) -> labels (C,).
-
-    Two candidates of different owners are linked when their distance is at most the mean of their radii;
-    the nodes are the connected components of the links.
-    """
-    if len(points) == 0:
-        return np.zeros(0, dtype=int)
-    dist = cdist(points, points)
-    linked = (dist <= (radii[:, None] + radii[None, :]) / 2) & (owners[:, None] != owners[None, :])
-    _, labels = connected_components(csr_matrix(linked), directed=False)
-    return labels
-
-
-def associate_joint(xy: np.ndarray, scores: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """One joint type: xy (P, M, 2), scores (P, M), per-person node radii (P,) -> (P, 3) x, y, score."""
-    n_persons = len(scores)
-    out = np.zeros((n_persons, 3))
-    owners, slots = np.nonzero(scores > 0)
-    if len(owners) == 0:
+    radii = dist_thresh * np.asarray(sigmas, dtype=np.float64)[None, :] * box_scale[:, None]  # (P, J)
+    out = own_best(xy, scores)
+    if n_persons < 2:
         return out
-    labels = joint_nodes(xy[owners, slots], owners, radii[owners])
-    weight = np.zeros((n_persons, labels.max() + 1))
-    best = np.full(weight.shape, -1)
-    for c, (p, node) in enumerate(zip(owners, labels)):
-        if scores[p, slots[c]] > weight[p, node]:
-            weight[p, node], best[p, node] = scores[p, slots[c]], slots[c]
-    own_best = scores.argmax(axis=1)
-    has_any = scores.max(axis=1) > 0
-    out[has_any, :2] = xy[has_any, own_best[has_any]]
-    for p, node in zip(*linear_sum_assignment(weight, maximize=True)):
-        if weight[p, node] > 0:
-            out[p] = (*xy[p, best[p, node]], weight[p, node])
+    nodes = joint_nodes(xy, scores, radii)
+    person, node, weight, slot = best_per_node(nodes, scores)
+    n_nodes = int(nodes.max()) + 1 if len(node) else 0
+    joint_of_node = np.zeros(n_nodes, dtype=int)
+    joint_of_node[nodes[nodes >= 0]] = np.nonzero(nodes >= 0)[1]
+    first = np.searchsorted(joint_of_node, np.arange(n_joints + 1))  # nodes are numbered joint by joint
+    w = np.zeros((n_persons, n_nodes))
+    best = np.zeros((n_persons, n_nodes), dtype=int)
+    w[person, node], best[person, node] = weight, slot
+    shared = np.bincount(node, minlength=n_nodes) >= 2
+    matched = [_match(w, first[j], first[j + 1]) for j in np.unique(joint_of_node[shared])]
+    return _apply_matches(out, xy, w, best, joint_of_node, matched)
+
+
+def _match(w: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    """Maximum-weight matching of persons to the nodes start:stop of one joint type: weights w (P, nodes) ->
+    persons (K,) and their global node indices (K,), zero-weight pairs dropped."""
+    rows, cols = linear_sum_assignment(w[:, start:stop], maximize=True)
+    keep = w[rows, start + cols] > 0
+    return rows[keep], start + cols[keep]
+
+
+def _apply_matches(
+    own: np.ndarray,
+    xy: np.ndarray,
+    w: np.ndarray,
+    best: np.ndarray,
+    joint_of_node: np.ndarray,
+    matched: list[tuple[np.ndarray, np.ndarray]],
+) -> np.ndarray:
+    """The persons' own best candidates (P, J, 3) with the matched joint types replaced: unmatched persons keep
+    their position with score 0, matched ones take their best candidate in the node and its score -> (P, J, 3)."""
+    if not matched:
+        return own
+    out = own.copy()
+    joints = np.unique(joint_of_node[np.concatenate([c for _, c in matched])])
+    out[:, joints, 2] = 0.0
+    rows, cols = np.concatenate([r for r, _ in matched]), np.concatenate([c for _, c in matched])
+    j = joint_of_node[cols]
+    out[rows, j, :2] = xy[rows, j, best[rows, cols]]
+    out[rows, j, 2] = w[rows, cols]
     return out
+
+
+def own_best(xy: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """Each person's best candidate per joint: xy (P, J, M, 2), scores (P, J, M) -> (P, J, 3); (0, 0, 0) where
+    a person has no candidate of a joint."""
+    best = scores.argmax(axis=-1)[..., None]
+    out = np.concatenate(
+        [np.take_along_axis(xy, best[..., None], axis=2)[:, :, 0], np.take_along_axis(scores, best, axis=2)], -1
+    )
+    return np.where(out[..., 2:] > 0, out, 0.0)
+
+
+def joint_nodes(xy: np.ndarray, scores: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Cluster the candidates of each joint type into joint nodes: xy (P, J, M, 2), scores (P, J, M), radii
+    (P, J) -> node labels (P, J, M), unique over all joint types, numbered 0.. in (joint, person, slot) order of
+    each node's first candidate; -1 where there is no candidate (score <= 0).
+
+    Two candidates of one joint type and different persons are linked when their distance is at most the
+    mean of their persons' radii; the nodes are the connected components of the links.
+    """
+    n_persons, n_joints, m = scores.shape
+    pts = xy.transpose(1, 0, 2, 3).reshape(n_joints, n_persons * m, 2)
+    valid = (scores > 0).transpose(1, 0, 2).reshape(n_joints, n_persons * m)
+    r = np.repeat(radii.T, m, axis=1)  # (J, P M)
+    owner = np.repeat(np.arange(n_persons), m)
+    x, y = pts[..., 0], pts[..., 1]
+    dist = np.sqrt((x[:, :, None] - x[:, None]) ** 2 + (y[:, :, None] - y[:, None]) ** 2)  # (J, P M, P M), as cdist
+    linked = (dist <= (r[:, :, None] + r[:, None, :]) / 2) & (owner[:, None] != owner[None, :])
+    linked &= valid[:, :, None] & valid[:, None, :]
+    j, a, b = np.nonzero(linked)
+    size = n_joints * n_persons * m
+    graph = csr_matrix((np.ones(len(j), dtype=bool), (j * n_persons * m + a, j * n_persons * m + b)), (size, size))
+    _, labels = connected_components(graph, directed=False)
+    labels = labels.reshape(n_joints, n_persons, m).transpose(1, 0, 2)
+    valid = scores > 0
+    _, dense = np.unique(labels[valid], return_inverse=True)  # labels of absent candidates dropped, order kept
+    out = np.full(scores.shape, -1, dtype=int)
+    out[valid] = dense
+    return out
+
+
+def best_per_node(nodes: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each person's best candidate in each node it has one in: nodes and scores (P, J, M) -> person, node,
+    weight (its score), slot, each (K,) over the K (person, node) pairs; ties go to the lower slot."""
+    p, _, m = np.nonzero(nodes >= 0)
+    node, s = nodes[nodes >= 0], scores[nodes >= 0]
+    order = np.lexsort((m, -s, node, p))
+    p, node, s, m = p[order], node[order], s[order], m[order]
+    first = np.ones(len(p), dtype=bool)
+    first[1:] = (p[1:] != p[:-1]) | (node[1:] != node[:-1])
+    return p[first], node[first], s[first], m[first]

@@ -30,12 +30,13 @@ from tqdm import tqdm
 from data.config_checks import ConfigError, check_bool, check_int, check_number, fail, is_int, value_of
 from data.pose2d.coco_eval import evaluate_keypoints
 from data.pose2d.coco_keypoints import load_keypoint_dataset
-from data.pose2d.crop_transforms import CropAugmentation, transform_points
+from data.pose2d.crop_transforms import CropAugmentation
 from data.pose2d.records import ImageRecord
 from data.pose2d.topdown_dataset import TopDownDataset, denormalize_image
 from models.checkpoint_io import atomic_torch_save, read_checkpoint, write_checkpoint  # noqa: F401 (re-exported)
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss
+from models.pose_decoding import person_scores, single_peaks
 from models.show_targets import GREEN, RED, tile_grid, tint
 
 log = logging.getLogger(__name__)
@@ -282,21 +283,17 @@ def train_one_epoch(
 def decode_predictions(codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, batch: dict) -> list[dict]:
     """Heatmaps (B, 23, h, w) of a batch -> B predictions {image_id, keypoints (23, 3) x, y, score in image
     pixels, score = box score x mean keypoint score, bbox (4,)}; single peak per joint (codec.decode)."""
-    points, scores = codec.decode(heatmaps)
-    affine_inv = batch["affine_inv"].numpy()
-    box_scores = batch["score"].numpy()
-    out = []
-    for i in range(len(points)):
-        xy = transform_points(points[i], affine_inv[i])
-        out.append(
-            {
-                "image_id": int(batch["image_id"][i]),
-                "keypoints": np.column_stack([xy, scores[i]]),
-                "score": float(box_scores[i] * scores[i].mean()),
-                "bbox": batch["box"][i].numpy(),
-            }
-        )
-    return out
+    keypoints = single_peaks(codec, heatmaps, batch["affine_inv"])
+    scores = person_scores(batch["score"].numpy(), keypoints)
+    return [
+        {
+            "image_id": int(batch["image_id"][i]),
+            "keypoints": keypoints[i],
+            "score": float(scores[i]),
+            "bbox": batch["box"][i].numpy(),
+        }
+        for i in range(len(keypoints))
+    ]
 
 
 def heatmap_grid(

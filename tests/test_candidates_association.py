@@ -19,15 +19,21 @@ def gaussian(h: int, w: int, centre: tuple[float, float], sigma: float = 2.0, am
     return amp * np.exp(-((xs - centre[0]) ** 2 + (ys - centre[1]) ** 2) / (2 * sigma**2))
 
 
+def candidates(heatmaps, **options) -> tuple[np.ndarray, np.ndarray]:
+    """find_candidates as numpy arrays."""
+    xy, scores = find_candidates(heatmaps, **options)
+    return xy.numpy(), scores.numpy()
+
+
 def test_two_gaussian_peaks_at_sub_pixel_positions():
     hm = gaussian(64, 48, (12.3, 20.7)) + gaussian(64, 48, (33.6, 45.2), amp=0.7)
-    xy, scores = find_candidates(hm[None, None], threshold=0.1, top_m=3)
+    xy, scores = candidates(hm[None, None], threshold=0.1, top_m=3)
     assert xy.shape == (1, 1, 3, 2) and scores.shape == (1, 1, 3)
     np.testing.assert_allclose(xy[0, 0, 0], (12.3, 20.7), atol=0.25)
     np.testing.assert_allclose(xy[0, 0, 1], (33.6, 45.2), atol=0.25)
     assert scores[0, 0, 0] > scores[0, 0, 1] > 0.6
     assert scores[0, 0, 2] == 0 and np.all(xy[0, 0, 2] == 0)
-    only_high, high_scores = find_candidates(hm[None, None], threshold=0.8, top_m=3)
+    only_high, high_scores = candidates(hm[None, None], threshold=0.8, top_m=3)
     assert np.count_nonzero(high_scores) == 1
     np.testing.assert_allclose(only_high[0, 0, 0], (12.3, 20.7), atol=0.25)
 
@@ -35,7 +41,7 @@ def test_two_gaussian_peaks_at_sub_pixel_positions():
 def test_suppression_keeps_exactly_the_local_maxima():
     rng = np.random.default_rng(3)
     hm = rng.uniform(0, 1, (2, 3, 9, 11))
-    xy, scores = find_candidates(torch.from_numpy(hm), threshold=0.3, top_m=200, nms_kernel=3)
+    xy, scores = candidates(torch.from_numpy(hm), threshold=0.3, top_m=200, nms_kernel=3)
     for b in range(2):
         for j in range(3):
             peak = (hm[b, j] == maximum_filter(hm[b, j], size=3, mode="constant", cval=-1)) & (hm[b, j] > 0.3)
@@ -45,7 +51,7 @@ def test_suppression_keeps_exactly_the_local_maxima():
             rows, cols = np.nonzero(peak)
             near = np.abs(xy[b, j, : len(expected), None] - np.stack([cols, rows], 1)[None]).max(-1) <= 0.5
             assert near.any(axis=1).all()
-    np_xy, np_scores = find_candidates(hm, threshold=0.3, top_m=200)
+    np_xy, np_scores = candidates(hm, threshold=0.3, top_m=200)
     np.testing.assert_array_equal(np_scores, scores)
     np.testing.assert_allclose(np_xy, xy)
 
@@ -64,7 +70,7 @@ def test_gaussian_rendered_at_an_image_point_decodes_back_to_it():
     x_in = forward[:, :2] @ point + forward[:, 2]
     x_hm = (x_in + 0.5) / 4 - 0.5
     hm = gaussian(64, 48, tuple(x_hm))
-    xy, _ = find_candidates(hm[None, None], top_m=1)
+    xy, _ = candidates(hm[None, None], top_m=1)
     image_xy = candidates_to_image(xy, inverse[None], stride=4)
     np.testing.assert_allclose(image_xy[0, 0, 0], point, atol=0.05)
 

@@ -113,8 +113,9 @@ def test_eval_py_evaluates_a_checkpoint_and_writes_poses2d(checkpoint, tmp_path)
 
 def test_eval_py_single_decoding_matches_train_validation(checkpoint, tmp_path):
     ckpt, root = checkpoint
-    metrics = eval_script.run_pose2d(eval_config([f"checkpoint={ckpt}", "coco2d.decode=single"]), tmp_path)
-    # the checkpoint's own validation set by default, decoded as train.py's validation decodes it
+    overrides = [f"checkpoint={ckpt}", "coco2d.decode=single", "coco2d.flip_test=false"]
+    metrics = eval_script.run_pose2d(eval_config(overrides), tmp_path)
+    # the checkpoint's own validation set by default, decoded as train.py's validation decodes it (no flip test)
     stored = json.loads((ckpt.parent.parent / "metrics.json").read_text())["metrics"]
     for key, value in metrics.items():
         assert value == pytest.approx(stored[key]), key

@@ -1,0 +1,154 @@
+"""The numpy decoding that models/candidates.py and models/joint_association.py replaced, kept as the reference.
+
+tests/test_pose_decoding.py checks the batched decoding against it (same candidates, same association) and
+``python -m benchmarks.pose2d_speed`` times both in one run. It is the repository's earlier implementation,
+unchanged: float64 candidates with a max-pool suppression, then one cdist, connected-components and
+Hungarian problem per joint type in a python loop. Nothing in the pipeline imports it.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial.distance import cdist
+
+from data.keypoints import NUM_JOINTS, OKS_SIGMAS
+
+_LOG_EPS = 1e-10
+
+
+def find_candidates(
+    heatmaps: torch.Tensor | np.ndarray, threshold: float = 0.1, top_m: int = 3, nms_kernel: int = 3
+) -> tuple[np.ndarray, np.ndarray]:
+    """Top-M local maxima per channel: heatmaps (B, J, h, w) -> xy (B, J, M, 2) heatmap px, scores (B, J, M).
+
+    A candidate is a pixel equal to the maximum of its ``nms_kernel`` neighbourhood and above
+    ``threshold``; candidates are sorted by score (the heatmap value at the peak pixel), best first.
+    Unused slots have score 0 and xy 0. Two equal adjacent maxima (a plateau) both survive.
+    """
+    if nms_kernel < 1 or nms_kernel % 2 == 0:
+        raise ValueError(f"nms_kernel must be a positive odd number, got {nms_kernel}")
+    if threshold < 0 or top_m < 1:
+        raise ValueError(f"need threshold >= 0 and top_m >= 1, got {threshold}, {top_m}")
+    hm = torch.as_tensor(heatmaps).detach().to(torch.float64)
+    b, j, h, w = hm.shape
+    pooled = F.max_pool2d(hm.reshape(b * j, 1, h, w), nms_kernel, stride=1, padding=nms_kernel // 2)
+    peaks = (hm == pooled.reshape(b, j, h, w)) & (hm > threshold)
+    flat = torch.where(peaks, hm, torch.zeros_like(hm)).reshape(b, j, h * w)
+    k = min(top_m, h * w)
+    vals, idx = flat.topk(k, dim=-1)
+    rows, cols = idx // w, idx % w
+    log_hm = hm.clamp_min(_LOG_EPS).log().reshape(b, j, h * w)
+    dx = _parabola_offset(log_hm, rows, cols, w, axis_len=w, along_x=True)
+    dy = _parabola_offset(log_hm, rows, cols, w, axis_len=h, along_x=False)
+    xy = torch.stack([cols + dx, rows + dy], dim=-1)
+    found = vals > 0
+    xy = torch.where(found[..., None], xy, torch.zeros_like(xy))
+    scores = torch.where(found, vals, torch.zeros_like(vals))
+    xy_np, scores_np = xy.cpu().numpy(), scores.cpu().numpy()
+    if k < top_m:
+        xy_np = np.concatenate([xy_np, np.zeros((b, j, top_m - k, 2))], axis=2)
+        scores_np = np.concatenate([scores_np, np.zeros((b, j, top_m - k))], axis=2)
+    return xy_np, scores_np
+
+
+def _parabola_offset(
+    log_hm: torch.Tensor, rows: torch.Tensor, cols: torch.Tensor, w: int, axis_len: int, along_x: bool
+) -> torch.Tensor:
+    """Vertex offset of the log-parabola through a peak and its two neighbours along one axis: (B, J, K)."""
+    pos = cols if along_x else rows
+
+    def log_at(shift: int) -> torch.Tensor:
+        p = (pos + shift).clamp(0, axis_len - 1)
+        flat = rows * w + p if along_x else p * w + cols
+        return log_hm.gather(-1, flat)
+
+    lm, l0, lp = log_at(-1), log_at(0), log_at(1)
+    curvature = lm - 2 * l0 + lp
+    inside = (pos > 0) & (pos < axis_len - 1) & (curvature < 0)
+    safe = torch.where(inside, curvature, -torch.ones_like(curvature))
+    offset = (0.5 * (lm - lp) / safe).clamp(-0.5, 0.5)
+    return torch.where(inside, offset, torch.zeros_like(offset))
+
+
+def candidates_to_image(xy: np.ndarray, inverse_affines: np.ndarray, stride: float | Sequence[float]) -> np.ndarray:
+    """Heatmap pixels to image pixels: xy (B, J, M, 2), inverse_affines (B, 2, 3) -> (B, J, M, 2).
+
+    ``stride`` is the input-to-heatmap size ratio (a number, or (sx, sy)); ``inverse_affines[b]`` maps
+    crop-input pixels to image pixels. Uses ``x_in = (x_hm + 0.5) * stride - 0.5`` (module docstring).
+    Slots with score 0 are transformed too and stay meaningless.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    affines = np.asarray(inverse_affines, dtype=np.float64).reshape(-1, 2, 3)
+    s = np.broadcast_to(np.asarray(stride, dtype=np.float64), (2,))
+    x_in = (xy + 0.5) * s - 0.5
+    return np.einsum("bik,bjmk->bjmi", affines[:, :, :2], x_in) + affines[:, None, None, :, 2]
+
+
+def associate_joints(
+    xy: np.ndarray, scores: np.ndarray, boxes: np.ndarray, dist_thresh: float = 1.0, sigmas: np.ndarray | None = None
+) -> np.ndarray:
+    """Associate joint candidates to persons: xy (P, J, M, 2) image px, scores (P, J, M), boxes (P, 4) xywh
+    -> keypoints (P, J, 3) x, y, score.
+
+    ``sigmas`` (J,): per-joint OKS sigmas of the node radius; defaults to the COCO-23 ones (J must be 23).
+    Candidates with score <= 0 are absent.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    scores = np.asarray(scores, dtype=np.float64)
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    n_persons, n_joints, _ = scores.shape
+    if xy.shape != scores.shape + (2,) or len(boxes) != n_persons:
+        raise ValueError(f"shape mismatch: xy {xy.shape}, scores {scores.shape}, boxes {boxes.shape}")
+    if sigmas is None:
+        if n_joints != NUM_JOINTS:
+            raise ValueError(f"give sigmas for {n_joints} joints (defaults exist for {NUM_JOINTS})")
+        sigmas = OKS_SIGMAS
+    sigmas = np.asarray(sigmas, dtype=np.float64)
+    box_scale = np.sqrt(np.clip(boxes[:, 2] * boxes[:, 3], 0.0, None))
+    out = np.zeros((n_persons, n_joints, 3))
+    for j in range(n_joints):
+        out[:, j] = associate_joint(xy[:, j], scores[:, j], dist_thresh * sigmas[j] * box_scale)
+    return out
+
+
+def joint_nodes(points: np.ndarray, owners: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Cluster candidates into joint nodes: points (C, 2), owners (C,) person ids, radii (C,) -> labels (C,).
+
+    Two candidates of different owners are linked when their distance is at most the mean of their radii;
+    the nodes are the connected components of the links.
+    """
+    if len(points) == 0:
+        return np.zeros(0, dtype=int)
+    dist = cdist(points, points)
+    linked = (dist <= (radii[:, None] + radii[None, :]) / 2) & (owners[:, None] != owners[None, :])
+    _, labels = connected_components(csr_matrix(linked), directed=False)
+    return labels
+
+
+def associate_joint(xy: np.ndarray, scores: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """One joint type: xy (P, M, 2), scores (P, M), per-person node radii (P,) -> (P, 3) x, y, score."""
+    n_persons = len(scores)
+    out = np.zeros((n_persons, 3))
+    owners, slots = np.nonzero(scores > 0)
+    if len(owners) == 0:
+        return out
+    labels = joint_nodes(xy[owners, slots], owners, radii[owners])
+    weight = np.zeros((n_persons, labels.max() + 1))
+    best = np.full(weight.shape, -1)
+    for c, (p, node) in enumerate(zip(owners, labels)):
+        if scores[p, slots[c]] > weight[p, node]:
+            weight[p, node], best[p, node] = scores[p, slots[c]], slots[c]
+    own_best = scores.argmax(axis=1)
+    has_any = scores.max(axis=1) > 0
+    out[has_any, :2] = xy[has_any, own_best[has_any]]
+    for p, node in zip(*linear_sum_assignment(weight, maximize=True)):
+        if weight[p, node] > 0:
+            out[p] = (*xy[p, best[p, node]], weight[p, node])
+    return out

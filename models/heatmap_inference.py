@@ -1,0 +1,50 @@
+"""Heatmaps of a batch of person crops: the network in chunks, optional flip test, float16 autocast on CUDA.
+
+Flip test: each crop also goes through the network mirrored; that output is mirrored back and its left and
+right channels swapped (data.keypoints.flip_permutation, feet included), then averaged with the plain
+output. Alignment: SimpleBaseline and AlphaPose shift the mirrored-back heatmap by one pixel because their
+heatmap pixel i sits at input pixel ``stride * i``, so a mirror of the input is not a mirror of the
+heatmap. Here heatmap pixel i is the centre of input pixels ``stride * i .. stride * (i + 1) - 1``
+(models/heatmap_codec.py), the input mirror ``x -> W - 1 - x`` is exactly the heatmap mirror
+``x -> w - 1 - x``, and no shift is applied: a network that is exactly mirror-equivariant gives the same
+heatmaps with and without the flip test.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from data.keypoints import NUM_JOINTS, flip_permutation
+
+
+def flip_back(heatmaps: torch.Tensor) -> torch.Tensor:
+    """Heatmaps (B, 23, h, w) of mirrored crops -> those of the crops: mirrored x -> w - 1 - x, left and right
+    channels swapped."""
+    if heatmaps.shape[1] != NUM_JOINTS:
+        raise ValueError(f"flip test needs {NUM_JOINTS} COCO-23 channels, the network gives {heatmaps.shape[1]}")
+    perm = torch.as_tensor(flip_permutation(), device=heatmaps.device)
+    return heatmaps.flip(-1).index_select(1, perm)
+
+
+@torch.no_grad()
+def predict_heatmaps(
+    model: nn.Module, crops: torch.Tensor, batch_size: int = 32, flip_test: bool = True, amp: bool = False
+) -> torch.Tensor:
+    """Normalised crops (B, 3, H, W) on the model's device -> float32 heatmaps (B, 23, H/4, W/4) there.
+
+    Passes of ``batch_size`` crops (twice as many images with ``flip_test``); ``amp``: float16 autocast when
+    the crops are on CUDA (ignored elsewhere).
+    """
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+    use_amp = bool(amp) and crops.device.type == "cuda"
+    out = []
+    for chunk in crops.split(batch_size):
+        images = torch.cat([chunk, chunk.flip(-1)]) if flip_test else chunk
+        with torch.autocast("cuda", dtype=torch.float16, enabled=use_amp):
+            heatmaps = model(images).float()
+        if flip_test:
+            heatmaps = (heatmaps[: len(chunk)] + flip_back(heatmaps[len(chunk) :])) / 2
+        out.append(heatmaps)
+    return torch.cat(out)  # split gives one empty chunk for no crops: the model maps it to (0, 23, h, w)

@@ -1,0 +1,69 @@
+"""Heatmaps of person crops -> keypoints in image pixels: the decoding shared by the SPPE stage
+(models/sppe_stage.py) and the COCO evaluation of a checkpoint (evaluation/pose2d_eval.py).
+
+``single``: one peak per joint (:meth:`models.heatmap_codec.MultiModalHeatmapCodec.decode`, DARK refinement),
+as train.py's validation. ``association``: the paper's joint-candidate SPPE, the top-M local maxima per joint
+(models/candidates.py, in torch on the heatmaps' device, all crops at once), then CrowdPose's global joint
+association over the crops of each image (models/joint_association.py), so two boxes never claim one joint.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from models.candidates import candidates_to_image, find_candidates
+from models.heatmap_codec import MultiModalHeatmapCodec
+from models.joint_association import associate_joints
+
+DECODERS = ("single", "association")
+
+
+def single_peaks(
+    codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, inverse_affines: torch.Tensor | np.ndarray
+) -> np.ndarray:
+    """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3) -> keypoints (B, 23, 3) x, y, score in image px."""
+    points, scores = codec.decode(heatmaps)
+    affines = torch.as_tensor(inverse_affines, dtype=torch.float64).cpu().numpy().reshape(-1, 2, 3)
+    xy = points @ affines[:, :, :2].transpose(0, 2, 1) + affines[:, None, :, 2]  # transform_points, batched
+    return np.concatenate([xy, scores[..., None]], axis=-1)
+
+
+def joint_candidates(
+    codec: MultiModalHeatmapCodec,
+    heatmaps: torch.Tensor,
+    inverse_affines: torch.Tensor | np.ndarray,
+    threshold: float = 0.1,
+    top_m: int = 3,
+) -> np.ndarray:
+    """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3) -> candidates (B, 23, M, 3) x, y, score in
+    image px: the top-M local maxima of each joint channel above threshold (score 0: no candidate)."""
+    xy, scores = find_candidates(heatmaps, threshold=threshold, top_m=top_m)
+    stride = np.array(codec.input_size, dtype=np.float64) / np.array(codec.heatmap_size)
+    image_xy = candidates_to_image(xy, inverse_affines, stride)
+    return torch.cat([image_xy, scores[..., None]], dim=-1).cpu().numpy()
+
+
+def associate_by_image(
+    candidates: np.ndarray, boxes: np.ndarray, image_keys: Sequence, dist_thresh: float = 1.0
+) -> np.ndarray:
+    """Candidates (B, 23, M, 3) of B crops, their boxes (B, 4) x, y, w, h and the image each crop is from (B,)
+    -> keypoints (B, 23, 3): the global joint association over the crops of each image; order kept."""
+    by_image: dict = defaultdict(list)
+    for i, key in enumerate(image_keys):
+        by_image[key].append(i)
+    out = np.zeros(candidates.shape[:2] + (3,))
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    for indices in by_image.values():
+        cands = candidates[indices]
+        out[indices] = associate_joints(cands[..., :2], cands[..., 2], boxes[indices], dist_thresh)
+    return out
+
+
+def person_scores(box_scores: np.ndarray, keypoints: np.ndarray) -> np.ndarray:
+    """The person score: box score (B,) x mean joint score of keypoints (B, 23, 3) -> (B,) (0 for a joint
+    another box claimed, so a box that lost its joints ranks low)."""
+    return np.asarray(box_scores, dtype=np.float64).reshape(-1) * np.asarray(keypoints)[..., 2].mean(axis=-1)

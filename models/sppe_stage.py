@@ -1,0 +1,218 @@
+"""The joint-candidate SPPE as the 2D stage of the multi-view pipeline (configs/pose2d/sppe.yaml).
+
+``stage(images, boxes)`` takes one frame: per view the image (H, W, 3) uint8 BGR and the person boxes
+(N, 5) x, y, w, h, score from the detector stage, and returns one ViewDetections per view. Every box is
+cropped as in training (data/pose2d/box_crops.py: the checkpoint's data.input_size and data.padding), the
+crops of ALL views go through the network together in passes of ``batch_size`` (models/heatmap_inference.py:
+flip test, float16 autocast on CUDA), and the heatmaps are decoded in one batch (models/pose_decoding.py;
+``association``: candidates then the global joint association over the boxes of each view).
+
+Pose-NMS (models/pose_nms.py, ``pose_nms.enabled``) runs per view on each box's own pose (``single``: its
+peaks; ``association``: its best candidate per joint) with the person score box score x mean joint score,
+BEFORE the association: a duplicate box then takes no part in it, where it would collect the runner-up
+candidates (neighbours' joints) and look like another person. Each kept person's final joints (after the
+association) are merged with its duplicates' agreeing joints. Output per view: keypoints (N, 23, 3) in
+pixels of the original image, bboxes the kept boxes (N, 4), scores = box score x mean of the 23 final joint
+scores (0 for a joint another box claimed), person_ids -1.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+
+from data.config_checks import ConfigError, is_int, is_number
+from data.keypoints import NUM_JOINTS
+from data.multiview import ViewDetections
+from data.pose2d.box_crops import crop_boxes, normalize_crops
+from models.heatmap_inference import predict_heatmaps
+from models.pose_decoding import DECODERS, associate_by_image, joint_candidates, person_scores, single_peaks
+from models.pose_nms import find_duplicates, merge_joints
+from models.trained_model import load_trained_model
+from models.training import build_codec, select_device
+
+KEY = "pose2d"  # the config group, named in error messages
+
+
+@dataclass(frozen=True)
+class SppeOptions:
+    """The stage's settings (configs/pose2d/sppe.yaml documents each); pose_nms_oks None = pose-NMS off."""
+
+    flip_test: bool = True
+    decode: str = "association"
+    threshold: float = 0.1
+    top_m: int = 3
+    dist_thresh: float = 1.0
+    batch_size: int = 32
+    amp: bool = True
+    pose_nms_oks: float | None = 0.7
+
+    def __post_init__(self) -> None:
+        for key in ("flip_test", "amp"):
+            if not isinstance(getattr(self, key), bool):
+                _fail(key, getattr(self, key), "must be true or false")
+        if self.decode not in DECODERS:
+            _fail("decode", self.decode, f"must be one of {', '.join(DECODERS)}")
+        for key, minimum in (("threshold", 0.0), ("dist_thresh", 0.0)):
+            if not is_number(getattr(self, key)) or getattr(self, key) < minimum:
+                _fail(key, getattr(self, key), f"must be a number >= {minimum:g}")
+        for key in ("top_m", "batch_size"):
+            if not is_int(getattr(self, key)) or getattr(self, key) < 1:
+                _fail(key, getattr(self, key), "must be an integer >= 1")
+        oks = self.pose_nms_oks
+        if oks is not None and not (is_number(oks) and 0 < oks < 1):
+            _fail("pose_nms.oks", oks, "must be a number in (0, 1)")
+
+
+def _fail(key: str, value: Any, what: str) -> None:
+    """Raise ConfigError 'pose2d.key=value: what'."""
+    raise ConfigError(f"{KEY}.{key}={value!r}: {what}")
+
+
+def nms_threshold(pose_nms_cfg: Mapping | None) -> float | None:
+    """The pose_nms config block {enabled, oks} -> the OKS threshold, None when off; no block: on, OKS 0.7."""
+    if pose_nms_cfg is None:
+        return SppeOptions.pose_nms_oks
+    enabled = pose_nms_cfg.get("enabled", True)
+    if not isinstance(enabled, bool):
+        _fail("pose_nms.enabled", enabled, "must be true or false")
+    return pose_nms_cfg.get("oks", SppeOptions.pose_nms_oks) if enabled else None
+
+
+class SppeStage:
+    """Person boxes of every view of a frame -> COCO-23 poses per view, by a train.py FastPose checkpoint."""
+
+    needs_boxes = True
+
+    def __init__(
+        self,
+        checkpoint: str | Path,
+        flip_test: bool = True,
+        decode: str = "association",
+        threshold: float = 0.1,
+        top_m: int = 3,
+        dist_thresh: float = 1.0,
+        batch_size: int = 32,
+        device: str = "auto",
+        amp: bool = True,
+        pose_nms: Mapping | None = None,
+    ) -> None:
+        options = SppeOptions(
+            flip_test, decode, threshold, top_m, dist_thresh, batch_size, amp, nms_threshold(pose_nms)
+        )
+        self.device = _device(device)
+        self.model, train_cfg = load_trained_model(checkpoint, self.device)
+        self.codec, self.padding, self.options = build_codec(train_cfg), float(train_cfg.data.padding), options
+        self.last_timings: dict[str, float] = {}  # seconds of the last call: crop, network, decode
+
+    def __call__(self, images: list[np.ndarray], boxes: list[np.ndarray]) -> list[ViewDetections]:
+        """Images per view (H, W, 3) uint8 BGR and boxes per view (N_v, 5) x, y, w, h, score -> ViewDetections
+        per view (N_v' <= N_v persons after pose-NMS)."""
+        if len(images) != len(boxes):
+            raise ValueError(f"SPPE stage: {len(images)} images but {len(boxes)} box arrays (one of each per view)")
+        boxes = [_checked_boxes(b, v) for v, b in enumerate(boxes)]
+        start = time.perf_counter()
+        pixels, affines = self._crops(images, boxes)
+        if len(affines) == 0:
+            return [ViewDetections.empty(NUM_JOINTS) for _ in boxes]
+        network = time.perf_counter()
+        o = self.options
+        heatmaps = predict_heatmaps(self.model, normalize_crops(pixels), o.batch_size, o.flip_test, o.amp)
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)  # the network's share of last_timings, not the decoding's
+        decode = time.perf_counter()
+        views = np.repeat(np.arange(len(boxes)), [len(b) for b in boxes])
+        out = self.decode(heatmaps, affines, np.concatenate(boxes), views, len(boxes))
+        end = time.perf_counter()
+        self.last_timings = {"crop": network - start, "network": decode - network, "decode": end - decode}
+        return out
+
+    def _crops(self, images: list[np.ndarray], boxes: list[np.ndarray]) -> tuple[torch.Tensor, np.ndarray]:
+        """RGB uint8 crops (B, h, w, 3) of every box of every view, on the device, and their crop-to-image
+        affines (B, 2, 3), views in order."""
+        crops = [
+            crop_boxes(_checked_image(image, v), b[:, :4], self.codec.input_size, self.padding)
+            for v, (image, b) in enumerate(zip(images, boxes))
+        ]
+        pixels = torch.from_numpy(np.concatenate([c for c, _ in crops])).to(self.device)
+        return pixels, np.concatenate([a for _, a in crops])
+
+    def decode(
+        self, heatmaps: torch.Tensor, affines: np.ndarray, boxes: np.ndarray, views: np.ndarray, n_views: int
+    ) -> list[ViewDetections]:
+        """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3), boxes (B, 5), the view of each crop (B,)
+        -> ViewDetections per view: pose-NMS, then the association of the kept boxes, then the merge."""
+        o = self.options
+        if o.decode == "single":
+            candidates, poses = None, single_peaks(self.codec, heatmaps, affines)
+        else:
+            candidates = joint_candidates(self.codec, heatmaps, affines, o.threshold, o.top_m)
+            poses = candidates[:, :, 0]  # each box's own best candidate per joint (slots are sorted best first)
+        groups = self._duplicates(poses, boxes, views)
+        kept = np.array([k for k, _ in groups], dtype=int)
+        if candidates is None:
+            final = poses[kept]
+        else:
+            final = associate_by_image(candidates[kept], boxes[kept, :4], views[kept], o.dist_thresh)
+        if o.pose_nms_oks is not None:
+            areas = boxes[kept, 2] * boxes[kept, 3]
+            final = [merge_joints(f, poses[d], a, o.pose_nms_oks) for f, (_, d), a in zip(final, groups, areas)]
+            final = np.stack(final)
+        return [_view(final[views[kept] == v], boxes[kept][views[kept] == v]) for v in range(n_views)]
+
+    def _duplicates(self, poses: np.ndarray, boxes: np.ndarray, views: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """(kept crop, its duplicate crops) in crop order: pose-NMS within each view on poses (B, 23, 3) with
+        boxes (B, 5), or every crop kept alone when pose-NMS is off."""
+        oks = self.options.pose_nms_oks
+        if oks is None:
+            return [(i, np.zeros(0, dtype=int)) for i in range(len(poses))]
+        groups = []
+        for v in np.unique(views):
+            idx = np.nonzero(views == v)[0]
+            scores = person_scores(boxes[idx, 4], poses[idx])
+            groups += [(int(idx[a]), idx[d]) for a, d in find_duplicates(poses[idx], boxes[idx, :4], scores, oks)]
+        return groups
+
+
+def _view(keypoints: np.ndarray, boxes: np.ndarray) -> ViewDetections:
+    """One view's final keypoints (N, 23, 3) and boxes (N, 5) -> ViewDetections with the person scores."""
+    return ViewDetections(keypoints, boxes[:, :4], person_scores(boxes[:, 4], keypoints), np.full(len(boxes), -1))
+
+
+def _device(name: str) -> torch.device:
+    """'auto' (CUDA when available), 'cpu', 'cuda', 'cuda:N' -> torch.device; anything else one ConfigError."""
+    try:
+        device = select_device(name)
+    except (RuntimeError, TypeError):
+        _fail("device", name, "must be auto, cpu, cuda or cuda:N")
+    if device.type == "cuda" and not torch.cuda.is_available():
+        _fail("device", name, "CUDA is not available on this machine (use auto or cpu)")
+    return device
+
+
+def _checked_boxes(boxes: np.ndarray, view: int) -> np.ndarray:
+    """One view's boxes as (N, 5) float64, or a ValueError naming the view and the box."""
+    array = np.asarray(boxes, dtype=np.float64)
+    if array.size == 0:
+        return np.zeros((0, 5))
+    if array.ndim != 2 or array.shape[1] != 5:
+        raise ValueError(f"SPPE stage: view {view}: boxes must be (N, 5) x, y, w, h, score, got shape {array.shape}")
+    bad = np.nonzero(~np.isfinite(array).all(axis=1) | (array[:, 2] <= 0) | (array[:, 3] <= 0))[0]
+    if len(bad):
+        raise ValueError(
+            f"SPPE stage: view {view}: box {bad[0]} {array[bad[0]].tolist()} is not finite or has w or h <= 0"
+        )
+    return array
+
+
+def _checked_image(image: np.ndarray, view: int) -> np.ndarray:
+    """One view's image, or a ValueError naming the view."""
+    if not (isinstance(image, np.ndarray) and image.dtype == np.uint8 and image.ndim == 3 and image.shape[2] == 3):
+        shape, dtype = getattr(image, "shape", None), getattr(image, "dtype", type(image).__name__)
+        raise ValueError(f"SPPE stage: view {view}: the image must be (H, W, 3) uint8 BGR, got {shape} {dtype}")
+    return image
