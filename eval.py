@@ -110,8 +110,7 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
         f"{len(sequence.rig)} cameras\n{format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation))}"
     )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
-    written = f"{out_dir / cfg.output}, " + (f"{cfg.poses2d_output}, " if front_timings else "")
-    print(f"\n{text}\n\nWrote {written}{cfg.metrics_file} and {cfg.report_file}")
+    print(f"\n{text}\n\nWrote {out_dir / cfg.output}, {cfg.poses2d_output}, {cfg.metrics_file} and {cfg.report_file}")
     if cfg.vis:
         try:
             pictures = save_run_pictures(
@@ -142,11 +141,12 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
 def run_2d_stage(
     cfg: DictConfig, sequence: Sequence, out_dir: Path
 ) -> tuple[Sequence, dict[str, float], tuple[dict, str] | None]:
-    """With a 2D stage (pose2d=sppe | keypointrcnn): the sequence with the predicted 2D poses (written to
-    cfg.poses2d_output), the stage timings and, where the frames carry ground-truth 2D (render=true), the per-view
-    COCO AP/AR and its printed line. Without one: the sequence as it is, no timings, None."""
+    """With a 2D stage (pose2d=sppe | keypointrcnn): the sequence with the predicted 2D poses, the stage timings
+    and, where the frames carry ground-truth 2D (render=true), the per-view COCO AP/AR and its printed line.
+    Without one: the sequence as it is, no timings, None. The 2D poses used are written to cfg.poses2d_output."""
     front_end = Pose2DFrontEnd.from_config(cfg, sequence)
-    if front_end is None:
+    if front_end is None:  # the dataset's 2D poses, written as they were used (e.g. boxes for detector=file)
+        write_poses2d(out_dir / cfg.poses2d_output, {f.index: f.views for f in sequence.frames}, sequence.rig.names)
         return sequence, {}, None
     estimated, gt_views = estimate_2d(sequence, front_end, cfg.progress)
     write_poses2d(out_dir / cfg.poses2d_output, {f.index: f.views for f in estimated.frames}, sequence.rig.names)

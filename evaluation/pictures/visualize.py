@@ -98,7 +98,8 @@ def save_run_pictures(
 ) -> list[Path]:
     """Pictures of one frame of an eval.py run (``frame`` = its index, None = the first result).
 
-    With ``images_dir``, the camera images are read by :func:`load_view_images` with ``pattern``.
+    With ``images_dir``, the camera images are read by :func:`load_view_images` with ``pattern``; without it,
+    the frame's own images where the dataset has them (dataset=images, render=true), else grey canvases.
     """
     if not results:
         raise ValueError("no reconstructed frame to draw")
@@ -106,5 +107,10 @@ def save_run_pictures(
     if result is None:
         raise ValueError(f"frame {frame} is not among the reconstructed frames {results[0].frame}..{results[-1].frame}")
     data = next(f for f in sequence.frames if f.index == result.frame)
-    images, scales = (None, None) if images_dir is None else load_view_images(images_dir, sequence.rig, pattern)
+    if images_dir is not None:
+        images, scales = load_view_images(images_dir, sequence.rig, pattern)
+    elif data.images is not None:  # the frame's own images (dataset=images, render=true), at the calibration size
+        images, scales = [cv2.cvtColor(im, cv2.COLOR_BGR2RGB) for im in data.images()], [(1.0, 1.0)] * len(sequence.rig)
+    else:
+        images, scales = None, None
     return save_frame_pictures(out_dir, sequence, result, data, images, scales, matcher)
