@@ -50,6 +50,7 @@ def test_the_render_ground_truth_2d_is_the_upper_bound_row(tmp_path):
     assert len(json.loads((tmp_path / "poses2d.json").read_text())) > 0  # the 2D the run used
 
 
+@pytest.mark.filterwarnings("ignore::data.geometry.check_rig.RigWarning")  # a toy rig: only the config error counts
 def test_a_2d_stage_without_images_and_images_without_a_2d_stage_stop_with_one_line(checkpoint, tmp_path):
     with pytest.raises(ConfigError, match="dataset.render=true"):
         eval_script.run(config([*SCENE, "pose2d=sppe", f"pose2d.checkpoint={checkpoint}"]), tmp_path / "a")
