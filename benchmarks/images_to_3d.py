@@ -70,7 +70,7 @@ def table_row(name: str, metrics: dict, timings: dict, frames: int) -> list:
         metrics["mpjpe_mm"],
         metrics["pcp_average"],
         metrics["recall"],
-        1000 * two_d / frames,
+        1000 * two_d / frames if any(k in timings for k in TWO_D_STAGES) else "-",
         1000 * rest / frames,
     ]
 
