@@ -156,7 +156,15 @@ def _validate(
     """Validate, log to TensorBoard, write the predictions JSON -> the metrics."""
     dataset = loader.dataset
     result = validate(
-        model, loader, dataset.codec, dataset.records, loss_fn, device, cfg.trainer.grid_images, cfg.trainer.progress
+        model,
+        loader,
+        dataset.codec,
+        dataset.records,
+        loss_fn,
+        device,
+        cfg.trainer.grid_images,
+        cfg.trainer.progress,
+        cfg.trainer.get("val_flip_test", False),  # False for a resumed run stored before the key existed
     )
     for key, value in result.metrics.items():
         writer.add_scalar(f"val/{key}", value, state.global_step)

@@ -35,6 +35,7 @@ from data.pose2d.records import ImageRecord
 from data.pose2d.topdown_dataset import TopDownDataset, denormalize_image
 from models.checkpoint_io import atomic_torch_save, read_checkpoint, write_checkpoint  # noqa: F401 (re-exported)
 from models.heatmap_codec import MultiModalHeatmapCodec
+from models.heatmap_inference import flip_back
 from models.loss import WeightedHeatmapLoss
 from models.pose_decoding import person_scores, single_peaks
 from models.show_targets import GREEN, RED, tile_grid, tint
@@ -322,17 +323,22 @@ def validate(
     device: torch.device,
     grid_images: int = 4,
     progress: bool = False,
+    flip_test: bool = False,
 ) -> Validation:
-    """Loss, COCO OKS AP/AR (subsets all, body, foot) and AP50/AP75/APm/APl (all) of the model on a plain (unshuffled) loader."""
+    """Loss, COCO OKS AP/AR (subsets all, body, foot) and AP50/AP75/APm/APl (all) of the model on a plain
+    (unshuffled) loader; with ``flip_test`` the scored poses come from the flip-tested heatmaps (the loss and
+    the picture from the plain ones)."""
     model.eval()
     predictions: list[dict] = []
     total, count, grid = 0.0, 0, None
     for batch in tqdm(loader, desc="validate", disable=not progress, leave=False):
-        heatmaps = model(batch["image"].to(device, non_blocking=True))
+        images = batch["image"].to(device, non_blocking=True)
+        heatmaps = model(images)
         target, weight = batch["target"].to(device), batch["weight"].to(device)
         total += float(loss_fn(heatmaps, target, weight)["loss"].item()) * len(heatmaps)
         count += len(heatmaps)
-        predictions += decode_predictions(codec, heatmaps, batch)
+        scored = 0.5 * (heatmaps + flip_back(model(images.flip(-1)))) if flip_test else heatmaps
+        predictions += decode_predictions(codec, scored, batch)
         if grid is None and grid_images > 0:
             n = grid_images
             grid = heatmap_grid(batch["image"][:n], batch["target"][:n], heatmaps[:n])

@@ -535,3 +535,30 @@ def test_box_and_colour_jitter_leave_the_geometric_draws_unchanged(wholebody):
     assert plain.jitter(0) is None and jittered.jitter(0) is not None
     a, b = plain[0], jittered[0]
     assert a["image"].shape == b["image"].shape and not torch.equal(a["image"], b["image"])
+
+
+def test_validation_flip_test_scores_flip_tested_heatmaps(wholebody):
+    """A mirror-equivariant network scores the same with and without the flip test; a network that looks at
+    one side of the crop does not, and its loss (from the plain heatmaps) is the same both ways."""
+    from models.training import validate
+    from tests.test_heatmap_inference import BlobFinder
+
+    codec = MultiModalHeatmapCodec((64, 64), (16, 16), sigma=1.0)
+    dataset = TopDownDataset(wholebody, codec, (64, 64), augment=None, train=False)
+    loader = DataLoader(dataset, batch_size=4, sampler=EpochSampler(len(dataset), shuffle=False))
+    run = lambda model, flip: validate(
+        model, loader, codec, wholebody, WeightedHeatmapLoss(1.5), torch.device("cpu"), 0, False, flip
+    )  # noqa: E501
+    equivariant = BlobFinder()
+    assert run(equivariant, True).metrics == run(equivariant, False).metrics
+
+    class LeftHalf(torch.nn.Module):
+        def forward(self, x):
+            out = BlobFinder()(x).clone()
+            out[..., out.shape[-1] // 2 :] = 0
+            return out
+
+    plain, flipped = run(LeftHalf(), False), run(LeftHalf(), True)
+    assert plain.metrics["loss"] == flipped.metrics["loss"]
+    a, b = (np.array([p["keypoints"] for p in v.predictions], float) for v in (plain, flipped))
+    assert a.shape == b.shape and not np.allclose(a, b)
