@@ -33,11 +33,12 @@ from data.multiview import ViewDetections
 from data.pose2d.coco_eval import evaluate_keypoints, write_coco_results
 from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.pose2d.topdown_dataset import EpochSampler, TopDownDataset
+from models.devices import resolve_device
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.heatmap_inference import predict_heatmaps
 from models.pose_decoding import DECODERS, associate_by_image, joint_candidates, person_scores
 from models.trained_model import load_trained_model
-from models.training import AP_SUBSETS, build_codec, decode_predictions, select_device
+from models.training import AP_SUBSETS, build_codec, decode_predictions
 
 
 def build_eval_dataset(
@@ -160,7 +161,7 @@ def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
     """Evaluate cfg.checkpoint on cfg.coco2d's set; write the COCO results, poses2d.json and metrics.json
     into out_dir -> {"AP_all", "AR_all", "AP_body", ...} (-1 where the set has no such joint)."""
     pose2d, out_dir = cfg.coco2d, Path(out_dir)
-    device = select_device(pose2d.device)
+    device = resolve_device(pose2d.device, "coco2d.device")
     model, train_cfg = load_trained_model(cfg.checkpoint, device)
     codec = build_codec(train_cfg)
     dataset, ann_file = build_eval_dataset(pose2d, train_cfg, codec)

@@ -16,7 +16,8 @@ from data.config_checks import fail, is_int, is_number
 from data.keypoints import COCO17_TO_COCO23, to_coco23
 from data.multiview import ViewDetections
 from models.detectors.boxes import xyxy_to_xywh
-from models.tv_detection import build_detection_model, detect, resolve_device
+from models.devices import resolve_device
+from models.tv_detection import build_detection_model, detect
 
 MODEL = "keypointrcnn_resnet50_fpn"
 PERSON_LABEL = 1  # torchvision's Keypoint R-CNN has two classes: background, person

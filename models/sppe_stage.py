@@ -30,11 +30,12 @@ from data.config_checks import ConfigError, is_int, is_number
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from data.pose2d.box_crops import crop_boxes, normalize_crops
+from models.devices import resolve_device
 from models.heatmap_inference import predict_heatmaps
 from models.pose_decoding import DECODERS, associate_by_image, joint_candidates, person_scores, single_peaks
 from models.pose_nms import find_duplicates, merge_joints
 from models.trained_model import load_trained_model
-from models.training import build_codec, select_device
+from models.training import build_codec
 
 KEY = "pose2d"  # the config group, named in error messages
 
@@ -187,7 +188,7 @@ def _view(keypoints: np.ndarray, boxes: np.ndarray) -> ViewDetections:
 def _device(name: str) -> torch.device:
     """'auto' (CUDA when available), 'cpu', 'cuda', 'cuda:N' -> torch.device; anything else one ConfigError."""
     try:
-        device = select_device(name)
+        device = resolve_device(name, "pose2d.device")
     except (RuntimeError, TypeError):
         _fail("device", name, "must be auto, cpu, cuda or cuda:N")
     if device.type == "cuda" and not torch.cuda.is_available():

@@ -34,6 +34,7 @@ from data.pose2d.crop_transforms import CropAugmentation
 from data.pose2d.records import ImageRecord
 from data.pose2d.topdown_dataset import TopDownDataset, denormalize_image
 from models.checkpoint_io import atomic_torch_save, read_checkpoint, write_checkpoint  # noqa: F401 (re-exported)
+from models.devices import resolve_device
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.heatmap_inference import flip_back
 from models.loss import WeightedHeatmapLoss
@@ -76,11 +77,9 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def select_device(name: str, local_rank: int = 0) -> torch.device:
-    """'auto' -> cuda:local_rank when CUDA is available, else cpu; anything else as torch.device."""
-    if name == "auto":
-        return torch.device("cuda", local_rank) if torch.cuda.is_available() else torch.device("cpu")
-    return torch.device(name)
+def select_device(name: str, local_rank: int = 0, key: str = "trainer.device") -> torch.device:
+    """'auto' -> cuda:local_rank when CUDA is available, else cpu; others checked (models/devices.py)."""
+    return resolve_device(name, key, local_rank)
 
 
 def setup_distributed(device_name: str) -> tuple[int, int, torch.device]:
@@ -106,17 +105,7 @@ def _plain(value: Any) -> Any:
 
 def check_device(cfg: DictConfig, key: str) -> None:
     """cfg[key] names a device this machine has: auto, cpu, cuda, cuda:N (N < the CUDA device count)."""
-    name = value_of(cfg, key)
-    if name == "auto":
-        return
-    try:
-        device = torch.device(name)
-    except (RuntimeError, TypeError):
-        fail(key, name, "must be auto, cpu, cuda or cuda:N")
-    if device.type == "cuda" and not torch.cuda.is_available():
-        fail(key, name, "CUDA is not available on this machine (use auto or cpu)")
-    if device.type == "cuda" and device.index is not None and device.index >= torch.cuda.device_count():
-        fail(key, name, f"this machine has {torch.cuda.device_count()} CUDA device(s)")
+    resolve_device(value_of(cfg, key), key)
 
 
 def check_input_size(cfg: DictConfig, key: str = "data.input_size") -> None:

@@ -17,19 +17,6 @@ from models.tv_weights import check_state_fits, read_state_dict, with_download
 COCO = "coco"  # weights value: the model's DEFAULT weights through torchvision's weights API
 
 
-def resolve_device(name: str, key: str) -> torch.device:
-    """'auto' -> cuda when available, else cpu; 'cpu', 'cuda', 'cuda:N' checked against this machine."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        device = torch.device(name)
-    except (RuntimeError, TypeError):
-        fail(key, name, "must be auto, cpu, cuda or cuda:N")
-    if device.type == "cuda" and not torch.cuda.is_available():
-        fail(key, name, "CUDA is not available on this machine (use auto or cpu)")
-    return device
-
-
 def detection_builder(name: str, key: str) -> Callable[..., nn.Module]:
     """torchvision's builder of detection model ``name``; a ConfigError naming ``key`` and the known names."""
     known = torchvision.models.list_models(module=torchvision.models.detection)

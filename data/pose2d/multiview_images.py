@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from data.pose2d.coco_keypoints import write_coco_keypoints
 from data.pose2d.scene_render import render_sequence
-from data.pose2d.synthetic_images import save_preview
+from data.pose2d.synthetic_images import parse_size, save_preview
 from data.pose2d.view_coco import ground_truth_records
 from data.synthetic import SyntheticConfig, generate_sequence
 
@@ -63,15 +63,6 @@ def generate_multiview_dataset(
     return ann_path
 
 
-def _size(text: str) -> tuple[int, int]:
-    """'640x480' -> (640, 480)."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size {text!r} must look like 640x480") from None
-    return w, h
-
-
 def main(argv: Sequence[str] | None = None) -> None:
     """Command line: render a multi-view training set, optionally save a preview grid."""
     parser = argparse.ArgumentParser(prog="python -m data.pose2d.multiview_images", description=__doc__.split("\n")[0])
@@ -82,7 +73,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--persons", type=int, default=10)
     parser.add_argument("--density", type=float, default=0.3, help="persons per m^2")
     parser.add_argument("--cameras", type=int, default=5, help="cameras of the ring")
-    parser.add_argument("--size", type=_size, default=(1280, 720), help="WIDTHxHEIGHT of the ring (default 1280x720)")
+    parser.add_argument(
+        "--size", type=parse_size, default=(1280, 720), help="WIDTHxHEIGHT of the ring (default 1280x720)"
+    )
     parser.add_argument("--focal", type=float, help="focal length of the ring (px; default 1000 x width / 1280)")
     parser.add_argument("--rig", default="ring", help="'ring', or a calibration file/folder (its sizes are used)")
     parser.add_argument(

@@ -292,7 +292,7 @@ def save_preview(
 # --- CLI --------------------------------------------------------------------------------------------
 
 
-def _size(text: str) -> tuple[int, int]:
+def parse_size(text: str) -> tuple[int, int]:
     """'640x480' -> (640, 480)."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -307,7 +307,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--out", required=True, type=Path, help="output folder")
     parser.add_argument("--num-images", required=True, type=int)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--size", type=_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
+    parser.add_argument("--size", type=parse_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
     parser.add_argument("--persons", type=int, nargs=2, default=(4, 12), metavar=("MIN", "MAX"))
     parser.add_argument(
         "--height-px",

@@ -7,7 +7,8 @@ import numpy as np
 from data.config_checks import fail, is_int, is_number
 from data.multiview import Frame
 from models.detectors.boxes import person_boxes
-from models.tv_detection import build_detection_model, detect, resolve_device
+from models.devices import resolve_device
+from models.tv_detection import build_detection_model, detect
 
 
 class TorchvisionDetector:
