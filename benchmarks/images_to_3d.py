@@ -9,7 +9,8 @@ Scene: ``dataset=synthetic dataset.render=true`` (the default ring of cameras, 1
 and standing); every row runs the same frames through ``eval.py``'s ``run`` with the default matching,
 MAP and tracking. Rows: ``gt2d`` (the 2D poses are the render's ground truth, exact: the upper bound of any
 2D stage), ``sppe`` (person boxes of the render, ``detector=gt``, then the SPPE with flip test),
-``sppe_jitter`` (boxes moved and scaled by 10 % sd, a detector's error), ``sppe_noflip`` (no flip test) and
+``sppe_sides`` (the same with ``pose2d.separate_pairs=true reconstruction.fix_sides=true``: a pair's two
+joints kept apart in 2D, their left / right labels settled in 3D), ``sppe_jitter`` (boxes moved and scaled by 10 % sd, a detector's error), ``sppe_noflip`` (no flip test) and
 ``simulated`` (the simulated 2D detections of ``render=false``, 2 px noise: the reference of the
 synthetic benchmarks). Columns: per-view COCO OKS AP (COCO-23 sigmas, pycocotools, all 23 / body 17 /
 foot 6 joints, against the render's labels with hidden joints v=1); absolute MPJPE (mm, all 23 joints,
@@ -35,6 +36,16 @@ CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 ROWS = {
     "gt2d": ("2D = render's ground truth (upper bound)", ["dataset.render=true"]),
     "sppe": ("SPPE, flip test, boxes of the render", ["dataset.render=true", "pose2d=sppe", "detector=gt"]),
+    "sppe_sides": (
+        "SPPE + separate_pairs + fix_sides",
+        [
+            "dataset.render=true",
+            "pose2d=sppe",
+            "detector=gt",
+            "pose2d.separate_pairs=true",
+            "reconstruction.fix_sides=true",
+        ],
+    ),
     "sppe_jitter": (
         "SPPE, flip test, boxes jittered 10 %",
         ["dataset.render=true", "pose2d=sppe", "detector=gt", "detector.jitter=0.1"],

@@ -15,6 +15,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from data.keypoints import FLIP_PAIRS
 from models.candidates import candidates_to_image, find_candidates
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.joint_association import associate_joints
@@ -60,6 +61,40 @@ def associate_by_image(
     for indices in by_image.values():
         cands = candidates[indices]
         out[indices] = associate_joints(cands[..., :2], cands[..., 2], boxes[indices], dist_thresh)
+    return out
+
+
+def separate_pairs(
+    keypoints: np.ndarray, candidates: np.ndarray, boxes: np.ndarray, min_sep: float = 0.05, min_ratio: float = 0.3
+) -> np.ndarray:
+    """Keypoints (B, 23, 3), their candidates (B, 23, M, 3), boxes (B, 4) x, y, w, h -> a copy (B, 23, 3) where a
+    person's left and right joint of a pair no longer sit on one spot (closer than min_sep x box height).
+
+    A network that cannot tell a person's left arm from the right gives both channels two near-equal peaks,
+    and each channel's best is then often the same arm: one arm is lost. Where that happens, the side whose
+    best other candidate (min_sep x height or more from the kept joint, inside the box grown by a tenth,
+    scoring at least min_ratio of the joint it replaces) scores higher moves there. Which arm gets which label
+    stays the network's guess; the 3D stage makes the labels consistent (reconstruction/solver/side_labels.py).
+    """
+    out = np.array(keypoints, dtype=np.float64)
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    for b in range(len(out)):
+        x, y, w, h = boxes[b]
+        sep, low, high = min_sep * h, np.array([x - 0.1 * w, y - 0.1 * h]), np.array([x + 1.1 * w, y + 1.1 * h])
+        for left, right in FLIP_PAIRS:
+            kl, kr = out[b, left], out[b, right]
+            if kl[2] <= 0 or kr[2] <= 0 or np.hypot(*(kl[:2] - kr[:2])) >= sep:
+                continue
+            best = None
+            for joint, other in ((left, kr), (right, kl)):
+                c = candidates[b, joint]
+                ok = (c[:, 2] >= min_ratio * out[b, joint, 2]) & (np.hypot(*(c[:, :2] - other[:2]).T) >= sep)
+                ok &= np.all((c[:, :2] >= low) & (c[:, :2] <= high), axis=1)
+                for k in np.flatnonzero(ok):
+                    if best is None or c[k, 2] > best[1][2]:
+                        best = (joint, c[k])
+            if best is not None:
+                out[b, best[0]] = best[1]
     return out
 
 

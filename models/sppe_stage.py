@@ -32,7 +32,14 @@ from data.multiview import ViewDetections
 from data.pose2d.box_crops import crop_boxes, normalize_crops
 from models.devices import resolve_device
 from models.heatmap_inference import predict_heatmaps
-from models.pose_decoding import DECODERS, associate_by_image, joint_candidates, person_scores, single_peaks
+from models.pose_decoding import (
+    DECODERS,
+    associate_by_image,
+    joint_candidates,
+    person_scores,
+    separate_pairs,
+    single_peaks,
+)
 from models.pose_nms import find_duplicates, merge_joints
 from models.trained_model import load_trained_model
 from models.training import build_codec
@@ -52,9 +59,10 @@ class SppeOptions:
     batch_size: int = 32
     amp: bool = True
     pose_nms_oks: float | None = 0.7
+    separate_pairs: bool = False
 
     def __post_init__(self) -> None:
-        for key in ("flip_test", "amp"):
+        for key in ("flip_test", "amp", "separate_pairs"):
             if not isinstance(getattr(self, key), bool):
                 _fail(key, getattr(self, key), "must be true or false")
         if self.decode not in DECODERS:
@@ -102,9 +110,10 @@ class SppeStage:
         device: str = "auto",
         amp: bool = True,
         pose_nms: Mapping | None = None,
+        separate_pairs: bool = False,
     ) -> None:
         options = SppeOptions(
-            flip_test, decode, threshold, top_m, dist_thresh, batch_size, amp, nms_threshold(pose_nms)
+            flip_test, decode, threshold, top_m, dist_thresh, batch_size, amp, nms_threshold(pose_nms), separate_pairs
         )
         self.device = _device(device)
         self.model, train_cfg = load_trained_model(checkpoint, self.device)
@@ -164,6 +173,8 @@ class SppeStage:
             areas = boxes[kept, 2] * boxes[kept, 3]
             final = [merge_joints(f, poses[d], a, o.pose_nms_oks) for f, (_, d), a in zip(final, groups, areas)]
             final = np.stack(final)
+        if candidates is not None and o.separate_pairs:
+            final = separate_pairs(final, candidates[kept], boxes[kept, :4])
         return [_view(final[views[kept] == v], boxes[kept][views[kept] == v]) for v in range(n_views)]
 
     def _duplicates(self, poses: np.ndarray, boxes: np.ndarray, views: np.ndarray) -> list[tuple[int, np.ndarray]]:

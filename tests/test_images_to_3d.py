@@ -105,3 +105,11 @@ def test_file_detector_boxes_are_rescaled_from_the_file_pixels_to_the_images_see
     detector.set_file_sizes({3: (1920, 1080)})
     small = [np.zeros((540, 960, 3), np.uint8)]
     np.testing.assert_allclose(detector(small, frame)[0], [[50, 25, 20, 40, 0.8]])
+
+
+def test_the_side_fixes_run_through_the_whole_chain(checkpoint, tmp_path):
+    overrides = ["dataset.render=true", "pose2d=sppe", f"pose2d.checkpoint={checkpoint}", "detector=gt"]
+    cfg = config([*SCENE, *overrides, "pose2d.separate_pairs=true", "reconstruction.fix_sides=true"])
+    cfg.pose2d.device = "cpu"
+    report = eval_script.run(cfg, tmp_path)
+    assert report.metrics["num_gt"] == 6 and "pose2d_AP_all" in report.metrics

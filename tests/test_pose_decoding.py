@@ -94,3 +94,25 @@ def test_back_projection_equals_the_reference():
     xy, affines = rng.uniform(0, 40, (5, NUM_JOINTS, 3, 2)), rng.normal(0, 2, (5, 2, 3))
     got = candidates_to_image(torch.from_numpy(xy), torch.from_numpy(affines), (4.0, 3.5)).numpy()
     np.testing.assert_allclose(got, reference.candidates_to_image(xy, affines, (4.0, 3.5)), rtol=1e-12)
+
+
+def test_separate_pairs_moves_one_of_two_joints_on_one_spot_to_its_other_candidate():
+    from models.pose_decoding import separate_pairs
+
+    kp = np.zeros((1, 23, 3))
+    kp[0, :, :2], kp[0, :, 2] = [50.0, 100.0], 0.9
+    kp[0, 9], kp[0, 10] = [40.0, 120.0, 0.8], [41.0, 121.0, 0.7]  # both wrists on the left arm
+    cands = np.zeros((1, 23, 3, 3))
+    cands[0, :, 0] = kp[0]
+    cands[0, 10, 1] = [70.0, 120.0, 0.6]  # the right wrist channel's second peak: the other arm
+    cands[0, 9, 1] = [300.0, 120.0, 0.9]  # a strong peak outside the box: a neighbour's, never taken
+    boxes = np.array([[20.0, 20.0, 80.0, 200.0]])
+    out = separate_pairs(kp, cands, boxes)
+    np.testing.assert_array_equal(out[0, 10], [70.0, 120.0, 0.6])
+    np.testing.assert_array_equal(np.delete(out, 10, axis=1), np.delete(kp, 10, axis=1))
+    apart = kp.copy()
+    apart[0, 10] = [70.0, 121.0, 0.7]
+    np.testing.assert_array_equal(separate_pairs(apart, cands, boxes), apart)  # already apart: unchanged
+    lonely = cands.copy()
+    lonely[0, 10, 1] = 0.0
+    np.testing.assert_array_equal(separate_pairs(kp, lonely, boxes), kp)  # no other candidate: unchanged

@@ -73,6 +73,7 @@ from reconstruction.solver.person_prior import (
     proportion_sds,
 )
 from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
+from reconstruction.solver.side_labels import chain_sides, consistent_sides
 from reconstruction.solver.side_swaps import apply_swaps, find_swaps
 
 SOLVERS = ("compiled", "numpy")
@@ -345,7 +346,8 @@ class MAPReconstruction:
     ("estimate": the sigma model times each person's scale from the MLE residuals, "model": the model
     alone), min_noise_scale; bone_prior ("adaptive": each person's own bone lengths with the table as
     their hierarchical prior, reconstruction/solver/person_prior.py, tie bone_tie_sd_m; "population": the
-    table's means, the paper); fix_swaps (undo left / right swaps, reconstruction/solver/side_swaps.py);
+    table's means, the paper); fix_swaps (undo left / right swaps, reconstruction/solver/side_swaps.py); fix_sides (left / right labels consistent
+    across views and with the body, reconstruction/solver/side_labels.py);
     prior_weight (w on every bone residual, 0 = plain MLE); bone_table (None = data/bone_lengths.py
     defaults, a JSON path or a {"bones": {name: {mean, std}}} mapping); robust ("none", "huber", "cauchy") and robust_scale (in
     sigma units) on the likelihood; anchor_weight (Tikhonov tau, 1/m); max_iterations, xtol (m),
@@ -379,6 +381,7 @@ class MAPReconstruction:
         sigma_px: float = 5.2,
         score_power: float = 1.27,
         fix_swaps: bool = True,
+        fix_sides: bool = False,
     ) -> None:
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
@@ -411,6 +414,7 @@ class MAPReconstruction:
             raise ValueError(f"sigma_px and score_power must be >= 0, got {sigma_px}, {score_power}")
         self.sigma_px, self.score_power = float(sigma_px), float(score_power)
         self.fix_swaps, self.last_swaps = bool(fix_swaps), 0
+        self.fix_sides = bool(fix_sides)
         self._variance_inputs: tuple = ((0, 0), None)  # what last_joint_variance is computed from, on demand
         self._variance: np.ndarray | None = None
         self.takes_skeletons = self.bone_prior == "adaptive"  # the tracker's bone lengths refine the prior
@@ -470,7 +474,11 @@ class MAPReconstruction:
         DLT (P, J, 4), placed (P,). ``skeletons``: the persons' own bone lengths from earlier frames (a
         tracker's), asked with the MLE poses (see :meth:`_person_problem`)."""
         bboxes = np.asarray(bboxes, dtype=np.float64)
+        if self.fix_sides:  # pairs labelled at random per view: made consistent across views
+            poses2d_und = consistent_sides(poses2d_und, proj)
         dlt = triangulate_dlt(poses2d_und, proj, self.min_views)
+        if self.fix_sides:  # ... and with the body (limb pairs the wrong way round for their parents)
+            poses2d_und, dlt = chain_sides(poses2d_und, dlt)
         uv, inv_sigma = self._observations(poses2d_und, bboxes)
         if self.fix_swaps:  # left / right swaps of the detector, undone
             swaps = find_swaps(poses2d_und, inv_sigma, proj, dlt if self.min_views == 2 else None)
@@ -637,6 +645,7 @@ class MLEReconstruction(MAPReconstruction):
         sigma_px: float = 5.2,
         score_power: float = 1.27,
         fix_swaps: bool = True,
+        fix_sides: bool = False,
     ) -> None:
         super().__init__(
             c=c,
@@ -645,6 +654,7 @@ class MLEReconstruction(MAPReconstruction):
             score_power=score_power,
             prior_weight=0.0,
             fix_swaps=fix_swaps,
+            fix_sides=fix_sides,
             robust=robust,
             robust_scale=robust_scale,
             anchor_weight=anchor_weight,
