@@ -28,8 +28,6 @@ from data.formats.poses_io import write_poses3d
 from data.geometry.calibration import CalibrationError
 from data.geometry.check_rig import RigWarning
 from data.multiview import Sequence
-from evaluation.pictures.sequence_view import save_sequence_pictures
-from evaluation.pictures.visualize import save_run_pictures
 from evaluation.pose2d_views import estimate_2d, format_view_metrics, view_metrics
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
@@ -112,6 +110,8 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
     print(f"\n{text}\n\nWrote {out_dir / cfg.output}, {cfg.poses2d_output}, {cfg.metrics_file} and {cfg.report_file}")
     if cfg.vis:
+        from evaluation.pictures.visualize import save_run_pictures  # matplotlib: only for runs that draw
+
         try:
             pictures = save_run_pictures(
                 out_dir / cfg.vis_dir,
@@ -130,6 +130,8 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     if cfg.vis_sequence and not report.results:
         print("Pictures over time: none, no frame was reconstructed")
     elif cfg.vis_sequence:
+        from evaluation.pictures.sequence_view import save_sequence_pictures
+
         title = f"{sequence.meta.get('description', 'dataset')}: {out_dir.name}"
         pictures = save_sequence_pictures(
             out_dir / cfg.vis_dir, report.results, sequence.rig, title, cfg.vis_sequence_max_mb
