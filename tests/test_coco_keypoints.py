@@ -172,5 +172,5 @@ def test_bad_detections_name_the_entry(tmp_path, crowdpose):
     dets[4]["bbox"] = [1, 2, 3]
     path = tmp_path / "dets.json"
     path.write_text(json.dumps(dets))
-    with pytest.raises(ValueError, match="dets.json: entry 4 needs a bbox of 4"):
+    with pytest.raises(ValueError, match=r"dets.json: entry 4 bbox must be 4 finite numbers"):
         load_detections(path, load_crowdpose(ann_file, folder))

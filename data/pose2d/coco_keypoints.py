@@ -17,6 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 from data.formats.atomic_io import atomic_write_text
+from data.formats.coco_detections import read_coco_detections
 from data.keypoints import COCO23_NAMES, CROWDPOSE14_TO_COCO23, LIMBS, NUM_BODY_JOINTS, NUM_JOINTS, to_coco23
 from data.pose2d.records import ImageRecord
 
@@ -193,30 +194,16 @@ def load_detections(
 ) -> list[ImageRecord]:
     """New records with det_boxes (M, 4) / det_scores (M,) from a COCO detection-results file.
 
-    Entries of another category or with score < score_threshold are dropped; entries of images not
-    in ``records`` are ignored. The given records are not modified.
+    The file is read and checked by :func:`data.formats.coco_detections.read_coco_detections`. Entries of
+    another category or with score < score_threshold are dropped; entries of images not in ``records`` are
+    ignored. The given records are not modified.
     """
-    path = Path(det_file)
-    dets = _read_json(path, "detections file")
-    if not isinstance(dets, list):
-        raise ValueError(
-            f"{path}: a detection-results file must be a JSON list of {{image_id, category_id, bbox, score}} objects"
-        )
+    dets = read_coco_detections(det_file)  # every entry checked; a bad one is named
+    keep = (dets.category_ids == category_id) & (dets.scores >= score_threshold)
     found: dict[int, list[tuple[np.ndarray, float]]] = {r.image_id: [] for r in records}
-    for i, det in enumerate(dets):
-        if not isinstance(det, dict) or not all(k in det for k in ("image_id", "bbox", "score")):
-            raise ValueError(f"{path}: entry {i} lacks one of image_id, bbox, score")
-        box, score = det["bbox"], det["score"]
-        try:
-            box, score = np.array(box, dtype=np.float64), float(score)
-        except (TypeError, ValueError):
-            raise ValueError(f"{path}: entry {i} has a non-numeric bbox or score") from None
-        if box.shape != (4,) or not np.all(np.isfinite(box)) or not math.isfinite(score):
-            raise ValueError(f"{path}: entry {i} needs a bbox of 4 finite numbers and a finite score")
-        if det.get("category_id", category_id) != category_id or score < score_threshold:
-            continue
-        if det["image_id"] in found:
-            found[det["image_id"]].append((box, score))
+    for image_id, box, score in zip(dets.image_ids[keep], dets.boxes[keep], dets.scores[keep]):
+        if int(image_id) in found:
+            found[int(image_id)].append((box, float(score)))
     return [
         dataclasses.replace(
             r,
