@@ -418,6 +418,7 @@ def _known_keys() -> frozenset[str]:
         for group in CONFIG_GROUPS:
             prefix = "+" if group == "experiment" else ""
             variants += [[f"{prefix}{group}={choice.stem}"] for choice in sorted((CONFIGS / group).glob("*.yaml"))]
+        variants += [["hydra/launcher=joblib"], ["hydra/launcher=submitit_slurm"]]  # the plugins' keys (docs)
         for variant in variants:
             try:
                 keys |= _key_paths(_compose(config_name, variant, hydra_config=True))
