@@ -13,11 +13,12 @@ synthetic crowd sweep of 10-400 people on the surveillance rig of ``configs/data
 speed setting of the issues, 100 people in 7 ring views (``timing``).
 
 Rows (Hydra overrides of ``configs/eval.yaml``): ``default`` (no override: tracking and its temporal
-evidence included), ``default, tracking off`` (every frame on its own), ``paper`` (the paper's exact
+evidence included), ``default, tracking off`` (every frame on its own), ``default + fix_sides`` (left / right labels settled
+across views, reconstruction/solver/side_labels.py; off by default), ``paper`` (the paper's exact
 method: feet-only matching and MLE -> MAP with the population bone table and the fixed 2D sigma model),
 ``epipolar + vanilla``, ``epipolar + mle_map`` and ``oracle + vanilla`` (ground-truth identities group the
-detections: the upper bound; not on Shelf, whose detections carry no identities); every row but the
-default runs with ``tracking=off``.
+detections: the upper bound; not on Shelf, whose detections carry no identities); every row but
+``default`` and ``default + fix_sides`` runs with ``tracking=off``.
 
 Columns: people found = GT persons matched by a prediction within ``evaluation.max_dist_m`` (%), and of
 those seen in >= 2 views (%); false positives = predictions matched to no GT person; matching pair
@@ -53,6 +54,7 @@ CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 ROWS = {
     "default": [],
     "default, tracking off": ["tracking=off"],
+    "default + fix_sides": ["reconstruction.fix_sides=true"],
     "paper": ["matching=feet_paper", "reconstruction=paper", "tracking=off"],
     "epipolar + vanilla": ["matching=epipolar", "reconstruction=vanilla", "tracking=off"],
     "epipolar + mle_map": ["matching=epipolar", "reconstruction=mle_map", "tracking=off"],
@@ -61,6 +63,7 @@ ROWS = {
 ROW_KEYS = {
     "default": "default",
     "untracked": "default, tracking off",
+    "fix_sides": "default + fix_sides",
     "paper": "paper",
     "epipolar_vanilla": "epipolar + vanilla",
     "epipolar_mle_map": "epipolar + mle_map",
