@@ -9,6 +9,7 @@ score are dropped.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from data.formats.fourd_detections import BODY25_NUM_JOINTS, BODY25_PAF_LIMBS
@@ -19,56 +20,79 @@ from data.multiview import ViewDetections
 
 def limb_connections(paf: np.ndarray, min_paf: float) -> np.ndarray:
     """Greedy one-to-one pairs of a PAF matrix (n_a, n_b) -> (C, 3) rows (i, j, score), best first."""
-    paf = np.asarray(paf, dtype=np.float64)
-    flat = paf.ravel()
-    order = np.argsort(-flat, kind="stable")  # ties: row-major order, so the result is deterministic
-    used_a, used_b = set(), set()
-    rows = []
-    for idx in order:
-        if not flat[idx] > min_paf:
-            break
-        i, j = divmod(int(idx), paf.shape[1])
-        if i in used_a or j in used_b:
-            continue
-        used_a.add(i)
-        used_b.add(j)
-        rows.append((i, j, flat[idx]))
-    return np.array(rows, dtype=np.float64).reshape(-1, 3)
+    paf = np.ascontiguousarray(paf, dtype=np.float64).reshape(np.shape(paf))
+    pairs = np.empty((min(paf.shape), 2), dtype=np.int64)
+    count = _greedy_pairs(paf.ravel(), 0, paf.shape[0], paf.shape[1], float(min_paf), pairs)
+    rows = pairs[:count]
+    return np.column_stack([rows.astype(np.float64), paf[rows[:, 0], rows[:, 1]]]).reshape(-1, 3)
 
 
-class _Assembly:
-    """Persons under construction: slots[p][joint] = candidate index or -1, plus who owns each candidate."""
+@numba.njit(cache=True)
+def _greedy_pairs(flat: np.ndarray, start: int, n_a: int, n_b: int, min_paf: float, out: np.ndarray) -> int:
+    """Greedy one-to-one pairs of the (n_a, n_b) PAF block flat[start:], best first, into out (C, 2); -> C.
 
-    def __init__(self, sizes: list[int]) -> None:
-        self.slots: list[np.ndarray] = []
-        self.owner = [np.full(n, -1, dtype=np.int64) for n in sizes]
+    Repeatedly takes the largest score above min_paf among unused rows and columns; the first in
+    row-major order wins a tie, as a stable sort by decreasing score would.
+    """
+    used_a = np.zeros(n_a, dtype=np.bool_)
+    used_b = np.zeros(n_b, dtype=np.bool_)
+    count = 0
+    while True:
+        best, best_i, best_j = min_paf, -1, -1
+        for i in range(n_a):
+            if used_a[i]:
+                continue
+            for j in range(n_b):
+                value = flat[start + i * n_b + j]
+                if not used_b[j] and value > best:
+                    best, best_i, best_j = value, i, j
+        if best_i < 0:
+            return count
+        used_a[best_i] = True
+        used_b[best_j] = True
+        out[count, 0] = best_i
+        out[count, 1] = best_j
+        count += 1
 
-    def assign(self, p: int, joint: int, cand: int) -> None:
-        """Put a candidate into person p's slot."""
-        self.slots[p][joint] = cand
-        self.owner[joint][cand] = p
 
-    def connect(self, a: int, i: int, b: int, j: int) -> None:
-        """Fold the connection (joint a, candidate i) - (joint b, candidate j) into the persons."""
-        pa, pb = self.owner[a][i], self.owner[b][j]
-        if pa < 0 and pb < 0:
-            self.slots.append(np.full(len(self.owner), -1, dtype=np.int64))
-            self.assign(len(self.slots) - 1, a, i)
-            self.assign(len(self.slots) - 1, b, j)
-        elif pb < 0:
-            if self.slots[pa][b] < 0:  # a filled slot is a conflict: keep the earlier (stronger) link
-                self.assign(pa, b, j)
-        elif pa < 0:
-            if self.slots[pb][a] < 0:
-                self.assign(pb, a, i)
-        elif pa != pb and not np.any((self.slots[pa] >= 0) & (self.slots[pb] >= 0)):
-            self.merge(pa, pb)
+@numba.njit(cache=True)
+def _assemble(
+    paf_flat: np.ndarray, paf_start: np.ndarray, limbs: np.ndarray, cand_start: np.ndarray, min_paf: float
+) -> np.ndarray:
+    """Fold every limb's greedy connections into persons -> slots (P, J): candidate index per joint or -1.
 
-    def merge(self, keep: int, gone: int) -> None:
-        """Move person `gone`'s joints to `keep`; `gone` is left empty."""
-        for joint in np.flatnonzero(self.slots[gone] >= 0):
-            self.assign(keep, int(joint), int(self.slots[gone][joint]))
-        self.slots[gone][:] = -1
+    A connection extends the person holding one of its ends (a filled slot is a conflict: the earlier,
+    stronger link stays), joins two persons whose slots do not overlap, or starts a person. Merged-away
+    persons stay as empty rows.
+    """
+    num_joints = len(cand_start) - 1
+    owner = np.full(cand_start[-1], -1, dtype=np.int64)
+    slots = np.full((cand_start[-1] // 2 + 1, num_joints), -1, dtype=np.int64)
+    num = 0
+    pairs = np.empty((cand_start[-1] + 1, 2), dtype=np.int64)
+    for k in range(len(limbs)):
+        a, b = limbs[k, 0], limbs[k, 1]
+        n_a, n_b = cand_start[a + 1] - cand_start[a], cand_start[b + 1] - cand_start[b]
+        for c in range(_greedy_pairs(paf_flat, paf_start[k], n_a, n_b, min_paf, pairs)):
+            ca, cb = cand_start[a] + pairs[c, 0], cand_start[b] + pairs[c, 1]
+            pa, pb = owner[ca], owner[cb]
+            if pa < 0 and pb < 0:
+                slots[num, a], slots[num, b] = pairs[c, 0], pairs[c, 1]
+                owner[ca], owner[cb] = num, num
+                num += 1
+            elif pb < 0:
+                if slots[pa, b] < 0:
+                    slots[pa, b], owner[cb] = pairs[c, 1], pa
+            elif pa < 0:
+                if slots[pb, a] < 0:
+                    slots[pb, a], owner[ca] = pairs[c, 0], pb
+            elif pa != pb and not np.any((slots[pa] >= 0) & (slots[pb] >= 0)):
+                for joint in range(num_joints):
+                    if slots[pb, joint] >= 0:
+                        slots[pa, joint] = slots[pb, joint]
+                        owner[cand_start[joint] + slots[pb, joint]] = pa
+                        slots[pb, joint] = -1
+    return slots[:num]
 
 
 def group_people(
@@ -92,31 +116,32 @@ def group_people(
     if len(pafs) != len(limbs):
         raise ValueError(f"group_people: {len(pafs)} PAF matrices for {len(limbs)} limbs")
     cands = [np.asarray(c, dtype=np.float64).reshape(-1, 3) for c in candidates]
-    assembly = _Assembly([len(c) for c in cands])
+    sizes = [len(c) for c in cands]
+    pafs = [np.asarray(p, dtype=np.float64) for p in pafs]
     for (a, b), paf in zip(limbs, pafs):
-        if np.shape(paf) != (len(cands[a]), len(cands[b])):
+        if paf.shape != (sizes[a], sizes[b]):
             raise ValueError(
-                f"group_people: PAF of limb ({a}, {b}) has shape {np.shape(paf)}, "
-                f"expected ({len(cands[a])}, {len(cands[b])})"
+                f"group_people: PAF of limb ({a}, {b}) has shape {paf.shape}, expected ({sizes[a]}, {sizes[b]})"
             )
-        for i, j, _ in limb_connections(paf, min_paf):
-            assembly.connect(a, int(i), b, int(j))
-    return _persons(assembly.slots, cands, min_joints, min_mean_score)
+    paf_flat = np.concatenate([p.reshape(-1) for p in pafs] or [np.zeros(0)])
+    paf_start = np.cumsum([0] + [p.size for p in pafs])
+    cand_start = np.cumsum([0, *sizes])
+    slots = _assemble(paf_flat, paf_start, np.array(limbs).reshape(-1, 2), cand_start, float(min_paf))
+    return _persons(slots, np.concatenate(cands), cand_start, min_joints, min_mean_score)
 
 
-def _persons(slots: list[np.ndarray], cands: list[np.ndarray], min_joints: int, min_mean_score: float) -> np.ndarray:
-    """Fill the kept persons' keypoints: P slot arrays (J,) -> (N, J, 3)."""
-    people = []
-    for slot in slots:
-        have = np.flatnonzero(slot >= 0)
-        if len(have) == 0 or len(have) < min_joints:
-            continue
-        pose = np.zeros((len(cands), 3))
-        for joint in have:
-            pose[joint] = cands[joint][slot[joint]]
-        if pose[have, 2].mean() >= min_mean_score:
-            people.append(pose)
-    return np.array(people, dtype=np.float64).reshape(-1, len(cands), 3)
+def _persons(
+    slots: np.ndarray, cand_flat: np.ndarray, cand_start: np.ndarray, min_joints: int, min_mean_score: float
+) -> np.ndarray:
+    """The kept persons' keypoints: slots (P, J), candidates (M, 3) stacked by joint -> (N, J, 3)."""
+    have = slots >= 0
+    count = have.sum(axis=1)
+    index = np.where(have, cand_start[:-1] + slots, 0)
+    poses = np.where(have[..., None], cand_flat.reshape(-1, 3)[index], 0.0)
+    keep = (count > 0) & (count >= min_joints)
+    mean = np.zeros(len(slots))
+    mean[keep] = [poses[p, have[p], 2].mean() for p in np.flatnonzero(keep)]
+    return poses[keep & (mean >= min_mean_score)].reshape(-1, len(cand_start) - 1, 3)
 
 
 def grouped_to_view_detections(persons: np.ndarray, margin: float = 0.1) -> ViewDetections:

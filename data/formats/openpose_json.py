@@ -38,16 +38,15 @@ def keypoints_to_view_detections(keypoints: np.ndarray, margin: float = 0.1) -> 
     a person without joints gets a zero box and score 0. person_ids are all -1.
     """
     keypoints = np.asarray(keypoints, dtype=np.float64)
-    boxes, scores = np.zeros((len(keypoints), 4)), np.zeros(len(keypoints))
-    for n, pose in enumerate(keypoints):
-        have = pose[:, 2] > 0
-        if not have.any():
-            continue
-        lo, hi = pose[have, :2].min(axis=0), pose[have, :2].max(axis=0)
-        pad = margin * (hi - lo)
-        boxes[n] = [*(lo - pad), *(hi - lo + 2 * pad)]
-        scores[n] = pose[have, 2].mean()
-    return ViewDetections(keypoints.copy(), boxes, scores, np.full(len(keypoints), -1, dtype=np.int64))
+    have = keypoints[..., 2] > 0
+    seen = have.any(axis=1)
+    lo = np.where(have[..., None], keypoints[..., :2], np.inf).min(axis=1, initial=np.inf)
+    hi = np.where(have[..., None], keypoints[..., :2], -np.inf).max(axis=1, initial=-np.inf)
+    pad = margin * (hi - lo)
+    boxes = np.where(seen[:, None], np.concatenate([lo - pad, hi - lo + 2 * pad], axis=1), 0.0)
+    # numpy's mean of each person's own joints (not a masked sum), so scores stay bit-identical
+    scores = np.array([pose[h, 2].mean() if s else 0.0 for pose, h, s in zip(keypoints, have, seen)])
+    return ViewDetections(keypoints.copy(), boxes, scores.reshape(-1), np.full(len(keypoints), -1, dtype=np.int64))
 
 
 def load_openpose_json(path: str | Path) -> np.ndarray:
