@@ -1,0 +1,266 @@
+"""Speed of the default pipeline: per-frame time by stage, in-run references, whole-process times.
+
+Run from the repository root (one core: BLAS / numba threads are pinned to 1 before numpy is imported,
+and the process to one CPU with ``--cpu``):
+
+    python -m benchmarks.speed [--repeats 3] [--crowd-frames 3] [--skip-process] [--quick] [--out FILE.md]
+
+Tables:
+
+1. Per frame, by stage (median over frames x repeats, ms; the default configuration of ``configs/eval.yaml``,
+   tracking on): Shelf 300-600 (real OpenPose BODY_25: PAF grouping per frame, then matching, MAP,
+   tracking), 100 people in 7 ring views (the issues' speed setting) and the crowd sweep on the
+   surveillance rig of ``configs/dataset/crowd.yaml`` (10-400 people, 5 and 10 views). Beside each, the
+   target of issue 16 and the figure the issue measured (at a9f9a65; the C++ peer's 4.73 ms on Shelf).
+2. References measured in the same run, same inputs: the PAF grouping against the frozen pure-Python
+   grouping (``benchmarks/reference_grouping.py``), the MAP's compiled solver against its batched numpy
+   reference (``reconstruction.solver=numpy``).
+3. Whole process, in fresh subprocesses: README command 1's ``python eval.py`` and the Shelf evaluation,
+   warm (numba cache filled; median of ``--repeats``), and the first run of a fresh clone (empty numba
+   cache, ``NUMBA_CACHE_DIR`` set to a new folder).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Callable  # noqa: E402
+
+import numpy as np  # noqa: E402
+from hydra import compose, initialize_config_dir  # noqa: E402
+from hydra.utils import instantiate  # noqa: E402
+
+from benchmarks import reference_grouping  # noqa: E402
+from data.formats.atomic_io import atomic_write_text  # noqa: E402
+from data.formats.fourd_detections import load_4dassoc_detections  # noqa: E402
+from evaluation.report import format_table  # noqa: E402
+from models.paf_grouping import group_people  # noqa: E402
+from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+STAGES = ("grouping", "matching", "reconstruction", "tracking")
+# Issue 16's targets (ms per frame, one core) and the figures it measured at a9f9a65.
+TARGETS = {"Shelf 300-600": 2.4, "100 people x 7 ring views": 15.0, "crowd 400 x 10 views": 120.0}
+ISSUE_FIGURES = {"Shelf 300-600": 4.86, "100 people x 7 ring views": 37.0}
+CPP_PEER_SHELF_MS = 4.73  # 4D Association's C++ (-O3), median ms per Shelf frame, as measured in issue 16
+PROCESS_TARGETS = {"python eval.py dataset=shelf (warm)": 2.0, "python eval.py, empty numba cache": 5.0}
+PROCESS_FIGURES = {"python eval.py dataset=shelf (warm)": 3.58, "python eval.py, empty numba cache": 17.7}
+
+
+def settings(data: str, crowd_frames: int, quick: bool) -> dict[str, list[str]]:
+    """Setting label -> eval.yaml overrides."""
+    out = {
+        "Shelf 300-600": ["dataset=shelf", f"dataset.root={data}/shelf"],
+        "100 people x 7 ring views": [
+            "dataset.num_persons=100",
+            "dataset.num_cameras=7",
+            "dataset.density=0.5",
+            "dataset.num_frames=4",
+        ],
+    }
+    people = (10, 100, 400) if quick else (10, 50, 100, 200, 400)
+    for views in (5, 10):
+        for n in people:
+            out[f"crowd {n} x {views} views"] = [
+                "dataset=crowd",
+                f"dataset.num_persons={n}",
+                f"dataset.num_cameras={views}",
+                f"dataset.num_frames={crowd_frames}",
+            ]
+    return out
+
+
+def frame_stage_times(sequence, cfg, repeats: int) -> np.ndarray:
+    """Per-frame seconds of matching, reconstruction, tracking: (repeats * F, 3); a fresh pipeline per repeat
+    (the tracker starts anew), its first frame run once before (kernels loaded)."""
+    rows = []
+    for _ in range(repeats):
+        pipe = MultiViewPipeline.from_config(cfg, sequence.rig)
+        pipe(sequence.frames[0])
+        pipe = MultiViewPipeline.from_config(cfg, sequence.rig)
+        for frame in sequence.frames:
+            before = [pipe.timings.get(s, 0.0) for s in STAGES[1:]]
+            pipe(frame)
+            rows.append([pipe.timings.get(s, 0.0) - b for s, b in zip(STAGES[1:], before)])
+    return np.array(rows)
+
+
+def shelf_candidates(cfg, rig) -> list[list]:
+    """The Shelf frames' ungrouped candidates: per frame, the cameras' FrameCandidates."""
+    folder = Path(cfg.dataset.root) / cfg.dataset.detections
+    cameras = [load_4dassoc_detections(folder / f"{name}.txt", rig.cameras[v].size) for v, name in enumerate(rig.names)]
+    return [list(views) for views in zip(*cameras)]
+
+
+def shelf_grouper(cfg):
+    """The configured grouper with the dataset's grouping keys: (candidates, pafs) -> ViewDetections."""
+    ds, grouper = cfg.dataset, instantiate(cfg.dataset.grouper)
+    keys = dict(min_paf=ds.min_paf, min_joints=ds.min_joints, min_mean_score=ds.min_mean_score, margin=ds.bbox_margin)
+    return lambda candidates, pafs: grouper(candidates, pafs, **keys)
+
+
+def grouping_times(frames: list[list], grouper, repeats: int) -> np.ndarray:
+    """Seconds per frame of grouping every view with grouper(candidates, pafs): (repeats * F,)."""
+    grouper(frames[0][0].candidates, frames[0][0].pafs)
+    out = []
+    for _ in range(repeats):
+        for views in frames:
+            t0 = time.perf_counter()
+            for view in views:
+                grouper(view.candidates, view.pafs)
+            out.append(time.perf_counter() - t0)
+    return np.array(out)
+
+
+def stage_rows(data: str, crowd_frames: int, repeats: int, quick: bool) -> tuple[list[list], dict]:
+    """Table 1's rows, and the sequences and configs of Shelf and the 100 x 7 setting for table 2."""
+    rows, kept = [], {}
+    for label, overrides in settings(data, crowd_frames, quick).items():
+        cfg = compose("eval", overrides=overrides)
+        sequence = instantiate(cfg.dataset, _convert_="all")
+        per_frame = frame_stage_times(sequence, cfg, repeats)
+        grouping = np.full(len(per_frame), np.nan)
+        if label.startswith("Shelf"):
+            grouping = grouping_times(shelf_candidates(cfg, sequence.rig), shelf_grouper(cfg), repeats)
+            kept["shelf"] = (sequence, overrides)
+        if label.startswith("100 people"):
+            kept["ring100"] = (sequence, overrides)
+        total = np.nan_to_num(grouping) + per_frame.sum(axis=1)
+        medians = [np.median(grouping), *np.median(per_frame, axis=0), np.median(total)]
+        figure = ISSUE_FIGURES.get(label, np.nan)
+        target = TARGETS.get(label, np.nan)
+        rows.append(
+            [label, len(sequence.frames), *(1e3 * m for m in medians), target, figure, figure / (1e3 * medians[-1])]
+        )
+    return rows, kept
+
+
+def reference_rows(kept: dict, repeats: int) -> list[list]:
+    """Table 2: (what, setting, ours ms, reference ms, reference / ours)."""
+    rows = []
+    if "shelf" in kept:
+        frames = shelf_candidates(compose("eval", overrides=kept["shelf"][1]), kept["shelf"][0].rig)
+        ours, ref = interleaved(
+            lambda: grouping_times(frames, group_people, 1),
+            lambda: grouping_times(frames, reference_grouping.group_people, 1),
+            repeats,
+        )
+        rows.append(["PAF grouping vs frozen pure Python", "Shelf 300-600", 1e3 * ours, 1e3 * ref, ref / ours])
+    for key, label in (("shelf", "Shelf 300-600"), ("ring100", "100 people x 7 ring views")):
+        if key not in kept:
+            continue
+        sequence, overrides = kept[key]
+        cfg = compose("eval", overrides=overrides)
+        numpy_cfg = compose("eval", overrides=[*overrides, "reconstruction.solver=numpy"])
+        ours, ref = interleaved(
+            lambda: frame_stage_times(sequence, cfg, 1)[:, 1],
+            lambda: frame_stage_times(sequence, numpy_cfg, 1)[:, 1],
+            repeats,
+        )
+        rows.append(["MAP compiled vs solver=numpy", label, 1e3 * ours, 1e3 * ref, ref / ours])
+    return rows
+
+
+def interleaved(
+    ours: Callable[[], np.ndarray], reference: Callable[[], np.ndarray], repeats: int
+) -> tuple[float, float]:
+    """Median seconds per frame of two timers run in turn `repeats` times (the machine's state shared)."""
+    a, b = [], []
+    for _ in range(repeats):
+        a.append(ours())
+        b.append(reference())
+    return float(np.median(np.concatenate(a))), float(np.median(np.concatenate(b)))
+
+
+def dashes(rows: list[list]) -> list[list]:
+    """Rows with NaN cells (no figure, no target) shown as '-'."""
+    return [["-" if isinstance(c, float) and np.isnan(c) else c for c in row] for row in rows]
+
+
+def process_seconds(args: list[str], env: dict[str, str]) -> float:
+    """Wall seconds of one `python eval.py ...` subprocess from the repository root."""
+    t0 = time.perf_counter()
+    done = subprocess.run([sys.executable, "eval.py", *args], cwd=ROOT, env=env, capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    if done.returncode != 0:
+        raise RuntimeError(f"python eval.py {' '.join(args)} failed:\n{done.stderr[-2000:]}")
+    return seconds
+
+
+def process_rows(data: str, repeats: int) -> list[list]:
+    """Table 3: (command, seconds, target, issue's figure, figure / this)."""
+    env = dict(os.environ)
+    with tempfile.TemporaryDirectory() as out:
+        common = ["progress=false", f"hydra.run.dir={out}/run"]
+        shelf = ["dataset=shelf", f"dataset.root={data}/shelf", *common]
+        process_seconds(common, env)  # fills the numba cache of this checkout
+        process_seconds(shelf, env)
+        runs = {
+            "python eval.py (warm)": [process_seconds(common, env) for _ in range(repeats)],
+            "python eval.py dataset=shelf (warm)": [process_seconds(shelf, env) for _ in range(repeats)],
+            "python eval.py, empty numba cache": [
+                process_seconds(common, {**env, "NUMBA_CACHE_DIR": tempfile.mkdtemp(dir=out)}) for _ in range(repeats)
+            ],
+        }
+    rows = []
+    for label, seconds in runs.items():
+        median = float(np.median(seconds))
+        figure = PROCESS_FIGURES.get(label, np.nan)
+        rows.append([label, median, PROCESS_TARGETS.get(label, np.nan), figure, figure / median])
+    return rows
+
+
+def main(argv: list[str] | None = None) -> str:
+    """Print (and with --out, write) the three tables."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--crowd-frames", type=int, default=3)
+    parser.add_argument("--data", default="../shared/data")
+    parser.add_argument("--cpu", type=int, default=None, help="pin the process to this CPU (Linux)")
+    parser.add_argument("--quick", action="store_true", help="crowd sweep at 10, 100 and 400 people only")
+    parser.add_argument("--skip-process", action="store_true", help="no whole-process table")
+    parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
+    args = parser.parse_args(argv)
+    if args.cpu is not None:
+        os.sched_setaffinity(0, {args.cpu})
+    with initialize_config_dir(str(ROOT / "configs"), version_base="1.3"):
+        stages, kept = stage_rows(args.data, args.crowd_frames, args.repeats, args.quick)
+        references = reference_rows(kept, args.repeats)
+    parts = [
+        "Per frame by stage, ms (median over frames x repeats, one core; tracking on; target and figure: issue 16, "
+        f"measured there at a9f9a65; the C++ peer 4D Association: {CPP_PEER_SHELF_MS} ms per Shelf frame)",
+        format_table(
+            ["setting", "frames", *STAGES, "total", "target", "issue's figure", "figure / total"],
+            dashes(stages),
+            floatfmt=".2f",
+        ),
+        "References in the same run, same inputs (ms per frame, median)",
+        format_table(["what", "setting", "ours", "reference", "reference / ours"], references, floatfmt=".2f"),
+    ]
+    if not args.skip_process:
+        parts += [
+            f"Whole process, seconds (median of {args.repeats} fresh subprocesses)",
+            format_table(
+                ["command", "seconds", "target", "issue's figure", "figure / this"],
+                dashes(process_rows(args.data, args.repeats)),
+                floatfmt=".2f",
+            ),
+        ]
+    text = "\n\n".join(parts)
+    print(text)
+    if args.out:
+        atomic_write_text(args.out, text + "\n")
+    return text
+
+
+if __name__ == "__main__":
+    main()
