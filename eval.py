@@ -28,7 +28,6 @@ from data.formats.poses_io import write_poses3d
 from data.geometry.calibration import CalibrationError
 from data.geometry.check_rig import RigWarning
 from data.multiview import Sequence
-from evaluation.pose2d_views import estimate_2d, format_view_metrics, view_metrics
 from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
@@ -150,6 +149,9 @@ def run_2d_stage(
     if front_end is None:  # the dataset's 2D poses, written as they were used (e.g. boxes for detector=file)
         write_poses2d(out_dir / cfg.poses2d_output, {f.index: f.views for f in sequence.frames}, sequence.rig.names)
         return sequence, {}, None
+    # pycocotools and the view scoring only for runs with a 2D stage
+    from evaluation.pose2d_views import estimate_2d, format_view_metrics, view_metrics
+
     estimated, gt_views = estimate_2d(sequence, front_end, cfg.progress)
     write_poses2d(out_dir / cfg.poses2d_output, {f.index: f.views for f in estimated.frames}, sequence.rig.names)
     if gt_views is None:

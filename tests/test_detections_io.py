@@ -233,6 +233,16 @@ def test_poses2d_round_trip(tmp_path: Path) -> None:
             np.testing.assert_array_equal(got.person_ids, want.person_ids)
 
 
+def test_write_poses2d_names_a_non_finite_detection(tmp_path: Path) -> None:
+    view = detections(np.random.default_rng(1), 3, [-1, -1, -1])
+    keypoints = view.keypoints.copy()
+    keypoints[2, 5, 0] = np.nan
+    bad = ViewDetections(keypoints, view.bboxes, view.scores, view.person_ids)
+    with pytest.raises(ValueError, match=r"frame 7, camera b, detection 2 has a non-finite value"):
+        write_poses2d(tmp_path / "poses2d.json", {7: [view, bad]}, ["a", "b"])
+    assert not (tmp_path / "poses2d.json").exists()
+
+
 def entry(camera: str = "0", values: int = 69, **extra) -> dict:
     """A poses2d.json entry."""
     return {"frame": 300, "camera": camera, "bbox": [1, 2, 3, 4], "score": 0.9, "keypoints": [1.0] * values, **extra}

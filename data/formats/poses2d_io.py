@@ -196,29 +196,30 @@ def poses2d_entries(frames: dict[int, list[ViewDetections]], camera_names: list[
         if len(views) != len(camera_names):
             raise ValueError(f"poses2d: frame {frame} has {len(views)} views for {len(camera_names)} cameras")
         for name, dets in zip(camera_names, views):
-            for n in range(len(dets)):
-                entries.append(_entry_dict(int(frame), str(name), dets, n))
+            entries += _view_entries(int(frame), str(name), dets)
     return entries
 
 
-def _entry_dict(frame: int, camera: str, dets: ViewDetections, n: int) -> dict:
-    """Detection n of a view as a poses2d.json entry."""
-    kps = np.asarray(dets.keypoints[n], dtype=np.float64)
-    if kps.shape != (NUM_JOINTS, 3):
-        raise ValueError(f"poses2d: frame {frame}, camera {camera}: keypoints {kps.shape}, expected (23, 3)")
-    values = np.concatenate([kps.ravel(), dets.bboxes[n], [dets.scores[n]]])
-    if not np.all(np.isfinite(values)):
-        raise ValueError(f"poses2d: frame {frame}, camera {camera}, detection {n} has a non-finite value")
-    entry = {
-        "frame": frame,
-        "camera": camera,
-        "bbox": [round(float(v), WRITE_DECIMALS) for v in dets.bboxes[n]],
-        "score": round(float(dets.scores[n]), WRITE_DECIMALS),
-        "keypoints": [round(float(v), WRITE_DECIMALS) for v in kps.ravel()],
-    }
-    if dets.person_ids[n] >= 0:
-        entry["id"] = int(dets.person_ids[n])
-    return entry
+def _view_entries(frame: int, camera: str, dets: ViewDetections) -> list[dict]:
+    """The detections of one view as poses2d.json entries, values rounded to WRITE_DECIMALS."""
+    if len(dets) == 0:
+        return []
+    kps = np.asarray(dets.keypoints, dtype=np.float64)
+    if kps.shape[1:] != (NUM_JOINTS, 3):
+        raise ValueError(f"poses2d: frame {frame}, camera {camera}: keypoints {kps.shape[1:]}, expected (23, 3)")
+    values = np.concatenate([kps.reshape(len(kps), -1), dets.bboxes, np.reshape(dets.scores, (-1, 1))], axis=1)
+    bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
+    if len(bad):
+        raise ValueError(f"poses2d: frame {frame}, camera {camera}, detection {bad[0]} has a non-finite value")
+    rounded = np.round(values, WRITE_DECIMALS).tolist()  # k / 10^4 as the nearest double: short reprs in the JSON
+    ids = np.asarray(dets.person_ids).tolist()
+    entries = []
+    for row, person in zip(rounded, ids):
+        entry = {"frame": frame, "camera": camera, "bbox": row[-5:-1], "score": row[-1], "keypoints": row[:-5]}
+        if person >= 0:
+            entry["id"] = int(person)
+        entries.append(entry)
+    return entries
 
 
 def write_poses2d(path: str | Path, frames: dict[int, list[ViewDetections]], camera_names: list[str]) -> None:
