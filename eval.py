@@ -9,6 +9,8 @@ printed report (report.txt) into the Hydra run directory.
 from __future__ import annotations
 
 import json
+import logging
+import os
 import sys
 import time
 import warnings
@@ -226,6 +228,16 @@ def main(cfg: DictConfig) -> dict:
 
 register_resolvers()  # ${run_id:} in the run folder names, before hydra.main composes the config
 
+def quick_exit() -> None:
+    """Leave without the interpreter's teardown (about 0.4 s of freeing numba's, scipy's and torch's objects
+    module by module): every output is written and closed by now; the streams and Hydra's log file are flushed."""
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
 if __name__ == "__main__":
     exit_on_sigterm()
     main()
+    quick_exit()
