@@ -183,3 +183,12 @@ def test_the_noise_calibration_follows_the_detector():
         m(seq.frames[0].views, seq.rig)
         scales.append(m.last_noise_scale)
     assert 0.6 < scales[0] < 1.5 and 2.5 < scales[1] / scales[0] < 5.5
+
+
+@pytest.mark.parametrize("reject_rate", [1e-2, 1e-4])
+def test_gate_limits_are_scipy_chi2_quantiles(reject_rate: float) -> None:
+    from scipy.stats import chi2
+
+    limits = gate_limits(reject_rate, 60)
+    assert limits[0] == np.inf
+    np.testing.assert_array_equal(limits[1:], chi2.ppf(1 - reject_rate, np.arange(1, 61)))

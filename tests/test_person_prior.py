@@ -15,6 +15,7 @@ from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstructio
 from reconstruction.solver.person_prior import (
     PROPORTION_SD,
     bone_groups,
+    chi2_medians,
     noise_scale,
     person_bone_lengths,
     proportion_sds,
@@ -143,3 +144,8 @@ def test_rejects_bad_settings():
     ):
         with pytest.raises(ValueError):
             MAPReconstruction(**bad)
+
+
+def test_chi2_medians_are_scipy_chi2_medians() -> None:
+    dof = np.arange(1, 64)
+    np.testing.assert_array_equal(chi2_medians(dof), chi2.median(dof))

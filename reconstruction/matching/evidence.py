@@ -36,7 +36,7 @@ from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
@@ -64,7 +64,8 @@ def calibrated(body: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
 def gate_limits(reject_rate: float, max_dof: int) -> np.ndarray:
     """chi^2 quantile 1 - reject_rate for 0..max_dof degrees of freedom: (max_dof + 1,); inf at dof 0."""
     dof = np.arange(max_dof + 1)
-    return np.where(dof > 0, chi2.ppf(1.0 - reject_rate, np.maximum(dof, 1)), np.inf)
+    # scipy.stats.chi2.ppf's own formula, without importing scipy.stats (~0.5 s)
+    return np.where(dof > 0, 2.0 * gammaincinv(np.maximum(dof, 1) / 2.0, 1.0 - reject_rate), np.inf)
 
 
 def joint_variances(
