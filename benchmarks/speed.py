@@ -3,7 +3,8 @@
 Run from the repository root (one core: BLAS / numba threads are pinned to 1 before numpy is imported,
 and the process to one CPU with ``--cpu``):
 
-    python -m benchmarks.speed [--repeats 3] [--crowd-frames 3] [--skip-process] [--quick] [--out FILE.md]
+    python -m benchmarks.speed [--repeats 3] [--crowd-frames 3] [--skip-process] [--quick] [--only TEXT]
+                               [--cpu N] [--out FILE.md]
 
 Tables:
 
@@ -121,10 +122,14 @@ def grouping_times(frames: list[list], grouper, repeats: int) -> np.ndarray:
     return np.array(out)
 
 
-def stage_rows(data: str, crowd_frames: int, repeats: int, quick: bool) -> tuple[list[list], dict]:
-    """Table 1's rows, and the sequences and configs of Shelf and the 100 x 7 setting for table 2."""
+def stage_rows(
+    data: str, crowd_frames: int, repeats: int, quick: bool, only: str | None = None
+) -> tuple[list[list], dict]:
+    """Table 1's rows, and the sequences and overrides of Shelf and the 100 x 7 setting for table 2."""
     rows, kept = [], {}
     for label, overrides in settings(data, crowd_frames, quick).items():
+        if only is not None and only not in label:
+            continue
         cfg = compose("eval", overrides=overrides)
         sequence = instantiate(cfg.dataset, _convert_="all")
         per_frame = frame_stage_times(sequence, cfg, repeats)
@@ -228,12 +233,13 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--cpu", type=int, default=None, help="pin the process to this CPU (Linux)")
     parser.add_argument("--quick", action="store_true", help="crowd sweep at 10, 100 and 400 people only")
     parser.add_argument("--skip-process", action="store_true", help="no whole-process table")
+    parser.add_argument("--only", default=None, help="only the settings whose label contains this text")
     parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
     args = parser.parse_args(argv)
     if args.cpu is not None:
         os.sched_setaffinity(0, {args.cpu})
     with initialize_config_dir(str(ROOT / "configs"), version_base="1.3"):
-        stages, kept = stage_rows(args.data, args.crowd_frames, args.repeats, args.quick)
+        stages, kept = stage_rows(args.data, args.crowd_frames, args.repeats, args.quick, args.only)
         references = reference_rows(kept, args.repeats)
     parts = [
         "Per frame by stage, ms (median over frames x repeats, one core; tracking on; target and figure: issue 16, "
@@ -243,9 +249,12 @@ def main(argv: list[str] | None = None) -> str:
             dashes(stages),
             floatfmt=".2f",
         ),
-        "References in the same run, same inputs (ms per frame, median)",
-        format_table(["what", "setting", "ours", "reference", "reference / ours"], references, floatfmt=".2f"),
     ]
+    if references:
+        parts += [
+            "References in the same run, same inputs (ms per frame, median)",
+            format_table(["what", "setting", "ours", "reference", "reference / ours"], references, floatfmt=".2f"),
+        ]
     if not args.skip_process:
         parts += [
             f"Whole process, seconds (median of {args.repeats} fresh subprocesses)",
