@@ -27,91 +27,135 @@ FULL_FIT_MIN_JOINTS = 6
 GROSS_OUTLIER_M = 1.5  # from the mean body translated to the median joint: wrong by any pose
 OUTLIER_M = 0.75  # from the fitted body: beyond a walking stride or a raised arm
 _MIN_RAY_DEPTH_M = 0.1
+_JACOBI_SWEEPS = 30  # a 3x3 SVD converges in ~4-6 (quadratically)
+
+
+@njit(cache=True)
+def _kabsch(cov: np.ndarray, R: np.ndarray) -> bool:
+    """R (3, 3) = V diag(1, 1, det) U^T of cov = U S V^T (one-sided Jacobi SVD); False if rank < 2 (R untouched).
+
+    Compact scalar loops: numba's compile time grows with every array access written out (np.linalg's
+    wrappers take seconds).
+    """
+    WV = np.zeros((6, 3))  # rows 0-2: cov -> U S (columns orthogonalised by plane rotations); 3-5: I -> V
+    for r in range(3):
+        for k in range(3):
+            WV[r, k] = cov[r, k]
+        WV[3 + r, r] = 1.0
+    for _ in range(_JACOBI_SWEEPS):
+        rotated = False
+        for a in range(2):
+            for b in range(a + 1, 3):
+                alpha, beta, gamma = 0.0, 0.0, 0.0
+                for r in range(3):
+                    alpha += WV[r, a] * WV[r, a]
+                    beta += WV[r, b] * WV[r, b]
+                    gamma += WV[r, a] * WV[r, b]
+                if abs(gamma) <= 1e-15 * np.sqrt(alpha * beta):
+                    continue
+                rotated = True
+                zeta = (beta - alpha) / (2.0 * gamma)
+                t = (1.0 if zeta >= 0.0 else -1.0) / (abs(zeta) + np.sqrt(1.0 + zeta * zeta))
+                c = 1.0 / np.sqrt(1.0 + t * t)
+                for r in range(6):
+                    x = WV[r, a]
+                    WV[r, a] = c * x - c * t * WV[r, b]
+                    WV[r, b] = c * t * x + c * WV[r, b]
+        if not rotated:
+            break
+    S = np.zeros(3)
+    for k in range(3):
+        S[k] = np.sqrt(WV[0, k] * WV[0, k] + WV[1, k] * WV[1, k] + WV[2, k] * WV[2, k])
+    k0 = 0 if S[0] >= S[1] and S[0] >= S[2] else (1 if S[1] >= S[2] else 2)
+    k1 = (k0 + 1) % 3 if S[(k0 + 1) % 3] >= S[(k0 + 2) % 3] else (k0 + 2) % 3
+    if not S[k1] > 1e-3 * max(S[k0], 1e-12):
+        return False
+    for r in range(3):  # U's columns
+        WV[r, k0] /= S[k0]
+        WV[r, k1] /= S[k1]
+    for i in range(3):  # the third pair as cross products: both frames right-handed, the det correction
+        nv = WV[3 + (i + 1) % 3, k0] * WV[3 + (i + 2) % 3, k1] - WV[3 + (i + 2) % 3, k0] * WV[3 + (i + 1) % 3, k1]
+        for m in range(3):
+            nu = WV[(m + 1) % 3, k0] * WV[(m + 2) % 3, k1] - WV[(m + 2) % 3, k0] * WV[(m + 1) % 3, k1]
+            R[i, m] = WV[3 + i, k0] * WV[m, k0] + WV[3 + i, k1] * WV[m, k1] + nv * nu
+    return True
 
 
 @njit(cache=True)
 def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray) -> bool:
     """The template aligned to the known joints of one person (rotation + translation) into out (J, 3): placed."""
-    J = len(points)
     count = 0
-    c_src, c_dst = np.zeros(3), np.zeros(3)
-    for j in range(J):
+    c = np.zeros((2, 3))  # centroids of the template (0) and the points (1) over the known joints
+    for j in range(len(points)):
         if known[j]:
             count += 1
             for i in range(3):
-                c_src[i] += template[j, i]
-                c_dst[i] += points[j, i]
-    c_src /= max(count, 1)
-    c_dst /= max(count, 1)
+                c[0, i] += template[j, i]
+                c[1, i] += points[j, i]
+    for i in range(3):
+        c[0, i] /= max(count, 1)
+        c[1, i] /= max(count, 1)
     cov = np.zeros((3, 3))
-    cross, dot = 0.0, 0.0
-    for j in range(J):
+    for j in range(len(points)):
         if known[j]:
-            s0, s1, s2 = template[j, 0] - c_src[0], template[j, 1] - c_src[1], template[j, 2] - c_src[2]
-            d0, d1, d2 = points[j, 0] - c_dst[0], points[j, 1] - c_dst[1], points[j, 2] - c_dst[2]
-            cov[0, 0] += s0 * d0
-            cov[0, 1] += s0 * d1
-            cov[0, 2] += s0 * d2
-            cov[1, 0] += s1 * d0
-            cov[1, 1] += s1 * d1
-            cov[1, 2] += s1 * d2
-            cov[2, 0] += s2 * d0
-            cov[2, 1] += s2 * d1
-            cov[2, 2] += s2 * d2
-            cross += s0 * d1 - s1 * d0
-            dot += s0 * d0 + s1 * d1
-    R = np.eye(3)
-    full = False
-    if count >= FULL_FIT_MIN_JOINTS:
-        U, S, Vt = np.linalg.svd(cov)
-        full = S[1] > 1e-3 * max(S[0], 1e-12)
-    if full:  # Kabsch: R = V diag(1, 1, det) U^T
-        det = np.sign(np.linalg.det(U @ Vt))
-        V = Vt.T.copy()
-        V[:, 2] *= det if det != 0.0 else 1.0
-        R = V @ U.T
-    else:  # rotation about z only
-        angle = np.arctan2(cross, dot)
+            for a in range(3):
+                for b in range(3):
+                    cov[a, b] += (template[j, a] - c[0, a]) * (points[j, b] - c[1, b])
+    R = np.zeros((3, 3))
+    if not (count >= FULL_FIT_MIN_JOINTS and _kabsch(cov, R)):  # rotation about z only
+        angle = np.arctan2(cov[0, 1] - cov[1, 0], cov[0, 0] + cov[1, 1])
         R[0, 0], R[0, 1], R[1, 0], R[1, 1] = np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle)
-    for j in range(J):
-        s0, s1, s2 = template[j, 0] - c_src[0], template[j, 1] - c_src[1], template[j, 2] - c_src[2]
+        R[2, 2] = 1.0
+    for j in range(len(points)):
         for i in range(3):
-            out[j, i] = R[i, 0] * s0 + R[i, 1] * s1 + R[i, 2] * s2 + c_dst[i]
+            x = 0.0
+            for k in range(3):
+                x += R[i, k] * (template[j, k] - c[0, k])
+            out[j, i] = x + c[1, i]
     return count > 0
 
 
 @njit(cache=True)
 def _fit_bodies(points: np.ndarray, known: np.ndarray, template: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """_fit_one of every person: (P, J, 3), (P, J) -> bodies (P, J, 3), placed (P,)."""
-    P = len(points)
-    out, placed = np.empty(points.shape), np.zeros(P, dtype=np.bool_)
+    P, J = known.shape
+    out, placed = np.empty((P, J, 3)), np.zeros(P, dtype=np.bool_)
     for p in range(P):
         placed[p] = _fit_one(points[p], known[p], template, out[p])
     return out, placed
 
 
 @njit(cache=True)
-def _masked_median(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Median over the masked rows of each column, 0 without any: (J, 3), (J,) -> (3,)."""
-    out = np.zeros(3)
-    n = mask.sum()
-    if n:
-        column = np.empty(n)
-        for i in range(3):
-            k = 0
-            for j in range(len(mask)):
-                if mask[j]:
-                    column[k] = values[j, i]
-                    k += 1
-            out[i] = np.median(column)
+def _median_offset(points: np.ndarray, template: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Median of points - template over the masked joints per axis, 0 without any: (J, 3), (J, 3), (J,) -> (3,).
+
+    An insertion sort of <= J values (np.median compiles for seconds).
+    """
+    out, sorted_ = np.zeros(3), np.empty(len(mask))
+    for i in range(3):
+        n = 0
+        for j in range(len(mask)):
+            if mask[j]:
+                x = points[j, i] - template[j, i]
+                k = n
+                while k > 0 and sorted_[k - 1] > x:
+                    sorted_[k] = sorted_[k - 1]
+                    k -= 1
+                sorted_[k] = x
+                n += 1
+        if n:
+            out[i] = (sorted_[(n - 1) // 2] + sorted_[n // 2]) / 2
     return out
 
 
 @njit(cache=True)
-def _distance(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
-    """|a - b - c| of 3-vectors."""
-    d0, d1, d2 = a[0] - b[0] - c[0], a[1] - b[1] - c[1], a[2] - b[2] - c[2]
-    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+def _far(a: np.ndarray, b: np.ndarray, c: np.ndarray, limit: float) -> bool:
+    """|a - b - c| > limit of 3-vectors."""
+    d = 0.0
+    for i in range(3):
+        e = a[i] - b[i] - c[i]
+        d += e * e
+    return np.sqrt(d) > limit
 
 
 @njit(cache=True)
@@ -121,23 +165,22 @@ def _inliers(
     """Known joints that are not gross outliers: (P, J, 3), (P, J), scores (V, P, J), (V, 3, 4) -> (P, J)."""
     P, J = known.shape
     ok = known.copy()
+    for p in range(P):
+        for j in range(J):
+            for v in range(len(proj)):
+                depth = 0.0
+                for i in range(3):
+                    depth += proj[v, 2, i] * points[p, j, i]
+                if score[v, p, j] > 0 and not depth + proj[v, 2, 3] > 0:
+                    ok[p, j] = False
+        offset = _median_offset(points[p], template, ok[p])
+        for j in range(J):
+            ok[p, j] &= not _far(points[p, j], template[j], offset, GROSS_OUTLIER_M)
+    bodies, _ = _fit_bodies(points, ok, template)
     zero = np.zeros(3)
     for p in range(P):
         for j in range(J):
-            X = points[p, j]
-            for v in range(len(proj)):
-                depth = proj[v, 2, 0] * X[0] + proj[v, 2, 1] * X[1] + proj[v, 2, 2] * X[2] + proj[v, 2, 3]
-                if score[v, p, j] > 0 and not depth > 0:
-                    ok[p, j] = False
-        offset = _masked_median(points[p] - template, ok[p])
-        for j in range(J):
-            if _distance(points[p, j], template[j], offset) > GROSS_OUTLIER_M:
-                ok[p, j] = False
-    bodies, _ = _fit_bodies(points, ok, template)
-    for p in range(P):
-        for j in range(J):
-            if _distance(points[p, j], bodies[p, j], zero) > OUTLIER_M:
-                ok[p, j] = False
+            ok[p, j] &= not _far(points[p, j], bodies[p, j], zero, OUTLIER_M)
     return ok
 
 
@@ -147,20 +190,23 @@ def _onto_rays(
 ) -> np.ndarray:
     """Point of the best-scored view's ray closest to each guess (P, J, 3); unseen joints keep theirs."""
     out = guess.copy()
-    P, J = guess.shape[:2]
-    for p in range(P):
-        for j in range(J):
-            best = np.argmax(score[:, p, j])
+    d = np.empty(3)
+    for p in range(len(guess)):
+        for j in range(guess.shape[1]):
+            best = 0  # np.argmax(score[:, p, j]): the first maximum, or the first NaN
+            for v in range(len(score)):
+                if not score[v, p, j] <= score[best, p, j] and not np.isnan(score[best, p, j]):
+                    best = v
             if not score[best, p, j] > 0:
                 continue
-            u, w = xy[best, p, j, 0], xy[best, p, j, 1]
-            M, c, g = Minv[best], centre[best], guess[p, j]
-            d0 = M[0, 0] * u + M[0, 1] * w + M[0, 2]
-            d1 = M[1, 0] * u + M[1, 1] * w + M[1, 2]
-            d2 = M[2, 0] * u + M[2, 1] * w + M[2, 2]
-            t = ((g[0] - c[0]) * d0 + (g[1] - c[1]) * d1 + (g[2] - c[2]) * d2) / (d0 * d0 + d1 * d1 + d2 * d2)
-            t = max(t, _MIN_RAY_DEPTH_M)  # in front of the camera
-            out[p, j, 0], out[p, j, 1], out[p, j, 2] = c[0] + t * d0, c[1] + t * d1, c[2] + t * d2
+            num, den = 0.0, 0.0
+            for i in range(3):
+                d[i] = Minv[best, i, 0] * xy[best, p, j, 0] + Minv[best, i, 1] * xy[best, p, j, 1] + Minv[best, i, 2]
+                num += (guess[p, j, i] - centre[best, i]) * d[i]
+                den += d[i] * d[i]
+            t = max(num / den, _MIN_RAY_DEPTH_M)  # in front of the camera
+            for i in range(3):
+                out[p, j, i] = centre[best, i] + t * d[i]
     return out
 
 
