@@ -33,13 +33,16 @@ _JACOBI_SWEEPS = 30  # a 3x3 converges in 3-5 (quadratically; the last sweep fin
 
 
 @njit(cache=True)
-def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray) -> bool:
+def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray, m: np.ndarray) -> bool:
     """The template aligned to the known joints of one person (rotation + translation) into out (J, 3): placed.
+    m: (12, 3) scratch (allocations would compile numpy's allocators too).
 
     Kabsch by a one-sided Jacobi SVD of the 3x3 covariance, in a few compact loops: numba's compile time
     grows with every loop and array access written out (np.linalg's wrappers take seconds to compile).
     """
-    m = np.zeros((12, 3))  # rows 0-2: cov -> U S; 3-5: I -> V; 6, 7: template, point centroids; 8: S; 9-11: R
+    for r in range(12):  # rows 0-2: cov -> U S; 3-5: I -> V; 6, 7: template, point centroids; 8: S; 9-11: R
+        for k in range(3):
+            m[r, k] = 0.0
     count = 0
     for j in range(len(points)):
         if known[j]:
@@ -108,12 +111,19 @@ def _start_kernel(
     Minv: np.ndarray,
     centre: np.ndarray,
     template: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+    out: np.ndarray,
+    placed: np.ndarray,
+    ok: np.ndarray,
+    body: np.ndarray,
+    m: np.ndarray,
+    buf: np.ndarray,
+) -> None:
     """_start per person (see there), one compiled function: (P, J, 3), (P, J), (V, P, J), (V, 3, 4), pixels
-    (V, P, J, 2), M^-1 (V, 3, 3), centres (V, 3), (J, 3) -> (P, J, 3), placed (P,)."""
+    (V, P, J, 2), M^-1 (V, 3, 3), centres (V, 3), (J, 3) -> out (P, J, 3) (enters as points), placed (P,) (enters
+    False); scratch: ok (P, J) (enters as known), body (J + 1, 3), m (12, 3), buf (max(J, 3),). No allocations:
+    numba would compile numpy's allocators for them."""
     P, J = known.shape
-    ok, out, placed = known.copy(), points.copy(), np.zeros(P, dtype=np.bool_)
-    body, shift, buf = np.empty((J, 3)), np.zeros(3), np.empty(max(J, 3))  # buf: sorted values, a ray direction
+    shift = body[J]
     for p in range(P):
         for j in range(J):  # behind a camera that sees it
             for v in range(len(proj)):
@@ -138,8 +148,8 @@ def _start_kernel(
                 for i in range(3):
                     d += (points[p, j, i] - body[j, i] - shift[i]) ** 2
                 ok[p, j] &= not np.sqrt(d) > limit
-            placed[p] = _fit_one(points[p], ok[p], template, body)
-            shift[:] = 0.0
+            placed[p] = _fit_one(points[p], ok[p], template, body, m)
+            shift[0], shift[1], shift[2] = 0.0, 0.0, 0.0
         for j in range(J):  # the rest: the body, moved onto the best-scored view's ray
             if ok[p, j]:
                 continue
@@ -158,7 +168,6 @@ def _start_kernel(
             t = max(num / den, _MIN_RAY_DEPTH_M)  # in front of the camera
             for i in range(3):
                 out[p, j, i] = centre[best, i] + t * buf[i]
-    return out, placed
 
 
 def _writable(a: np.ndarray, dtype: type) -> np.ndarray:
@@ -180,9 +189,9 @@ def _views(poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, ...]:
 def fit_mean_body(points: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The mean body aligned to each person's known joints: (P, J, 3), (P, J) bool -> (P, J, 3), placed (P,)."""
     points, known = _writable(points, np.float64), _writable(known, np.bool_)
-    out, placed = np.empty(points.shape), np.zeros(len(points), dtype=bool)
+    out, placed, m = np.empty(points.shape), np.zeros(len(points), dtype=bool), np.empty((12, 3))
     for p in range(len(points)):
-        placed[p] = _fit_one(points[p], known[p], MEAN_POSE[: points.shape[1]], out[p])
+        placed[p] = _fit_one(points[p], known[p], MEAN_POSE[: points.shape[1]], out[p], m)
     return out, placed
 
 
@@ -191,7 +200,11 @@ def _start(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Inliers of points kept, every other joint from the fitted body moved onto its ray -> (P, J, 3), placed (P,)."""
     points, known, proj = _writable(points, np.float64), _writable(known, np.bool_), _writable(proj, np.float64)
-    return _start_kernel(points, known, *_views(poses2d, proj), MEAN_POSE[: points.shape[1]])
+    P, J = known.shape
+    out, placed = points.copy(), np.zeros(P, dtype=bool)
+    scratch = known.copy(), np.empty((J + 1, 3)), np.empty((12, 3)), np.empty(max(J, 3))
+    _start_kernel(points, known, *_views(poses2d, proj), MEAN_POSE[:J], out, placed, *scratch)
+    return out, placed
 
 
 def initial_poses(dlt: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
