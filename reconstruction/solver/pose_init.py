@@ -14,8 +14,8 @@ consistent with its observation. The rotation is a full 3D Kabsch fit when at le
 (DESIGN.md: world z up; people in a crowd stand upright), else none.
 
 The per-person work runs in two compiled (numba) kernels of plain scalar loops: a frame of a few persons costs
-microseconds. Written so to compile fast on an empty cache (~2 s; with np.linalg, np.median and array expressions
-~8 s). tests/reference_pose_init.py is the plain-numpy reference they are tested against.
+microseconds. Written so to compile fast on an empty cache (~1.7 s CPU; with np.linalg, np.median, array expressions
+and allocations ~8 s). tests/reference_pose_init.py is the plain-numpy reference they are tested against.
 """
 
 from __future__ import annotations
