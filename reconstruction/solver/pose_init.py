@@ -13,7 +13,9 @@ consistent with its observation. The rotation is a full 3D Kabsch fit when at le
 ``FULL_FIT_MIN_JOINTS`` non-collinear joints are known, else a rotation about the vertical z axis only
 (DESIGN.md: world z up; people in a crowd stand upright), else none.
 
-The per-person work runs in compiled (numba) loops: a frame of a few persons costs microseconds.
+The per-person work runs in two compiled (numba) kernels of plain scalar loops: a frame of a few persons costs
+microseconds. Written so to compile fast on an empty cache (~1.7 s CPU; with np.linalg, np.median, array expressions
+and allocations ~8 s). tests/reference_pose_init.py is the plain-numpy reference they are tested against.
 """
 
 from __future__ import annotations
@@ -27,169 +29,182 @@ FULL_FIT_MIN_JOINTS = 6
 GROSS_OUTLIER_M = 1.5  # from the mean body translated to the median joint: wrong by any pose
 OUTLIER_M = 0.75  # from the fitted body: beyond a walking stride or a raised arm
 _MIN_RAY_DEPTH_M = 0.1
+_JACOBI_SWEEPS = 30  # a 3x3 converges in 3-5 (quadratically; the last sweep finds nothing to rotate)
 
 
 @njit(cache=True)
-def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray) -> bool:
-    """The template aligned to the known joints of one person (rotation + translation) into out (J, 3): placed."""
-    J = len(points)
+def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray, m: np.ndarray) -> bool:
+    """The template aligned to the known joints of one person (rotation + translation) into out (J, 3): placed.
+    m: (12, 3) scratch (allocations would compile numpy's allocators too).
+
+    Kabsch by a one-sided Jacobi SVD of the 3x3 covariance, in a few compact loops: numba's compile time
+    grows with every loop and array access written out (np.linalg's wrappers take seconds to compile).
+    """
+    for r in range(12):  # rows 0-2: cov -> U S; 3-5: I -> V; 6, 7: template, point centroids; 8: S; 9-11: R
+        for k in range(3):
+            m[r, k] = 0.0
     count = 0
-    c_src, c_dst = np.zeros(3), np.zeros(3)
-    for j in range(J):
+    for j in range(len(points)):
         if known[j]:
             count += 1
             for i in range(3):
-                c_src[i] += template[j, i]
-                c_dst[i] += points[j, i]
-    c_src /= max(count, 1)
-    c_dst /= max(count, 1)
-    cov = np.zeros((3, 3))
-    cross, dot = 0.0, 0.0
-    for j in range(J):
+                m[6, i] += template[j, i]
+                m[7, i] += points[j, i]
+    for i in range(6, 8):
+        for k in range(3):
+            m[i, k] /= max(count, 1)
+    for j in range(len(points)):
         if known[j]:
-            s0, s1, s2 = template[j, 0] - c_src[0], template[j, 1] - c_src[1], template[j, 2] - c_src[2]
-            d0, d1, d2 = points[j, 0] - c_dst[0], points[j, 1] - c_dst[1], points[j, 2] - c_dst[2]
-            cov[0, 0] += s0 * d0
-            cov[0, 1] += s0 * d1
-            cov[0, 2] += s0 * d2
-            cov[1, 0] += s1 * d0
-            cov[1, 1] += s1 * d1
-            cov[1, 2] += s1 * d2
-            cov[2, 0] += s2 * d0
-            cov[2, 1] += s2 * d1
-            cov[2, 2] += s2 * d2
-            cross += s0 * d1 - s1 * d0
-            dot += s0 * d0 + s1 * d1
-    R = np.eye(3)
-    full = False
-    if count >= FULL_FIT_MIN_JOINTS:
-        U, S, Vt = np.linalg.svd(cov)
-        full = S[1] > 1e-3 * max(S[0], 1e-12)
-    if full:  # Kabsch: R = V diag(1, 1, det) U^T
-        det = np.sign(np.linalg.det(U @ Vt))
-        V = Vt.T.copy()
-        V[:, 2] *= det if det != 0.0 else 1.0
-        R = V @ U.T
-    else:  # rotation about z only
-        angle = np.arctan2(cross, dot)
-        R[0, 0], R[0, 1], R[1, 0], R[1, 1] = np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle)
-    for j in range(J):
-        s0, s1, s2 = template[j, 0] - c_src[0], template[j, 1] - c_src[1], template[j, 2] - c_src[2]
+            for a in range(3):
+                for b in range(3):
+                    m[a, b] += (template[j, a] - m[6, a]) * (points[j, b] - m[7, b])
+    angle = np.arctan2(m[0, 1] - m[1, 0], m[0, 0] + m[1, 1])  # the yaw fallback
+    for r in range(3):
+        m[3 + r, r] = 1.0
+    for _ in range(_JACOBI_SWEEPS if count >= FULL_FIT_MIN_JOINTS else 0):
+        rotated = False
+        for a in range(2):
+            for b in range(a + 1, 3):
+                alpha, beta, gamma = 0.0, 0.0, 0.0
+                for r in range(3):
+                    alpha, beta, gamma = alpha + m[r, a] ** 2, beta + m[r, b] ** 2, gamma + m[r, a] * m[r, b]
+                if abs(gamma) > 1e-15 * np.sqrt(alpha * beta):  # a plane rotation orthogonalises columns a, b
+                    rotated = True
+                    zeta = (beta - alpha) / (2.0 * gamma)
+                    t = (1.0 if zeta >= 0.0 else -1.0) / (abs(zeta) + np.sqrt(1.0 + zeta * zeta))
+                    c = 1.0 / np.sqrt(1.0 + t * t)
+                    for r in range(6):
+                        x = m[r, a]
+                        m[r, a], m[r, b] = c * x - c * t * m[r, b], c * t * x + c * m[r, b]
+        if not rotated:
+            break
+    for k in range(3):
+        m[8, k] = np.sqrt(m[0, k] ** 2 + m[1, k] ** 2 + m[2, k] ** 2)
+    k2 = 0 if m[8, 0] <= m[8, 1] and m[8, 0] <= m[8, 2] else (1 if m[8, 1] <= m[8, 2] else 2)  # the smallest
+    k0, k1 = (k2 + 1) % 3, (k2 + 2) % 3
+    full = count >= FULL_FIT_MIN_JOINTS and min(m[8, k0], m[8, k1]) > 1e-3 * max(m[8, k0], m[8, k1], 1e-12)
+    for i in range(3 if full else 0):  # R = v0 u0^T + v1 u1^T + (v0 x v1)(u0 x u1)^T: Kabsch's det correction
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        nv = m[3 + i1, k0] * m[3 + i2, k1] - m[3 + i2, k0] * m[3 + i1, k1]
+        for k in range(3):
+            k_1, k_2 = (k + 1) % 3, (k + 2) % 3
+            nu = (m[k_1, k0] * m[k_2, k1] - m[k_2, k0] * m[k_1, k1]) / (m[8, k0] * m[8, k1])
+            m[9 + i, k] = m[3 + i, k0] * m[k, k0] / m[8, k0] + m[3 + i, k1] * m[k, k1] / m[8, k1] + nv * nu
+    if not full:  # rotation about z only
+        m[9, 0], m[9, 1], m[10, 0], m[10, 1], m[11, 2] = np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle), 1
+    for j in range(len(points)):
         for i in range(3):
-            out[j, i] = R[i, 0] * s0 + R[i, 1] * s1 + R[i, 2] * s2 + c_dst[i]
+            x = 0.0
+            for k in range(3):
+                x += m[9 + i, k] * (template[j, k] - m[6, k])
+            out[j, i] = x + m[7, i]
     return count > 0
 
 
 @njit(cache=True)
-def _fit_bodies(points: np.ndarray, known: np.ndarray, template: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """_fit_one of every person: (P, J, 3), (P, J) -> bodies (P, J, 3), placed (P,)."""
-    P = len(points)
-    out, placed = np.empty(points.shape), np.zeros(P, dtype=np.bool_)
-    for p in range(P):
-        placed[p] = _fit_one(points[p], known[p], template, out[p])
-    return out, placed
-
-
-@njit(cache=True)
-def _masked_median(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Median over the masked rows of each column, 0 without any: (J, 3), (J,) -> (3,)."""
-    out = np.zeros(3)
-    n = mask.sum()
-    if n:
-        column = np.empty(n)
-        for i in range(3):
-            k = 0
-            for j in range(len(mask)):
-                if mask[j]:
-                    column[k] = values[j, i]
-                    k += 1
-            out[i] = np.median(column)
-    return out
-
-
-@njit(cache=True)
-def _distance(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
-    """|a - b - c| of 3-vectors."""
-    d0, d1, d2 = a[0] - b[0] - c[0], a[1] - b[1] - c[1], a[2] - b[2] - c[2]
-    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-
-
-@njit(cache=True)
-def _inliers(
-    points: np.ndarray, known: np.ndarray, score: np.ndarray, proj: np.ndarray, template: np.ndarray
-) -> np.ndarray:
-    """Known joints that are not gross outliers: (P, J, 3), (P, J), scores (V, P, J), (V, 3, 4) -> (P, J)."""
+def _start_kernel(
+    points: np.ndarray,
+    known: np.ndarray,
+    score: np.ndarray,
+    proj: np.ndarray,
+    xy: np.ndarray,
+    Minv: np.ndarray,
+    centre: np.ndarray,
+    template: np.ndarray,
+    out: np.ndarray,
+    placed: np.ndarray,
+    ok: np.ndarray,
+    body: np.ndarray,
+    m: np.ndarray,
+    buf: np.ndarray,
+) -> None:
+    """_start per person (see there), one compiled function: (P, J, 3), (P, J), (V, P, J), (V, 3, 4), pixels
+    (V, P, J, 2), M^-1 (V, 3, 3), centres (V, 3), (J, 3) -> out (P, J, 3) (enters as points), placed (P,) (enters
+    False); scratch: ok (P, J) (enters as known), body (J + 1, 3), m (12, 3), buf (max(J, 3),). No allocations:
+    numba would compile numpy's allocators for them."""
     P, J = known.shape
-    ok = known.copy()
-    zero = np.zeros(3)
+    shift = body[J]
     for p in range(P):
-        for j in range(J):
-            X = points[p, j]
+        for j in range(J):  # behind a camera that sees it
             for v in range(len(proj)):
-                depth = proj[v, 2, 0] * X[0] + proj[v, 2, 1] * X[1] + proj[v, 2, 2] * X[2] + proj[v, 2, 3]
-                if score[v, p, j] > 0 and not depth > 0:
-                    ok[p, j] = False
-        offset = _masked_median(points[p] - template, ok[p])
-        for j in range(J):
-            if _distance(points[p, j], template[j], offset) > GROSS_OUTLIER_M:
-                ok[p, j] = False
-    bodies, _ = _fit_bodies(points, ok, template)
-    for p in range(P):
-        for j in range(J):
-            if _distance(points[p, j], bodies[p, j], zero) > OUTLIER_M:
-                ok[p, j] = False
-    return ok
-
-
-@njit(cache=True)
-def _onto_rays(
-    guess: np.ndarray, xy: np.ndarray, score: np.ndarray, Minv: np.ndarray, centre: np.ndarray
-) -> np.ndarray:
-    """Point of the best-scored view's ray closest to each guess (P, J, 3); unseen joints keep theirs."""
-    out = guess.copy()
-    P, J = guess.shape[:2]
-    for p in range(P):
-        for j in range(J):
-            best = np.argmax(score[:, p, j])
-            if not score[best, p, j] > 0:
+                depth = 0.0
+                for i in range(3):
+                    depth += proj[v, 2, i] * points[p, j, i]
+                ok[p, j] &= not (score[v, p, j] > 0 and not depth + proj[v, 2, 3] > 0)
+        for i in range(3):  # the template shifted by the median of points - template: insertion sorts
+            n = 0
+            for j in range(J):
+                body[j, i] = template[j, i]
+                if ok[p, j]:
+                    x = points[p, j, i] - template[j, i]
+                    k = n
+                    while k > 0 and buf[k - 1] > x:
+                        buf[k], k = buf[k - 1], k - 1
+                    buf[k], n = x, n + 1
+            shift[i] = (buf[(n - 1) // 2] + buf[n // 2]) / 2 if n else 0.0
+        for limit in (GROSS_OUTLIER_M, OUTLIER_M):  # far from the body shifted, then from the body fitted
+            for j in range(J):
+                d = 0.0
+                for i in range(3):
+                    d += (points[p, j, i] - body[j, i] - shift[i]) ** 2
+                ok[p, j] &= not np.sqrt(d) > limit
+            placed[p] = _fit_one(points[p], ok[p], template, body, m)
+            shift[0], shift[1], shift[2] = 0.0, 0.0, 0.0
+        for j in range(J):  # the rest: the body, moved onto the best-scored view's ray
+            if ok[p, j]:
                 continue
-            u, w = xy[best, p, j, 0], xy[best, p, j, 1]
-            M, c, g = Minv[best], centre[best], guess[p, j]
-            d0 = M[0, 0] * u + M[0, 1] * w + M[0, 2]
-            d1 = M[1, 0] * u + M[1, 1] * w + M[1, 2]
-            d2 = M[2, 0] * u + M[2, 1] * w + M[2, 2]
-            t = ((g[0] - c[0]) * d0 + (g[1] - c[1]) * d1 + (g[2] - c[2]) * d2) / (d0 * d0 + d1 * d1 + d2 * d2)
-            t = max(t, _MIN_RAY_DEPTH_M)  # in front of the camera
-            out[p, j, 0], out[p, j, 1], out[p, j, 2] = c[0] + t * d0, c[1] + t * d1, c[2] + t * d2
-    return out
+            best = 0  # np.argmax(score[:, p, j]): the first maximum, or the first NaN
+            for v in range(len(score)):
+                if not score[v, p, j] <= score[best, p, j] and not np.isnan(score[best, p, j]):
+                    best = v
+            if not score[best, p, j] > 0:
+                for i in range(3):
+                    out[p, j, i] = body[j, i]
+                continue
+            num, den = 0.0, 0.0
+            for i in range(3):
+                buf[i] = Minv[best, i, 0] * xy[best, p, j, 0] + Minv[best, i, 1] * xy[best, p, j, 1] + Minv[best, i, 2]
+                num, den = num + (body[j, i] - centre[best, i]) * buf[i], den + buf[i] * buf[i]
+            t = max(num / den, _MIN_RAY_DEPTH_M)  # in front of the camera
+            for i in range(3):
+                out[p, j, i] = centre[best, i] + t * buf[i]
 
 
-def _views(poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Contiguous pixels (V, P, J, 2), scores (V, P, J) (0 where not finite), M^-1 (V, 3, 3), centres (V, 3)."""
+def _writable(a: np.ndarray, dtype: type) -> np.ndarray:
+    """a as a writable C-contiguous array of dtype (a copy if needed): one compiled specialisation per kernel."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
+
+
+def _views(poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Contiguous scores (V, P, J) (0 where not finite), proj (V, 3, 4), pixels (V, P, J, 2), M^-1 (V, 3, 3), centres
+    (V, 3): _start_kernel's arguments after the points."""
     poses2d = np.asarray(poses2d, dtype=np.float64)
     score = np.where(np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1]), poses2d[..., 2], 0.0)
     Minv = np.linalg.inv(proj[:, :, :3])
     centre = -np.matmul(Minv, proj[:, :, 3:])[..., 0]
-    return np.ascontiguousarray(poses2d[..., :2]), np.ascontiguousarray(score), Minv, centre
+    return np.ascontiguousarray(score), proj, np.ascontiguousarray(poses2d[..., :2]), Minv, centre
 
 
 def fit_mean_body(points: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The mean body aligned to each person's known joints: (P, J, 3), (P, J) bool -> (P, J, 3), placed (P,)."""
-    return _fit_bodies(
-        np.ascontiguousarray(points, dtype=np.float64), np.asarray(known, dtype=bool), MEAN_POSE[: points.shape[1]]
-    )
+    points, known = _writable(points, np.float64), _writable(known, np.bool_)
+    out, placed, m = np.empty(points.shape), np.zeros(len(points), dtype=bool), np.empty((12, 3))
+    for p in range(len(points)):
+        placed[p] = _fit_one(points[p], known[p], MEAN_POSE[: points.shape[1]], out[p], m)
+    return out, placed
 
 
 def _start(
     points: np.ndarray, known: np.ndarray, poses2d: np.ndarray, proj: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Inliers of points kept, every other joint from the fitted body moved onto its ray -> (P, J, 3), placed (P,)."""
-    xy, score, Minv, centre = _views(poses2d, proj)
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    template = MEAN_POSE[: points.shape[1]]
-    inl = _inliers(points, np.asarray(known, dtype=bool), score, np.asarray(proj, dtype=np.float64), template)
-    body, placed = _fit_bodies(points, inl, template)
-    return np.where(inl[..., None], points, _onto_rays(body, xy, score, Minv, centre)), placed
+    points, known, proj = _writable(points, np.float64), _writable(known, np.bool_), _writable(proj, np.float64)
+    P, J = known.shape
+    out, placed = points.copy(), np.zeros(P, dtype=bool)
+    scratch = known.copy(), np.empty((J + 1, 3)), np.empty((12, 3)), np.empty(max(J, 3))
+    _start_kernel(points, known, *_views(poses2d, proj), MEAN_POSE[:J], out, placed, *scratch)
+    return out, placed
 
 
 def initial_poses(dlt: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
