@@ -1,8 +1,10 @@
-"""Compiled loop of the evidence matcher: the chi-square of every detection pair of a view pair.
+"""Compiled loops of the evidence matcher: the chi-square of every detection pair of the view pairs of a
+frame, and the complete-linkage merge.
 
 Each pair's body evidence is a sum over the joints both detections see of the Sampson distance to the
 epipolar geometry, added to the feet term; the loop stops as soon as a pair cannot pass its gate any
-more, so unrelated pairs (most of a crowd's) cost one or two joints each.
+more, so unrelated pairs (most of a crowd's) cost one or two joints each, and only the pairs that pass
+are returned (a crowd's view pair has ~1 per detection, not Na x Nb).
 """
 
 from __future__ import annotations
@@ -32,80 +34,184 @@ def _masks(var: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
-def pair_chi2(
-    uv_a: np.ndarray,
-    var_a: np.ndarray,
-    uv_b: np.ndarray,
-    var_b: np.ndarray,
-    F: np.ndarray,
-    feet_d2: np.ndarray,
-    limits: np.ndarray,
-    min_dof: int,
-    cap: float,
-    body_scale2: float,
-    chi2_out: np.ndarray,
-    dof_out: np.ndarray,
-) -> None:
-    """Chi-square feet + body / body_scale2 and degrees of freedom of every pair (i, j); inf where rejected.
+@njit(cache=True, inline="always")
+def _common(masks: np.ndarray, i: int, j: int) -> int:
+    """Number of joints usable in both detections i and j (rows of _masks)."""
+    common = 0
+    for w in range(masks.shape[1]):
+        common += _popcount(masks[i, w] & masks[j, w])
+    return common
 
-    uv_a (Na, J, 2) undistorted pixels, var_a (Na, J) pixel variances (0 = joint not usable), the same for
-    b; F (3, 3) with x_b^T F x_a = 0; feet_d2 (Na, Nb) squared Mahalanobis feet distance (2 dof), NaN where
-    either detection has no feet; limits (D + 1,) the gate chi^2 quantile per dof; cap: the most one joint
-    adds (an outlying joint, e.g. a left / right swap, counts as a bad joint, not as a wrong person);
-    body_scale2: the squared noise scale the body terms are divided by (the feet term keeps its own model).
-    """
-    Na, J = var_a.shape
-    Nb = var_b.shape[0]
-    la = np.empty((Na, J, 3))  # epipolar lines of a's joints in view b
-    for i in range(Na):
+
+@njit(cache=True)
+def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
+    """Epipolar lines F x (or F^T x) of every joint: uv (N, J, 2) -> (N, J, 3)."""
+    N, J = uv.shape[0], uv.shape[1]
+    out = np.empty((N, J, 3))
+    for i in range(N):
         for k in range(J):
-            x, y = uv_a[i, k, 0], uv_a[i, k, 1]
+            x, y = uv[i, k, 0], uv[i, k, 1]
             for r in range(3):
-                la[i, k, r] = F[r, 0] * x + F[r, 1] * y + F[r, 2]
-    lb = np.empty((Nb, J, 3))  # lines of b's joints in view a: F^T x_b
-    for j in range(Nb):
-        for k in range(J):
-            x, y = uv_b[j, k, 0], uv_b[j, k, 1]
-            for r in range(3):
-                lb[j, k, r] = F[0, r] * x + F[1, r] * y + F[2, r]
-    mask_a, mask_b = _masks(var_a), _masks(var_b)
-    for i in range(Na):
-        for j in range(Nb):
-            feet = feet_d2[i, j]
+                if transpose:
+                    out[i, k, r] = F[0, r] * x + F[1, r] * y + F[2, r]
+                else:
+                    out[i, k, r] = F[r, 0] * x + F[r, 1] * y + F[r, 2]
+    return out
+
+
+@njit(cache=True, inline="always")
+def _feet_d2(p, cov, i, j, floor2) -> float:
+    """Squared Mahalanobis distance of two feet midpoints, as feet_uncertainty.mahalanobis_distances ** 2."""
+    dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
+    a = cov[i, 0, 0] + cov[j, 0, 0] + floor2
+    c = cov[i, 1, 1] + cov[j, 1, 1] + floor2
+    b = 0.5 * (cov[i, 0, 1] + cov[i, 1, 0] + cov[j, 0, 1] + cov[j, 1, 0])
+    quad = (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
+    d = np.sqrt(max(quad, 0.0))
+    return d * d
+
+
+@njit(cache=True)
+def _grow(buf: np.ndarray, n: int) -> np.ndarray:
+    """buf with room for at least n rows (doubling)."""
+    if n <= len(buf):
+        return buf
+    out = np.empty((max(n, 2 * len(buf)),) + buf.shape[1:], dtype=buf.dtype)
+    out[: len(buf)] = buf
+    return out
+
+
+@njit(cache=True)
+def _view_pair(dets, F, sa, na, sb, nb, test, out, n) -> int:
+    """Append the detection pairs of views a (detections sa:sa + na) and b (sb:sb + nb) that pass to out
+    (i, j, chi^2, dof, feet; see pairs_chi2), from row n: -> the new n. dets = (uv, var, masks, has_p, p, cov),
+    test = (limits, min_dof, cap, scale2, floor2). One loop, no calls per pair: numba's reference counting of
+    array arguments would cost more than the test of an unrelated pair."""
+    uv, var, masks, has_p, p, cov = dets
+    limits, min_dof, cap, scale2, floor2 = test
+    gi, gj, chi2, dofs, feet = out
+    J = var.shape[1]
+    la, lb = _lines(uv[sa : sa + na], F, False), _lines(uv[sb : sb + nb], F, True)
+    for ai in range(na):
+        i = sa + ai
+        for bj in range(nb):
+            j = sb + bj
+            f = _feet_d2(p, cov, i, j, floor2) if has_p[i] and has_p[j] else np.nan
             dof = 0
             d2 = 0.0
-            if not np.isnan(feet):
+            if not np.isnan(f):
                 dof = 2
-                d2 = feet
+                d2 = f
                 if d2 > limits[2 + J]:  # the cheap test: no body evidence can save these feet
-                    chi2_out[i, j] = np.inf
-                    dof_out[i, j] = 2
                     continue
             common = 0
-            for w in range(mask_a.shape[1]):
-                common += _popcount(mask_a[i, w] & mask_b[j, w])
+            for w in range(masks.shape[1]):
+                common += _popcount(masks[i, w] & masks[j, w])
             possible = dof + common
             if possible < min_dof or d2 > limits[possible]:
-                chi2_out[i, j] = np.inf
-                dof_out[i, j] = possible
                 continue
             for k in range(J):
-                if var_a[i, k] > 0.0 and var_b[j, k] > 0.0:
-                    l0, l1, l2 = la[i, k, 0], la[i, k, 1], la[i, k, 2]
-                    e = uv_b[j, k, 0] * l0 + uv_b[j, k, 1] * l1 + l2
-                    m0, m1 = lb[j, k, 0], lb[j, k, 1]
-                    denom = var_b[j, k] * (l0 * l0 + l1 * l1) + var_a[i, k] * (m0 * m0 + m1 * m1)
+                if var[i, k] > 0.0 and var[j, k] > 0.0:
+                    l0, l1, l2 = la[ai, k, 0], la[ai, k, 1], la[ai, k, 2]
+                    e = uv[j, k, 0] * l0 + uv[j, k, 1] * l1 + l2
+                    m0, m1 = lb[bj, k, 0], lb[bj, k, 1]
+                    denom = var[j, k] * (l0 * l0 + l1 * l1) + var[i, k] * (m0 * m0 + m1 * m1)
                     if denom > 0.0:
-                        d2 += min(e * e / denom, cap) / body_scale2
+                        d2 += min(e * e / denom, cap) / scale2
                         dof += 1
                         if d2 > limits[possible]:
                             break
-            if dof < min_dof or d2 > limits[dof]:
-                chi2_out[i, j] = np.inf
-            else:
-                chi2_out[i, j] = d2
-            dof_out[i, j] = dof
+            if dof == 0:  # joints in common but no usable line: nothing tested (kept as inf, linked; merge_linked)
+                d2 = np.inf
+            elif dof < min_dof or d2 > limits[dof]:
+                continue
+            gi[n], gj[n], chi2[n], dofs[n], feet[n] = i, j, d2, dof, f
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def pairs_chi2(
+    uv: np.ndarray,
+    var: np.ndarray,
+    offsets: np.ndarray,
+    has_p: np.ndarray,
+    p: np.ndarray,
+    cov: np.ndarray,
+    floor2: float,
+    fundamentals: np.ndarray,
+    view_pairs: np.ndarray,
+    limits: np.ndarray,
+    min_dof: int,
+    cap: float,
+    scale2: float,
+    medians: np.ndarray,
+    evidence_per_dof: float,
+    sample: int,
+):
+    """The detection pairs of view pairs (a, b) that pass: -> pair (E,) (row of view_pairs), i, j (E,) global
+    detection indices, chi^2 (E,) = feet + body / scale2, dof (E,), feet (E,) (NaN without a feet term),
+    calibration ratios (R,) and the number of view pairs done.
+
+    Detections of all views are stacked (view v: offsets[v]:offsets[v + 1]): uv (N, J, 2) undistorted pixels,
+    var (N, J) pixel variances (0 = joint not usable), has_p (N,), p (N, 2), cov (N, 2, 2) the feet midpoint
+    on the ground and its covariance; fundamentals (V, V, 3, 3) with x_b^T F[a, b] x_a = 0. A pair passes when
+    its chi^2 passes limits (D + 1,) at its dof (>= min_dof); one joint adds at most cap (an outlying joint,
+    e.g. a left / right swap, counts as a bad joint, not as a wrong person); the loop over joints stops as
+    soon as a pair fails. With sample > 0 the view pairs stop once the body chi^2 / medians[body dof] of the
+    mutual best partners (cost 0.5 chi^2 - evidence_per_dof * dof) number at least sample.
+    """
+    dets, test = (uv, var, _masks(var), has_p, p, cov), (limits, min_dof, cap, scale2, floor2)
+    cap_e = 16
+    pair, gi, gj = np.empty(cap_e, np.int64), np.empty(cap_e, np.int64), np.empty(cap_e, np.int64)
+    chi2, dofs, feet = np.empty(cap_e), np.empty(cap_e, np.int64), np.empty(cap_e)
+    ratios = np.empty(16)
+    n, nr, done = 0, 0, 0
+    for q in range(len(view_pairs)):
+        a, b = view_pairs[q, 0], view_pairs[q, 1]
+        sa, sb = offsets[a], offsets[b]
+        na, nb = offsets[a + 1] - sa, offsets[b + 1] - sb
+        first = n
+        if n + na * nb > len(pair):  # room for every pair of this view pair
+            pair, gi, gj = _grow(pair, n + na * nb), _grow(gi, n + na * nb), _grow(gj, n + na * nb)
+            chi2, dofs, feet = _grow(chi2, n + na * nb), _grow(dofs, n + na * nb), _grow(feet, n + na * nb)
+        n = _view_pair(dets, fundamentals[a, b], sa, na, sb, nb, test, (gi, gj, chi2, dofs, feet), n)
+        pair[first:n] = q
+        done = q + 1
+        if sample > 0:
+            found = (gi[first:n] - sa, gj[first:n] - sb, chi2[first:n], dofs[first:n], feet[first:n])
+            ratios, nr = _mutual_best_ratios(found, na, nb, scale2, medians, evidence_per_dof, ratios, nr)
+            if nr >= sample:
+                break
+    return pair[:n], gi[:n], gj[:n], chi2[:n], dofs[:n], feet[:n], ratios[:nr], done
+
+
+@njit(cache=True)
+def _mutual_best_ratios(found, na, nb, scale2, medians, evidence_per_dof, ratios, nr):
+    """Append body chi^2 / medians[body dof] of the mutual best partners of one view pair's detection pairs,
+    found = (local i, local j, chi^2, dof, feet) sorted by i, then j, to ratios[:nr]: -> (ratios, nr)."""
+    li, lj, chi2, dof, feet = found
+    best_row_cost, best_row = np.full(na, np.inf), np.full(na, -1)
+    best_col_cost, best_col = np.full(nb, np.inf), np.full(nb, -1)
+    body = np.empty(len(chi2))
+    for k in range(len(chi2)):
+        f0 = feet[k] if np.isfinite(feet[k]) else 0.0
+        body[k] = (chi2[k] - f0) * scale2
+        c = 0.5 * (f0 + body[k] / scale2) - evidence_per_dof * dof[k]
+        if c < best_row_cost[li[k]]:
+            best_row_cost[li[k]], best_row[li[k]] = c, k
+        if c < best_col_cost[lj[k]]:
+            best_col_cost[lj[k]], best_col[lj[k]] = c, k
+    for i in range(na):
+        k = best_row[i]
+        if k < 0 or best_col[lj[k]] != k:
+            continue
+        body_dof = dof[k] - (2 if np.isfinite(feet[k]) else 0)
+        if body_dof > 0:
+            ratios = _grow(ratios, nr + 1)
+            ratios[nr] = body[k] / medians[min(body_dof, len(medians) - 1)]
+            nr += 1
+    return ratios, nr
 
 
 @njit(cache=True)
@@ -117,13 +223,37 @@ def _find(parent: np.ndarray, i: int) -> int:
     return i
 
 
+@njit(cache=True, inline="always")
+def _is_linked(indptr: np.ndarray, partners: np.ndarray, x: int, y: int) -> bool:
+    """Whether y is among the sorted partners[indptr[x]:indptr[x + 1]] of x (binary search)."""
+    lo, hi = indptr[x], indptr[x + 1]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if partners[mid] < y:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo < indptr[x + 1] and partners[lo] == y
+
+
 @njit(cache=True)
-def merge_linked(ga: np.ndarray, gb: np.ndarray, view_of: np.ndarray, linked: np.ndarray) -> np.ndarray:
+def merge_linked(
+    ga: np.ndarray,
+    gb: np.ndarray,
+    view_of: np.ndarray,
+    indptr: np.ndarray,
+    partners: np.ndarray,
+    has_feet: np.ndarray,
+    var: np.ndarray,
+) -> np.ndarray:
     """Complete-linkage merging of edges (ga[k], gb[k]) in the given order -> root of every detection (N,).
 
-    Two components join when no view is in both and linked[x, y] holds for every x of one and y of the
-    other (linked: (N, N) bool, symmetric). Members are kept as linked lists (head, next, tail per root).
+    Two components join when no view is in both and every x of one is linked to every y of the other: the
+    links of x are partners[indptr[x]:indptr[x + 1]] (sorted, symmetric); a pair that shares no evidence
+    (not both has_feet (N,), no joint usable in both, var (N, J) > 0) has nothing to test and counts as
+    linked. Members are kept as linked lists (head, next, tail per root).
     """
+    masks = _masks(var)
     n = len(view_of)
     parent = np.arange(n)
     views = np.zeros(n, dtype=np.int64)
@@ -141,7 +271,8 @@ def merge_linked(ga: np.ndarray, gb: np.ndarray, view_of: np.ndarray, linked: np
         while x >= 0 and ok:
             y = b
             while y >= 0:
-                if not linked[x, y]:
+                untestable = not (has_feet[x] and has_feet[y]) and _common(masks, x, y) == 0
+                if not untestable and not _is_linked(indptr, partners, x, y):
                     ok = False
                     break
                 y = nxt[y]
