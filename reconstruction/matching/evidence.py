@@ -69,20 +69,24 @@ def gate_limits(reject_rate: float, max_dof: int) -> np.ndarray:
 
 
 def joint_variances(
-    view: ViewDetections, camera, min_score: float, sigma_model: tuple[float, float, float, float]
+    views: list[ViewDetections], cameras: list, min_score: float, sigma_model: tuple[float, float, float, float], J: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Undistorted pixels (N, J, 2), pixel variances (N, J) (0 = unusable) and any-non-finite (N,) of a view;
-    sigma_model = (c, sigma_min, sigma_px, score_power) of :func:`joint_sigma`."""
-    kp = np.asarray(view.keypoints, dtype=np.float64)
+    """Undistorted pixels (N, J, 2), pixel variances (N, J) (0 = unusable) and any-non-finite (N,) of the
+    detections of V views stacked in view order (N in all); sigma_model = (c, sigma_min, sigma_px,
+    score_power) of :func:`joint_sigma`. Only the undistortion is done per view (camera)."""
+    kp = np.concatenate([np.asarray(v.keypoints, dtype=np.float64).reshape(-1, J, 3) for v in views])
+    boxes = np.concatenate([np.asarray(v.bboxes, dtype=np.float64).reshape(-1, 4) for v in views])
     finite = np.isfinite(kp).all(axis=-1)
     bad = ~finite.all(axis=-1)
     kp = np.where(finite[..., None], kp, 0.0)
     ok = finite & (kp[..., 2] >= min_score)
     kp = np.where(ok[..., None], kp, 0.0)
-    sigma = joint_sigma(kp, np.nan_to_num(view.bboxes, nan=0.0, posinf=0.0, neginf=0.0), *sigma_model)
+    sigma = joint_sigma(kp, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0), *sigma_model)
     var = np.where(ok & np.isfinite(sigma), sigma**2, 0.0)
-    uv = camera.undistort_points(kp[..., :2]) if len(kp) else kp[..., :2]
-    return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), var, bad
+    ends = np.cumsum([len(v) for v in views])
+    uv = [cam.undistort_points(kp[e - len(v) : e, :, :2]) for v, cam, e in zip(views, cameras, ends) if len(v)]
+    uv = np.concatenate(uv) if uv else kp[..., :2]
+    return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), np.ascontiguousarray(var), bad
 
 
 def merge_complete(
@@ -107,23 +111,12 @@ def merge_complete(
     gb = offsets[edges[:, 2].astype(np.int64)] + edges[:, 3].astype(np.int64)
     order = np.lexsort((gb, ga, edges[:, 4]))
     has_feet, var = evidence if evidence is not None else (np.ones(offsets[-1], bool), np.ones((offsets[-1], 1)))
-    adjacency = _adjacency(linked, offsets[-1])
-    root = merge_linked(ga[order], gb[order], view_of, *adjacency, has_feet, np.ascontiguousarray(var, np.float64))
+    links = np.ascontiguousarray(np.asarray(linked, dtype=np.int64).reshape(-1, 2))
+    root = merge_linked(ga[order], gb[order], view_of, links, has_feet, np.ascontiguousarray(var, np.float64))
     roots, person, size = np.unique(root, return_inverse=True, return_counts=True)
     rows = np.full((len(roots), len(counts)), -1, dtype=np.int64)
     rows[person, view_of] = np.arange(offsets[-1]) - offsets[view_of]
     return rows[size >= min_views]
-
-
-def _adjacency(linked: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric sorted adjacency of n nodes from (L, 2) links: indptr (n + 1,), partners (2 L,)."""
-    linked = np.asarray(linked, dtype=np.int64).reshape(-1, 2)
-    src = np.concatenate([linked[:, 0], linked[:, 1]])
-    dst = np.concatenate([linked[:, 1], linked[:, 0]])
-    order = np.lexsort((dst, src))
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
-    return indptr, dst[order]
 
 
 @lru_cache(maxsize=1)
@@ -135,7 +128,7 @@ def warm_up() -> None:
     F, pairs, limits = np.zeros((2, 2, 3, 3)), np.array([[0, 1]]), np.full(5, np.inf)
     pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1)
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
-    merge_linked(one[:1], one[1:2], one[:2], one, one[:2][::-1].copy(), np.ones(2, bool), var)
+    merge_linked(one[:1], one[1:2], one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
 
 
 class EvidenceMatcher:
@@ -224,27 +217,25 @@ class EvidenceMatcher:
         frame's calibrated noise (:meth:`noise_scale2`)."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
-        feats = self.feet.features([_finite(v) for v in views], rig)
-        model = (self.c, self.sigma_min, self.sigma_px, self.score_power)
-        joints = [joint_variances(v, cam, self.min_score, model) for v, cam in zip(views, rig)]
+        feet = self.feet.stacked_features([_finite(v) for v in views], rig)
         counts = np.array([len(v) for v in views], dtype=np.int64)
         J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
-        var = np.ascontiguousarray(np.concatenate([j[1] for j in joints]).reshape(-1, J))
-        has_p = np.concatenate([f.has_p for f in feats]).astype(bool)
+        model = (self.c, self.sigma_min, self.sigma_px, self.score_power)
+        uv, var, bad = joint_variances(views, list(rig), self.min_score, model, J)
+        has_p = np.asarray(feet.has_p, dtype=bool)
         stacked = (
-            np.ascontiguousarray(np.concatenate([j[0] for j in joints]).reshape(-1, J, 2)),
+            uv,
             var,
             np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
             has_p,
-            np.ascontiguousarray(np.concatenate([f.p for f in feats]).reshape(-1, 2), dtype=np.float64),
-            np.ascontiguousarray(np.concatenate([f.cov for f in feats]).reshape(-1, 2, 2), dtype=np.float64),
+            np.ascontiguousarray(feet.p, dtype=np.float64),
+            np.ascontiguousarray(feet.cov, dtype=np.float64),
             self.feet.ground_sigma_floor**2,
             self._fundamentals_of(rig),
         )
         view_pairs = _view_pairs(counts)
         pairs, scale2 = self._calibrated_pairs(stacked, view_pairs, J)
         usable = has_p | ((var > 0).sum(axis=1) >= self.min_dof)
-        bad = np.concatenate([j[2] for j in joints]).astype(bool)
         return FrameEvidence(counts, stacked[2], view_pairs, *pairs, scale2, has_p, var, usable, bad)
 
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:

@@ -223,38 +223,48 @@ def _find(parent: np.ndarray, i: int) -> int:
     return i
 
 
+@njit(cache=True)
+def _adjacency(links: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric adjacency of n nodes from (L, 2) links, by counting sort: indptr (n + 1,), partners (2 L,)."""
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for k in range(len(links)):
+        indptr[links[k, 0] + 1] += 1
+        indptr[links[k, 1] + 1] += 1
+    for x in range(n):
+        indptr[x + 1] += indptr[x]
+    fill = indptr[:-1].copy()
+    partners = np.empty(2 * len(links), dtype=np.int64)
+    for k in range(len(links)):
+        x, y = links[k, 0], links[k, 1]
+        partners[fill[x]], partners[fill[y]] = y, x
+        fill[x] += 1
+        fill[y] += 1
+    return indptr, partners
+
+
 @njit(cache=True, inline="always")
 def _is_linked(indptr: np.ndarray, partners: np.ndarray, x: int, y: int) -> bool:
-    """Whether y is among the sorted partners[indptr[x]:indptr[x + 1]] of x (binary search)."""
-    lo, hi = indptr[x], indptr[x + 1]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if partners[mid] < y:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo < indptr[x + 1] and partners[lo] == y
+    """Whether y is among the partners[indptr[x]:indptr[x + 1]] of x (a short list: a linear scan)."""
+    for k in range(indptr[x], indptr[x + 1]):
+        if partners[k] == y:
+            return True
+    return False
 
 
 @njit(cache=True)
 def merge_linked(
-    ga: np.ndarray,
-    gb: np.ndarray,
-    view_of: np.ndarray,
-    indptr: np.ndarray,
-    partners: np.ndarray,
-    has_feet: np.ndarray,
-    var: np.ndarray,
+    ga: np.ndarray, gb: np.ndarray, view_of: np.ndarray, links: np.ndarray, has_feet: np.ndarray, var: np.ndarray
 ) -> np.ndarray:
     """Complete-linkage merging of edges (ga[k], gb[k]) in the given order -> root of every detection (N,).
 
-    Two components join when no view is in both and every x of one is linked to every y of the other: the
-    links of x are partners[indptr[x]:indptr[x + 1]] (sorted, symmetric); a pair that shares no evidence
-    (not both has_feet (N,), no joint usable in both, var (N, J) > 0) has nothing to test and counts as
-    linked. Members are kept as linked lists (head, next, tail per root).
+    Two components join when no view is in both and every x of one is linked to every y of the other (links
+    (L, 2): pairs of detections, either order); a pair that shares no evidence (not both has_feet (N,), no
+    joint usable in both, var (N, J) > 0) has nothing to test and counts as linked. Members are kept as
+    linked lists (head, next, tail per root).
     """
     masks = _masks(var)
     n = len(view_of)
+    indptr, partners = _adjacency(links, n)
     parent = np.arange(n)
     views = np.zeros(n, dtype=np.int64)
     nxt = np.full(n, -1)
