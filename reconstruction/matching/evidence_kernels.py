@@ -60,15 +60,14 @@ def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def _feet_d2(p, cov, i, j, floor2) -> float:
-    """Squared Mahalanobis distance of two feet midpoints, as feet_uncertainty.mahalanobis_distances ** 2."""
+def _feet_quad(p, cov, i, j, floor2) -> tuple[float, float]:
+    """Numerator and denominator of the squared Mahalanobis distance of two feet midpoints, in the operations
+    and order of feet_uncertainty.mahalanobis_distances (so that sqrt(max(num / den, 0)) ** 2 is its square)."""
     dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
     a = cov[i, 0, 0] + cov[j, 0, 0] + floor2
     c = cov[i, 1, 1] + cov[j, 1, 1] + floor2
     b = 0.5 * (cov[i, 0, 1] + cov[i, 1, 0] + cov[j, 0, 1] + cov[j, 1, 0])
-    quad = (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
-    d = np.sqrt(max(quad, 0.0))
-    return d * d
+    return c * dx * dx - 2 * b * dx * dy + a * dy * dy, a * c - b * b
 
 
 @njit(cache=True)
@@ -92,11 +91,17 @@ def _view_pair(dets, F, sa, na, sb, nb, test, out, n) -> int:
     gi, gj, chi2, dofs, feet = out
     J = var.shape[1]
     la, lb = _lines(uv[sa : sa + na], F, False), _lines(uv[sb : sb + nb], F, True)
+    far = limits[2 + J] * (1.0 + 1e-9)  # above it, rounding cannot bring the feet term back under the limit
     for ai in range(na):
         i = sa + ai
         for bj in range(nb):
             j = sb + bj
-            f = _feet_d2(p, cov, i, j, floor2) if has_p[i] and has_p[j] else np.nan
+            f = np.nan
+            if has_p[i] and has_p[j]:
+                num, den = _feet_quad(p, cov, i, j, floor2)
+                if den > 0.0 and num > far * den:  # fails the feet test below: skip the division and root
+                    continue
+                f = np.sqrt(max(num / den, 0.0)) ** 2
             dof = 0
             d2 = 0.0
             if not np.isnan(f):
