@@ -85,9 +85,13 @@ def _two_views(uv_a, var_a, uv_b, var_b, F, feet_dx=None):
 
 def _chi2(stacked, limits, min_dof=1, cap=1e9):
     """Detection pairs (i, j local) that pass, their chi^2 and dof, for two views."""
-    pair, gi, gj, chi2, dof, _, _, done = pairs_chi2(*stacked, limits, min_dof, cap, 1.0, np.ones(len(limits)), 2.0, 0)
-    assert done == 1 and np.all(pair == 0)
-    return gi, gj - stacked[2][1], chi2, dof
+    room = int(np.prod(np.diff(stacked[2])))
+    out = (np.empty((room, 4), np.int64), np.empty((room, 2)), np.empty(0), 0, 0)
+    fixed = (limits, min_dof, cap, 1.0, np.ones(len(limits)), 2.0, 0)
+    n, _, done = pairs_chi2(*stacked[:-1], stacked[-1], 0, *fixed, *out)
+    ints, floats = out[0][:n], out[1][:n]
+    assert done == 1 and np.all(ints[:, 0] == 0)
+    return ints[:, 1], ints[:, 2] - stacked[2][1], floats[:, 0], ints[:, 3]
 
 
 def test_the_gate_rejects_true_pairs_at_its_nominal_rate_whatever_the_degrees_of_freedom():

@@ -25,8 +25,11 @@ seen in 10 views has 45 pairs, a few of which fail the edge test by chance) and 
 so a cluster whose members disagree is never formed: a detection is left unmatched rather than merged
 wrongly.
 
-The body term is computed in compiled loops (:mod:`.evidence_kernels`) that stop as soon as a pair
-fails (the feet term first), so the unrelated pairs of a crowd cost a joint or two each.
+The evidence is computed for all view pairs of a frame in compiled loops (:mod:`.evidence_kernels`) that
+stop as soon as a pair fails (the feet term first), so the unrelated pairs of a crowd cost a joint or two
+each, and only the pairs that pass are kept (a crowd has about one per detection and view, not N_a x N_b).
+Each view pair's assignment is solved one connected component of allowed pairs at a time
+(:mod:`.sparse_assignment`, scipy's solver step for step), and the merge reads the links as adjacency lists.
 """
 
 from __future__ import annotations
@@ -126,7 +129,8 @@ def warm_up() -> None:
     uv, var, one = np.zeros((2, 2, 2)), np.ones((2, 2)), np.array([0, 1, 2])
     p, cov = np.zeros((2, 2)), np.zeros((2, 2, 2))
     F, pairs, limits = np.zeros((2, 2, 3, 3)), np.array([[0, 1]]), np.full(5, np.inf)
-    pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1)
+    out = (np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty(1), 0, 0)
+    pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, 0, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1, *out)
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
     merge_linked(one[:1], one[1:2], one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
 
@@ -266,21 +270,41 @@ class EvidenceMatcher:
         (:meth:`noise_scale2`); the others are computed at the calibrated scale, so that their loops stop
         as soon as the link test fails.
         """
-        fixed = (gate_limits(self.reject_rate, J + 2) * self.link_scale**2, self.min_dof, self.outlier_sd**2)
+        sizes = np.diff(stacked[2])[view_pairs].reshape(-1, 2)
+        room = int(sizes.prod(axis=1).max(initial=0)) + 4 * len(stacked[1])
+        out = [
+            np.empty((room, 4), np.int64),
+            np.empty((room, 2)),
+            np.empty(int(sizes.min(axis=1).sum())),
+            0,
+            0,
+        ]
         calibration = (chi2_medians(np.arange(J + 3)), self.evidence_per_dof)
-        parts, done, scale2 = [], 0, 1.0
+        loosest, scale2, done = self.max_noise_scale**2, 1.0, 0
         if self.calibrate:
-            loosest = self.max_noise_scale**2
-            *found, ratios, done = pairs_chi2(*stacked, view_pairs, *fixed, loosest, *calibration, CALIBRATION_SAMPLE)
-            parts.append((found, loosest))
-            scale2 = self.noise_scale2(ratios)
-        if done < len(view_pairs) or not parts:
-            *found, _, _ = pairs_chi2(*stacked, view_pairs[done:], *fixed, scale2, *calibration, 0)
-            parts.append(([found[0] + done, *found[1:]], scale2))
-        pair, gi, gj, chi2, dof, feet = (np.concatenate([found[k] for found, _ in parts]) for k in range(6))
-        used = np.concatenate([np.full(len(found[0]), s) for found, s in parts])
-        body = (chi2 - np.where(np.isfinite(feet), feet, 0.0)) * used  # in model units, as the kernel's scale undone
-        return [pair, gi, gj, calibrated(body, feet, scale2), dof], scale2
+            done = self._run_pairs(stacked, view_pairs, 0, loosest, (*calibration, CALIBRATION_SAMPLE), out, sizes)
+            scale2 = self.noise_scale2(out[2][: out[4]])
+        first = out[3]  # rows computed at the loosest scale
+        self._run_pairs(stacked, view_pairs, done, scale2, (*calibration, 0), out, sizes)
+        ints, floats = out[0][: out[3]], out[1][: out[3]]
+        used = np.where(np.arange(len(ints)) < first, loosest, scale2)
+        feet = floats[:, 1]
+        body = (floats[:, 0] - np.where(np.isfinite(feet), feet, 0.0)) * used  # model units: the kernel's scale undone
+        return [ints[:, 0], ints[:, 1], ints[:, 2], calibrated(body, feet, scale2), ints[:, 3]], scale2
+
+    def _run_pairs(self, stacked, view_pairs, q0: int, scale2: float, calibration: tuple, out: list, sizes) -> int:
+        """:func:`pairs_chi2` from view pair q0 at scale2 into out = [ints, floats, ratios, n, nr], growing ints and
+        floats when a view pair needs the room: -> view pairs done."""
+        fixed = (gate_limits(self.reject_rate, stacked[1].shape[1] + 2) * self.link_scale**2, self.min_dof)
+        while True:
+            out[3], out[4], q0 = pairs_chi2(
+                *stacked, view_pairs, q0, *fixed, self.outlier_sd**2, scale2, *calibration, *out
+            )
+            if q0 == len(view_pairs) or (calibration[2] > 0 and out[4] >= calibration[2]):
+                return q0
+            grow = 2 * len(out[0]) + int(sizes[q0].prod())
+            out[0] = np.concatenate([out[0][: out[3]], np.empty((grow, 4), np.int64)])
+            out[1] = np.concatenate([out[1][: out[3]], np.empty((grow, 2))])
 
     def noise_scale2(self, ratios: list[float] | np.ndarray) -> float:
         """The frame's 2D noise over the model, squared, from the calibration ratios (their median): body chi^2 /

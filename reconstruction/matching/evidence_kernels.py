@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _popcount(x: np.int64) -> int:
     """Number of set bits of a non-negative 64-bit integer."""
     x = x - ((x >> 1) & 0x5555555555555555)
@@ -34,15 +34,6 @@ def _masks(var: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True, inline="always")
-def _common(masks: np.ndarray, i: int, j: int) -> int:
-    """Number of joints usable in both detections i and j (rows of _masks)."""
-    common = 0
-    for w in range(masks.shape[1]):
-        common += _popcount(masks[i, w] & masks[j, w])
-    return common
-
-
 @njit(cache=True)
 def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
     """Epipolar lines F x (or F^T x) of every joint: uv (N, J, 2) -> (N, J, 3)."""
@@ -59,36 +50,13 @@ def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
     return out
 
 
-@njit(cache=True, inline="always")
-def _feet_quad(p, cov, i, j, floor2) -> tuple[float, float]:
-    """Numerator and denominator of the squared Mahalanobis distance of two feet midpoints, in the operations
-    and order of feet_uncertainty.mahalanobis_distances (so that sqrt(max(num / den, 0)) ** 2 is its square)."""
-    dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
-    a = cov[i, 0, 0] + cov[j, 0, 0] + floor2
-    c = cov[i, 1, 1] + cov[j, 1, 1] + floor2
-    b = 0.5 * (cov[i, 0, 1] + cov[i, 1, 0] + cov[j, 0, 1] + cov[j, 1, 0])
-    return c * dx * dx - 2 * b * dx * dy + a * dy * dy, a * c - b * b
-
-
 @njit(cache=True)
-def _grow(buf: np.ndarray, n: int) -> np.ndarray:
-    """buf with room for at least n rows (doubling)."""
-    if n <= len(buf):
-        return buf
-    out = np.empty((max(n, 2 * len(buf)),) + buf.shape[1:], dtype=buf.dtype)
-    out[: len(buf)] = buf
-    return out
-
-
-@njit(cache=True)
-def _view_pair(dets, F, sa, na, sb, nb, test, out, n) -> int:
-    """Append the detection pairs of views a (detections sa:sa + na) and b (sb:sb + nb) that pass to out
-    (i, j, chi^2, dof, feet; see pairs_chi2), from row n: -> the new n. dets = (uv, var, masks, has_p, p, cov),
-    test = (limits, min_dof, cap, scale2, floor2). One loop, no calls per pair: numba's reference counting of
-    array arguments would cost more than the test of an unrelated pair."""
-    uv, var, masks, has_p, p, cov = dets
-    limits, min_dof, cap, scale2, floor2 = test
-    gi, gj, chi2, dofs, feet = out
+def _view_pair(
+    uv, var, masks, has_p, p, cov, floor2, F, sa, na, sb, nb, limits, min_dof, cap, scale2, q, ints, floats, n
+):
+    """Append the detection pairs of views a (detections sa:sa + na) and b (sb:sb + nb) that pass to ints
+    (view pair q, i, j, dof) and floats (chi^2, feet) from row n (see pairs_chi2): -> the new n. One loop, no
+    calls per pair: numba's reference counting of array arguments would cost more than an unrelated pair."""
     J = var.shape[1]
     la, lb = _lines(uv[sa : sa + na], F, False), _lines(uv[sb : sb + nb], F, True)
     far = limits[2 + J] * (1.0 + 1e-9)  # above it, rounding cannot bring the feet term back under the limit
@@ -98,7 +66,12 @@ def _view_pair(dets, F, sa, na, sb, nb, test, out, n) -> int:
             j = sb + bj
             f = np.nan
             if has_p[i] and has_p[j]:
-                num, den = _feet_quad(p, cov, i, j, floor2)
+                # the operations and order of feet_uncertainty.mahalanobis_distances, squared
+                dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
+                a = cov[i, 0, 0] + cov[j, 0, 0] + floor2
+                c = cov[i, 1, 1] + cov[j, 1, 1] + floor2
+                b = 0.5 * (cov[i, 0, 1] + cov[i, 1, 0] + cov[j, 0, 1] + cov[j, 1, 0])
+                num, den = c * dx * dx - 2 * b * dx * dy + a * dy * dy, a * c - b * b
                 if den > 0.0 and num > far * den:  # fails the feet test below: skip the division and root
                     continue
                 f = np.sqrt(max(num / den, 0.0)) ** 2
@@ -109,10 +82,9 @@ def _view_pair(dets, F, sa, na, sb, nb, test, out, n) -> int:
                 d2 = f
                 if d2 > limits[2 + J]:  # the cheap test: no body evidence can save these feet
                     continue
-            common = 0
+            possible = dof
             for w in range(masks.shape[1]):
-                common += _popcount(masks[i, w] & masks[j, w])
-            possible = dof + common
+                possible += _popcount(masks[i, w] & masks[j, w])
             if possible < min_dof or d2 > limits[possible]:
                 continue
             for k in range(J):
@@ -130,93 +102,97 @@ def _view_pair(dets, F, sa, na, sb, nb, test, out, n) -> int:
                 d2 = np.inf
             elif dof < min_dof or d2 > limits[dof]:
                 continue
-            gi[n], gj[n], chi2[n], dofs[n], feet[n] = i, j, d2, dof, f
+            ints[n, 0], ints[n, 1], ints[n, 2], ints[n, 3] = q, i, j, dof
+            floats[n, 0], floats[n, 1] = d2, f
             n += 1
     return n
 
 
 @njit(cache=True)
 def pairs_chi2(
-    uv: np.ndarray,
-    var: np.ndarray,
-    offsets: np.ndarray,
-    has_p: np.ndarray,
-    p: np.ndarray,
-    cov: np.ndarray,
-    floor2: float,
-    fundamentals: np.ndarray,
-    view_pairs: np.ndarray,
-    limits: np.ndarray,
-    min_dof: int,
-    cap: float,
-    scale2: float,
-    medians: np.ndarray,
-    evidence_per_dof: float,
-    sample: int,
+    uv,
+    var,
+    offsets,
+    has_p,
+    p,
+    cov,
+    floor2,
+    fundamentals,
+    view_pairs,
+    q0,
+    limits,
+    min_dof,
+    cap,
+    scale2,
+    medians,
+    evidence_per_dof,
+    sample,
+    ints,
+    floats,
+    ratios,
+    n,
+    nr,
 ):
-    """The detection pairs of view pairs (a, b) that pass: -> pair (E,) (row of view_pairs), i, j (E,) global
-    detection indices, chi^2 (E,) = feet + body / scale2, dof (E,), feet (E,) (NaN without a feet term),
-    calibration ratios (R,) and the number of view pairs done.
+    """The detection pairs of the view pairs (a, b) (rows q0, q0 + 1, ... of view_pairs) that pass -> (rows of
+    ints / floats used, of ratios used, view pairs done); it stops before a view pair that ints has no room
+    for (all its detection pairs) and after the one that completes the calibration sample.
 
     Detections of all views are stacked (view v: offsets[v]:offsets[v + 1]): uv (N, J, 2) undistorted pixels,
     var (N, J) pixel variances (0 = joint not usable), has_p (N,), p (N, 2), cov (N, 2, 2) the feet midpoint
     on the ground and its covariance; fundamentals (V, V, 3, 3) with x_b^T F[a, b] x_a = 0. A pair passes when
-    its chi^2 passes limits (D + 1,) at its dof (>= min_dof); one joint adds at most cap (an outlying joint,
-    e.g. a left / right swap, counts as a bad joint, not as a wrong person); the loop over joints stops as
-    soon as a pair fails. With sample > 0 the view pairs stop once the body chi^2 / medians[body dof] of the
-    mutual best partners (cost 0.5 chi^2 - evidence_per_dof * dof) number at least sample.
+    its chi^2 = feet + body / scale2 passes limits (D + 1,) at its dof (>= min_dof); one joint adds at most
+    cap (an outlying joint, e.g. a left / right swap, counts as a bad joint, not as a wrong person); the loop
+    over joints stops as soon as a pair fails. Out, from rows n and nr: ints (M, 4) (view pair row, i, j
+    global indices, dof), floats (M, 2) (chi^2, inf where untestable and kept as linked; feet term, NaN where
+    none). With sample > 0, the body chi^2 / medians[body dof] (medians (D + 1,)) of each view pair's mutual best
+    partners (cost 0.5 chi^2 - evidence_per_dof * dof) go to ratios (R,), until there are sample of them.
     """
-    dets, test = (uv, var, _masks(var), has_p, p, cov), (limits, min_dof, cap, scale2, floor2)
-    cap_e = 16
-    pair, gi, gj = np.empty(cap_e, np.int64), np.empty(cap_e, np.int64), np.empty(cap_e, np.int64)
-    chi2, dofs, feet = np.empty(cap_e), np.empty(cap_e, np.int64), np.empty(cap_e)
-    ratios = np.empty(16)
-    n, nr, done = 0, 0, 0
-    for q in range(len(view_pairs)):
+    masks = _masks(var)
+    for q in range(q0, len(view_pairs)):
         a, b = view_pairs[q, 0], view_pairs[q, 1]
         sa, sb = offsets[a], offsets[b]
         na, nb = offsets[a + 1] - sa, offsets[b + 1] - sb
+        if n + na * nb > len(ints):
+            return n, nr, q
         first = n
-        if n + na * nb > len(pair):  # room for every pair of this view pair
-            pair, gi, gj = _grow(pair, n + na * nb), _grow(gi, n + na * nb), _grow(gj, n + na * nb)
-            chi2, dofs, feet = _grow(chi2, n + na * nb), _grow(dofs, n + na * nb), _grow(feet, n + na * nb)
-        n = _view_pair(dets, fundamentals[a, b], sa, na, sb, nb, test, (gi, gj, chi2, dofs, feet), n)
-        pair[first:n] = q
-        done = q + 1
+        F = fundamentals[a, b]
+        n = _view_pair(
+            uv, var, masks, has_p, p, cov, floor2, F, sa, na, sb, nb, limits, min_dof, cap, scale2, q, ints, floats, n
+        )  # noqa: E501
         if sample > 0:
-            found = (gi[first:n] - sa, gj[first:n] - sb, chi2[first:n], dofs[first:n], feet[first:n])
-            ratios, nr = _mutual_best_ratios(found, na, nb, scale2, medians, evidence_per_dof, ratios, nr)
+            nr = _mutual_best_ratios(
+                ints, floats, first, n, sa, sb, na, nb, scale2, medians, evidence_per_dof, ratios, nr
+            )  # noqa: E501
             if nr >= sample:
-                break
-    return pair[:n], gi[:n], gj[:n], chi2[:n], dofs[:n], feet[:n], ratios[:nr], done
+                return n, nr, q + 1
+    return n, nr, len(view_pairs)
 
 
 @njit(cache=True)
-def _mutual_best_ratios(found, na, nb, scale2, medians, evidence_per_dof, ratios, nr):
-    """Append body chi^2 / medians[body dof] of the mutual best partners of one view pair's detection pairs,
-    found = (local i, local j, chi^2, dof, feet) sorted by i, then j, to ratios[:nr]: -> (ratios, nr)."""
-    li, lj, chi2, dof, feet = found
+def _mutual_best_ratios(ints, floats, first, n, sa, sb, na, nb, scale2, medians, evidence_per_dof, ratios, nr):
+    """Append body chi^2 / medians[body dof] of the mutual best partners among the rows first:n (one view pair,
+    sorted by i, then j) to ratios from nr (room for min(na, nb) more): -> the new nr."""
     best_row_cost, best_row = np.full(na, np.inf), np.full(na, -1)
     best_col_cost, best_col = np.full(nb, np.inf), np.full(nb, -1)
-    body = np.empty(len(chi2))
-    for k in range(len(chi2)):
-        f0 = feet[k] if np.isfinite(feet[k]) else 0.0
-        body[k] = (chi2[k] - f0) * scale2
-        c = 0.5 * (f0 + body[k] / scale2) - evidence_per_dof * dof[k]
-        if c < best_row_cost[li[k]]:
-            best_row_cost[li[k]], best_row[li[k]] = c, k
-        if c < best_col_cost[lj[k]]:
-            best_col_cost[lj[k]], best_col[lj[k]] = c, k
+    for k in range(first, n):
+        f0 = floats[k, 1] if np.isfinite(floats[k, 1]) else 0.0
+        body = (floats[k, 0] - f0) * scale2
+        c = 0.5 * (f0 + body / scale2) - evidence_per_dof * ints[k, 3]
+        i, j = ints[k, 1] - sa, ints[k, 2] - sb
+        if c < best_row_cost[i]:
+            best_row_cost[i], best_row[i] = c, k
+        if c < best_col_cost[j]:
+            best_col_cost[j], best_col[j] = c, k
     for i in range(na):
         k = best_row[i]
-        if k < 0 or best_col[lj[k]] != k:
+        if k < 0 or best_col[ints[k, 2] - sb] != k:
             continue
-        body_dof = dof[k] - (2 if np.isfinite(feet[k]) else 0)
+        body_dof = ints[k, 3] - (2 if np.isfinite(floats[k, 1]) else 0)
         if body_dof > 0:
-            ratios = _grow(ratios, nr + 1)
-            ratios[nr] = body[k] / medians[min(body_dof, len(medians) - 1)]
+            f0 = floats[k, 1] if np.isfinite(floats[k, 1]) else 0.0
+            ratios[nr] = (floats[k, 0] - f0) * scale2 / medians[min(body_dof, len(medians) - 1)]
             nr += 1
-    return ratios, nr
+    return nr
 
 
 @njit(cache=True)
@@ -245,15 +221,6 @@ def _adjacency(links: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
         fill[x] += 1
         fill[y] += 1
     return indptr, partners
-
-
-@njit(cache=True, inline="always")
-def _is_linked(indptr: np.ndarray, partners: np.ndarray, x: int, y: int) -> bool:
-    """Whether y is among the partners[indptr[x]:indptr[x + 1]] of x (a short list: a linear scan)."""
-    for k in range(indptr[x], indptr[x + 1]):
-        if partners[k] == y:
-            return True
-    return False
 
 
 @njit(cache=True)
@@ -286,8 +253,13 @@ def merge_linked(
         while x >= 0 and ok:
             y = b
             while y >= 0:
-                untestable = not (has_feet[x] and has_feet[y]) and _common(masks, x, y) == 0
-                if not untestable and not _is_linked(indptr, partners, x, y):
+                common = 0
+                for w in range(masks.shape[1]):
+                    common += _popcount(masks[x, w] & masks[y, w])
+                linked = common == 0 and not (has_feet[x] and has_feet[y])  # nothing to test
+                for t in range(indptr[x], indptr[x + 1]):  # x's partners: a short list
+                    linked = linked or partners[t] == y
+                if not linked:
                     ok = False
                     break
                 y = nxt[y]

@@ -13,44 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-
-@njit(cache=True)
-def _augment(cost, u, v, path, row4col, spc, i, SR, SC, remaining) -> tuple[int, float]:
-    """One shortest augmenting path from row i: (sink column or -1, its reduced length)."""
-    nc = cost.shape[1]
-    min_val = 0.0
-    num_remaining = nc
-    for it in range(nc):
-        remaining[it] = nc - it - 1  # reverse order, as scipy: a constant matrix gives the identity
-    SR[:] = False
-    SC[:] = False
-    spc[:] = np.inf
-    sink = -1
-    while sink == -1:
-        index = -1
-        lowest = np.inf
-        SR[i] = True
-        for it in range(num_remaining):
-            j = remaining[it]
-            r = min_val + cost[i, j] - u[i] - v[j]
-            if r < spc[j]:
-                path[j] = i
-                spc[j] = r
-            if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
-                lowest = spc[j]
-                index = it
-        min_val = lowest
-        if min_val == np.inf:
-            return -1, min_val
-        j = remaining[index]
-        if row4col[j] == -1:
-            sink = j
-        else:
-            i = row4col[j]
-        SC[j] = True
-        num_remaining -= 1
-        remaining[index] = remaining[num_remaining]
-    return sink, min_val
+from reconstruction.matching.evidence_kernels import _find
 
 
 @njit(cache=True)
@@ -67,9 +30,35 @@ def lsap(cost: np.ndarray) -> np.ndarray:
     SR, SC = np.zeros(nr, dtype=np.bool_), np.zeros(nc, dtype=np.bool_)
     remaining = np.empty(nc, dtype=np.int64)
     for cur in range(nr):
-        sink, min_val = _augment(cost, u, v, path, row4col, spc, cur, SR, SC, remaining)
-        if sink < 0:
-            return np.full(nr, -1)
+        # the shortest augmenting path from row cur (scipy's augmenting_path)
+        min_val, num_remaining, i, sink = 0.0, nc, cur, -1
+        for it in range(nc):
+            remaining[it] = nc - it - 1  # reverse order, as scipy: a constant matrix gives the identity
+            SC[it], spc[it] = False, np.inf
+        for it in range(nr):
+            SR[it] = False
+        while sink == -1:
+            index, lowest = -1, np.inf
+            SR[i] = True
+            for it in range(num_remaining):
+                j = remaining[it]
+                r = min_val + cost[i, j] - u[i] - v[j]
+                if r < spc[j]:
+                    path[j], spc[j] = i, r
+                if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
+                    lowest, index = spc[j], it
+            min_val = lowest
+            if min_val == np.inf:  # infeasible (not with finite costs)
+                return col4row
+            j = remaining[index]
+            if row4col[j] == -1:
+                sink = j
+            else:
+                i = row4col[j]
+            SC[j] = True
+            num_remaining -= 1
+            remaining[index] = remaining[num_remaining]
+        # update the dual variables, then augment
         u[cur] += min_val
         for i in range(nr):
             if SR[i] and i != cur:
@@ -88,31 +77,44 @@ def lsap(cost: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _root(parent: np.ndarray, i: int) -> int:
-    """Root of i, with path halving."""
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
-@njit(cache=True)
-def _solve_component(rows, cols, ei, ej, ec, big, keep, idx) -> None:
-    """Assign one component: its rows, cols (sorted local indices), its entries (ei, ej, ec, index idx)."""
-    transpose = len(rows) > len(cols)
-    nr, nc = (len(cols), len(rows)) if transpose else (len(rows), len(cols))
-    sub = np.full((nr, nc), big)
-    at = np.full((nr, nc), -1)
-    for k in range(len(ei)):
-        r, c = np.searchsorted(rows, ei[k]), np.searchsorted(cols, ej[k])
+def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
+    """Assign one component, its entries ks (ascending, so rows ascending): -> keep[ks] of the assignment.
+    row_at, col_at: scratch (na,), (nb,) of -1, left as found."""
+    nr, nc = 0, 0
+    cols = np.empty(len(ks), dtype=np.int64)
+    for k in ks:
+        if row_at[li[k]] < 0:
+            row_at[li[k]] = nr
+            nr += 1
+        if col_at[lj[k]] < 0:
+            col_at[lj[k]] = 0
+            cols[nc] = lj[k]
+            nc += 1
+    for c in range(1, nc):  # insertion sort: the columns in their order in the view
+        x, d = cols[c], c
+        while d > 0 and cols[d - 1] > x:
+            cols[d] = cols[d - 1]
+            d -= 1
+        cols[d] = x
+    for c in range(nc):
+        col_at[cols[c]] = c
+    transpose = nr > nc  # the solver wants rows <= columns, as scipy transposes
+    R, C = min(nr, nc), max(nr, nc)
+    sub, at = np.empty((R, C)), np.empty((R, C), dtype=np.int64)
+    for r in range(R):
+        for c in range(C):
+            sub[r, c], at[r, c] = big, -1
+    for k in ks:
+        r, c = row_at[li[k]], col_at[lj[k]]
         if transpose:
             r, c = c, r
-        sub[r, c] = ec[k]
-        at[r, c] = idx[k]
+        sub[r, c], at[r, c] = cost[k], k
     col = lsap(sub)
-    for r in range(nr):
+    for r in range(len(col)):
         if col[r] >= 0 and at[r, col[r]] >= 0:
             keep[at[r, col[r]]] = True
+    for k in ks:
+        row_at[li[k]], col_at[lj[k]] = -1, -1
 
 
 @njit(cache=True)
@@ -120,14 +122,12 @@ def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj
     """Gated assignment of view pairs given by their allowed entries -> accepted (E,) bool.
 
     Pair p has (sizes[p, 0], sizes[p, 1]) detections and the entries starts[p]:starts[p + 1] of li, lj
-    (local row, column) and cost (finite); the entries not listed are not allowed. As
+    (local row, column; sorted by row) and cost (finite); the entries not listed are not allowed. As
     :func:`~reconstruction.matching.merge.solve_pair` with the same big cost, component by component.
     """
     keep = np.zeros(len(cost), dtype=np.bool_)
     for p in range(len(starts) - 1):
         s, e = starts[p], starts[p + 1]
-        if e == s:
-            continue
         na, nb = sizes[p, 0], sizes[p, 1]
         largest = 0.0
         for k in range(s, e):
@@ -135,22 +135,32 @@ def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj
         big = (min(na, nb) + 1) * largest + 1.0
         parent = np.arange(na + nb)
         for k in range(s, e):
-            a, b = _root(parent, li[k]), _root(parent, na + lj[k])
+            a, b = _find(parent, li[k]), _find(parent, na + lj[k])
             if a != b:
                 parent[max(a, b)] = min(a, b)
-        comp = np.empty(e - s, dtype=np.int64)
+        # entries grouped by component (counting sort on the root, stable: rows stay ascending)
+        start = np.zeros(na + nb + 1, dtype=np.int64)
         for k in range(s, e):
-            comp[k - s] = _root(parent, li[k])
-        order = np.argsort(comp, kind="mergesort")
-        g = 0
-        while g < len(order):
-            h = g
-            while h < len(order) and comp[order[h]] == comp[order[g]]:
-                h += 1
-            idx = s + order[g:h]
-            if h - g == 1:  # one allowed pair alone: always taken (cost - big < 0)
-                keep[idx[0]] = True
-            else:
-                _solve_component(np.unique(li[idx]), np.unique(lj[idx]), li[idx], lj[idx], cost[idx], big, keep, idx)
-            g = h
+            start[_find(parent, li[k]) + 1] += 1
+        for r in range(na + nb):
+            start[r + 1] += start[r]
+        fill, order = np.empty(na + nb, dtype=np.int64), np.empty(e - s, dtype=np.int64)
+        for r in range(na + nb):
+            fill[r] = start[r]
+        for k in range(s, e):
+            r = _find(parent, li[k])
+            order[fill[r]] = k
+            fill[r] += 1
+        row_at, col_at = np.empty(na, dtype=np.int64), np.empty(nb, dtype=np.int64)
+        for r in range(max(na, nb)):
+            if r < na:
+                row_at[r] = -1
+            if r < nb:
+                col_at[r] = -1
+        for r in range(na + nb):
+            m = start[r + 1] - start[r]
+            if m == 1:  # one allowed pair alone: always taken (its cost - big < 0)
+                keep[order[start[r]]] = True
+            elif m > 1:
+                _solve_component(order[start[r] : start[r + 1]], li, lj, cost, big, row_at, col_at, keep)
     return keep
