@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _popcount(x: np.int64) -> int:
     """Number of set bits of a non-negative 64-bit integer."""
     x = x - ((x >> 1) & 0x5555555555555555)
@@ -22,7 +22,7 @@ def _popcount(x: np.int64) -> int:
     return int((x * 0x0101010101010101) >> 56) & 0xFF
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _masks(var: np.ndarray) -> np.ndarray:
     """Bit masks of the usable joints (var > 0) of every detection, 62 joints per word: (N, J) -> (N, W) int64."""
     N, J = var.shape
@@ -34,7 +34,7 @@ def _masks(var: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
     """Epipolar lines F x (or F^T x) of every joint: uv (N, J, 2) -> (N, J, 3)."""
     N, J = uv.shape[0], uv.shape[1]
@@ -50,7 +50,7 @@ def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _view_pair(
     uv, var, masks, has_p, p, cov, floor2, F, sa, na, sb, nb, limits, min_dof, cap, scale2, q, ints, floats, n
 ):
@@ -108,7 +108,7 @@ def _view_pair(
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pairs_chi2(
     uv,
     var,
@@ -168,7 +168,7 @@ def pairs_chi2(
     return n, nr, len(view_pairs)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _mutual_best_ratios(ints, floats, first, n, sa, sb, na, nb, scale2, medians, evidence_per_dof, ratios, nr):
     """Append body chi^2 / medians[body dof] of the mutual best partners among the rows first:n (one view pair,
     sorted by i, then j) to ratios from nr (room for min(na, nb) more): -> the new nr."""
@@ -195,7 +195,7 @@ def _mutual_best_ratios(ints, floats, first, n, sa, sb, na, nb, scale2, medians,
     return nr
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _find(parent: np.ndarray, i: int) -> int:
     """Root of i, with path halving."""
     while parent[i] != i:
@@ -204,7 +204,7 @@ def _find(parent: np.ndarray, i: int) -> int:
     return i
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _adjacency(links: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Symmetric adjacency of n nodes from (L, 2) links, by counting sort: indptr (n + 1,), partners (2 L,)."""
     indptr = np.zeros(n + 1, dtype=np.int64)
@@ -223,7 +223,7 @@ def _adjacency(links: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return indptr, partners
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def merge_linked(
     ga: np.ndarray, gb: np.ndarray, view_of: np.ndarray, links: np.ndarray, has_feet: np.ndarray, var: np.ndarray
 ) -> np.ndarray:

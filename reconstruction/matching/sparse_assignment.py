@@ -16,7 +16,7 @@ from numba import njit
 from reconstruction.matching.evidence_kernels import _find
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def lsap(cost: np.ndarray) -> np.ndarray:
     """Minimum-cost assignment of a finite (nr, nc) matrix, nr <= nc: column of every row (nr,).
 
@@ -76,7 +76,7 @@ def lsap(cost: np.ndarray) -> np.ndarray:
     return col4row
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
     """Assign one component, its entries ks (ascending, so rows ascending): -> keep[ks] of the assignment.
     row_at, col_at: scratch (na,), (nb,) of -1, left as found."""
@@ -117,7 +117,7 @@ def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
         row_at[li[k]], col_at[lj[k]] = -1, -1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj: np.ndarray, cost: np.ndarray):
     """Gated assignment of view pairs given by their allowed entries -> accepted (E,) bool.
 
