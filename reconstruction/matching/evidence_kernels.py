@@ -172,8 +172,12 @@ def pairs_chi2(
 def _mutual_best_ratios(ints, floats, first, n, sa, sb, na, nb, scale2, medians, evidence_per_dof, ratios, nr):
     """Append body chi^2 / medians[body dof] of the mutual best partners among the rows first:n (one view pair,
     sorted by i, then j) to ratios from nr (room for min(na, nb) more): -> the new nr."""
-    best_row_cost, best_row = np.full(na, np.inf), np.full(na, -1)
-    best_col_cost, best_col = np.full(nb, np.inf), np.full(nb, -1)
+    best_row_cost, best_row = np.empty(na), np.empty(na, dtype=np.int64)
+    best_col_cost, best_col = np.empty(nb), np.empty(nb, dtype=np.int64)
+    for i in range(na):
+        best_row_cost[i], best_row[i] = np.inf, -1
+    for j in range(nb):
+        best_col_cost[j], best_col[j] = np.inf, -1
     for k in range(first, n):
         f0 = floats[k, 1] if np.isfinite(floats[k, 1]) else 0.0
         body = (floats[k, 0] - f0) * scale2
@@ -237,12 +241,10 @@ def merge_linked(
     masks = _masks(var)
     n = len(view_of)
     indptr, partners = _adjacency(links, n)
-    parent = np.arange(n)
-    views = np.zeros(n, dtype=np.int64)
-    nxt = np.full(n, -1)
-    tail = np.arange(n)
-    size = np.ones(n, dtype=np.int64)
+    parent, tail = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    views, nxt, size = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
     for i in range(n):
+        parent[i], tail[i], nxt[i], size[i] = i, i, -1, 1
         views[i] = np.int64(1) << view_of[i]
     for k in range(len(ga)):
         a, b = _find(parent, ga[k]), _find(parent, gb[k])

@@ -23,12 +23,14 @@ def lsap(cost: np.ndarray) -> np.ndarray:
     The shortest augmenting path algorithm of scipy's ``linear_sum_assignment`` (Crouse 2016), step for step.
     """
     nr, nc = cost.shape
-    u, v = np.zeros(nr), np.zeros(nc)
-    spc = np.empty(nc)
-    path = np.full(nc, -1)
-    col4row, row4col = np.full(nr, -1), np.full(nc, -1)
-    SR, SC = np.zeros(nr, dtype=np.bool_), np.zeros(nc, dtype=np.bool_)
+    u, v, spc = np.empty(nr), np.empty(nc), np.empty(nc)
+    path, col4row, row4col = np.empty(nc, dtype=np.int64), np.empty(nr, dtype=np.int64), np.empty(nc, dtype=np.int64)
+    SR, SC = np.empty(nr, dtype=np.bool_), np.empty(nc, dtype=np.bool_)
     remaining = np.empty(nc, dtype=np.int64)
+    for i in range(nr):
+        u[i], col4row[i] = 0.0, -1
+    for j in range(nc):
+        v[j], path[j], row4col[j] = 0.0, -1, -1
     for cur in range(nr):
         # the shortest augmenting path from row cur (scipy's augmenting_path)
         min_val, num_remaining, i, sink = 0.0, nc, cur, -1
@@ -133,7 +135,9 @@ def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj
         for k in range(s, e):
             largest = max(largest, abs(cost[k]))
         big = (min(na, nb) + 1) * largest + 1.0
-        parent = np.arange(na + nb)
+        parent = np.empty(na + nb, dtype=np.int64)
+        for r in range(na + nb):
+            parent[r] = r
         for k in range(s, e):
             a, b = _find(parent, li[k]), _find(parent, na + lj[k])
             if a != b:
