@@ -1,5 +1,7 @@
 """The default matcher: calibrated chi-square gate on feet + body evidence, complete-linkage merging."""
 
+import hashlib
+
 import numpy as np
 import pytest
 
@@ -11,7 +13,7 @@ from evaluation.correspondence import CorrespondenceCounts, correspondence_count
 from reconstruction.matching import EvidenceMatcher
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence import gate_limits, merge_complete
-from reconstruction.matching.evidence_kernels import pair_chi2
+from reconstruction.matching.evidence_kernels import pairs_chi2
 from reconstruction.pipeline import MultiViewPipeline
 from reconstruction.solver.map_solver import MLEMAPReconstruction
 
@@ -68,6 +70,30 @@ def test_a_pair_with_only_feet_is_matched():
     assert c.precision == 1.0 and c.recall == 1.0
 
 
+def _two_views(uv_a, var_a, uv_b, var_b, F, feet_dx=None):
+    """pairs_chi2's stacked inputs for two views (no feet, or feet midpoints feet_dx apart, unit covariance)."""
+    na, nb = len(uv_a), len(uv_b)
+    Fs = np.zeros((2, 2, 3, 3))
+    Fs[0, 1] = F
+    p = np.zeros((na + nb, 2))
+    if feet_dx is not None:
+        p[:na, 0] = feet_dx
+    has_p = np.full(na + nb, feet_dx is not None)
+    uv, var = np.concatenate([uv_a, uv_b]), np.concatenate([var_a, var_b])
+    return uv, var, np.array([0, na, na + nb]), has_p, p, np.zeros((na + nb, 2, 2)), 1.0, Fs, np.array([[0, 1]])
+
+
+def _chi2(stacked, limits, min_dof=1, cap=1e9):
+    """Detection pairs (i, j local) that pass, their chi^2 and dof, for two views."""
+    room = int(np.prod(np.diff(stacked[2])))
+    out = (np.empty((room, 4), np.int64), np.empty((room, 2)), np.empty(0), 0, 0)
+    fixed = (limits, min_dof, cap, 1.0, np.ones(len(limits)), 2.0, 0)
+    n, _, done = pairs_chi2(*stacked[:-1], stacked[-1], 0, *fixed, *out)
+    ints, floats = out[0][:n], out[1][:n]
+    assert done == 1 and np.all(ints[:, 0] == 0)
+    return ints[:, 1], ints[:, 2] - stacked[2][1], floats[:, 0], ints[:, 3]
+
+
 def test_the_gate_rejects_true_pairs_at_its_nominal_rate_whatever_the_degrees_of_freedom():
     # noise drawn exactly as the model says (2 px per coordinate): D^2 of a true pair is chi^2(common joints)
     rig = ring_rig(2, 6.0, 2.5)
@@ -78,15 +104,12 @@ def test_the_gate_rejects_true_pairs_at_its_nominal_rate_whatever_the_degrees_of
         X = rng.uniform([-1, -1, 0.2], [1, 1, 1.8], (400, joints, 3))
         uv = [rig[v].project(X) + rng.normal(0, 2.0, X.shape[:2] + (2,)) for v in (0, 1)]
         var = np.full((400, joints), 4.0)
-        out, dof = np.empty((400, 400)), np.empty((400, 400), dtype=np.int64)
-        pair_chi2(
-            uv[0], var, uv[1], var, F, np.full((400, 400), np.nan), gate_limits(rate, joints), 1, 1e9, 1.0, out, dof
-        )
-        rejected = np.mean(~np.isfinite(np.diag(out)))
+        i, j, chi2, dof = _chi2(_two_views(uv[0], var, uv[1], var, F), gate_limits(rate, joints))
+        same = i == j
+        rejected = 1 - np.sum(same) / 400
         assert abs(rejected - rate) < 3 * np.sqrt(rate * (1 - rate) / 400), (joints, rejected)
-        assert np.all(np.diag(dof)[np.isfinite(np.diag(out))] == joints)
-        unrelated = out[~np.eye(400, dtype=bool)]  # the joints of another random person
-        assert np.mean(np.isfinite(unrelated)) < 0.02
+        assert np.all(dof[same] == joints) and np.all(np.isfinite(chi2))
+        assert np.sum(~same) / (400 * 399) < 0.02  # the joints of another random person
 
 
 def test_the_chi_square_is_the_sum_of_sampson_distances_and_the_feet_term():
@@ -95,25 +118,55 @@ def test_the_chi_square_is_the_sum_of_sampson_distances_and_the_feet_term():
     X = np.array([[[0.1, 0.2, 1.0], [0.3, -0.2, 1.5], [-0.4, 0.0, 0.5]]])
     a, b = rig[0].project(X), rig[1].project(X) + np.array([3.0, -2.0])
     var = np.array([[4.0, 9.0, 1.0]])
-    out, dof = np.empty((1, 1)), np.empty((1, 1), dtype=np.int64)
-    pair_chi2(a, var, b, var, F, np.array([[2.5]]), gate_limits(1e-9, 5), 1, 1e9, 1.0, out, dof)
+    # feet midpoints sqrt(2.5) m apart, covariance 0 + floor 1: a feet term of 2.5
+    _, _, chi2, dof = _chi2(_two_views(a, var, b, var, F, np.sqrt(2.5)), gate_limits(1e-9, 5))
     ha, hb = np.c_[a[0], np.ones(3)], np.c_[b[0], np.ones(3)]
     la, lb = ha @ F.T, hb @ F
     e = np.sum(hb * la, axis=1)
     sampson = e**2 / (var[0] * (la[:, 0] ** 2 + la[:, 1] ** 2) + var[0] * (lb[:, 0] ** 2 + lb[:, 1] ** 2))
-    assert dof[0, 0] == 5
-    np.testing.assert_allclose(out[0, 0], 2.5 + sampson.sum())
+    assert dof[0] == 5
+    np.testing.assert_allclose(chi2[0], 2.5 + sampson.sum())
+
+
+def test_the_sparse_chi_square_equals_a_dense_reference():
+    # random views: every pair's chi^2 (full sum, in joint order) where it passes, as a dense numpy computation
+    rng = np.random.default_rng(4)
+    rig = ring_rig(2, 6.0, 2.5)
+    F = fundamental_matrix(rig[0], rig[1])
+    X = rng.uniform([-1, -1, 0.2], [1, 1, 1.8], (30, 6, 3))
+    uv = [rig[v].project(X[rng.permutation(30)[: 20 + 5 * v]]) + rng.normal(0, 3.0, (20 + 5 * v, 6, 2)) for v in (0, 1)]
+    var = [np.where(rng.random((len(u), 6)) < 0.3, 0.0, 4.0) for u in uv]
+    uv = [np.where(v[..., None] > 0, u, 0.0) for u, v in zip(uv, var)]
+    limits, cap = gate_limits(1e-2, 6), 30.0
+    i, j, chi2, dof = _chi2(_two_views(uv[0], var[0], uv[1], var[1], F), limits, 2, cap)
+    ha = np.concatenate([uv[0], np.ones((20, 6, 1))], -1)
+    hb = np.concatenate([uv[1], np.ones((25, 6, 1))], -1)
+    la, lb = ha @ F.T, hb @ F  # (Na, J, 3), (Nb, J, 3)
+    both = (var[0][:, None] > 0) & (var[1][None] > 0)
+    e = np.einsum("bjr,ajr->abj", hb, la)
+    denom = var[1][None] * (la[:, None, :, 0] ** 2 + la[:, None, :, 1] ** 2) + var[0][:, None] * (
+        lb[None, :, :, 0] ** 2 + lb[None, :, :, 1] ** 2
+    )
+    terms = np.where(both, np.minimum(e**2 / np.where(both, denom, 1.0), cap), 0.0)
+    d2, n = terms.sum(-1), both.sum(-1)
+    passes = (n >= 2) & (d2 <= limits[n])
+    np.testing.assert_array_equal(np.argwhere(passes), np.c_[i, j])
+    np.testing.assert_allclose(chi2, d2[passes], rtol=1e-12)
+    np.testing.assert_array_equal(dof, n[passes])
 
 
 def test_complete_linkage_never_joins_persons_whose_cross_pair_disagrees():
     # edges a0-b0 and b0-c0 pass, a0-c0 does not: c0 stays out; counts 1 per view
     edges = np.array([[0, 0, 1, 0, -5.0], [1, 0, 2, 0, -4.0]])
-    linked = np.zeros((3, 3), dtype=bool)
-    linked[0, 1] = linked[1, 0] = linked[1, 2] = linked[2, 1] = True
+    linked = np.array([[0, 1], [2, 1]])
     out = merge_complete(edges, linked, [1, 1, 1], 2)
     np.testing.assert_array_equal(out, [[0, 0, -1]])
-    linked[0, 2] = linked[2, 0] = True
-    np.testing.assert_array_equal(merge_complete(edges, linked, [1, 1, 1], 2), [[0, 0, 0]])
+    np.testing.assert_array_equal(merge_complete(edges, np.r_[linked, [[0, 2]]], [1, 1, 1], 2), [[0, 0, 0]])
+    # a0 and c0 share no evidence (no feet, no joint seen by both): nothing to test, so they may join
+    has_feet, var = np.array([True, True, False]), np.array([[1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    np.testing.assert_array_equal(merge_complete(edges, linked, [1, 1, 1], 2, (has_feet, var)), [[0, 0, 0]])
+    var[2, 0] = 1.0
+    np.testing.assert_array_equal(merge_complete(edges, linked, [1, 1, 1], 2, (has_feet, var)), [[0, 0, -1]])
 
 
 def test_precise_in_a_dense_crowd_where_the_paper_matcher_merges_wrongly():
@@ -125,6 +178,20 @@ def test_precise_in_a_dense_crowd_where_the_paper_matcher_merges_wrongly():
     for frame in seq.frames:
         total = total + _counts(matcher(frame.views, seq.rig), frame.views)
     assert total.precision > 0.98 and total.recall > 0.7
+
+
+def test_the_assignments_are_those_of_the_dense_implementation():
+    # sha256 of the (P, V) int64 assignments of both frames, as the dense per-view-pair implementation (commit
+    # df9a567, before the sparse kernels) gave them: same persons, same order, same unmatched counts
+    seq = generate_sequence(
+        SyntheticConfig(seed=1, num_frames=2, num_persons=80, area=(-4.5, 4.5, -4.5, 4.5), num_cameras=5, noise_px=2.0)
+    )
+    matcher, digest = EvidenceMatcher(), hashlib.sha256()
+    for frame in seq.frames:
+        digest.update(np.ascontiguousarray(matcher(frame.views, seq.rig), dtype=np.int64).tobytes())
+    assert digest.hexdigest()[:16] == "1136323799c2132a"
+    assert matcher.unmatched_reasons == {"no_counterpart": 8, "too_little_evidence": 1}
+    assert matcher.last_noise_scale == pytest.approx(0.45891882886317503, rel=1e-12)
 
 
 def test_bad_detections_are_reported_as_unmatched_by_reason_not_a_crash():

@@ -9,7 +9,7 @@ from data.geometry.camera import Camera, apply_homography
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
 from reconstruction.matching import FeetMatcher
-from reconstruction.matching.feet import NO_COUNTERPART, NO_FOOT_JOINTS, pair_homography
+from reconstruction.matching.feet import NO_COUNTERPART, NO_FOOT_JOINTS, feet_features, pair_homography
 from tests.test_feet_matching import crowd, matched_id_sets, person, ring_rig, scene
 
 DIST = (-0.25, 0.05, 0.001, -0.001, 0.0)
@@ -104,3 +104,17 @@ def test_person_with_hidden_feet_in_one_view_is_matched_through_the_other_views(
     assert frozenset((v, 0) for v in (0, 1, 3)) in found
     assert found == {frozenset((v, 0) for v in (0, 1, 3))} | {frozenset((v, i) for v in range(4)) for i in (1, 2, 3)}
     assert matcher.last_unmatched_reasons == {NO_FOOT_JOINTS: 1}
+
+
+def test_the_features_of_all_views_at_once_are_those_of_each_view():
+    # FeetMatcher.features computes every view in one pass (views_feet_features): the same, bit for bit
+    from data.synthetic import SyntheticConfig, generate_sequence
+
+    seq = generate_sequence(SyntheticConfig(seed=3, num_frames=1, num_persons=12, num_cameras=4, noise_px=2.0))
+    views = list(seq.frames[0].views)
+    views[2] = ViewDetections(views[2].keypoints[:0], views[2].bboxes[:0], views[2].scores[:0], views[2].person_ids[:0])
+    m = FeetMatcher(pixel_sigma=4.0, sigma_score_power=0.5)
+    for got, v, cam in zip(m.features(views, seq.rig), views, seq.rig):
+        ref = feet_features(v.keypoints, cam, m.foot_rule, m.min_score, True, 4.0, m.ankle_height_m, 0.0, 0.5)
+        for name in ("left", "right", "p", "v", "cov", "has_p", "has_stride", "reason"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)

@@ -18,7 +18,9 @@ def assignment_from_labels(labels: list[np.ndarray], min_views: int = 2) -> np.n
         for det, person in enumerate(lab):
             if person < 0:
                 continue
-            row = people.setdefault(int(person), np.full(V, -1, dtype=np.int64))
+            row = people.get(int(person))
+            if row is None:  # not setdefault: that would build a row for every detection
+                row = people[int(person)] = np.full(V, -1, dtype=np.int64)
             if row[v] >= 0:
                 raise ValueError(f"label {person} occurs twice in view {v} (detections {row[v]} and {det})")
             row[v] = det

@@ -25,13 +25,17 @@ seen in 10 views has 45 pairs, a few of which fail the edge test by chance) and 
 so a cluster whose members disagree is never formed: a detection is left unmatched rather than merged
 wrongly.
 
-The body term is computed in compiled loops (:mod:`.evidence_kernels`) that stop as soon as a pair
-fails (the feet term first), so the unrelated pairs of a crowd cost a joint or two each.
+The evidence is computed for all view pairs of a frame in compiled loops (:mod:`.evidence_kernels`) that
+stop as soon as a pair fails (the feet term first), so the unrelated pairs of a crowd cost a joint or two
+each, and only the pairs that pass are kept (a crowd has about one per detection and view, not N_a x N_b).
+Each view pair's assignment is solved one connected component of allowed pairs at a time
+(:mod:`.sparse_assignment`, scipy's solver step for step), and the merge reads the links as adjacency lists.
 """
 
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import dataclass
 from functools import lru_cache
 from itertools import combinations
 
@@ -42,10 +46,10 @@ from data.geometry.camera import Rig
 from data.multiview import ViewDetections
 from reconstruction.compile_notice import compile_notice
 from reconstruction.matching.epipolar import fundamental_matrix
-from reconstruction.matching.evidence_kernels import merge_linked, pair_chi2
+from reconstruction.matching.evidence_kernels import merge_linked, pairs_chi2
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
-from reconstruction.matching.feet_uncertainty import mahalanobis_distances
-from reconstruction.matching.merge import _as_edges, pair_edges, solve_pair
+from reconstruction.matching.merge import _as_edges
+from reconstruction.matching.sparse_assignment import solve_sparse_pairs
 from reconstruction.solver.map_estimation import joint_sigma
 from reconstruction.solver.person_prior import chi2_medians
 
@@ -69,26 +73,38 @@ def gate_limits(reject_rate: float, max_dof: int) -> np.ndarray:
 
 
 def joint_variances(
-    view: ViewDetections, camera, min_score: float, sigma_model: tuple[float, float, float, float]
+    views: list[ViewDetections], cameras: list, min_score: float, sigma_model: tuple[float, float, float, float], J: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Undistorted pixels (N, J, 2), pixel variances (N, J) (0 = unusable) and any-non-finite (N,) of a view;
-    sigma_model = (c, sigma_min, sigma_px, score_power) of :func:`joint_sigma`."""
-    kp = np.asarray(view.keypoints, dtype=np.float64)
+    """Undistorted pixels (N, J, 2), pixel variances (N, J) (0 = unusable) and any-non-finite (N,) of the
+    detections of V views stacked in view order (N in all); sigma_model = (c, sigma_min, sigma_px,
+    score_power) of :func:`joint_sigma`. Only the undistortion is done per view (camera)."""
+    kp = np.concatenate([np.asarray(v.keypoints, dtype=np.float64).reshape(-1, J, 3) for v in views])
+    boxes = np.concatenate([np.asarray(v.bboxes, dtype=np.float64).reshape(-1, 4) for v in views])
     finite = np.isfinite(kp).all(axis=-1)
     bad = ~finite.all(axis=-1)
     kp = np.where(finite[..., None], kp, 0.0)
     ok = finite & (kp[..., 2] >= min_score)
     kp = np.where(ok[..., None], kp, 0.0)
-    sigma = joint_sigma(kp, np.nan_to_num(view.bboxes, nan=0.0, posinf=0.0, neginf=0.0), *sigma_model)
+    sigma = joint_sigma(kp, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0), *sigma_model)
     var = np.where(ok & np.isfinite(sigma), sigma**2, 0.0)
-    uv = camera.undistort_points(kp[..., :2]) if len(kp) else kp[..., :2]
-    return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), var, bad
+    ends = np.cumsum([len(v) for v in views])
+    uv = [cam.undistort_points(kp[e - len(v) : e, :, :2]) for v, cam, e in zip(views, cameras, ends) if len(v)]
+    uv = np.concatenate(uv) if uv else kp[..., :2]
+    return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), np.ascontiguousarray(var), bad
 
 
-def merge_complete(edges: np.ndarray, linked: np.ndarray, num_detections: list[int], min_views: int) -> np.ndarray:
+def merge_complete(
+    edges: np.ndarray,
+    linked: np.ndarray,
+    num_detections: list[int],
+    min_views: int,
+    evidence: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Persons from edges (E, 5) (view_a, det_a, view_b, det_b, cost), cheapest first, joining two partial
-    persons only when every cross pair of their detections is ``linked`` ((N, N) bool over global indices,
-    views in order) and no view repeats: -> (P, V) detection index per view or -1, V <= 62."""
+    persons only when every cross pair of their detections is linked ((L, 2) pairs of global detection
+    indices, views in order; either order) and no view repeats: -> (P, V) detection index per view or -1,
+    V <= 62. With evidence = (has_feet (N,), joint variances (N, J)), a pair that shares no evidence (not
+    both feet, no joint usable in both) has nothing to test and counts as linked."""
     edges = _as_edges(edges)
     counts = np.asarray(num_detections, dtype=np.int64)
     if len(counts) > 62:
@@ -98,25 +114,26 @@ def merge_complete(edges: np.ndarray, linked: np.ndarray, num_detections: list[i
     ga = offsets[edges[:, 0].astype(np.int64)] + edges[:, 1].astype(np.int64)
     gb = offsets[edges[:, 2].astype(np.int64)] + edges[:, 3].astype(np.int64)
     order = np.lexsort((gb, ga, edges[:, 4]))
-    root = merge_linked(ga[order], gb[order], view_of, linked)
-    rows = []
-    for r in np.unique(root):
-        members = np.flatnonzero(root == r)
-        if len(members) >= min_views:
-            row = np.full(len(counts), -1, dtype=np.int64)
-            row[view_of[members]] = members - offsets[view_of[members]]
-            rows.append(row)
-    return np.stack(rows) if rows else np.zeros((0, len(counts)), dtype=np.int64)
+    has_feet, var = evidence if evidence is not None else (np.ones(offsets[-1], bool), np.ones((offsets[-1], 1)))
+    links = np.ascontiguousarray(np.asarray(linked, dtype=np.int64).reshape(-1, 2))
+    root = merge_linked(ga[order], gb[order], view_of, links, has_feet, np.ascontiguousarray(var, np.float64))
+    roots, person, size = np.unique(root, return_inverse=True, return_counts=True)
+    rows = np.full((len(roots), len(counts)), -1, dtype=np.int64)
+    rows[person, view_of] = np.arange(offsets[-1]) - offsets[view_of]
+    return rows[size >= min_views]
 
 
 @lru_cache(maxsize=1)
 def warm_up() -> None:
     """Compile the kernels (or load them from numba's cache) once per process, so a first frame is not timed
     with the compiler."""
-    uv, var = np.zeros((1, 2, 2)), np.ones((1, 2))
-    out, dof = np.empty((1, 1)), np.empty((1, 1), dtype=np.int64)
-    pair_chi2(uv, var, uv, var, np.eye(3), np.full((1, 1), np.nan), np.full(5, np.inf), 1, 9.0, 1.0, out, dof)
-    merge_linked(np.zeros(1, np.int64), np.ones(1, np.int64), np.arange(2, dtype=np.int64), np.ones((2, 2), bool))
+    uv, var, one = np.zeros((2, 2, 2)), np.ones((2, 2)), np.array([0, 1, 2])
+    p, cov = np.zeros((2, 2)), np.zeros((2, 2, 2))
+    F, pairs, limits = np.zeros((2, 2, 3, 3)), np.array([[0, 1]]), np.full(5, np.inf)
+    out = (np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty(1), 0, 0)
+    pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, 0, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1, *out)
+    solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
+    merge_linked(one[:1], one[1:2], one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
 
 
 class EvidenceMatcher:
@@ -183,124 +200,117 @@ class EvidenceMatcher:
             raise ValueError(f"need 1 <= link_scale <= max_noise_scale, got {link_scale}")
         self.link_scale = float(link_scale)
         self.last_noise_scale = 1.0
-        self._fundamentals: dict[tuple[int, int, int], tuple[Rig, np.ndarray]] = {}
+        self._fundamentals: dict[int, tuple[Rig, np.ndarray]] = {}
         with compile_notice("evidence matcher"):  # one line while numba compiles (first run)
             warm_up()
         self.feet = FeetMatcher(min_views=min_views, **{"pixel_sigma": 5.0, **(feet or {})})
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()
 
-    def _fundamental(self, rig: Rig, a: int, b: int) -> np.ndarray:
-        """F of a view pair of the rig, computed once per rig: (3, 3)."""
-        key = (id(rig), a, b)
+    def _fundamentals_of(self, rig: Rig) -> np.ndarray:
+        """F of every view pair (a, b) of the rig, x_b^T F[a, b] x_a = 0, computed once per rig: (V, V, 3, 3)."""
+        key = id(rig)
         if key not in self._fundamentals:
-            self._fundamentals[key] = (rig, fundamental_matrix(rig[a], rig[b]))  # keeps rig alive: id stays unique
+            F = np.zeros((len(rig), len(rig), 3, 3))
+            for a, b in combinations(range(len(rig)), 2):
+                F[a, b] = fundamental_matrix(rig[a], rig[b])
+            self._fundamentals[key] = (rig, F)  # keeps rig alive: its id stays unique
         return self._fundamentals[key][1]
 
-    def pair_evidence(self, views: list[ViewDetections], rig: Rig):
-        """The evidence function of one frame: (a, b[, scale2]) -> body chi^2 (N_a, N_b) in model units, dof
-        (N_a, N_b), feet term (N_a, N_b) (NaN where either has no feet); the body term is inf where
-        feet + body / scale2 fails the link test (default scale2: the loosest any calibration allows,
-        ``max_noise_scale`` ** 2, so that no later test needs a pair it dropped)."""
+    def frame_evidence(self, views: list[ViewDetections], rig: Rig) -> FrameEvidence:
+        """The frame's detections stacked over views and its detection pairs that pass the link test at the
+        frame's calibrated noise (:meth:`noise_scale2`)."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
-        feats = self.feet.features([_finite(v) for v in views], rig)
-        model = (self.c, self.sigma_min, self.sigma_px, self.score_power)
-        joints = [joint_variances(v, cam, self.min_score, model) for v, cam in zip(views, rig)]
+        feet = self.feet.stacked_features([_finite(v) for v in views], rig)
+        counts = np.array([len(v) for v in views], dtype=np.int64)
         J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
-        limits = gate_limits(self.reject_rate, J + 2)
-        loosest = self.max_noise_scale**2 if self.calibrate else 1.0
-        link2 = self.link_scale**2  # the widest test any later step applies (complete linkage)
-
-        def evidence(a: int, b: int, scale2: float = loosest) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            fa, fb = feats[a], feats[b]
-            feet = mahalanobis_distances(fa.p, fb.p, fa.cov, fb.cov, self.feet.ground_sigma_floor) ** 2
-            feet = np.where(fa.has_p[:, None] & fb.has_p[None, :], feet, np.nan)
-            out = np.empty((len(fa), len(fb)))
-            dof = np.empty((len(fa), len(fb)), dtype=np.int64)
-            pair_chi2(
-                joints[a][0],
-                joints[a][1],
-                joints[b][0],
-                joints[b][1],
-                self._fundamental(rig, a, b),
-                np.ascontiguousarray(feet),
-                limits * link2,
-                self.min_dof,
-                self.outlier_sd**2,
-                scale2,
-                out,
-                dof,
-            )
-            body = (out - np.where(np.isfinite(feet), feet, 0.0)) * scale2  # model units; inf = rejected
-            return body, dof, feet
-
-        return evidence, feats, joints
+        model = (self.c, self.sigma_min, self.sigma_px, self.score_power)
+        uv, var, bad = joint_variances(views, list(rig), self.min_score, model, J)
+        has_p = np.asarray(feet.has_p, dtype=bool)
+        stacked = (
+            uv,
+            var,
+            np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+            has_p,
+            np.ascontiguousarray(feet.p, dtype=np.float64),
+            np.ascontiguousarray(feet.cov, dtype=np.float64),
+            self.feet.ground_sigma_floor**2,
+            self._fundamentals_of(rig),
+        )
+        view_pairs = _view_pairs(counts)
+        pairs, scale2 = self._calibrated_pairs(stacked, view_pairs, J)
+        usable = has_p | ((var > 0).sum(axis=1) >= self.min_dof)
+        return FrameEvidence(counts, stacked[2], view_pairs, *pairs, scale2, has_p, var, usable, bad)
 
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
-        evidence, feats, joints = self.pair_evidence(views, rig)
-        counts = [len(v) for v in views]
-        pairs, scale2 = self._calibrated_pairs(evidence, counts)
-        self.last_noise_scale = float(np.sqrt(scale2))
-        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        ev = self.frame_evidence(views, rig)
+        self.last_noise_scale = float(np.sqrt(ev.scale2))
         limits = gate_limits(self.reject_rate, next((v.keypoints.shape[1] for v in views if len(v)), 23) + 2)
-        edges = [np.zeros((0, 5))]
-        linked = np.zeros((offsets[-1], offsets[-1]), dtype=bool)
-        for a, b, body, dof, feet in pairs:
-            d2 = calibrated(body, feet, scale2)
-            block = d2 <= limits[dof] * self.link_scale**2
-            linked[offsets[a] : offsets[a + 1], offsets[b] : offsets[b + 1]] = block
-            linked[offsets[b] : offsets[b + 1], offsets[a] : offsets[a + 1]] = block.T
-            ok = d2 <= limits[dof]
-            if not ok.any():
-                continue
-            cost = np.where(ok, 0.5 * d2 - self.evidence_per_dof * dof, np.inf)
-            rows, cols = solve_pair(cost)
-            edges.append(pair_edges(a, b, rows, cols, cost))
-        assignment = merge_complete(np.concatenate(edges), linked, counts, self.min_views)
-        usable = [f.has_p | ((var > 0).sum(axis=1) >= self.min_dof) for f, (_, var, _) in zip(feats, joints)]
-        self._count_reasons(assignment, usable, joints)
+        limits = limits[ev.dof]
+        ok = (ev.d2 <= limits) & np.isfinite(ev.d2)  # inf: a pair kept only as linked, not testable
+        linked = ev.d2 <= limits * self.link_scale**2
+        cost = 0.5 * ev.d2[ok] - self.evidence_per_dof * ev.dof[ok]
+        pair = ev.pair[ok]
+        va, vb = ev.view_pairs[pair, 0], ev.view_pairs[pair, 1]
+        da, db = ev.gi[ok] - ev.offsets[va], ev.gj[ok] - ev.offsets[vb]
+        starts = np.searchsorted(pair, np.arange(len(ev.view_pairs) + 1))
+        keep = solve_sparse_pairs(starts, ev.counts[ev.view_pairs], da, db, cost)
+        edges = np.column_stack([va[keep], da[keep], vb[keep], db[keep], cost[keep]])
+        links = np.column_stack([ev.gi[linked], ev.gj[linked]])
+        assignment = merge_complete(edges, links, ev.counts, self.min_views, (ev.has_feet, ev.var))
+        self._count_reasons(assignment, ev)
         return assignment
 
-    def _calibrated_pairs(self, evidence, counts: list[int]) -> tuple[list[tuple], float]:
-        """The evidence of every view pair (a, b, chi^2, dof, feet) and the squared noise scale of the frame.
+    def _calibrated_pairs(self, stacked: tuple, view_pairs: np.ndarray, J: int) -> tuple[list[np.ndarray], float]:
+        """[view pair (E,) (row of view_pairs), i, j (E,) global detection indices, D^2 (E,) at the calibrated
+        noise, dof (E,)] of the detection pairs that pass the link test, and the frame's squared noise scale.
 
         View pairs are taken, neighbours first, under the loosest test until the calibration has its sample
         (:meth:`noise_scale2`); the others are computed at the calibrated scale, so that their loops stop
         as soon as the link test fails.
         """
-        # neighbours first ((0, 1), (1, 2), ..., then (0, 2), ...): the sample covers every view early
-        view_pairs = sorted(
-            ((a, b) for a, b in combinations(range(len(counts)), 2) if counts[a] and counts[b]),
-            key=lambda ab: (ab[1] - ab[0], ab[0]),
-        )
-        pairs, ratios = [], []
+        sizes = np.diff(stacked[2])[view_pairs].reshape(-1, 2)
+        room = int(sizes.prod(axis=1).max(initial=0)) + 4 * len(stacked[1])
+        out = [
+            np.empty((room, 4), np.int64),
+            np.empty((room, 2)),
+            np.empty(int(sizes.min(axis=1).sum())),
+            0,
+            0,
+        ]
+        calibration = (chi2_medians(np.arange(J + 3)), self.evidence_per_dof)
+        loosest, scale2, done = self.max_noise_scale**2, 1.0, 0
         if self.calibrate:
-            for a, b in view_pairs:
-                pairs.append((a, b, *evidence(a, b)))
-                ratios += self.calibration_ratios(*pairs[-1][2:])
-                if len(ratios) >= CALIBRATION_SAMPLE:
-                    break
-        scale2 = self.noise_scale2(ratios) if self.calibrate else 1.0
-        pairs += [(a, b, *evidence(a, b, scale2)) for a, b in view_pairs[len(pairs) :]]
-        return pairs, scale2
+            done = self._run_pairs(stacked, view_pairs, 0, loosest, (*calibration, CALIBRATION_SAMPLE), out, sizes)
+            scale2 = self.noise_scale2(out[2][: out[4]])
+        first = out[3]  # rows computed at the loosest scale
+        self._run_pairs(stacked, view_pairs, done, scale2, (*calibration, 0), out, sizes)
+        ints, floats = out[0][: out[3]], out[1][: out[3]]
+        used = np.where(np.arange(len(ints)) < first, loosest, scale2)
+        feet = floats[:, 1]
+        body = (floats[:, 0] - np.where(np.isfinite(feet), feet, 0.0)) * used  # model units: the kernel's scale undone
+        return [ints[:, 0], ints[:, 1], ints[:, 2], calibrated(body, feet, scale2), ints[:, 3]], scale2
 
-    def calibration_ratios(self, body: np.ndarray, dof: np.ndarray, feet: np.ndarray) -> list[float]:
-        """Body chi^2 / median(chi^2(body dof)) of a view pair's mutual best partners under the loosest test."""
-        if not np.isfinite(body).any():
-            return []
-        loose = calibrated(body, feet, self.max_noise_scale**2)
-        cost = np.where(np.isfinite(loose), 0.5 * loose - self.evidence_per_dof * dof, np.inf)
-        best_b, best_a = np.argmin(cost, axis=1), np.argmin(cost, axis=0)
-        rows = np.flatnonzero(best_a[best_b] == np.arange(len(cost)))  # mutual best partners
-        rows = rows[np.isfinite(cost[rows, best_b[rows]])]
-        cols = best_b[rows]
-        body_dof = dof[rows, cols] - 2 * np.isfinite(feet[rows, cols])
-        return (body[rows, cols][body_dof > 0] / chi2_medians(body_dof[body_dof > 0])).tolist()
+    def _run_pairs(self, stacked, view_pairs, q0: int, scale2: float, calibration: tuple, out: list, sizes) -> int:
+        """:func:`pairs_chi2` from view pair q0 at scale2 into out = [ints, floats, ratios, n, nr], growing ints and
+        floats when a view pair needs the room: -> view pairs done."""
+        fixed = (gate_limits(self.reject_rate, stacked[1].shape[1] + 2) * self.link_scale**2, self.min_dof)
+        while True:
+            out[3], out[4], q0 = pairs_chi2(
+                *stacked, view_pairs, q0, *fixed, self.outlier_sd**2, scale2, *calibration, *out
+            )
+            if q0 == len(view_pairs) or (calibration[2] > 0 and out[4] >= calibration[2]):
+                return q0
+            grow = 2 * len(out[0]) + int(sizes[q0].prod())
+            out[0] = np.concatenate([out[0][: out[3]], np.empty((grow, 4), np.int64)])
+            out[1] = np.concatenate([out[1][: out[3]], np.empty((grow, 2))])
 
-    def noise_scale2(self, ratios: list[float]) -> float:
-        """The frame's 2D noise over the model, squared, from :meth:`calibration_ratios` (their median).
+    def noise_scale2(self, ratios: list[float] | np.ndarray) -> float:
+        """The frame's 2D noise over the model, squared, from the calibration ratios (their median): body chi^2 /
+        median(chi^2(body dof)) of each view pair's mutual best partners under the loosest test (computed by
+        :func:`~reconstruction.matching.evidence_kernels.pairs_chi2`).
 
         The mutual best partners under the test widened by ``max_noise_scale`` are mostly true pairs, so
         the median of their body chi^2 / median(chi^2(body dof)) estimates the squared scale robustly.
@@ -310,18 +320,53 @@ class EvidenceMatcher:
             return 1.0
         return float(np.clip(np.median(ratios), self.max_noise_scale**-2, self.max_noise_scale**2))
 
-    def _count_reasons(self, assignment: np.ndarray, usable: list[np.ndarray], joints: list) -> None:
+    def _count_reasons(self, assignment: np.ndarray, ev: FrameEvidence) -> None:
         """Unmatched detections by reason: too little evidence (with NaN keypoints, or not) or no counterpart."""
+        placed = np.zeros(len(ev.usable), dtype=bool)
+        views = np.broadcast_to(np.arange(assignment.shape[1]), assignment.shape)
+        have = assignment >= 0
+        placed[ev.offsets[views[have]] + assignment[have]] = True
         reasons: Counter[str] = Counter()
-        for v, ok in enumerate(usable):
-            placed = np.zeros(len(ok), dtype=bool)
-            placed[assignment[:, v][assignment[:, v] >= 0]] = True
-            bad = joints[v][2]
-            reasons[NON_FINITE_KEYPOINTS] += int(np.sum(~placed & ~ok & bad))
-            reasons[TOO_LITTLE_EVIDENCE] += int(np.sum(~placed & ~ok & ~bad))
-            reasons[NO_COUNTERPART] += int(np.sum(~placed & ok))
+        reasons[NON_FINITE_KEYPOINTS] = int(np.sum(~placed & ~ev.usable & ev.bad))
+        reasons[TOO_LITTLE_EVIDENCE] = int(np.sum(~placed & ~ev.usable & ~ev.bad))
+        reasons[NO_COUNTERPART] = int(np.sum(~placed & ev.usable))
         self.last_unmatched_reasons = +reasons
         self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
+
+
+def _view_pairs(counts: np.ndarray) -> np.ndarray:
+    """The view pairs (a < b) where both views have detections, neighbours first ((0, 1), (1, 2), ..., then
+    (0, 2), ...: the calibration sample covers every view early): (K, 2) int64."""
+    pairs = sorted(
+        ((a, b) for a, b in combinations(range(len(counts)), 2) if counts[a] and counts[b]),
+        key=lambda ab: (ab[1] - ab[0], ab[0]),
+    )
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
+@dataclass(frozen=True)
+class FrameEvidence:
+    """A frame's detections, stacked over its V views (N in all), and its detection pairs that pass the link test.
+
+    counts (V,), offsets (V + 1,) (view v: offsets[v]:offsets[v + 1]); view_pairs (K, 2); per detection pair:
+    pair (E,) its row of view_pairs, gi, gj (E,) global indices, d2 (E,) chi^2 at the calibrated noise (scale2,
+    squared), dof (E,); per detection: has_feet (N,), var (N, J) joint pixel variances (0: not usable), usable
+    (N,) (feet or >= min_dof joints), bad (N,) (non-finite keypoints).
+    """
+
+    counts: np.ndarray
+    offsets: np.ndarray
+    view_pairs: np.ndarray
+    pair: np.ndarray
+    gi: np.ndarray
+    gj: np.ndarray
+    d2: np.ndarray
+    dof: np.ndarray
+    scale2: float
+    has_feet: np.ndarray
+    var: np.ndarray
+    usable: np.ndarray
+    bad: np.ndarray
 
 
 def _finite(view: ViewDetections) -> ViewDetections:

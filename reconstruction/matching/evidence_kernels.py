@@ -1,8 +1,10 @@
-"""Compiled loop of the evidence matcher: the chi-square of every detection pair of a view pair.
+"""Compiled loops of the evidence matcher: the chi-square of every detection pair of the view pairs of a
+frame, and the complete-linkage merge.
 
 Each pair's body evidence is a sum over the joints both detections see of the Sampson distance to the
 epipolar geometry, added to the feet term; the loop stops as soon as a pair cannot pass its gate any
-more, so unrelated pairs (most of a crowd's) cost one or two joints each.
+more, so unrelated pairs (most of a crowd's) cost one or two joints each, and only the pairs that pass
+are returned (a crowd's view pair has ~1 per detection, not Na x Nb).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy")
 def _popcount(x: np.int64) -> int:
     """Number of set bits of a non-negative 64-bit integer."""
     x = x - ((x >> 1) & 0x5555555555555555)
@@ -20,7 +22,7 @@ def _popcount(x: np.int64) -> int:
     return int((x * 0x0101010101010101) >> 56) & 0xFF
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _masks(var: np.ndarray) -> np.ndarray:
     """Bit masks of the usable joints (var > 0) of every detection, 62 joints per word: (N, J) -> (N, W) int64."""
     N, J = var.shape
@@ -32,83 +34,172 @@ def _masks(var: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
-def pair_chi2(
-    uv_a: np.ndarray,
-    var_a: np.ndarray,
-    uv_b: np.ndarray,
-    var_b: np.ndarray,
-    F: np.ndarray,
-    feet_d2: np.ndarray,
-    limits: np.ndarray,
-    min_dof: int,
-    cap: float,
-    body_scale2: float,
-    chi2_out: np.ndarray,
-    dof_out: np.ndarray,
-) -> None:
-    """Chi-square feet + body / body_scale2 and degrees of freedom of every pair (i, j); inf where rejected.
+@njit(cache=True, error_model="numpy")
+def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
+    """Epipolar lines F x (or F^T x) of every joint: uv (N, J, 2) -> (N, J, 3)."""
+    N, J = uv.shape[0], uv.shape[1]
+    out = np.empty((N, J, 3))
+    for i in range(N):
+        for k in range(J):
+            x, y = uv[i, k, 0], uv[i, k, 1]
+            for r in range(3):
+                if transpose:
+                    out[i, k, r] = F[0, r] * x + F[1, r] * y + F[2, r]
+                else:
+                    out[i, k, r] = F[r, 0] * x + F[r, 1] * y + F[r, 2]
+    return out
 
-    uv_a (Na, J, 2) undistorted pixels, var_a (Na, J) pixel variances (0 = joint not usable), the same for
-    b; F (3, 3) with x_b^T F x_a = 0; feet_d2 (Na, Nb) squared Mahalanobis feet distance (2 dof), NaN where
-    either detection has no feet; limits (D + 1,) the gate chi^2 quantile per dof; cap: the most one joint
-    adds (an outlying joint, e.g. a left / right swap, counts as a bad joint, not as a wrong person);
-    body_scale2: the squared noise scale the body terms are divided by (the feet term keeps its own model).
-    """
-    Na, J = var_a.shape
-    Nb = var_b.shape[0]
-    la = np.empty((Na, J, 3))  # epipolar lines of a's joints in view b
-    for i in range(Na):
-        for k in range(J):
-            x, y = uv_a[i, k, 0], uv_a[i, k, 1]
-            for r in range(3):
-                la[i, k, r] = F[r, 0] * x + F[r, 1] * y + F[r, 2]
-    lb = np.empty((Nb, J, 3))  # lines of b's joints in view a: F^T x_b
-    for j in range(Nb):
-        for k in range(J):
-            x, y = uv_b[j, k, 0], uv_b[j, k, 1]
-            for r in range(3):
-                lb[j, k, r] = F[0, r] * x + F[1, r] * y + F[2, r]
-    mask_a, mask_b = _masks(var_a), _masks(var_b)
-    for i in range(Na):
-        for j in range(Nb):
-            feet = feet_d2[i, j]
+
+@njit(cache=True, error_model="numpy")
+def _view_pair(
+    uv, var, masks, has_p, p, cov, floor2, F, sa, na, sb, nb, limits, min_dof, cap, scale2, q, ints, floats, n
+):
+    """Append the detection pairs of views a (detections sa:sa + na) and b (sb:sb + nb) that pass to ints
+    (view pair q, i, j, dof) and floats (chi^2, feet) from row n (see pairs_chi2): -> the new n. One loop, no
+    calls per pair: numba's reference counting of array arguments would cost more than an unrelated pair."""
+    J = var.shape[1]
+    la, lb = _lines(uv[sa : sa + na], F, False), _lines(uv[sb : sb + nb], F, True)
+    far = limits[2 + J] * (1.0 + 1e-9)  # above it, rounding cannot bring the feet term back under the limit
+    for ai in range(na):
+        i = sa + ai
+        for bj in range(nb):
+            j = sb + bj
+            f = np.nan
+            if has_p[i] and has_p[j]:
+                # the operations and order of feet_uncertainty.mahalanobis_distances, squared
+                dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
+                a = cov[i, 0, 0] + cov[j, 0, 0] + floor2
+                c = cov[i, 1, 1] + cov[j, 1, 1] + floor2
+                b = 0.5 * (cov[i, 0, 1] + cov[i, 1, 0] + cov[j, 0, 1] + cov[j, 1, 0])
+                num, den = c * dx * dx - 2 * b * dx * dy + a * dy * dy, a * c - b * b
+                if den > 0.0 and num > far * den:  # fails the feet test below: skip the division and root
+                    continue
+                f = np.sqrt(max(num / den, 0.0)) ** 2
             dof = 0
             d2 = 0.0
-            if not np.isnan(feet):
+            if not np.isnan(f):
                 dof = 2
-                d2 = feet
+                d2 = f
                 if d2 > limits[2 + J]:  # the cheap test: no body evidence can save these feet
-                    chi2_out[i, j] = np.inf
-                    dof_out[i, j] = 2
                     continue
-            common = 0
-            for w in range(mask_a.shape[1]):
-                common += _popcount(mask_a[i, w] & mask_b[j, w])
-            possible = dof + common
+            possible = dof
+            for w in range(masks.shape[1]):
+                possible += _popcount(masks[i, w] & masks[j, w])
             if possible < min_dof or d2 > limits[possible]:
-                chi2_out[i, j] = np.inf
-                dof_out[i, j] = possible
                 continue
             for k in range(J):
-                if var_a[i, k] > 0.0 and var_b[j, k] > 0.0:
-                    l0, l1, l2 = la[i, k, 0], la[i, k, 1], la[i, k, 2]
-                    e = uv_b[j, k, 0] * l0 + uv_b[j, k, 1] * l1 + l2
-                    m0, m1 = lb[j, k, 0], lb[j, k, 1]
-                    denom = var_b[j, k] * (l0 * l0 + l1 * l1) + var_a[i, k] * (m0 * m0 + m1 * m1)
+                if var[i, k] > 0.0 and var[j, k] > 0.0:
+                    l0, l1, l2 = la[ai, k, 0], la[ai, k, 1], la[ai, k, 2]
+                    e = uv[j, k, 0] * l0 + uv[j, k, 1] * l1 + l2
+                    m0, m1 = lb[bj, k, 0], lb[bj, k, 1]
+                    denom = var[j, k] * (l0 * l0 + l1 * l1) + var[i, k] * (m0 * m0 + m1 * m1)
                     if denom > 0.0:
-                        d2 += min(e * e / denom, cap) / body_scale2
+                        d2 += min(e * e / denom, cap) / scale2
                         dof += 1
                         if d2 > limits[possible]:
                             break
-            if dof < min_dof or d2 > limits[dof]:
-                chi2_out[i, j] = np.inf
-            else:
-                chi2_out[i, j] = d2
-            dof_out[i, j] = dof
+            if dof == 0:  # joints in common but no usable line: nothing tested (kept as inf, linked; merge_linked)
+                d2 = np.inf
+            elif dof < min_dof or d2 > limits[dof]:
+                continue
+            ints[n, 0], ints[n, 1], ints[n, 2], ints[n, 3] = q, i, j, dof
+            floats[n, 0], floats[n, 1] = d2, f
+            n += 1
+    return n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
+def pairs_chi2(
+    uv,
+    var,
+    offsets,
+    has_p,
+    p,
+    cov,
+    floor2,
+    fundamentals,
+    view_pairs,
+    q0,
+    limits,
+    min_dof,
+    cap,
+    scale2,
+    medians,
+    evidence_per_dof,
+    sample,
+    ints,
+    floats,
+    ratios,
+    n,
+    nr,
+):
+    """The detection pairs of the view pairs (a, b) (rows q0, q0 + 1, ... of view_pairs) that pass -> (rows of
+    ints / floats used, of ratios used, view pairs done); it stops before a view pair that ints has no room
+    for (all its detection pairs) and after the one that completes the calibration sample.
+
+    Detections of all views are stacked (view v: offsets[v]:offsets[v + 1]): uv (N, J, 2) undistorted pixels,
+    var (N, J) pixel variances (0 = joint not usable), has_p (N,), p (N, 2), cov (N, 2, 2) the feet midpoint
+    on the ground and its covariance; fundamentals (V, V, 3, 3) with x_b^T F[a, b] x_a = 0. A pair passes when
+    its chi^2 = feet + body / scale2 passes limits (D + 1,) at its dof (>= min_dof); one joint adds at most
+    cap (an outlying joint, e.g. a left / right swap, counts as a bad joint, not as a wrong person); the loop
+    over joints stops as soon as a pair fails. Out, from rows n and nr: ints (M, 4) (view pair row, i, j
+    global indices, dof), floats (M, 2) (chi^2, inf where untestable and kept as linked; feet term, NaN where
+    none). With sample > 0, the body chi^2 / medians[body dof] (medians (D + 1,)) of each view pair's mutual best
+    partners (cost 0.5 chi^2 - evidence_per_dof * dof) go to ratios (R,), until there are sample of them.
+    """
+    masks = _masks(var)
+    for q in range(q0, len(view_pairs)):
+        a, b = view_pairs[q, 0], view_pairs[q, 1]
+        sa, sb = offsets[a], offsets[b]
+        na, nb = offsets[a + 1] - sa, offsets[b + 1] - sb
+        if n + na * nb > len(ints):
+            return n, nr, q
+        first = n
+        F = fundamentals[a, b]
+        n = _view_pair(
+            uv, var, masks, has_p, p, cov, floor2, F, sa, na, sb, nb, limits, min_dof, cap, scale2, q, ints, floats, n
+        )  # noqa: E501
+        if sample > 0:
+            nr = _mutual_best_ratios(
+                ints, floats, first, n, sa, sb, na, nb, scale2, medians, evidence_per_dof, ratios, nr
+            )  # noqa: E501
+            if nr >= sample:
+                return n, nr, q + 1
+    return n, nr, len(view_pairs)
+
+
+@njit(cache=True, error_model="numpy")
+def _mutual_best_ratios(ints, floats, first, n, sa, sb, na, nb, scale2, medians, evidence_per_dof, ratios, nr):
+    """Append body chi^2 / medians[body dof] of the mutual best partners among the rows first:n (one view pair,
+    sorted by i, then j) to ratios from nr (room for min(na, nb) more): -> the new nr."""
+    best_row_cost, best_row = np.empty(na), np.empty(na, dtype=np.int64)
+    best_col_cost, best_col = np.empty(nb), np.empty(nb, dtype=np.int64)
+    for i in range(na):
+        best_row_cost[i], best_row[i] = np.inf, -1
+    for j in range(nb):
+        best_col_cost[j], best_col[j] = np.inf, -1
+    for k in range(first, n):
+        f0 = floats[k, 1] if np.isfinite(floats[k, 1]) else 0.0
+        body = (floats[k, 0] - f0) * scale2
+        c = 0.5 * (f0 + body / scale2) - evidence_per_dof * ints[k, 3]
+        i, j = ints[k, 1] - sa, ints[k, 2] - sb
+        if c < best_row_cost[i]:
+            best_row_cost[i], best_row[i] = c, k
+        if c < best_col_cost[j]:
+            best_col_cost[j], best_col[j] = c, k
+    for i in range(na):
+        k = best_row[i]
+        if k < 0 or best_col[ints[k, 2] - sb] != k:
+            continue
+        body_dof = ints[k, 3] - (2 if np.isfinite(floats[k, 1]) else 0)
+        if body_dof > 0:
+            f0 = floats[k, 1] if np.isfinite(floats[k, 1]) else 0.0
+            ratios[nr] = (floats[k, 0] - f0) * scale2 / medians[min(body_dof, len(medians) - 1)]
+            nr += 1
+    return nr
+
+
+@njit(cache=True, error_model="numpy")
 def _find(parent: np.ndarray, i: int) -> int:
     """Root of i, with path halving."""
     while parent[i] != i:
@@ -117,20 +208,43 @@ def _find(parent: np.ndarray, i: int) -> int:
     return i
 
 
-@njit(cache=True)
-def merge_linked(ga: np.ndarray, gb: np.ndarray, view_of: np.ndarray, linked: np.ndarray) -> np.ndarray:
+@njit(cache=True, error_model="numpy")
+def _adjacency(links: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric adjacency of n nodes from (L, 2) links, by counting sort: indptr (n + 1,), partners (2 L,)."""
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for k in range(len(links)):
+        indptr[links[k, 0] + 1] += 1
+        indptr[links[k, 1] + 1] += 1
+    for x in range(n):
+        indptr[x + 1] += indptr[x]
+    fill = indptr[:-1].copy()
+    partners = np.empty(2 * len(links), dtype=np.int64)
+    for k in range(len(links)):
+        x, y = links[k, 0], links[k, 1]
+        partners[fill[x]], partners[fill[y]] = y, x
+        fill[x] += 1
+        fill[y] += 1
+    return indptr, partners
+
+
+@njit(cache=True, error_model="numpy")
+def merge_linked(
+    ga: np.ndarray, gb: np.ndarray, view_of: np.ndarray, links: np.ndarray, has_feet: np.ndarray, var: np.ndarray
+) -> np.ndarray:
     """Complete-linkage merging of edges (ga[k], gb[k]) in the given order -> root of every detection (N,).
 
-    Two components join when no view is in both and linked[x, y] holds for every x of one and y of the
-    other (linked: (N, N) bool, symmetric). Members are kept as linked lists (head, next, tail per root).
+    Two components join when no view is in both and every x of one is linked to every y of the other (links
+    (L, 2): pairs of detections, either order); a pair that shares no evidence (not both has_feet (N,), no
+    joint usable in both, var (N, J) > 0) has nothing to test and counts as linked. Members are kept as
+    linked lists (head, next, tail per root).
     """
+    masks = _masks(var)
     n = len(view_of)
-    parent = np.arange(n)
-    views = np.zeros(n, dtype=np.int64)
-    nxt = np.full(n, -1)
-    tail = np.arange(n)
-    size = np.ones(n, dtype=np.int64)
+    indptr, partners = _adjacency(links, n)
+    parent, tail = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    views, nxt, size = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
     for i in range(n):
+        parent[i], tail[i], nxt[i], size[i] = i, i, -1, 1
         views[i] = np.int64(1) << view_of[i]
     for k in range(len(ga)):
         a, b = _find(parent, ga[k]), _find(parent, gb[k])
@@ -141,7 +255,13 @@ def merge_linked(ga: np.ndarray, gb: np.ndarray, view_of: np.ndarray, linked: np
         while x >= 0 and ok:
             y = b
             while y >= 0:
-                if not linked[x, y]:
+                common = 0
+                for w in range(masks.shape[1]):
+                    common += _popcount(masks[x, w] & masks[y, w])
+                linked = common == 0 and not (has_feet[x] and has_feet[y])  # nothing to test
+                for t in range(indptr[x], indptr[x + 1]):  # x's partners: a short list
+                    linked = linked or partners[t] == y
+                if not linked:
                     ok = False
                     break
                 y = nxt[y]

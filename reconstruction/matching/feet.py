@@ -119,18 +119,38 @@ def feet_features(
     whose point lies behind the camera (above the horizon) are unusable. With ``pixel_sigma`` (px),
     the covariance of p under that isotropic pixel noise (times score^-sigma_score_power) is propagated too.
     """
+    settings = (rule, min_score, ankle_fallback, pixel_sigma, ankle_height_m, foot_joint_height_m, sigma_score_power)
+    return views_feet_features([keypoints], [camera], *settings)
+
+
+def views_feet_features(
+    keypoints: list[np.ndarray],
+    cameras: list[Camera],
+    rule: str = "mean",
+    min_score: float = 0.2,
+    ankle_fallback: bool = True,
+    pixel_sigma: float | None = None,
+    ankle_height_m: float = 0.07,
+    foot_joint_height_m: float = 0.0,
+    sigma_score_power: float = 0.0,
+) -> FeetFeatures:
+    """:func:`feet_features` of V views at once: V keypoint arrays (N_v, 23, 3), V cameras -> FeetFeatures of
+    the sum(N_v) detections, view after view. Only the ground points are computed per view (camera); the
+    rest, one row per detection, once for all."""
     if rule not in FOOT_RULES:
         raise ValueError(f"foot rule must be one of {FOOT_RULES}, got {rule!r}")
-    kp = np.asarray(keypoints, dtype=np.float64)
-    if kp.ndim != 3 or kp.shape[1:] != (NUM_JOINTS, 3):
-        raise ValueError(f"keypoints must have shape (N, {NUM_JOINTS}, 3), got {kp.shape}")
+    kps = [np.asarray(k, dtype=np.float64) for k in keypoints]
+    for kp in kps:
+        if kp.ndim != 3 or kp.shape[1:] != (NUM_JOINTS, 3):
+            raise ValueError(f"keypoints must have shape (N, {NUM_JOINTS}, 3), got {kp.shape}")
+    kp = np.concatenate(kps) if len(kps) != 1 else kps[0]
     uv = kp[:, _FOOT_COLUMNS, :2]
     score = kp[:, _FOOT_COLUMNS, 2]
     finite = np.isfinite(uv).all(axis=-1) & np.isfinite(score)
     uv = np.where(finite[..., None], uv, 0.0)
     heights = np.array([foot_joint_height_m] * 6 + [ankle_height_m] * 2, dtype=np.float64)
     sigma = None if pixel_sigma is None else joint_sigmas(score, pixel_sigma, sigma_score_power)
-    ground, depth, cov = joints_on_planes(camera, uv, heights, sigma)
+    ground, depth, cov = _views_on_planes(cameras, [len(k) for k in kps], uv, heights, sigma)
     ground_ok = np.isfinite(ground).all(axis=-1)
     ground = np.where(ground_ok[..., None], ground, 0.0)
     cov = np.zeros(ground.shape + (2,)) if cov is None else np.where(ground_ok[..., None, None], cov, 0.0)
@@ -151,6 +171,32 @@ def feet_features(
     reason = np.where(feet[0][2] | feet[1][2], "", np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))
     covs = (feet[0][1], feet[1][1]) if pixel_sigma is not None else (None, None)
     return features_from_feet(feet[0][0], feet[1][0], feet[0][2], feet[1][2], reason, *covs)
+
+
+def _views_on_planes(
+    cameras: list[Camera], counts: list[int], uv: np.ndarray, heights: np.ndarray, sigma: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """:func:`joints_on_planes` of the stacked detections of V views, view by view: (N, K, 2) -> (N, K, 2),
+    (N, K), (N, K, 2, 2) or None."""
+    if len(cameras) == 1:
+        return joints_on_planes(cameras[0], uv, heights, sigma)
+    ends = np.cumsum(counts)
+    parts = [
+        joints_on_planes(cam, uv[e - n : e], heights, None if sigma is None else sigma[e - n : e])
+        for cam, n, e in zip(cameras, counts, ends)
+    ]
+    cov = None if sigma is None else np.concatenate([c for _, _, c in parts])
+    return np.concatenate([g for g, _, _ in parts]), np.concatenate([d for _, d, _ in parts]), cov
+
+
+def split_features(features: FeetFeatures, counts: list[int]) -> list[FeetFeatures]:
+    """FeetFeatures of stacked views -> one per view (N_v rows each, in order)."""
+    cuts = np.cumsum(counts)[:-1]
+    fields = [
+        np.split(getattr(features, name), cuts) if getattr(features, name) is not None else [None] * len(counts)
+        for name in FeetFeatures.__dataclass_fields__
+    ]
+    return [FeetFeatures(*values) for values in zip(*fields)]
 
 
 def pair_homography(camera_l: Camera, camera_m: Camera) -> np.ndarray:
@@ -277,23 +323,24 @@ class FeetMatcher:
 
     def features(self, views: list[ViewDetections], rig: Rig) -> list[FeetFeatures]:
         """Ground-plane feet of every view: V views -> V FeetFeatures."""
+        return split_features(self.stacked_features(views, rig), [len(v) for v in views])
+
+    def stacked_features(self, views: list[ViewDetections], rig: Rig) -> FeetFeatures:
+        """Ground-plane feet of the detections of all views, view after view: V views -> FeetFeatures."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         sigma = self.pixel_sigma if self.location_metric == "mahalanobis" else None
-        return [
-            feet_features(
-                v.keypoints,
-                cam,
-                self.foot_rule,
-                self.min_score,
-                self.ankle_fallback,
-                sigma,
-                self.ankle_height_m,
-                self.foot_joint_height_m,
-                self.sigma_score_power,
-            )
-            for v, cam in zip(views, rig)
-        ]
+        return views_feet_features(
+            [v.keypoints for v in views],
+            list(rig),
+            self.foot_rule,
+            self.min_score,
+            self.ankle_fallback,
+            sigma,
+            self.ankle_height_m,
+            self.foot_joint_height_m,
+            self.sigma_score_power,
+        )
 
     def pair_cost(self, fa: FeetFeatures, fb: FeetFeatures, camera_a: Camera) -> np.ndarray:
         """Edge costs of a view pair (a < b) in the configured space: (Na,), (Nb,) -> (Na, Nb)."""

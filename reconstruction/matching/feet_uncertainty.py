@@ -103,7 +103,8 @@ def joints_on_planes(
     depth = camera.depth(point)
     if sigma_px is None:
         return xy, depth, None
-    J = J @ undistortion_jacobian(camera, uv)
+    if camera.has_distortion:  # else the undistortion's Jacobian is the identity: J @ I = J
+        J = J @ undistortion_jacobian(camera, uv)
     var = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64) ** 2, uv.shape[:2])
     return xy, depth, var[..., None, None] * (J @ np.swapaxes(J, -1, -2))
 

@@ -155,7 +155,10 @@ def _components_to_assignment(
     V = len(offsets) - 1
     rows: dict[int, np.ndarray] = {}
     for g, v in enumerate(view_of.tolist()):  # increasing g = increasing (view, det): first seen = smallest
-        row = rows.setdefault(comps.find(g), np.full(V, -1, dtype=np.int64))
+        root = comps.find(g)
+        row = rows.get(root)
+        if row is None:  # not setdefault: that would build a row for every detection
+            row = rows[root] = np.full(V, -1, dtype=np.int64)
         if row[v] >= 0:
             raise AssertionError("merger produced two detections of one view in a person")
         row[v] = g - offsets[v]
