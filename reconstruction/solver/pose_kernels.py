@@ -314,6 +314,17 @@ def solve_component(
     (:func:`reconstruction.solver.compiled_solver.plan_arrays`); B (n_blocks, 3, 3) scratch.
     """
     s, e, slot, later_ptr, later_idx = plan[1][c], plan[1][c + 1], plan[9], plan[10], plan[11]
+    if e - s == 1:  # one joint (no bone): one block, the same arithmetic as below without the plan's loops
+        q = slot[s, s]
+        for i in range(3):
+            for m in range(3):
+                B[q, i, m] = D[s, i, m]
+            B[q, i, i] += mu
+        if not _cholesky3(B, q):
+            return False
+        y0, y1, y2 = _lower_solve(B, q, -g[s, 0], -g[s, 1], -g[s, 2])
+        h[s, 0], h[s, 1], h[s, 2] = _upper_solve(B, q, y0, y1, y2)
+        return True
     _assemble(c, D, K, Kr, mu, exact, plan, B)
     if not _factorize(s, e, slot, later_ptr, later_idx, B):
         return False
