@@ -15,8 +15,10 @@ from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstructio
 from reconstruction.solver.person_prior import (
     PROPORTION_SD,
     bone_groups,
+    joint_information,
     noise_scale,
     person_bone_lengths,
+    project,
     proportion_sds,
 )
 from reconstruction.solver.side_swaps import apply_swaps, find_swaps
@@ -33,6 +35,50 @@ def _observe(rig, X, noise_px: float, seed: int = 0):
     uv = rig.project(X) + rng.normal(0.0, noise_px, (len(rig),) + X.shape[:2] + (2,))
     poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
     return poses2d, np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
+
+
+def _joint_information_numpy(X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray) -> np.ndarray:
+    """The numpy formula the compiled joint_information replaced: (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3)."""
+    xy, z = project(X, proj)
+    M = proj[:, :, :3]
+    info = np.zeros(X.shape[:2] + (3, 3))
+    for k in range(2):
+        rows = (M[:, None, None, k, :] - xy[..., k, None] * M[:, None, None, 2, :]) * (inv_sigma / z)[..., None]
+        info += np.sum(rows[..., :, None] * rows[..., None, :], axis=0)
+    return info
+
+
+def test_joint_information_is_the_numpy_formula_and_the_jacobian_product():
+    rig = ring_rig(5, 7.0, 2.5)
+    X = np.stack([_scaled_body(1.0, 0.3 * p, -0.2 * p) for p in range(4)])
+    inv_sigma = np.random.default_rng(1).uniform(0.05, 0.5, (5, 4, 23)) * (np.arange(5 * 4 * 23) % 7 > 0).reshape(
+        5, 4, 23
+    )
+    proj = rig.projection_matrices()
+    info = joint_information(X, proj, inv_sigma)
+    np.testing.assert_array_equal(info, _joint_information_numpy(X, proj, inv_sigma))  # same arithmetic
+    eps, p, j = 1e-6, 2, 11  # J^T J of the weighted projection of one joint, by central differences
+    jac = (
+        np.stack(
+            [
+                (project(X + eps * d, proj)[0] - project(X - eps * d, proj)[0])[:, p, j] / (2 * eps)
+                for d in _unit_moves(X, p, j)
+            ],
+            axis=-1,
+        )
+        * inv_sigma[:, p, j, None, None]
+    )
+    np.testing.assert_allclose(info[p, j], np.einsum("vka,vkb->ab", jac, jac), rtol=1e-5)
+
+
+def _unit_moves(X: np.ndarray, p: int, j: int) -> list[np.ndarray]:
+    """The three unit moves of joint j of person p, as arrays shaped like X."""
+    moves = []
+    for a in range(3):
+        d = np.zeros_like(X)
+        d[p, j, a] = 1.0
+        moves.append(d)
+    return moves
 
 
 def test_bone_groups_pair_left_and_right():

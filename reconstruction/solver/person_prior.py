@@ -31,6 +31,7 @@ from scipy.stats import chi2
 from data.bone_lengths import BONE_NAMES
 from reconstruction.solver.block_solver import inverse_3x3
 from reconstruction.solver.map_estimation import EPS_DEPTH
+from reconstruction.solver.prior_kernels import information_sums
 
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
@@ -51,23 +52,33 @@ def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([hom[:, 0] / z, hom[:, 1] / z], axis=-1), z
 
 
-def joint_information(X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray) -> np.ndarray:
-    """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3)."""
-    xy, z = project(X, proj)
-    M = proj[:, :, :3]
-    info = np.zeros(X.shape[:2] + (3, 3))
-    for k in range(2):  # d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint
-        rows = (M[:, None, None, k, :] - xy[..., k, None] * M[:, None, None, 2, :]) * (inv_sigma / z)[..., None]
-        info += np.sum(rows[..., :, None] * rows[..., None, :], axis=0)
+def joint_information(
+    X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray, projected: tuple[np.ndarray, np.ndarray] | None = None
+) -> np.ndarray:
+    """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3).
+
+    d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint; ``projected``: :func:`project` of X, if at hand.
+    """
+    xy, z = project(X, proj) if projected is None else projected
+    info = np.empty(X.shape[:2] + (3, 3))
+    information_sums(
+        xy, z, np.ascontiguousarray(proj, dtype=np.float64), np.ascontiguousarray(inv_sigma, dtype=np.float64), info
+    )
     return info
 
 
 def noise_scale(
-    X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, floor: float = 0.01
+    X: np.ndarray,
+    uv: np.ndarray,
+    inv_sigma: np.ndarray,
+    proj: np.ndarray,
+    floor: float = 0.01,
+    projected: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Each person's 2D noise over the sigma model, robustly from MLE residuals: (P, J, 3), (V, P, J, 2),
-    (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views."""
-    xy, _ = project(X, proj)
+    (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views.
+    ``projected``: :func:`project` of X, if at hand."""
+    xy, _ = project(X, proj) if projected is None else projected
     seen = inv_sigma > 0
     r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma**2, 0.0)  # (V, P, J)
     rss, views = r2.sum(axis=0), seen.sum(axis=0)  # (P, J)
