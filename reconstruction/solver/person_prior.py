@@ -80,7 +80,8 @@ def noise_scale(
     ``projected``: :func:`project` of X, if at hand."""
     xy, _ = project(X, proj) if projected is None else projected
     seen = inv_sigma > 0
-    r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma**2, 0.0)  # (V, P, J)
+    dx, dy = uv[..., 0] - xy[..., 0], uv[..., 1] - xy[..., 1]  # not np.sum over the axis of 2: slow
+    r2 = np.where(seen, (dx * dx + dy * dy) * inv_sigma**2, 0.0)  # (V, P, J)
     rss, views = r2.sum(axis=0), seen.sum(axis=0)  # (P, J)
     ok = views >= 2
     ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)  # valid first
@@ -100,6 +101,17 @@ def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:
     return np.array([order[k] for k in keys], dtype=np.int64)
 
 
+def _det_3x3(A: np.ndarray) -> np.ndarray:
+    """Determinants of 3x3 matrices by cofactors (LAPACK's batched det is 20x slower here): (..., 3, 3) -> (...)."""
+    a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
+    cof = A[..., 1, 1] * A[..., 2, 2] - A[..., 1, 2] * A[..., 2, 1]
+    return (
+        a * cof
+        + b * (A[..., 1, 2] * A[..., 2, 0] - A[..., 1, 0] * A[..., 2, 2])
+        + c * (A[..., 1, 0] * A[..., 2, 1] - A[..., 1, 1] * A[..., 2, 0])
+    )
+
+
 def bone_variances(
     X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -113,7 +125,7 @@ def bone_variances(
     info = np.nan_to_num(info)
     inv, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
     trace = np.trace(info, axis1=-2, axis2=-1)
-    det = np.linalg.det(info)
+    det = _det_3x3(info)
     # a joint is measured only where every direction is: two nearly parallel rays leave its depth free
     good = measured & (det > 1e-9 * (trace / 3) ** 3) & (trace > 0)
     cov = np.where(good[..., None, None], np.moveaxis(inv, (0, 1), (-2, -1)), 0.0)
