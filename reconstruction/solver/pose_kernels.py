@@ -39,9 +39,11 @@ _EPS = np.finfo(np.float64).eps
 # between the kernels were most of the time of a small (one-joint) problem: 2x faster, half the compile time.
 # Element-wise copies instead of array assignments for the same reason: those compile numba's shape-error messages.
 _JIT = {"cache": True, "error_model": "numpy", "_nrt": False}
+# helpers called only from the kernels: without the CPython and C wrappers numba compiles for every function
+_INNER = {**_JIT, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _robust(r: float, kind: int, C2: float) -> tuple[float, float, float]:
     """Cost term C^2 rho(r^2 / C^2), residual scale and Jacobian scale of one raw residual (scipy's rho)."""
     z = r * r / C2
@@ -57,7 +59,7 @@ def _robust(r: float, kind: int, C2: float) -> tuple[float, float, float]:
     return C2 * rho, d1 / j_scale, j_scale
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _likelihood_terms(
     x: np.ndarray,
     s: int,
@@ -126,7 +128,7 @@ def _likelihood_terms(
     return cost
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _outer_plus_identity(A: np.ndarray, l: int, c: float, d: float, u0: float, u1: float, u2: float) -> None:
     """A[l] (3, 3) = c u u^T + d I."""
     A[l, 0, 0], A[l, 0, 1], A[l, 0, 2] = c * u0 * u0 + d, c * u0 * u1, c * u0 * u2
@@ -134,7 +136,7 @@ def _outer_plus_identity(A: np.ndarray, l: int, c: float, d: float, u0: float, u
     A[l, 2, 0], A[l, 2, 1], A[l, 2, 2] = c * u0 * u2, c * u1 * u2, c * u2 * u2 + d
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _bone_terms(
     x: np.ndarray,
     bones: np.ndarray,
@@ -180,7 +182,7 @@ def _bone_terms(
     return cost
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _cholesky3(B: np.ndarray, q: int) -> bool:
     """In-place lower Cholesky factor of the symmetric 3x3 block B[q] (upper part zeroed); False if not positive definite."""
     a00 = B[q, 0, 0]
@@ -202,7 +204,7 @@ def _cholesky3(B: np.ndarray, q: int) -> bool:
     return True
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _lower_solve(B: np.ndarray, q: int, y0: float, y1: float, y2: float) -> tuple[float, float, float]:
     """L^-1 y for the lower 3x3 factor L = B[q]."""
     y0 = y0 / B[q, 0, 0]
@@ -210,7 +212,7 @@ def _lower_solve(B: np.ndarray, q: int, y0: float, y1: float, y2: float) -> tupl
     return y0, y1, (y2 - B[q, 2, 0] * y0 - B[q, 2, 1] * y1) / B[q, 2, 2]
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _upper_solve(B: np.ndarray, q: int, y0: float, y1: float, y2: float) -> tuple[float, float, float]:
     """L^-T y for the lower 3x3 factor L = B[q]."""
     y2 = y2 / B[q, 2, 2]
@@ -218,7 +220,7 @@ def _upper_solve(B: np.ndarray, q: int, y0: float, y1: float, y2: float) -> tupl
     return (y0 - B[q, 1, 0] * y1 - B[q, 2, 0] * y2) / B[q, 0, 0], y1, y2
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _assemble(
     c: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray, mu: float, exact: bool, plan: tuple, B: np.ndarray
 ) -> None:
@@ -244,7 +246,7 @@ def _assemble(
                     B[qb, i, m] += Kr[l, i, m]
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _factorize(s: int, e: int, slot: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray, B: np.ndarray) -> bool:
     """Right-looking block Cholesky of positions s:e in place (B holds L); False if not positive definite."""
     for k in range(s, e):
@@ -267,7 +269,7 @@ def _factorize(s: int, e: int, slot: np.ndarray, later_ptr: np.ndarray, later_id
     return True
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _substitute(
     s: int,
     e: int,
@@ -332,7 +334,7 @@ def solve_component(
     return True
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def linearize(
     x: np.ndarray,
     c: int,
@@ -361,7 +363,7 @@ def linearize(
     return cost + _bone_terms(x, bones, bones_ptr[c], bones_ptr[c + 1], bone_pa, bone_pb, ref, bw, p, D, g, K, Kr)
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _abs_max(a: np.ndarray, s: int, e: int) -> float:
     """max |a[s:e]| of a (J, 3) array."""
     out = 0.0
@@ -371,7 +373,7 @@ def _abs_max(a: np.ndarray, s: int, e: int) -> float:
     return out
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _max_diagonal(D: np.ndarray, s: int, e: int) -> float:
     """max diag of the blocks D[s:e] (J, 3, 3)."""
     out = 0.0
@@ -381,7 +383,7 @@ def _max_diagonal(D: np.ndarray, s: int, e: int) -> float:
     return out
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _step(c: int, lin: tuple, mu: float, exact: bool, plan: tuple, B: np.ndarray, h: np.ndarray) -> bool:
     """The damped step h of component c (the exact model where asked and positive definite, else the safe
     one; NaN where neither is) -> whether the exact model was used."""
@@ -396,7 +398,7 @@ def _step(c: int, lin: tuple, mu: float, exact: bool, plan: tuple, B: np.ndarray
     return used
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _solve_problem(
     x: np.ndarray,
     c: int,
