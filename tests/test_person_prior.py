@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_NAMES, BONE_STD, bone_lengths
+from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_NAMES, BONE_PAIRS, BONE_STD, bone_lengths
+from data.geometry.linalg import inverse_3x3
 from data.keypoints import shelf15_validity
 from data.synthetic.body import mean_body, pose_joints
 from data.synthetic.observe import bbox_from_keypoints
@@ -15,6 +16,7 @@ from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstructio
 from reconstruction.solver.person_prior import (
     PROPORTION_SD,
     bone_groups,
+    bone_variances,
     joint_information,
     noise_scale,
     person_bone_lengths,
@@ -69,6 +71,39 @@ def test_joint_information_is_the_numpy_formula_and_the_jacobian_product():
         * inv_sigma[:, p, j, None, None]
     )
     np.testing.assert_allclose(info[p, j], np.einsum("vka,vkb->ab", jac, jac), rtol=1e-5)
+
+
+def _bone_variances_numpy(X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured: np.ndarray) -> tuple:
+    """The numpy formula the compiled bone_variances replaced: (P, J, 3), (P, J, 3, 3), (L, 2), (P, J) -> (P, L) x2."""
+    a, b = pairs[:, 0], pairs[:, 1]
+    d = X[:, a] - X[:, b]
+    n = np.linalg.norm(d, axis=-1)
+    u = d / np.maximum(n, 1e-12)[..., None]
+    info = np.nan_to_num(info)
+    inv, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
+    trace = np.trace(info, axis1=-2, axis2=-1)
+    good = measured & (np.linalg.det(info) > 1e-9 * (trace / 3) ** 3) & (trace > 0)
+    cov = np.where(good[..., None, None], np.moveaxis(inv, (0, 1), (-2, -1)), 0.0)
+    var = np.sum(u[..., :, None] * (cov[:, a] + cov[:, b]) * u[..., None, :], axis=(-2, -1))
+    return n, np.where(good[:, a] & good[:, b], var, np.inf)
+
+
+def test_bone_variances_are_the_numpy_formula():
+    rig = ring_rig(5, 7.0, 2.5)
+    X = np.stack([_scaled_body(1.0 + 0.05 * p, 0.3 * p, -0.2 * p) for p in range(6)])
+    rng = np.random.default_rng(4)
+    inv_sigma = rng.uniform(0.05, 0.5, (5, 6, 23)) * (rng.uniform(size=(5, 6, 23)) > 0.3)
+    info = joint_information(X, rig.projection_matrices(), inv_sigma)
+    info[0, 3] = np.nan  # unusable information, a singular one (a joint on one ray), an unmeasured joint
+    info[1, 5] = np.outer([1.0, 2.0, 0.5], [1.0, 2.0, 0.5])
+    measured = (inv_sigma > 0).sum(axis=0) >= 2
+    measured[2, 7] = False
+    pairs = np.asarray(BONE_PAIRS)
+    n, var = bone_variances(X, info, pairs, measured)
+    n_ref, var_ref = _bone_variances_numpy(X, info, pairs, measured)
+    np.testing.assert_array_equal(n, n_ref)
+    np.testing.assert_array_equal(var, var_ref)  # same arithmetic, same order
+    assert np.isinf(var).any() and np.isfinite(var).any()
 
 
 def _unit_moves(X: np.ndarray, p: int, j: int) -> list[np.ndarray]:

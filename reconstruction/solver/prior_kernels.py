@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit
 
 _JIT = {"cache": True, "error_model": "numpy", "_nrt": False}
+_BIG = np.finfo(np.float64).max
 
 
 @njit(**_JIT)
@@ -35,3 +36,75 @@ def information_sums(xy: np.ndarray, z: np.ndarray, proj: np.ndarray, w: np.ndar
             out[p, j, 0, 0], out[p, j, 0, 1], out[p, j, 0, 2] = b00, b01, b02
             out[p, j, 1, 0], out[p, j, 1, 1], out[p, j, 1, 2] = b01, b11, b12
             out[p, j, 2, 0], out[p, j, 2, 1], out[p, j, 2, 2] = b02, b12, b22
+
+
+@njit(**_JIT)
+def _finite(a: float) -> float:
+    """np.nan_to_num of one value: NaN -> 0, +-inf -> the largest finite float of that sign."""
+    if np.isnan(a):
+        return 0.0
+    return min(max(a, -_BIG), _BIG)
+
+
+@njit(**_JIT)
+def joint_covariances(info: np.ndarray, measured: np.ndarray, cov: np.ndarray, good: np.ndarray) -> None:
+    """cov (P, J, 3, 3): the inverse of each joint's information (P, J, 3, 3) (np.nan_to_num'd) where ``good``: the
+    joint is ``measured`` (P, J) and fixed in every direction (det > 1e-9 (trace / 3)^3, trace > 0), else 0.
+    Inverse by cofactors over the determinant, cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1]
+    (indices mod 3), as data.geometry.linalg.inverse_3x3."""
+    for p in range(info.shape[0]):
+        for j in range(info.shape[1]):
+            A = (
+                _finite(info[p, j, 0, 0]), _finite(info[p, j, 0, 1]), _finite(info[p, j, 0, 2]),
+                _finite(info[p, j, 1, 0]), _finite(info[p, j, 1, 1]), _finite(info[p, j, 1, 2]),
+                _finite(info[p, j, 2, 0]), _finite(info[p, j, 2, 1]), _finite(info[p, j, 2, 2]),
+            )  # fmt: skip
+            c00 = A[4] * A[8] - A[5] * A[7]
+            c01 = A[5] * A[6] - A[3] * A[8]
+            c02 = A[3] * A[7] - A[4] * A[6]
+            det = A[0] * c00 + A[1] * c01 + A[2] * c02
+            trace = A[0] + A[4] + A[8]
+            good[p, j] = measured[p, j] and det > 1e-9 * (trace / 3) ** 3.0 and trace > 0
+            for r in range(3):
+                for c in range(3):
+                    a, b, e, f = 3 * ((r + 1) % 3), 3 * ((r + 2) % 3), (c + 1) % 3, (c + 2) % 3
+                    cov[p, j, r, c] = (A[a + e] * A[b + f] - A[a + f] * A[b + e]) / det if good[p, j] else 0.0
+
+
+@njit(**_JIT)
+def bone_sums(
+    X: np.ndarray, cov: np.ndarray, good: np.ndarray, pairs: np.ndarray, n_out: np.ndarray, var_out: np.ndarray
+) -> None:
+    """Length n_out (P, L) of each bone of X (P, J, 3) and the variance var_out (P, L) of the length, u^T (cov_a +
+    cov_b) u with u the unit bone direction, from :func:`joint_covariances` (inf unless both ends are good),
+    numpy's pairwise order of the 9-term sum."""
+    for p in range(X.shape[0]):
+        for l in range(pairs.shape[0]):
+            a, b = pairs[l, 0], pairs[l, 1]
+            d0, d1, d2 = X[p, a, 0] - X[p, b, 0], X[p, a, 1] - X[p, b, 1], X[p, a, 2] - X[p, b, 2]
+            n = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            m = max(n, 1e-12)
+            u0, u1, u2 = d0 / m, d1 / m, d2 / m
+            t0, t1, t2 = (
+                _term(cov, p, a, b, 0, 0, u0, u0),
+                _term(cov, p, a, b, 0, 1, u0, u1),
+                _term(cov, p, a, b, 0, 2, u0, u2),
+            )
+            t3, t4, t5 = (
+                _term(cov, p, a, b, 1, 0, u1, u0),
+                _term(cov, p, a, b, 1, 1, u1, u1),
+                _term(cov, p, a, b, 1, 2, u1, u2),
+            )
+            t6, t7, t8 = (
+                _term(cov, p, a, b, 2, 0, u2, u0),
+                _term(cov, p, a, b, 2, 1, u2, u1),
+                _term(cov, p, a, b, 2, 2, u2, u2),
+            )
+            var = (((t0 + t1) + (t2 + t3)) + ((t4 + t5) + (t6 + t7))) + t8
+            n_out[p, l], var_out[p, l] = n, var if good[p, a] and good[p, b] else np.inf
+
+
+@njit(**_JIT)
+def _term(cov: np.ndarray, p: int, a: int, b: int, r: int, c: int, ur: float, uc: float) -> float:
+    """u_r (cov_a + cov_b)_rc u_c of person p's joints a and b."""
+    return ur * (cov[p, a, r, c] + cov[p, b, r, c]) * uc
