@@ -23,7 +23,8 @@ from reconstruction.solver.person_prior import (
     project,
     proportion_sds,
 )
-from reconstruction.solver.side_swaps import apply_swaps, find_swaps
+from reconstruction.solver.prior_kernels import pair_chi2s
+from reconstruction.solver.side_swaps import _chi2s, apply_swaps, find_swaps
 
 
 def _scaled_body(scale: float, x: float = 0.0, y: float = 0.0) -> np.ndarray:
@@ -104,6 +105,21 @@ def test_bone_variances_are_the_numpy_formula():
     np.testing.assert_array_equal(n, n_ref)
     np.testing.assert_array_equal(var, var_ref)  # same arithmetic, same order
     assert np.isinf(var).any() and np.isfinite(var).any()
+
+
+def test_compiled_pair_chi2s_are_the_numpy_formula():
+    rig = ring_rig(4, 7.0, 2.5)
+    X = np.stack([_scaled_body(1.0, 0.4 * p, 0.1 * p) for p in range(3)])
+    proj = rig.projection_matrices()
+    poses2d, _ = _observe(rig, X, 3.0)
+    w2 = np.random.default_rng(2).uniform(0.0, 0.2, poses2d.shape[:3])
+    left, right = np.array([5, 7, 9]), np.array([6, 8, 10])
+    given, exchanged = np.empty((4, 3, 3)), np.empty((4, 3, 3))
+    hom = np.ascontiguousarray(proj[:, :, :3] @ X.reshape(-1, 3).T)
+    pair_chi2s(hom, proj, np.ascontiguousarray(poses2d), w2, left, right, given, exchanged)
+    ref = _chi2s(poses2d[..., :2], project(X, proj)[0], w2, left, right)
+    np.testing.assert_array_equal(given, ref[0])
+    np.testing.assert_array_equal(exchanged, ref[1])
 
 
 def _unit_moves(X: np.ndarray, p: int, j: int) -> list[np.ndarray]:

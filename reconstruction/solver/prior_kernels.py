@@ -1,4 +1,4 @@
-"""Compiled (numba) loops of the person prior's statistics (person_prior.py): per-joint 3x3 sums over the views.
+"""Compiled (numba) loops of the person prior's statistics (person_prior.py) and of the swap test (side_swaps.py).
 
 Same arithmetic in the same order as the numpy formulas they replace (bit-identical results), without
 their (V, P, J, 3, 3) temporaries. Compiled like pose_kernels: numpy's error model, no reference counting
@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from reconstruction.solver.map_estimation import EPS_DEPTH
 
 _JIT = {"cache": True, "error_model": "numpy", "_nrt": False}
 _BIG = np.finfo(np.float64).max
@@ -108,3 +110,46 @@ def bone_sums(
 def _term(cov: np.ndarray, p: int, a: int, b: int, r: int, c: int, ur: float, uc: float) -> float:
     """u_r (cov_a + cov_b)_rc u_c of person p's joints a and b."""
     return ur * (cov[p, a, r, c] + cov[p, b, r, c]) * uc
+
+
+@njit(**_JIT)
+def _pixel(hom: np.ndarray, proj: np.ndarray, v: int, i: int) -> tuple[float, float]:
+    """Pixel of point i in view v from hom (V, 3, N) = M X (the matmul, translation not added)."""
+    z = hom[v, 2, i] + proj[v, 2, 3]
+    z = z if z >= EPS_DEPTH or np.isnan(z) else EPS_DEPTH  # np.maximum
+    return (hom[v, 0, i] + proj[v, 0, 3]) / z, (hom[v, 1, i] + proj[v, 1, 3]) / z
+
+
+@njit(**_JIT)
+def pair_chi2s(
+    hom: np.ndarray,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w2: np.ndarray,
+    left: np.ndarray,
+    right: np.ndarray,
+    given: np.ndarray,
+    exchanged: np.ndarray,
+) -> None:
+    """Chi-square given (V, P, K) and exchanged (V, P, K) of the joint pairs (left, right (K,)) of pixels uv
+    (V, P, J, 2+) against the projections of 3D joints (P, J): hom (V, 3, P J) their matmul with the views'
+    M (V, 3, 4); w2 (V, P, J) 1 / sigma^2. side_swaps' formula, same order."""
+    J = uv.shape[2]
+    for v in range(uv.shape[0]):
+        for p in range(uv.shape[1]):
+            for k in range(len(left)):
+                a, b = left[k], right[k]
+                xa, ya = _pixel(hom, proj, v, p * J + a)
+                xb, yb = _pixel(hom, proj, v, p * J + b)
+                d_aa = _sq(uv[v, p, a, 0] - xa, uv[v, p, a, 1] - ya)
+                d_bb = _sq(uv[v, p, b, 0] - xb, uv[v, p, b, 1] - yb)
+                d_ba = _sq(uv[v, p, b, 0] - xa, uv[v, p, b, 1] - ya)
+                d_ab = _sq(uv[v, p, a, 0] - xb, uv[v, p, a, 1] - yb)
+                given[v, p, k] = w2[v, p, a] * d_aa + w2[v, p, b] * d_bb
+                exchanged[v, p, k] = w2[v, p, b] * d_ba + w2[v, p, a] * d_ab
+
+
+@njit(**_JIT)
+def _sq(dx: float, dy: float) -> float:
+    """dx^2 + dy^2."""
+    return dx * dx + dy * dy
