@@ -17,6 +17,7 @@ from reconstruction.solver.person_prior import (
     PROPORTION_SD,
     bone_groups,
     bone_variances,
+    chi2_medians,
     joint_information,
     noise_scale,
     person_bone_lengths,
@@ -120,6 +121,33 @@ def test_compiled_pair_chi2s_are_the_numpy_formula():
     ref = _chi2s(poses2d[..., :2], project(X, proj)[0], w2, left, right)
     np.testing.assert_array_equal(given, ref[0])
     np.testing.assert_array_equal(exchanged, ref[1])
+
+
+def _noise_scale_numpy(X, uv, inv_sigma, proj, floor: float = 0.01) -> np.ndarray:
+    """The numpy formula the compiled noise_scale replaced: (P, J, 3), (V, P, J, 2), (V, P, J), (V, 3, 4) -> (P,)."""
+    xy, _ = project(X, proj)
+    seen = inv_sigma > 0
+    r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma**2, 0.0)
+    rss, views = r2.sum(axis=0), seen.sum(axis=0)
+    ok = views >= 2
+    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)
+    n, rows = ok.sum(axis=1), np.arange(len(X))
+    a, b = ratio[rows, np.maximum(n - 1, 0) // 2], ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
+    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
+    return np.maximum(np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0), floor)
+
+
+def test_compiled_noise_scale_is_the_numpy_formula():
+    rig = ring_rig(6, 7.0, 2.5)
+    X = np.stack([_scaled_body(1.0, 0.3 * p, -0.3 * p) for p in range(5)])
+    poses2d, _ = _observe(rig, X, 4.0, seed=3)
+    seen = np.random.default_rng(5).uniform(size=poses2d.shape[:3]) > np.array([0.2, 0.5, 0.8, 0.95, 1.0])[:, None]
+    inv_sigma = np.where(seen, 0.3, 0.0)  # the last person seen nowhere, the one before in one view at most
+    proj = rig.projection_matrices()
+    args = (X + 0.01, poses2d[..., :2], inv_sigma, proj)
+    scale = noise_scale(*args)
+    np.testing.assert_array_equal(scale, _noise_scale_numpy(*args))
+    assert scale[-1] == 1.0 and np.all(scale[:2] > 0.01)
 
 
 def _unit_moves(X: np.ndarray, p: int, j: int) -> list[np.ndarray]:

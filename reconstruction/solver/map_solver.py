@@ -70,8 +70,8 @@ from reconstruction.solver.person_prior import (
     joint_information,
     noise_scale,
     person_bone_lengths,
-    project,
     proportion_sds,
+    view_matmul,
 )
 from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.solver.side_labels import chain_sides, consistent_sides
@@ -567,16 +567,16 @@ class MAPReconstruction:
         their standard errors (P, L), NaN / inf where unknown), each bone's measurement in this frame is combined
         with the earlier frames' by precision before the population prior is applied, once: a person followed
         for a while is fitted with their own skeleton."""
-        projected = project(mle, proj)
+        hom = view_matmul(mle, proj)
         scale = (
-            noise_scale(mle, uv, inv_sigma, proj, self.min_noise_scale, projected)
+            noise_scale(mle, uv, inv_sigma, proj, self.min_noise_scale, hom)
             if self.noise_scale == "estimate"
             else np.ones(len(mle))
         )
         inv_sigma = inv_sigma / scale[None, :, None]
         if self.bone_prior == "population":
             return self._problem(uv, inv_sigma, proj, anchor, True)
-        info = joint_information(mle, proj, inv_sigma, projected)
+        info = joint_information(mle, proj, inv_sigma, hom)
         self._mle_information = info  # the joints' information, kept for last_joint_variance
         measured = (inv_sigma > 0).sum(axis=0) >= 2
         lengths, variances = bone_variances(mle, info, BONE_PAIRS, measured)

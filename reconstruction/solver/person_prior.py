@@ -30,7 +30,7 @@ from scipy.stats import chi2
 
 from data.bone_lengths import BONE_NAMES
 from reconstruction.solver.map_estimation import EPS_DEPTH
-from reconstruction.solver.prior_kernels import bone_sums, information_sums, joint_covariances
+from reconstruction.solver.prior_kernels import bone_sums, information_sums, joint_covariances, noise_medians
 
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
@@ -51,18 +51,22 @@ def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([hom[:, 0] / z, hom[:, 1] / z], axis=-1), z
 
 
+def view_matmul(X: np.ndarray, proj: np.ndarray) -> np.ndarray:
+    """M X of joints (P, J, 3) in views (V, 3, 4), translation not added: (V, 3, P J), as in :func:`project`."""
+    return np.ascontiguousarray(proj[:, :, :3] @ X.reshape(-1, 3).T)
+
+
 def joint_information(
-    X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray, projected: tuple[np.ndarray, np.ndarray] | None = None
+    X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray, hom: np.ndarray | None = None
 ) -> np.ndarray:
     """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3).
 
-    d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint; ``projected``: :func:`project` of X, if at hand.
+    d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint; hom: :func:`view_matmul` of X, if at hand.
     """
-    xy, z = project(X, proj) if projected is None else projected
+    hom = view_matmul(X, proj) if hom is None else hom
     info = np.empty(X.shape[:2] + (3, 3))
-    information_sums(
-        xy, z, np.ascontiguousarray(proj, dtype=np.float64), np.ascontiguousarray(inv_sigma, dtype=np.float64), info
-    )
+    w = np.ascontiguousarray(inv_sigma, dtype=np.float64)
+    information_sums(hom, np.ascontiguousarray(proj, dtype=np.float64), w, info)
     return info
 
 
@@ -72,25 +76,16 @@ def noise_scale(
     inv_sigma: np.ndarray,
     proj: np.ndarray,
     floor: float = 0.01,
-    projected: tuple[np.ndarray, np.ndarray] | None = None,
+    hom: np.ndarray | None = None,
 ) -> np.ndarray:
     """Each person's 2D noise over the sigma model, robustly from MLE residuals: (P, J, 3), (V, P, J, 2),
     (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views.
-    ``projected``: :func:`project` of X, if at hand."""
-    xy, _ = project(X, proj) if projected is None else projected
-    seen = inv_sigma > 0
-    dx, dy = uv[..., 0] - xy[..., 0], uv[..., 1] - xy[..., 1]  # not np.sum over the axis of 2: slow
-    r2 = np.where(seen, (dx * dx + dy * dy) * inv_sigma**2, 0.0)  # (V, P, J)
-    rss, views = r2.sum(axis=0), seen.sum(axis=0)  # (P, J)
-    ok = views >= 2
-    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)  # valid first
-    n = ok.sum(axis=1)
-    rows = np.arange(len(X))
-    a = ratio[rows, np.maximum(n - 1, 0) // 2]
-    b = ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
-    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
-    out = np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0)
-    return np.maximum(out, floor)
+    hom: :func:`view_matmul` of X, if at hand."""
+    hom = view_matmul(X, proj) if hom is None else hom
+    median, ratio = np.empty(len(X)), np.empty(X.shape[1])
+    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    noise_medians(hom, as_float(proj), as_float(uv), as_float(inv_sigma), _CHI2_MEDIANS, ratio, median)
+    return np.maximum(np.sqrt(np.where(median < 0, 1.0, median)), floor)  # median -1: no joint in >= 2 views
 
 
 def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:

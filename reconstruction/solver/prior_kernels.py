@@ -13,14 +13,15 @@ from numba import njit
 from reconstruction.solver.map_estimation import EPS_DEPTH
 
 _JIT = {"cache": True, "error_model": "numpy", "_nrt": False}
+_INNER = {**_JIT, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}  # helpers of the kernels alone
 _BIG = np.finfo(np.float64).max
 
 
 @njit(**_JIT)
-def information_sums(xy: np.ndarray, z: np.ndarray, proj: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
-    """out (P, J, 3, 3) = sum over k = x, y of sum over views of r r^T, r = (M_k - xy_k M_2) w / z: the
-    Gauss-Newton information of each joint from its pixels xy (V, P, J, 2), depths z (V, P, J), views proj
-    (V, 3, 4) and 1/sigma w (V, P, J) (0 unseen)."""
+def information_sums(hom: np.ndarray, proj: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
+    """out (P, J, 3, 3) = sum over k = x, y of sum over views of r r^T, r = (M_k - x_k M_2) w / z: the Gauss-Newton
+    information of each joint from its projections (hom (V, 3, P J), see :func:`pair_chi2s`), views proj (V, 3, 4)
+    and 1/sigma w (V, P, J) (0 unseen)."""
     V, P, J = w.shape
     for p in range(P):
         for j in range(J):
@@ -28,7 +29,8 @@ def information_sums(xy: np.ndarray, z: np.ndarray, proj: np.ndarray, w: np.ndar
             for k in range(2):
                 a00 = a01 = a02 = a11 = a12 = a22 = 0.0
                 for v in range(V):
-                    s, x = w[v, p, j] / z[v, p, j], xy[v, p, j, k]
+                    x, y, z = _pixel(hom, proj, v, p * J + j)
+                    s, x = w[v, p, j] / z, x if k == 0 else y
                     r0 = (proj[v, k, 0] - x * proj[v, 2, 0]) * s
                     r1 = (proj[v, k, 1] - x * proj[v, 2, 1]) * s
                     r2 = (proj[v, k, 2] - x * proj[v, 2, 2]) * s
@@ -40,7 +42,7 @@ def information_sums(xy: np.ndarray, z: np.ndarray, proj: np.ndarray, w: np.ndar
             out[p, j, 2, 0], out[p, j, 2, 1], out[p, j, 2, 2] = b02, b12, b22
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _finite(a: float) -> float:
     """np.nan_to_num of one value: NaN -> 0, +-inf -> the largest finite float of that sign."""
     if np.isnan(a):
@@ -106,18 +108,19 @@ def bone_sums(
             n_out[p, l], var_out[p, l] = n, var if good[p, a] and good[p, b] else np.inf
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _term(cov: np.ndarray, p: int, a: int, b: int, r: int, c: int, ur: float, uc: float) -> float:
     """u_r (cov_a + cov_b)_rc u_c of person p's joints a and b."""
     return ur * (cov[p, a, r, c] + cov[p, b, r, c]) * uc
 
 
-@njit(**_JIT)
-def _pixel(hom: np.ndarray, proj: np.ndarray, v: int, i: int) -> tuple[float, float]:
-    """Pixel of point i in view v from hom (V, 3, N) = M X (the matmul, translation not added)."""
+@njit(**_INNER)
+def _pixel(hom: np.ndarray, proj: np.ndarray, v: int, i: int) -> tuple[float, float, float]:
+    """Pixel and clamped depth of point i in view v from hom (V, 3, N) = M X (the matmul, translation not added),
+    as person_prior.project."""
     z = hom[v, 2, i] + proj[v, 2, 3]
     z = z if z >= EPS_DEPTH or np.isnan(z) else EPS_DEPTH  # np.maximum
-    return (hom[v, 0, i] + proj[v, 0, 3]) / z, (hom[v, 1, i] + proj[v, 1, 3]) / z
+    return (hom[v, 0, i] + proj[v, 0, 3]) / z, (hom[v, 1, i] + proj[v, 1, 3]) / z, z
 
 
 @njit(**_JIT)
@@ -139,8 +142,8 @@ def pair_chi2s(
         for p in range(uv.shape[1]):
             for k in range(len(left)):
                 a, b = left[k], right[k]
-                xa, ya = _pixel(hom, proj, v, p * J + a)
-                xb, yb = _pixel(hom, proj, v, p * J + b)
+                xa, ya, _ = _pixel(hom, proj, v, p * J + a)
+                xb, yb, _ = _pixel(hom, proj, v, p * J + b)
                 d_aa = _sq(uv[v, p, a, 0] - xa, uv[v, p, a, 1] - ya)
                 d_bb = _sq(uv[v, p, b, 0] - xb, uv[v, p, b, 1] - yb)
                 d_ba = _sq(uv[v, p, b, 0] - xa, uv[v, p, b, 1] - ya)
@@ -149,7 +152,41 @@ def pair_chi2s(
                 exchanged[v, p, k] = w2[v, p, b] * d_ba + w2[v, p, a] * d_ab
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _sq(dx: float, dy: float) -> float:
     """dx^2 + dy^2."""
     return dx * dx + dy * dy
+
+
+@njit(**_JIT)
+def noise_medians(
+    hom: np.ndarray,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w: np.ndarray,
+    medians: np.ndarray,
+    ratio: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """out (P,): each person's median over joints seen in n >= 2 views of RSS / median(chi^2(2n - 3)), -1 without
+    any; RSS the squared residuals of pixels uv (V, P, J, 2+) in units of 1/w (V, P, J) against hom (see
+    :func:`pair_chi2s`); medians: chi^2 medians by degrees of freedom; ratio (J,) scratch. noise_scale's formula."""
+    V, P, J = w.shape
+    for p in range(P):
+        n = 0
+        for j in range(J):
+            rss, views = 0.0, 0
+            for v in range(V):
+                if w[v, p, j] > 0:
+                    x, y, _ = _pixel(hom, proj, v, p * J + j)
+                    rss += _sq(uv[v, p, j, 0] - x, uv[v, p, j, 1] - y) * (w[v, p, j] * w[v, p, j])
+                    views += 1
+            value = rss / medians[min(2 * views - 3, len(medians) - 1)] if views >= 2 else np.inf
+            n += views >= 2
+            i = j  # insertion sort, NaN last as np.sort
+            while i > 0 and (value < ratio[i - 1] or (np.isnan(ratio[i - 1]) and not np.isnan(value))):
+                ratio[i] = ratio[i - 1]
+                i -= 1
+            ratio[i] = value
+        a, b = ratio[max(n - 1, 0) // 2], ratio[min(n // 2, J - 1)]
+        out[p] = (a if n % 2 == 1 else 0.5 * (a + b)) if n > 0 else -1.0

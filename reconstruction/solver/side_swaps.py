@@ -16,6 +16,7 @@ import numpy as np
 from data.geometry.triangulation import triangulate_dlt
 from data.keypoints import FLIP_PAIRS
 from reconstruction.solver.map_estimation import EPS_DEPTH
+from reconstruction.solver.person_prior import view_matmul
 from reconstruction.solver.prior_kernels import pair_chi2s
 
 
@@ -56,7 +57,7 @@ def find_swaps(
     seen = inv_sigma > 0
     left, right = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
     given, exchanged = np.empty((V, len(seen[0]), len(pairs))), np.empty((V, len(seen[0]), len(pairs)))
-    hom = np.ascontiguousarray(proj[:, :, :3] @ full[..., :3].reshape(-1, 3).T)  # as person_prior.project
+    hom = view_matmul(full[..., :3], proj)
     pair_chi2s(hom, np.ascontiguousarray(proj), np.ascontiguousarray(poses2d), w2, left, right, given, exchanged)
     # a swap reprojects worse than its exchange even from the DLT it pulls (only the exchange test below
     # needs the other views alone)
