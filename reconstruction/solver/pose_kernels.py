@@ -41,6 +41,7 @@ _EPS = np.finfo(np.float64).eps
 _JIT = {"cache": True, "error_model": "numpy", "_nrt": False}
 # helpers called only from the kernels: without the CPython and C wrappers numba compiles for every function
 _INNER = {**_JIT, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+_INLINE = {**_INNER, "inline": "always"}  # _step alone: 0.3 s less compile, no slower (inlining more is slower)
 
 
 @njit(**_INNER)
@@ -383,7 +384,7 @@ def _max_diagonal(D: np.ndarray, s: int, e: int) -> float:
     return out
 
 
-@njit(**_INNER)
+@njit(**_INLINE)
 def _step(c: int, lin: tuple, mu: float, exact: bool, plan: tuple, B: np.ndarray, h: np.ndarray) -> bool:
     """The damped step h of component c (the exact model where asked and positive definite, else the safe
     one; NaN where neither is) -> whether the exact model was used."""
