@@ -190,3 +190,19 @@ def noise_medians(
             ratio[i] = value
         a, b = ratio[max(n - 1, 0) // 2], ratio[min(n // 2, J - 1)]
         out[p] = (a if n % 2 == 1 else 0.5 * (a + b)) if n > 0 else -1.0
+
+
+@njit(**_JIT)
+def mean_variances(info: np.ndarray, tie: np.ndarray, out: np.ndarray) -> None:
+    """out (P, J): a third of the trace of (info + tie I)^-1 per joint, info (P, J, 3, 3), tie (P, J); the
+    inverse by cofactors over the determinant as data.geometry.linalg.inverse_3x3 (inf / NaN where singular)."""
+    for p in range(info.shape[0]):
+        for j in range(info.shape[1]):
+            t = tie[p, j]
+            a00, a01, a02 = info[p, j, 0, 0] + t, info[p, j, 0, 1] + 0.0, info[p, j, 0, 2] + 0.0
+            a10, a11, a12 = info[p, j, 1, 0] + 0.0, info[p, j, 1, 1] + t, info[p, j, 1, 2] + 0.0
+            a20, a21, a22 = info[p, j, 2, 0] + 0.0, info[p, j, 2, 1] + 0.0, info[p, j, 2, 2] + t
+            c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
+            c11, c22 = a22 * a00 - a20 * a02, a00 * a11 - a01 * a10
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            out[p, j] = (c00 / det + c11 / det + c22 / det) / 3
