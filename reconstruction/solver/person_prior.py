@@ -30,7 +30,7 @@ from scipy.stats import chi2
 
 from data.bone_lengths import BONE_NAMES
 from reconstruction.solver.map_estimation import EPS_DEPTH
-from reconstruction.solver.prior_kernels import bone_sums, information_sums, joint_covariances, noise_medians
+from reconstruction.solver.prior_kernels import bone_sums, information_sums, noise_medians
 
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
@@ -103,12 +103,10 @@ def bone_variances(
     every direction."""
     P, J, L = X.shape[0], X.shape[1], len(pairs)
     cov, good = np.empty((P, J, 3, 3)), np.empty((P, J), dtype=bool)
-    joint_covariances(
-        np.ascontiguousarray(info, dtype=np.float64), np.ascontiguousarray(measured, dtype=bool), cov, good
-    )
     n, var = np.empty((P, L)), np.empty((P, L))
     X, pairs = np.ascontiguousarray(X, dtype=np.float64), np.ascontiguousarray(pairs, dtype=np.int64)
-    bone_sums(X, cov, good, pairs, n, var)
+    info, measured = np.ascontiguousarray(info, dtype=np.float64), np.ascontiguousarray(measured, dtype=bool)
+    bone_sums(X, info, measured, pairs, cov, good, n, var)
     return n, var
 
 

@@ -50,38 +50,46 @@ def _finite(a: float) -> float:
     return min(max(a, -_BIG), _BIG)
 
 
-@njit(**_JIT)
-def joint_covariances(info: np.ndarray, measured: np.ndarray, cov: np.ndarray, good: np.ndarray) -> None:
+@njit(**_INNER)
+def _joint_covariances(info: np.ndarray, measured: np.ndarray, cov: np.ndarray, good: np.ndarray) -> None:
     """cov (P, J, 3, 3): the inverse of each joint's information (P, J, 3, 3) (np.nan_to_num'd) where ``good``: the
     joint is ``measured`` (P, J) and fixed in every direction (det > 1e-9 (trace / 3)^3, trace > 0), else 0.
     Inverse by cofactors over the determinant, cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1]
     (indices mod 3), as data.geometry.linalg.inverse_3x3."""
     for p in range(info.shape[0]):
         for j in range(info.shape[1]):
-            A = (
-                _finite(info[p, j, 0, 0]), _finite(info[p, j, 0, 1]), _finite(info[p, j, 0, 2]),
-                _finite(info[p, j, 1, 0]), _finite(info[p, j, 1, 1]), _finite(info[p, j, 1, 2]),
-                _finite(info[p, j, 2, 0]), _finite(info[p, j, 2, 1]), _finite(info[p, j, 2, 2]),
-            )  # fmt: skip
-            c00 = A[4] * A[8] - A[5] * A[7]
-            c01 = A[5] * A[6] - A[3] * A[8]
-            c02 = A[3] * A[7] - A[4] * A[6]
-            det = A[0] * c00 + A[1] * c01 + A[2] * c02
-            trace = A[0] + A[4] + A[8]
+            a00, a01, a02 = _finite(info[p, j, 0, 0]), _finite(info[p, j, 0, 1]), _finite(info[p, j, 0, 2])
+            a10, a11, a12 = _finite(info[p, j, 1, 0]), _finite(info[p, j, 1, 1]), _finite(info[p, j, 1, 2])
+            a20, a21, a22 = _finite(info[p, j, 2, 0]), _finite(info[p, j, 2, 1]), _finite(info[p, j, 2, 2])
+            c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
+            c10, c11, c12 = a21 * a02 - a22 * a01, a22 * a00 - a20 * a02, a20 * a01 - a21 * a00
+            c20, c21, c22 = a01 * a12 - a02 * a11, a02 * a10 - a00 * a12, a00 * a11 - a01 * a10
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            trace = a00 + a11 + a22
             good[p, j] = measured[p, j] and det > 1e-9 * (trace / 3) ** 3.0 and trace > 0
-            for r in range(3):
-                for c in range(3):
-                    a, b, e, f = 3 * ((r + 1) % 3), 3 * ((r + 2) % 3), (c + 1) % 3, (c + 2) % 3
-                    cov[p, j, r, c] = (A[a + e] * A[b + f] - A[a + f] * A[b + e]) / det if good[p, j] else 0.0
+            if not good[p, j]:
+                c00 = c01 = c02 = c10 = c11 = c12 = c20 = c21 = c22 = 0.0
+                det = 1.0
+            cov[p, j, 0, 0], cov[p, j, 0, 1], cov[p, j, 0, 2] = c00 / det, c01 / det, c02 / det
+            cov[p, j, 1, 0], cov[p, j, 1, 1], cov[p, j, 1, 2] = c10 / det, c11 / det, c12 / det
+            cov[p, j, 2, 0], cov[p, j, 2, 1], cov[p, j, 2, 2] = c20 / det, c21 / det, c22 / det
 
 
 @njit(**_JIT)
 def bone_sums(
-    X: np.ndarray, cov: np.ndarray, good: np.ndarray, pairs: np.ndarray, n_out: np.ndarray, var_out: np.ndarray
+    X: np.ndarray,
+    info: np.ndarray,
+    measured: np.ndarray,
+    pairs: np.ndarray,
+    cov: np.ndarray,
+    good: np.ndarray,
+    n_out: np.ndarray,
+    var_out: np.ndarray,
 ) -> None:
     """Length n_out (P, L) of each bone of X (P, J, 3) and the variance var_out (P, L) of the length, u^T (cov_a +
-    cov_b) u with u the unit bone direction, from :func:`joint_covariances` (inf unless both ends are good),
-    numpy's pairwise order of the 9-term sum."""
+    cov_b) u with u the unit bone direction and cov, good from :func:`_joint_covariances` of info and measured
+    (inf unless both ends are good); numpy's pairwise order of the 9-term sum."""
+    _joint_covariances(info, measured, cov, good)
     for p in range(X.shape[0]):
         for l in range(pairs.shape[0]):
             a, b = pairs[l, 0], pairs[l, 1]
