@@ -61,6 +61,67 @@ def _robust(r: float, kind: int, C2: float) -> tuple[float, float, float]:
 
 
 @njit(**_INNER)
+def _joint_terms(
+    cost: float,
+    X0: float,
+    X1: float,
+    X2: float,
+    p: int,
+    j: int,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w: np.ndarray,
+    anchor: np.ndarray,
+    tau2: float,
+    robust: int,
+    C2: float,
+) -> tuple[float, float, float, float, float, float, float, float, float, float]:
+    """Joint j of person p at (X0, X1, X2): cost + its likelihood and anchor terms, its gradient (3) and the
+    distinct entries of its block (00, 01, 02, 11, 12, 22)."""
+    dx0, dx1, dx2 = X0 - anchor[p, j, 0], X1 - anchor[p, j, 1], X2 - anchor[p, j, 2]
+    cost += 0.5 * tau2 * (dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
+    g0, g1, g2 = tau2 * dx0, tau2 * dx1, tau2 * dx2
+    d00 = d01 = d02 = d11 = d12 = d22 = 0.0
+    for v in range(proj.shape[0]):
+        wv = w[v, p, j]
+        if wv <= 0.0:
+            continue
+        h0 = proj[v, 0, 0] * X0 + proj[v, 0, 1] * X1 + proj[v, 0, 2] * X2 + proj[v, 0, 3]
+        h1 = proj[v, 1, 0] * X0 + proj[v, 1, 1] * X1 + proj[v, 1, 2] * X2 + proj[v, 1, 3]
+        depth = max(proj[v, 2, 0] * X0 + proj[v, 2, 1] * X1 + proj[v, 2, 2] * X2 + proj[v, 2, 3], _EPS_DEPTH)
+        px, py = h0 / depth, h1 / depth
+        rx, ry = (uv[v, p, j, 0] - px) * wv, (uv[v, p, j, 1] - py) * wv
+        sx = sy = wv / depth
+        if robust == 0:
+            cost += 0.5 * (rx * rx + ry * ry)
+        else:
+            cx, rsx, jsx = _robust(rx, robust, C2)
+            cy, rsy, jsy = _robust(ry, robust, C2)
+            cost += 0.5 * (cx + cy)
+            rx, ry, sx, sy = rx * rsx, ry * rsy, sx * jsx, sy * jsy
+        # dr_x/dX = -s_x (M0 - px M2), dr_y/dX = -s_y (M1 - py M2)
+        a0, a1, a2 = (
+            proj[v, 0, 0] - px * proj[v, 2, 0],
+            proj[v, 0, 1] - px * proj[v, 2, 1],
+            proj[v, 0, 2] - px * proj[v, 2, 2],
+        )
+        b0, b1, b2 = (
+            proj[v, 1, 0] - py * proj[v, 2, 0],
+            proj[v, 1, 1] - py * proj[v, 2, 1],
+            proj[v, 1, 2] - py * proj[v, 2, 2],
+        )
+        q = sx * sx
+        d00, d01, d02 = d00 + q * a0 * a0, d01 + q * a0 * a1, d02 + q * a0 * a2
+        d11, d12, d22 = d11 + q * a1 * a1, d12 + q * a1 * a2, d22 + q * a2 * a2
+        q = sy * sy
+        d00, d01, d02 = d00 + q * b0 * b0, d01 + q * b0 * b1, d02 + q * b0 * b2
+        d11, d12, d22 = d11 + q * b1 * b1, d12 + q * b1 * b2, d22 + q * b2 * b2
+        ex, ey = -sx * rx, -sy * ry
+        g0, g1, g2 = g0 + (ex * a0 + ey * b0), g1 + (ex * a1 + ey * b1), g2 + (ex * a2 + ey * b2)
+    return cost, g0, g1, g2, d00 + tau2, d01, d02, d11 + tau2, d12, d22 + tau2
+
+
+@njit(**_INNER)
 def _likelihood_terms(
     x: np.ndarray,
     s: int,
@@ -80,52 +141,14 @@ def _likelihood_terms(
     """Likelihood + anchor cost of positions s:e; writes their blocks D (J, 3, 3) and gradients g (J, 3)."""
     cost = 0.0
     for k in range(s, e):
-        j = pos_joint[k]
         X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
-        dx0, dx1, dx2 = X0 - anchor[p, j, 0], X1 - anchor[p, j, 1], X2 - anchor[p, j, 2]
-        cost += 0.5 * tau2 * (dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
-        g0, g1, g2 = tau2 * dx0, tau2 * dx1, tau2 * dx2
-        d00 = d01 = d02 = d11 = d12 = d22 = 0.0
-        for v in range(proj.shape[0]):
-            wv = w[v, p, j]
-            if wv <= 0.0:
-                continue
-            h0 = proj[v, 0, 0] * X0 + proj[v, 0, 1] * X1 + proj[v, 0, 2] * X2 + proj[v, 0, 3]
-            h1 = proj[v, 1, 0] * X0 + proj[v, 1, 1] * X1 + proj[v, 1, 2] * X2 + proj[v, 1, 3]
-            depth = max(proj[v, 2, 0] * X0 + proj[v, 2, 1] * X1 + proj[v, 2, 2] * X2 + proj[v, 2, 3], _EPS_DEPTH)
-            px, py = h0 / depth, h1 / depth
-            rx, ry = (uv[v, p, j, 0] - px) * wv, (uv[v, p, j, 1] - py) * wv
-            sx = sy = wv / depth
-            if robust == 0:
-                cost += 0.5 * (rx * rx + ry * ry)
-            else:
-                cx, rsx, jsx = _robust(rx, robust, C2)
-                cy, rsy, jsy = _robust(ry, robust, C2)
-                cost += 0.5 * (cx + cy)
-                rx, ry, sx, sy = rx * rsx, ry * rsy, sx * jsx, sy * jsy
-            # dr_x/dX = -s_x (M0 - px M2), dr_y/dX = -s_y (M1 - py M2)
-            a0, a1, a2 = (
-                proj[v, 0, 0] - px * proj[v, 2, 0],
-                proj[v, 0, 1] - px * proj[v, 2, 1],
-                proj[v, 0, 2] - px * proj[v, 2, 2],
-            )
-            b0, b1, b2 = (
-                proj[v, 1, 0] - py * proj[v, 2, 0],
-                proj[v, 1, 1] - py * proj[v, 2, 1],
-                proj[v, 1, 2] - py * proj[v, 2, 2],
-            )
-            q = sx * sx
-            d00, d01, d02 = d00 + q * a0 * a0, d01 + q * a0 * a1, d02 + q * a0 * a2
-            d11, d12, d22 = d11 + q * a1 * a1, d12 + q * a1 * a2, d22 + q * a2 * a2
-            q = sy * sy
-            d00, d01, d02 = d00 + q * b0 * b0, d01 + q * b0 * b1, d02 + q * b0 * b2
-            d11, d12, d22 = d11 + q * b1 * b1, d12 + q * b1 * b2, d22 + q * b2 * b2
-            ex, ey = -sx * rx, -sy * ry
-            g0, g1, g2 = g0 + (ex * a0 + ey * b0), g1 + (ex * a1 + ey * b1), g2 + (ex * a2 + ey * b2)
+        cost, g0, g1, g2, d00, d01, d02, d11, d12, d22 = _joint_terms(
+            cost, X0, X1, X2, p, pos_joint[k], proj, uv, w, anchor, tau2, robust, C2
+        )
         g[k, 0], g[k, 1], g[k, 2] = g0, g1, g2
-        D[k, 0, 0], D[k, 0, 1], D[k, 0, 2] = d00 + tau2, d01, d02
-        D[k, 1, 0], D[k, 1, 1], D[k, 1, 2] = d01, d11 + tau2, d12
-        D[k, 2, 0], D[k, 2, 1], D[k, 2, 2] = d02, d12, d22 + tau2
+        D[k, 0, 0], D[k, 0, 1], D[k, 0, 2] = d00, d01, d02
+        D[k, 1, 0], D[k, 1, 1], D[k, 1, 2] = d01, d11, d12
+        D[k, 2, 0], D[k, 2, 1], D[k, 2, 2] = d02, d12, d22
     return cost
 
 
@@ -317,17 +340,6 @@ def solve_component(
     (:func:`reconstruction.solver.compiled_solver.plan_arrays`); B (n_blocks, 3, 3) scratch.
     """
     s, e, slot, later_ptr, later_idx = plan[1][c], plan[1][c + 1], plan[9], plan[10], plan[11]
-    if e - s == 1:  # one joint (no bone): one block, the same arithmetic as below without the plan's loops
-        q = slot[s, s]
-        for i in range(3):
-            for m in range(3):
-                B[q, i, m] = D[s, i, m]
-            B[q, i, i] += mu
-        if not _cholesky3(B, q):
-            return False
-        y0, y1, y2 = _lower_solve(B, q, -g[s, 0], -g[s, 1], -g[s, 2])
-        h[s, 0], h[s, 1], h[s, 2] = _upper_solve(B, q, y0, y1, y2)
-        return True
     _assemble(c, D, K, Kr, mu, exact, plan, B)
     if not _factorize(s, e, slot, later_ptr, later_idx, B):
         return False
@@ -466,6 +478,84 @@ def _solve_problem(
     return f, it, MAX_ITERATIONS if status == RUNNING else status
 
 
+@njit(**_INNER)
+def _point_step(
+    g0: float, g1: float, g2: float, b00: float, b01: float, b02: float, b11: float, b12: float, b22: float
+) -> tuple[float, float, float]:
+    """-B^-1 g of one symmetric 3x3 block B (distinct entries) by the arithmetic of _cholesky3 and the two
+    triangular solves; NaN if B is not positive definite."""
+    if not b00 > 0.0:
+        return np.nan, np.nan, np.nan
+    l00 = np.sqrt(b00)
+    l10, l20 = b01 / l00, b02 / l00
+    a11 = b11 - l10 * l10
+    if not a11 > 0.0:
+        return np.nan, np.nan, np.nan
+    l11 = np.sqrt(a11)
+    l21 = (b12 - l20 * l10) / l11
+    a22 = b22 - l20 * l20 - l21 * l21
+    if not a22 > 0.0:
+        return np.nan, np.nan, np.nan
+    l22 = np.sqrt(a22)
+    y0 = -g0 / l00
+    y1 = (-g1 - l10 * y0) / l11
+    y2 = (-g2 - l20 * y0 - l21 * y1) / l22
+    y2 = y2 / l22
+    y1 = (y1 - l21 * y2) / l11
+    return (y0 - l10 * y1 - l20 * y2) / l00, y1, y2
+
+
+@njit(**_INNER)
+def _solve_point(
+    x: np.ndarray, k: int, p: int, j: int, data: tuple, tau2: float, robust: int, C2: float, settings: tuple
+) -> tuple[float, int, int]:
+    """:func:`_solve_problem` of a component of one joint (no bone: every MLE problem), the joint at position k
+    of x, in scalars: the same arithmetic and decisions without the block machinery's call overhead."""
+    max_iterations, xtol, ftol, gtol, tau = settings
+    proj, uv, w, anchor = data[0], data[1], data[2], data[3]
+    X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
+    f, g0, g1, g2, d00, d01, d02, d11, d12, d22 = _joint_terms(
+        0.0, X0, X1, X2, p, j, proj, uv, w, anchor, tau2, robust, C2
+    )
+    scale = max(max(max(0.0, d00), d11), d22)
+    scale = scale if scale > 0.0 else 1.0
+    status = CONVERGED_GRADIENT if max(max(max(0.0, abs(g0)), abs(g1)), abs(g2)) <= gtol else RUNNING
+    mu, nu, it = tau * scale, 2.0, 0
+    while status == RUNNING and it < max_iterations:
+        it += 1
+        h0, h1, h2 = _point_step(g0, g1, g2, d00 + mu, d01, d02, d11 + mu, d12, d22 + mu)
+        predicted = 0.0  # summed in _solve_problem's order
+        predicted += 0.5 * h0 * (mu * h0 - g0)
+        predicted += 0.5 * h1 * (mu * h1 - g1)
+        predicted += 0.5 * h2 * (mu * h2 - g2)
+        n0, n1, n2 = X0 + h0, X1 + h1, X2 + h2
+        h_max = max(max(max(0.0, abs(h0)), abs(h1)), abs(h2)) if not np.isnan(predicted) else np.nan
+        trial = _joint_terms(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2)
+        actual = f - trial[0]
+        rho = actual / predicted if predicted != 0.0 else np.nan
+        if predicted > 0.0 and rho > 0.0 and np.isfinite(trial[0] + h_max):
+            mu *= max(MIN_DAMPING_FACTOR, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+            X0, X1, X2 = n0, n1, n2
+            f_old = f
+            f, g0, g1, g2, d00, d01, d02, d11, d12, d22 = trial
+            if h_max <= xtol:
+                status = CONVERGED_STEP
+            elif actual <= ftol * max(f_old, 0.0):
+                status = CONVERGED_COST
+            elif max(max(max(0.0, abs(g0)), abs(g1)), abs(g2)) <= gtol:
+                status = CONVERGED_GRADIENT
+        else:
+            if h_max <= xtol:
+                status = CONVERGED_STEP
+            mu *= nu
+            nu *= 2.0
+            if mu > MAX_DAMPING * scale and status == RUNNING:
+                status = STALLED
+    x[k, 0], x[k, 1], x[k, 2] = X0, X1, X2
+    return f, it, MAX_ITERATIONS if status == RUNNING else status
+
+
 @njit(**_JIT)
 def solve_all(
     X: np.ndarray,
@@ -493,9 +583,12 @@ def solve_all(
             for i in range(3):
                 x[k, i] = X[p, pos_joint[k], i]
         for c in range(len(comp_start) - 1):
-            cost_out[p, c], it_out[p, c], status_out[p, c] = _solve_problem(
-                x, c, p, data, tau2, robust, C2, plan, settings, work[1:]
-            )
+            s = comp_start[c]
+            if comp_start[c + 1] - s == 1:  # one joint, no bone
+                result = _solve_point(x, s, p, pos_joint[s], data, tau2, robust, C2, settings)
+            else:
+                result = _solve_problem(x, c, p, data, tau2, robust, C2, plan, settings, work[1:])
+            cost_out[p, c], it_out[p, c], status_out[p, c] = result
         for k in range(X.shape[1]):
             for i in range(3):
                 X[p, pos_joint[k], i] = x[k, i]
