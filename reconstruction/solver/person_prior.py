@@ -53,7 +53,7 @@ def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def view_matmul(X: np.ndarray, proj: np.ndarray) -> np.ndarray:
     """M X of joints (P, J, 3) in views (V, 3, 4), translation not added: (V, 3, P J), as in :func:`project`."""
-    return np.ascontiguousarray(proj[:, :, :3] @ X.reshape(-1, 3).T)
+    return np.ascontiguousarray(proj[:, :, :3] @ X.reshape(-1, 3).T, dtype=np.float64)
 
 
 def joint_information(

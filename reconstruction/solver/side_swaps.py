@@ -55,10 +55,11 @@ def find_swaps(
     w2 = inv_sigma**2
     full = triangulate_dlt(poses2d, proj, 2) if full is None else full
     seen = inv_sigma > 0
-    left, right = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+    left, right = np.array([p[0] for p in pairs], dtype=np.int64), np.array([p[1] for p in pairs], dtype=np.int64)
     given, exchanged = np.empty((V, len(seen[0]), len(pairs))), np.empty((V, len(seen[0]), len(pairs)))
     hom = view_matmul(full[..., :3], proj)
-    pair_chi2s(hom, np.ascontiguousarray(proj), np.ascontiguousarray(poses2d), w2, left, right, given, exchanged)
+    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    pair_chi2s(hom, as_float(proj), as_float(poses2d), as_float(w2), left, right, given, exchanged)
     # a swap reprojects worse than its exchange even from the DLT it pulls (only the exchange test below
     # needs the other views alone)
     bad = ((given > min_chi2) & (exchanged < given) & seen[..., left] & seen[..., right]).any(axis=0)
