@@ -6,7 +6,9 @@ component) problem at a time in compiled loops: a crowd of small problems costs 
 numpy call overhead. The normal equations are 3x3 blocks per joint coupled along the bones, factorised
 by a block Cholesky in the elimination order of a :class:`reconstruction.solver.compiled_solver.SolverPlan`
 (joints at solver *positions*, components contiguous; ``slot[i, j]`` (i >= j) is the storage of block
-(i, j) including the fill-in; ``later[k]`` the positions i > k with a block (i, k)).
+(i, j) including the fill-in; ``later[k]`` the positions i > k with a block (i, k)). A component of one
+joint (every problem of the MLE, which has no bones) is solved in scalars by :func:`_solve_point`, with the
+same arithmetic: its iterations would otherwise be mostly call overhead.
 
 Status codes are those of :mod:`reconstruction.solver.lm_solver`.
 """
