@@ -47,7 +47,7 @@ def _finite(a: float) -> float:
     """np.nan_to_num of one value: NaN -> 0, +-inf -> the largest finite float of that sign."""
     if np.isnan(a):
         return 0.0
-    return min(max(a, -_BIG), _BIG)
+    return _BIG if a > _BIG else (-_BIG if a < -_BIG else a)
 
 
 @njit(**_INNER)
@@ -97,29 +97,26 @@ def bone_sums(
             n = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             m = max(n, 1e-12)
             u0, u1, u2 = d0 / m, d1 / m, d2 / m
-            t0, t1, t2 = (
-                _term(cov, p, a, b, 0, 0, u0, u0),
-                _term(cov, p, a, b, 0, 1, u0, u1),
-                _term(cov, p, a, b, 0, 2, u0, u2),
+            s00, s01, s02 = (
+                cov[p, a, 0, 0] + cov[p, b, 0, 0],
+                cov[p, a, 0, 1] + cov[p, b, 0, 1],
+                cov[p, a, 0, 2] + cov[p, b, 0, 2],
             )
-            t3, t4, t5 = (
-                _term(cov, p, a, b, 1, 0, u1, u0),
-                _term(cov, p, a, b, 1, 1, u1, u1),
-                _term(cov, p, a, b, 1, 2, u1, u2),
+            s10, s11, s12 = (
+                cov[p, a, 1, 0] + cov[p, b, 1, 0],
+                cov[p, a, 1, 1] + cov[p, b, 1, 1],
+                cov[p, a, 1, 2] + cov[p, b, 1, 2],
             )
-            t6, t7, t8 = (
-                _term(cov, p, a, b, 2, 0, u2, u0),
-                _term(cov, p, a, b, 2, 1, u2, u1),
-                _term(cov, p, a, b, 2, 2, u2, u2),
+            s20, s21, s22 = (
+                cov[p, a, 2, 0] + cov[p, b, 2, 0],
+                cov[p, a, 2, 1] + cov[p, b, 2, 1],
+                cov[p, a, 2, 2] + cov[p, b, 2, 2],
             )
+            t0, t1, t2 = u0 * s00 * u0, u0 * s01 * u1, u0 * s02 * u2
+            t3, t4, t5 = u1 * s10 * u0, u1 * s11 * u1, u1 * s12 * u2
+            t6, t7, t8 = u2 * s20 * u0, u2 * s21 * u1, u2 * s22 * u2
             var = (((t0 + t1) + (t2 + t3)) + ((t4 + t5) + (t6 + t7))) + t8
             n_out[p, l], var_out[p, l] = n, var if good[p, a] and good[p, b] else np.inf
-
-
-@njit(**_INNER)
-def _term(cov: np.ndarray, p: int, a: int, b: int, r: int, c: int, ur: float, uc: float) -> float:
-    """u_r (cov_a + cov_b)_rc u_c of person p's joints a and b."""
-    return ur * (cov[p, a, r, c] + cov[p, b, r, c]) * uc
 
 
 @njit(**_INNER)
