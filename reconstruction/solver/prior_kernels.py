@@ -25,21 +25,27 @@ def information_sums(hom: np.ndarray, proj: np.ndarray, w: np.ndarray, out: np.n
     V, P, J = w.shape
     for p in range(P):
         for j in range(J):
-            b00 = b01 = b02 = b11 = b12 = b22 = 0.0
-            for k in range(2):
-                a00 = a01 = a02 = a11 = a12 = a22 = 0.0
-                for v in range(V):
-                    x, y, z = _pixel(hom, proj, v, p * J + j)
-                    s, x = w[v, p, j] / z, x if k == 0 else y
-                    r0 = (proj[v, k, 0] - x * proj[v, 2, 0]) * s
-                    r1 = (proj[v, k, 1] - x * proj[v, 2, 1]) * s
-                    r2 = (proj[v, k, 2] - x * proj[v, 2, 2]) * s
-                    a00, a01, a02 = a00 + r0 * r0, a01 + r0 * r1, a02 + r0 * r2
-                    a11, a12, a22 = a11 + r1 * r1, a12 + r1 * r2, a22 + r2 * r2
-                b00, b01, b02, b11, b12, b22 = b00 + a00, b01 + a01, b02 + a02, b11 + a11, b12 + a12, b22 + a22
-            out[p, j, 0, 0], out[p, j, 0, 1], out[p, j, 0, 2] = b00, b01, b02
-            out[p, j, 1, 0], out[p, j, 1, 1], out[p, j, 1, 2] = b01, b11, b12
-            out[p, j, 2, 0], out[p, j, 2, 1], out[p, j, 2, 2] = b02, b12, b22
+            a00 = a01 = a02 = a11 = a12 = a22 = 0.0  # the x rows' sums
+            b00 = b01 = b02 = b11 = b12 = b22 = 0.0  # the y rows'
+            for v in range(V):
+                i = p * J + j
+                z = hom[v, 2, i] + proj[v, 2, 3]
+                z = z if z >= EPS_DEPTH or np.isnan(z) else EPS_DEPTH  # np.maximum
+                x, y, s = (hom[v, 0, i] + proj[v, 0, 3]) / z, (hom[v, 1, i] + proj[v, 1, 3]) / z, w[v, p, j] / z
+                r0 = (proj[v, 0, 0] - x * proj[v, 2, 0]) * s
+                r1 = (proj[v, 0, 1] - x * proj[v, 2, 1]) * s
+                r2 = (proj[v, 0, 2] - x * proj[v, 2, 2]) * s
+                a00, a01, a02 = a00 + r0 * r0, a01 + r0 * r1, a02 + r0 * r2
+                a11, a12, a22 = a11 + r1 * r1, a12 + r1 * r2, a22 + r2 * r2
+                r0 = (proj[v, 1, 0] - y * proj[v, 2, 0]) * s
+                r1 = (proj[v, 1, 1] - y * proj[v, 2, 1]) * s
+                r2 = (proj[v, 1, 2] - y * proj[v, 2, 2]) * s
+                b00, b01, b02 = b00 + r0 * r0, b01 + r0 * r1, b02 + r0 * r2
+                b11, b12, b22 = b11 + r1 * r1, b12 + r1 * r2, b22 + r2 * r2
+            a00, a01, a02, a11, a12, a22 = a00 + b00, a01 + b01, a02 + b02, a11 + b11, a12 + b12, a22 + b22
+            out[p, j, 0, 0], out[p, j, 0, 1], out[p, j, 0, 2] = a00, a01, a02
+            out[p, j, 1, 0], out[p, j, 1, 1], out[p, j, 1, 2] = a01, a11, a12
+            out[p, j, 2, 0], out[p, j, 2, 1], out[p, j, 2, 2] = a02, a12, a22
 
 
 @njit(**_INNER)
