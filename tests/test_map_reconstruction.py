@@ -30,7 +30,7 @@ from reconstruction.reconstructors import VanillaTriangulation
 from reconstruction.solver import map_estimation as me
 from reconstruction.solver import map_solver, pose_kernels
 from reconstruction.solver.block_solver import _assemble, elimination_plan, inverse_3x3, solve_blocks, solve_dense
-from reconstruction.solver.compiled_solver import solve_poses_compiled, solver_plan
+from reconstruction.solver.compiled_solver import plan_arrays, solve_poses_compiled, solver_plan
 from reconstruction.solver.lm_solver import levenberg_marquardt
 from reconstruction.solver.map_solver import (
     MAPReconstruction,
@@ -316,27 +316,9 @@ def test_compiled_block_cholesky_matches_numpy_and_detects_indefinite_systems(gr
         g = -rhs[:, pos, b].T.copy()
         h = np.zeros((J, 3))
         B = np.empty((plan.slot.max() + 1, 3, 3))
+        arrays = plan_arrays(plan)
         ok = all(
-            pose_kernels.solve_component(
-                int(plan.comp_start[c]),
-                int(plan.comp_start[c + 1]),
-                D,
-                K,
-                np.zeros_like(K),
-                g,
-                0.0,
-                False,
-                plan.comp_bones[plan.comp_bones_ptr[c] : plan.comp_bones_ptr[c + 1]],
-                plan.bone_pa,
-                plan.bone_pb,
-                plan.bone_slot,
-                plan.slot,
-                plan.comp_slots[plan.comp_slots_ptr[c] : plan.comp_slots_ptr[c + 1]],
-                plan.later_ptr,
-                plan.later_idx,
-                B,
-                h,
-            )
+            pose_kernels.solve_component(c, D, K, np.zeros_like(K), g, 0.0, False, arrays, B, h)
             for c in range(len(plan.comp_start) - 1)
         )
         assert ok == definite[b]

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_NAMES, BONE_STD, bone_lengths
+from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_NAMES, BONE_PAIRS, BONE_STD, bone_lengths
+from data.geometry.linalg import inverse_3x3
 from data.keypoints import shelf15_validity
 from data.synthetic.body import mean_body, pose_joints
 from data.synthetic.observe import bbox_from_keypoints
@@ -15,12 +16,16 @@ from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstructio
 from reconstruction.solver.person_prior import (
     PROPORTION_SD,
     bone_groups,
+    bone_variances,
     chi2_medians,
+    joint_information,
     noise_scale,
     person_bone_lengths,
+    project,
     proportion_sds,
 )
-from reconstruction.solver.side_swaps import apply_swaps, find_swaps
+from reconstruction.solver.prior_kernels import pair_chi2s
+from reconstruction.solver.side_swaps import _chi2s, apply_swaps, find_swaps
 
 
 def _scaled_body(scale: float, x: float = 0.0, y: float = 0.0) -> np.ndarray:
@@ -34,6 +39,125 @@ def _observe(rig, X, noise_px: float, seed: int = 0):
     uv = rig.project(X) + rng.normal(0.0, noise_px, (len(rig),) + X.shape[:2] + (2,))
     poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
     return poses2d, np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
+
+
+def _joint_information_numpy(X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray) -> np.ndarray:
+    """The numpy formula the compiled joint_information replaced: (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3)."""
+    xy, z = project(X, proj)
+    M = proj[:, :, :3]
+    info = np.zeros(X.shape[:2] + (3, 3))
+    for k in range(2):
+        rows = (M[:, None, None, k, :] - xy[..., k, None] * M[:, None, None, 2, :]) * (inv_sigma / z)[..., None]
+        info += np.sum(rows[..., :, None] * rows[..., None, :], axis=0)
+    return info
+
+
+def test_joint_information_is_the_numpy_formula_and_the_jacobian_product():
+    rig = ring_rig(5, 7.0, 2.5)
+    X = np.stack([_scaled_body(1.0, 0.3 * p, -0.2 * p) for p in range(4)])
+    inv_sigma = np.random.default_rng(1).uniform(0.05, 0.5, (5, 4, 23)) * (np.arange(5 * 4 * 23) % 7 > 0).reshape(
+        5, 4, 23
+    )
+    proj = rig.projection_matrices()
+    info = joint_information(X, proj, inv_sigma)
+    np.testing.assert_array_equal(info, _joint_information_numpy(X, proj, inv_sigma))  # same arithmetic
+    eps, p, j = 1e-6, 2, 11  # J^T J of the weighted projection of one joint, by central differences
+    jac = (
+        np.stack(
+            [
+                (project(X + eps * d, proj)[0] - project(X - eps * d, proj)[0])[:, p, j] / (2 * eps)
+                for d in _unit_moves(X, p, j)
+            ],
+            axis=-1,
+        )
+        * inv_sigma[:, p, j, None, None]
+    )
+    np.testing.assert_allclose(info[p, j], np.einsum("vka,vkb->ab", jac, jac), rtol=1e-5)
+
+
+def _bone_variances_numpy(X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured: np.ndarray) -> tuple:
+    """The numpy formula the compiled bone_variances replaced: (P, J, 3), (P, J, 3, 3), (L, 2), (P, J) -> (P, L) x2."""
+    a, b = pairs[:, 0], pairs[:, 1]
+    d = X[:, a] - X[:, b]
+    n = np.linalg.norm(d, axis=-1)
+    u = d / np.maximum(n, 1e-12)[..., None]
+    info = np.nan_to_num(info)
+    inv, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
+    trace = np.trace(info, axis1=-2, axis2=-1)
+    good = measured & (np.linalg.det(info) > 1e-9 * (trace / 3) ** 3) & (trace > 0)
+    cov = np.where(good[..., None, None], np.moveaxis(inv, (0, 1), (-2, -1)), 0.0)
+    var = np.sum(u[..., :, None] * (cov[:, a] + cov[:, b]) * u[..., None, :], axis=(-2, -1))
+    return n, np.where(good[:, a] & good[:, b], var, np.inf)
+
+
+def test_bone_variances_are_the_numpy_formula():
+    rig = ring_rig(5, 7.0, 2.5)
+    X = np.stack([_scaled_body(1.0 + 0.05 * p, 0.3 * p, -0.2 * p) for p in range(6)])
+    rng = np.random.default_rng(4)
+    inv_sigma = rng.uniform(0.05, 0.5, (5, 6, 23)) * (rng.uniform(size=(5, 6, 23)) > 0.3)
+    info = joint_information(X, rig.projection_matrices(), inv_sigma)
+    info[0, 3] = np.nan  # unusable information, a singular one (a joint on one ray), an unmeasured joint
+    info[1, 5] = np.outer([1.0, 2.0, 0.5], [1.0, 2.0, 0.5])
+    measured = (inv_sigma > 0).sum(axis=0) >= 2
+    measured[2, 7] = False
+    pairs = np.asarray(BONE_PAIRS)
+    n, var = bone_variances(X, info, pairs, measured)
+    n_ref, var_ref = _bone_variances_numpy(X, info, pairs, measured)
+    np.testing.assert_array_equal(n, n_ref)
+    np.testing.assert_array_equal(var, var_ref)  # same arithmetic, same order
+    assert np.isinf(var).any() and np.isfinite(var).any()
+
+
+def test_compiled_pair_chi2s_are_the_numpy_formula():
+    rig = ring_rig(4, 7.0, 2.5)
+    X = np.stack([_scaled_body(1.0, 0.4 * p, 0.1 * p) for p in range(3)])
+    proj = rig.projection_matrices()
+    poses2d, _ = _observe(rig, X, 3.0)
+    w2 = np.random.default_rng(2).uniform(0.0, 0.2, poses2d.shape[:3])
+    left, right = np.array([5, 7, 9]), np.array([6, 8, 10])
+    given, exchanged = np.empty((4, 3, 3)), np.empty((4, 3, 3))
+    hom = np.ascontiguousarray(proj[:, :, :3] @ X.reshape(-1, 3).T)
+    pair_chi2s(hom, proj, np.ascontiguousarray(poses2d), w2, left, right, given, exchanged)
+    ref = _chi2s(poses2d[..., :2], project(X, proj)[0], w2, left, right)
+    np.testing.assert_array_equal(given, ref[0])
+    np.testing.assert_array_equal(exchanged, ref[1])
+
+
+def _noise_scale_numpy(X, uv, inv_sigma, proj, floor: float = 0.01) -> np.ndarray:
+    """The numpy formula the compiled noise_scale replaced: (P, J, 3), (V, P, J, 2), (V, P, J), (V, 3, 4) -> (P,)."""
+    xy, _ = project(X, proj)
+    seen = inv_sigma > 0
+    r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma**2, 0.0)
+    rss, views = r2.sum(axis=0), seen.sum(axis=0)
+    ok = views >= 2
+    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)
+    n, rows = ok.sum(axis=1), np.arange(len(X))
+    a, b = ratio[rows, np.maximum(n - 1, 0) // 2], ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
+    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
+    return np.maximum(np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0), floor)
+
+
+def test_compiled_noise_scale_is_the_numpy_formula():
+    rig = ring_rig(6, 7.0, 2.5)
+    X = np.stack([_scaled_body(1.0, 0.3 * p, -0.3 * p) for p in range(5)])
+    poses2d, _ = _observe(rig, X, 4.0, seed=3)
+    seen = np.random.default_rng(5).uniform(size=poses2d.shape[:3]) > np.array([0.2, 0.5, 0.8, 0.95, 1.0])[:, None]
+    inv_sigma = np.where(seen, 0.3, 0.0)  # the last person seen nowhere, the one before in one view at most
+    proj = rig.projection_matrices()
+    args = (X + 0.01, poses2d[..., :2], inv_sigma, proj)
+    scale = noise_scale(*args)
+    np.testing.assert_array_equal(scale, _noise_scale_numpy(*args))
+    assert scale[-1] == 1.0 and np.all(scale[:2] > 0.01)
+
+
+def _unit_moves(X: np.ndarray, p: int, j: int) -> list[np.ndarray]:
+    """The three unit moves of joint j of person p, as arrays shaped like X."""
+    moves = []
+    for a in range(3):
+        d = np.zeros_like(X)
+        d[p, j, a] = 1.0
+        moves.append(d)
+    return moves
 
 
 def test_bone_groups_pair_left_and_right():

@@ -107,12 +107,45 @@ def solver_plan(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> SolverPl
     )
 
 
+def plan_arrays(plan: SolverPlan) -> tuple[np.ndarray, ...]:
+    """The plan's arrays in the order the kernels unpack them (pose_kernels.solve_all's ``plan``)."""
+    return (
+        plan.pos_joint,
+        plan.comp_start,
+        plan.comp_bones_ptr,
+        plan.comp_bones,
+        plan.comp_slots_ptr,
+        plan.comp_slots,
+        plan.bone_pa,
+        plan.bone_pb,
+        plan.bone_slot,
+        plan.slot,
+        plan.later_ptr,
+        plan.later_idx,
+    )
+
+
+def scratch(J: int, L: int, n_blocks: int) -> tuple:
+    """The kernels' work arrays (pose_kernels.solve_all's ``work``): x, x_new, h (J, 3), B (n_blocks, 3, 3), and
+    two linearisations (D (J, 3, 3), g (J, 3), K, Kr (L, 3, 3))."""
+    lin = lambda: (np.empty((J, 3, 3)), np.empty((J, 3)), np.empty((L, 3, 3)), np.empty((L, 3, 3)))  # noqa: E731
+    return np.empty((J, 3)), np.empty((J, 3)), np.empty((J, 3)), np.empty((n_blocks, 3, 3)), lin(), lin()
+
+
 def person_bones(problem: PoseProblem, on: np.ndarray, P: int) -> tuple[np.ndarray, np.ndarray]:
     """Each person's reference lengths and weights of the bones switched on: -> (P, L_on), (P, L_on)."""
-    L = len(on)
-    ref = np.broadcast_to(np.asarray(problem.bone_ref, dtype=np.float64), (P, L))[:, on]
-    weight = np.broadcast_to(np.asarray(problem.bone_weight, dtype=np.float64), (P, L))[:, on]
-    return np.ascontiguousarray(ref), np.ascontiguousarray(weight)
+    n = int(np.count_nonzero(on))
+    ref, weight = np.empty((P, n)), np.empty((P, n))
+    ref[:] = np.asarray(problem.bone_ref, dtype=np.float64)[..., on]  # (L,) or (P, L)
+    weight[:] = np.asarray(problem.bone_weight, dtype=np.float64)[..., on]
+    return ref, weight
+
+
+@lru_cache(maxsize=32)
+def _kernel_plan(num_joints: int, pairs: bytes) -> tuple[tuple[np.ndarray, ...], int, int]:
+    """The plan of J joints and bones (int64 (L, 2) as bytes) as the kernels take it: arrays, blocks, components."""
+    plan = solver_plan(num_joints, tuple(map(tuple, np.frombuffer(pairs, dtype=np.int64).reshape(-1, 2).tolist())))
+    return plan_arrays(plan), int(plan.slot.max()) + 1, len(plan.comp_start) - 1
 
 
 def solve_poses_compiled(
@@ -132,42 +165,21 @@ def solve_poses_compiled(
     X = np.array(X0, dtype=np.float64)
     P, J, _ = X.shape
     L = len(problem.bone_pairs)
-    on = np.any(np.asarray(problem.bone_weight).reshape(-1, L) > 0, axis=0) if L else np.zeros(0, dtype=bool)
+    on = (np.asarray(problem.bone_weight).reshape(-1, L) > 0).any(axis=0) if L else np.zeros(0, dtype=bool)
     pairs = np.asarray(problem.bone_pairs, dtype=np.int64).reshape(-1, 2)[on]
-    plan = solver_plan(J, tuple(map(tuple, pairs.tolist())))
-    C = len(plan.comp_start) - 1
-    cost, iterations = np.zeros((P, C)), np.zeros((P, C), dtype=np.int64)
-    status = np.zeros((P, C), dtype=np.int64)
+    plan, n_blocks, C = _kernel_plan(J, pairs.tobytes())
+    cost, iterations, status = np.zeros((P, C)), np.zeros((P, C), dtype=np.int64), np.zeros((P, C), dtype=np.int64)
     if P:
-        pose_kernels.solve_all(
-            X,
+        data = (
             np.ascontiguousarray(problem.proj, dtype=np.float64),
             np.ascontiguousarray(problem.uv, dtype=np.float64),
             np.ascontiguousarray(problem.inv_sigma, dtype=np.float64),
             np.ascontiguousarray(problem.anchor, dtype=np.float64),
-            float(problem.anchor_weight) ** 2,
-            pose_kernels.ROBUST_CODES[problem.robust],
-            float(problem.robust_scale) ** 2,
             *person_bones(problem, on, P),
-            plan.pos_joint,
-            plan.comp_start,
-            plan.comp_bones_ptr,
-            plan.comp_bones,
-            plan.comp_slots_ptr,
-            plan.comp_slots,
-            plan.bone_pa,
-            plan.bone_pb,
-            plan.bone_slot,
-            plan.slot,
-            plan.later_ptr,
-            plan.later_idx,
-            int(max_iterations),
-            float(xtol),
-            float(ftol),
-            float(gtol),
-            float(tau),
-            cost,
-            iterations,
-            status,
         )
+        tau2, C2 = float(problem.anchor_weight) ** 2, float(problem.robust_scale) ** 2
+        settings = (int(max_iterations), float(xtol), float(ftol), float(gtol), float(tau))
+        robust = pose_kernels.ROBUST_CODES[problem.robust]
+        args = (tau2, robust, C2, plan, settings, scratch(J, len(pairs), n_blocks))
+        pose_kernels.solve_all(X, data, *args, cost, iterations, status)
     return X, LMResult(X.reshape(P, 3 * J), cost, iterations, status)

@@ -49,7 +49,6 @@ from reconstruction.solver.block_solver import (
     EliminationPlan,
     elimination_plan,
     graph_components,
-    inverse_3x3,
     solve_blocks,
     solve_dense,
 )
@@ -71,8 +70,10 @@ from reconstruction.solver.person_prior import (
     noise_scale,
     person_bone_lengths,
     proportion_sds,
+    view_matmul,
 )
 from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
+from reconstruction.solver.prior_kernels import mean_variances
 from reconstruction.solver.side_labels import chain_sides, consistent_sides
 from reconstruction.solver.side_swaps import apply_swaps, find_swaps
 
@@ -325,7 +326,8 @@ def warm_up() -> None:
     """
     J = len(MEAN_POSE)
     M = np.hstack([np.eye(3), [[0.0], [0.0], [5.0]]])
-    proj = np.stack([M, M @ np.diag([1.0, -1.0, -1.0, 1.0])])  # two views facing each other
+    side = np.array([[0.0, 0, 1, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, 0, 0, 1]])
+    proj = np.stack([M, M @ np.diag([1.0, -1.0, -1.0, 1.0]), M @ side])  # two views facing each other, one beside
     hom = np.einsum("vab,jb->vja", proj, np.hstack([MEAN_POSE, np.ones((J, 1))]))[:, None]
     poses2d = np.concatenate([hom[..., :2] / hom[..., 2:], np.ones(hom.shape[:-1] + (1,))], axis=-1)
     X, _ = initial_poses(triangulate_dlt(poses2d, proj), poses2d, proj)
@@ -337,6 +339,12 @@ def warm_up() -> None:
                 X,
                 max_iterations=2,
             )
+    w = poses2d[..., 2]  # the prior's and the swap test's kernels (prior_kernels.py)
+    info = joint_information(X, proj, w)
+    noise_scale(X, poses2d[..., :2], w, proj)
+    bone_variances(X, info, BONE_PAIRS, w.sum(axis=0) >= 2)
+    find_swaps(poses2d, w, proj)
+    mean_variances(info, np.zeros(X.shape[:2]), np.empty(X.shape[:2]))
 
 
 class MAPReconstruction:
@@ -546,9 +554,8 @@ class MAPReconstruction:
             info = joint_information(X, proj, inv_sigma / scale[None, :, None])
         views = (inv_sigma > 0).sum(axis=0)
         tie = np.where(views == 1, 1.0 / self.bone_tie_sd_m**2, 0.0) if self.prior_weight > 0 else 0.0 * views
-        info = info + tie[..., None, None] * np.eye(3)
-        cov, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
-        var = (cov[0, 0] + cov[1, 1] + cov[2, 2]) / 3
+        var = np.empty(views.shape)
+        mean_variances(np.ascontiguousarray(info), np.ascontiguousarray(tie, dtype=np.float64), var)
         return np.where((views >= 1 + (tie == 0)) & np.isfinite(var) & (var > 0), var, np.inf)
 
     def _person_problem(
@@ -566,15 +573,16 @@ class MAPReconstruction:
         their standard errors (P, L), NaN / inf where unknown), each bone's measurement in this frame is combined
         with the earlier frames' by precision before the population prior is applied, once: a person followed
         for a while is fitted with their own skeleton."""
+        hom = view_matmul(mle, proj)
         scale = (
-            noise_scale(mle, uv, inv_sigma, proj, self.min_noise_scale)
+            noise_scale(mle, uv, inv_sigma, proj, self.min_noise_scale, hom)
             if self.noise_scale == "estimate"
             else np.ones(len(mle))
         )
         inv_sigma = inv_sigma / scale[None, :, None]
         if self.bone_prior == "population":
             return self._problem(uv, inv_sigma, proj, anchor, True)
-        info = joint_information(mle, proj, inv_sigma)
+        info = joint_information(mle, proj, inv_sigma, hom)
         self._mle_information = info  # the joints' information, kept for last_joint_variance
         measured = (inv_sigma > 0).sum(axis=0) >= 2
         lengths, variances = bone_variances(mle, info, BONE_PAIRS, measured)

@@ -29,8 +29,8 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from data.bone_lengths import BONE_NAMES
-from reconstruction.solver.block_solver import inverse_3x3
 from reconstruction.solver.map_estimation import EPS_DEPTH
+from reconstruction.solver.prior_kernels import bone_sums, information_sums, noise_medians
 
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
@@ -52,35 +52,41 @@ def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([hom[:, 0] / z, hom[:, 1] / z], axis=-1), z
 
 
-def joint_information(X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray) -> np.ndarray:
-    """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3)."""
-    xy, z = project(X, proj)
-    M = proj[:, :, :3]
-    info = np.zeros(X.shape[:2] + (3, 3))
-    for k in range(2):  # d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint
-        rows = (M[:, None, None, k, :] - xy[..., k, None] * M[:, None, None, 2, :]) * (inv_sigma / z)[..., None]
-        info += np.sum(rows[..., :, None] * rows[..., None, :], axis=0)
+def view_matmul(X: np.ndarray, proj: np.ndarray) -> np.ndarray:
+    """M X of joints (P, J, 3) in views (V, 3, 4), translation not added: (V, 3, P J), as in :func:`project`."""
+    return np.ascontiguousarray(proj[:, :, :3] @ X.reshape(-1, 3).T, dtype=np.float64)
+
+
+def joint_information(
+    X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray, hom: np.ndarray | None = None
+) -> np.ndarray:
+    """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3).
+
+    d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint; hom: :func:`view_matmul` of X, if at hand.
+    """
+    hom = view_matmul(X, proj) if hom is None else hom
+    info = np.empty(X.shape[:2] + (3, 3))
+    w = np.ascontiguousarray(inv_sigma, dtype=np.float64)
+    information_sums(hom, np.ascontiguousarray(proj, dtype=np.float64), w, info)
     return info
 
 
 def noise_scale(
-    X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, floor: float = 0.01
+    X: np.ndarray,
+    uv: np.ndarray,
+    inv_sigma: np.ndarray,
+    proj: np.ndarray,
+    floor: float = 0.01,
+    hom: np.ndarray | None = None,
 ) -> np.ndarray:
     """Each person's 2D noise over the sigma model, robustly from MLE residuals: (P, J, 3), (V, P, J, 2),
-    (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views."""
-    xy, _ = project(X, proj)
-    seen = inv_sigma > 0
-    r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma**2, 0.0)  # (V, P, J)
-    rss, views = r2.sum(axis=0), seen.sum(axis=0)  # (P, J)
-    ok = views >= 2
-    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)  # valid first
-    n = ok.sum(axis=1)
-    rows = np.arange(len(X))
-    a = ratio[rows, np.maximum(n - 1, 0) // 2]
-    b = ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
-    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
-    out = np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0)
-    return np.maximum(out, floor)
+    (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views.
+    hom: :func:`view_matmul` of X, if at hand."""
+    hom = view_matmul(X, proj) if hom is None else hom
+    median, ratio = np.empty(len(X)), np.empty(X.shape[1])
+    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    noise_medians(hom, as_float(proj), as_float(uv), as_float(inv_sigma), _CHI2_MEDIANS, ratio, median)
+    return np.maximum(np.sqrt(np.where(median < 0, 1.0, median)), floor)  # median -1: no joint in >= 2 views
 
 
 def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:
@@ -96,20 +102,13 @@ def bone_variances(
     """Bone lengths (P, L) of X (P, J, 3) and their variances (P, L) from the joints' information (P, J, 3, 3)
     (in the units of the actual noise); inf where an end is not ``measured`` (P, J) bool or not fixed in
     every direction."""
-    a, b = pairs[:, 0], pairs[:, 1]
-    d = X[:, a] - X[:, b]
-    n = np.linalg.norm(d, axis=-1)
-    u = d / np.maximum(n, 1e-12)[..., None]
-    info = np.nan_to_num(info)
-    inv, _ = inverse_3x3(np.moveaxis(info, (-2, -1), (0, 1)), check=False)
-    trace = np.trace(info, axis1=-2, axis2=-1)
-    det = np.linalg.det(info)
-    # a joint is measured only where every direction is: two nearly parallel rays leave its depth free
-    good = measured & (det > 1e-9 * (trace / 3) ** 3) & (trace > 0)
-    cov = np.where(good[..., None, None], np.moveaxis(inv, (0, 1), (-2, -1)), 0.0)
-    ok = good[:, a] & good[:, b]
-    var = np.sum(u[..., :, None] * (cov[:, a] + cov[:, b]) * u[..., None, :], axis=(-2, -1))
-    return n, np.where(ok, var, np.inf)
+    P, J, L = X.shape[0], X.shape[1], len(pairs)
+    cov, good = np.empty((P, J, 3, 3)), np.empty((P, J), dtype=bool)
+    n, var = np.empty((P, L)), np.empty((P, L))
+    X, pairs = np.ascontiguousarray(X, dtype=np.float64), np.ascontiguousarray(pairs, dtype=np.int64)
+    info, measured = np.ascontiguousarray(info, dtype=np.float64), np.ascontiguousarray(measured, dtype=bool)
+    bone_sums(X, info, measured, pairs, cov, good, n, var)
+    return n, var
 
 
 def proportion_sds(

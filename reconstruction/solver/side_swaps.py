@@ -15,13 +15,19 @@ import numpy as np
 
 from data.geometry.triangulation import triangulate_dlt
 from data.keypoints import FLIP_PAIRS
-from reconstruction.solver.person_prior import project
+from reconstruction.solver.map_estimation import EPS_DEPTH
+from reconstruction.solver.person_prior import view_matmul
+from reconstruction.solver.prior_kernels import pair_chi2s
 
 
 def _chi2s(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> tuple[np.ndarray, np.ndarray]:
     """Chi-square of joint pairs as given and exchanged: (V, P, J, 2) x2, (V, P, J), left / right indices (an
     int or (K,)) -> (V, P) or (V, P, K) x2."""
-    d = lambda a, b: np.sum((uv[:, :, a] - xy[:, :, b]) ** 2, axis=-1)  # noqa: E731
+
+    def d(a, b) -> np.ndarray:  # squared distances (not np.sum over the axis of 2: slow)
+        dx, dy = uv[:, :, a, 0] - xy[:, :, b, 0], uv[:, :, a, 1] - xy[:, :, b, 1]
+        return dx * dx + dy * dy
+
     given = w2[..., left] * d(left, left) + w2[..., right] * d(right, right)
     exchanged = w2[..., right] * d(right, left) + w2[..., left] * d(left, right)
     return given, exchanged
@@ -47,12 +53,13 @@ def find_swaps(
     if V < 3 or poses2d.shape[1] == 0:
         return []
     w2 = inv_sigma**2
-    uv = poses2d[..., :2]
     full = triangulate_dlt(poses2d, proj, 2) if full is None else full
-    xy, _ = project(full[..., :3], proj)
     seen = inv_sigma > 0
-    left, right = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-    given, exchanged = _chi2s(uv, xy, w2, left, right)  # (V, P, pairs)
+    left, right = np.array([p[0] for p in pairs], dtype=np.int64), np.array([p[1] for p in pairs], dtype=np.int64)
+    given, exchanged = np.empty((V, len(seen[0]), len(pairs))), np.empty((V, len(seen[0]), len(pairs)))
+    hom = view_matmul(full[..., :3], proj)
+    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    pair_chi2s(hom, as_float(proj), as_float(poses2d), as_float(w2), left, right, given, exchanged)
     # a swap reprojects worse than its exchange even from the DLT it pulls (only the exchange test below
     # needs the other views alone)
     bad = ((given > min_chi2) & (exchanged < given) & seen[..., left] & seen[..., right]).any(axis=0)
@@ -68,7 +75,8 @@ def find_swaps(
     others = np.repeat(sub[:, None], V, axis=1)  # (V, V, K, 2, 3): without view u
     others[np.arange(V), np.arange(V), ..., 2] = 0.0
     X = triangulate_dlt(others.reshape(V, V * K, 2, 3), proj, 2).reshape(V, K, 2, 4)  # one DLT for all V variants
-    pxy = np.stack([project(X[v, ..., :3], proj[v : v + 1])[0][0] for v in range(V)])  # (V, K, 2, 2)
+    hom = np.matmul(X[..., :3].reshape(V, 2 * K, 3), proj[:, :, :3].transpose(0, 2, 1)) + proj[:, None, :, 3]
+    pxy = (hom[..., :2] / np.maximum(hom[..., 2:], EPS_DEPTH)).reshape(V, K, 2, 2)  # each X[v] in its view v
     g, e = _chi2s(sub[..., :2], pxy, sub_w2, 0, 1)  # (V, K)
     ok = (sub_w2 > 0).all(axis=-1) & (X[..., 3] > 0).all(axis=-1) & (g > min_chi2) & (e < ratio * g)
     gains = np.where(ok, g - e, -np.inf)

@@ -1,0 +1,219 @@
+"""Compiled (numba) loops of the person prior's statistics (person_prior.py) and of the swap test (side_swaps.py).
+
+Same arithmetic in the same order as the numpy formulas they replace (bit-identical results), without
+their (V, P, J, 3, 3) temporaries. Compiled like pose_kernels: numpy's error model, no reference counting
+(the caller allocates every array).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from reconstruction.solver.map_estimation import EPS_DEPTH
+
+_JIT = {"cache": True, "error_model": "numpy", "_nrt": False}
+_INNER = {**_JIT, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}  # helpers of the kernels alone
+_BIG = np.finfo(np.float64).max
+
+
+@njit(**_JIT)
+def information_sums(hom: np.ndarray, proj: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
+    """out (P, J, 3, 3) = sum over k = x, y of sum over views of r r^T, r = (M_k - x_k M_2) w / z: the Gauss-Newton
+    information of each joint from its projections (hom (V, 3, P J), see :func:`pair_chi2s`), views proj (V, 3, 4)
+    and 1/sigma w (V, P, J) (0 unseen)."""
+    V, P, J = w.shape
+    for p in range(P):
+        for j in range(J):
+            a00 = a01 = a02 = a11 = a12 = a22 = 0.0  # the x rows' sums
+            b00 = b01 = b02 = b11 = b12 = b22 = 0.0  # the y rows'
+            for v in range(V):
+                i = p * J + j
+                z = hom[v, 2, i] + proj[v, 2, 3]
+                z = z if z >= EPS_DEPTH or np.isnan(z) else EPS_DEPTH  # np.maximum
+                x, y, s = (hom[v, 0, i] + proj[v, 0, 3]) / z, (hom[v, 1, i] + proj[v, 1, 3]) / z, w[v, p, j] / z
+                r0 = (proj[v, 0, 0] - x * proj[v, 2, 0]) * s
+                r1 = (proj[v, 0, 1] - x * proj[v, 2, 1]) * s
+                r2 = (proj[v, 0, 2] - x * proj[v, 2, 2]) * s
+                a00, a01, a02 = a00 + r0 * r0, a01 + r0 * r1, a02 + r0 * r2
+                a11, a12, a22 = a11 + r1 * r1, a12 + r1 * r2, a22 + r2 * r2
+                r0 = (proj[v, 1, 0] - y * proj[v, 2, 0]) * s
+                r1 = (proj[v, 1, 1] - y * proj[v, 2, 1]) * s
+                r2 = (proj[v, 1, 2] - y * proj[v, 2, 2]) * s
+                b00, b01, b02 = b00 + r0 * r0, b01 + r0 * r1, b02 + r0 * r2
+                b11, b12, b22 = b11 + r1 * r1, b12 + r1 * r2, b22 + r2 * r2
+            a00, a01, a02, a11, a12, a22 = a00 + b00, a01 + b01, a02 + b02, a11 + b11, a12 + b12, a22 + b22
+            out[p, j, 0, 0], out[p, j, 0, 1], out[p, j, 0, 2] = a00, a01, a02
+            out[p, j, 1, 0], out[p, j, 1, 1], out[p, j, 1, 2] = a01, a11, a12
+            out[p, j, 2, 0], out[p, j, 2, 1], out[p, j, 2, 2] = a02, a12, a22
+
+
+@njit(**_INNER)
+def _finite(a: float) -> float:
+    """np.nan_to_num of one value: NaN -> 0, +-inf -> the largest finite float of that sign."""
+    if np.isnan(a):
+        return 0.0
+    return _BIG if a > _BIG else (-_BIG if a < -_BIG else a)
+
+
+@njit(**_INNER)
+def _joint_covariances(info: np.ndarray, measured: np.ndarray, cov: np.ndarray, good: np.ndarray) -> None:
+    """cov (P, J, 3, 3): the inverse of each joint's information (P, J, 3, 3) (np.nan_to_num'd) where ``good``: the
+    joint is ``measured`` (P, J) and fixed in every direction (det > 1e-9 (trace / 3)^3, trace > 0), else 0.
+    Inverse by cofactors over the determinant, cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1]
+    (indices mod 3), as data.geometry.linalg.inverse_3x3."""
+    for p in range(info.shape[0]):
+        for j in range(info.shape[1]):
+            a00, a01, a02 = _finite(info[p, j, 0, 0]), _finite(info[p, j, 0, 1]), _finite(info[p, j, 0, 2])
+            a10, a11, a12 = _finite(info[p, j, 1, 0]), _finite(info[p, j, 1, 1]), _finite(info[p, j, 1, 2])
+            a20, a21, a22 = _finite(info[p, j, 2, 0]), _finite(info[p, j, 2, 1]), _finite(info[p, j, 2, 2])
+            c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
+            c10, c11, c12 = a21 * a02 - a22 * a01, a22 * a00 - a20 * a02, a20 * a01 - a21 * a00
+            c20, c21, c22 = a01 * a12 - a02 * a11, a02 * a10 - a00 * a12, a00 * a11 - a01 * a10
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            trace = a00 + a11 + a22
+            good[p, j] = measured[p, j] and det > 1e-9 * (trace / 3) ** 3.0 and trace > 0
+            if not good[p, j]:
+                c00 = c01 = c02 = c10 = c11 = c12 = c20 = c21 = c22 = 0.0
+                det = 1.0
+            cov[p, j, 0, 0], cov[p, j, 0, 1], cov[p, j, 0, 2] = c00 / det, c01 / det, c02 / det
+            cov[p, j, 1, 0], cov[p, j, 1, 1], cov[p, j, 1, 2] = c10 / det, c11 / det, c12 / det
+            cov[p, j, 2, 0], cov[p, j, 2, 1], cov[p, j, 2, 2] = c20 / det, c21 / det, c22 / det
+
+
+@njit(**_JIT)
+def bone_sums(
+    X: np.ndarray,
+    info: np.ndarray,
+    measured: np.ndarray,
+    pairs: np.ndarray,
+    cov: np.ndarray,
+    good: np.ndarray,
+    n_out: np.ndarray,
+    var_out: np.ndarray,
+) -> None:
+    """Length n_out (P, L) of each bone of X (P, J, 3) and the variance var_out (P, L) of the length, u^T (cov_a +
+    cov_b) u with u the unit bone direction and cov, good from :func:`_joint_covariances` of info and measured
+    (inf unless both ends are good); numpy's pairwise order of the 9-term sum."""
+    _joint_covariances(info, measured, cov, good)
+    for p in range(X.shape[0]):
+        for l in range(pairs.shape[0]):
+            a, b = pairs[l, 0], pairs[l, 1]
+            d0, d1, d2 = X[p, a, 0] - X[p, b, 0], X[p, a, 1] - X[p, b, 1], X[p, a, 2] - X[p, b, 2]
+            n = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            m = max(n, 1e-12)
+            u0, u1, u2 = d0 / m, d1 / m, d2 / m
+            s00, s01, s02 = (
+                cov[p, a, 0, 0] + cov[p, b, 0, 0],
+                cov[p, a, 0, 1] + cov[p, b, 0, 1],
+                cov[p, a, 0, 2] + cov[p, b, 0, 2],
+            )
+            s10, s11, s12 = (
+                cov[p, a, 1, 0] + cov[p, b, 1, 0],
+                cov[p, a, 1, 1] + cov[p, b, 1, 1],
+                cov[p, a, 1, 2] + cov[p, b, 1, 2],
+            )
+            s20, s21, s22 = (
+                cov[p, a, 2, 0] + cov[p, b, 2, 0],
+                cov[p, a, 2, 1] + cov[p, b, 2, 1],
+                cov[p, a, 2, 2] + cov[p, b, 2, 2],
+            )
+            t0, t1, t2 = u0 * s00 * u0, u0 * s01 * u1, u0 * s02 * u2
+            t3, t4, t5 = u1 * s10 * u0, u1 * s11 * u1, u1 * s12 * u2
+            t6, t7, t8 = u2 * s20 * u0, u2 * s21 * u1, u2 * s22 * u2
+            var = (((t0 + t1) + (t2 + t3)) + ((t4 + t5) + (t6 + t7))) + t8
+            n_out[p, l], var_out[p, l] = n, var if good[p, a] and good[p, b] else np.inf
+
+
+@njit(**_INNER)
+def _pixel(hom: np.ndarray, proj: np.ndarray, v: int, i: int) -> tuple[float, float, float]:
+    """Pixel and clamped depth of point i in view v from hom (V, 3, N) = M X (the matmul, translation not added),
+    as person_prior.project."""
+    z = hom[v, 2, i] + proj[v, 2, 3]
+    z = z if z >= EPS_DEPTH or np.isnan(z) else EPS_DEPTH  # np.maximum
+    return (hom[v, 0, i] + proj[v, 0, 3]) / z, (hom[v, 1, i] + proj[v, 1, 3]) / z, z
+
+
+@njit(**_JIT)
+def pair_chi2s(
+    hom: np.ndarray,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w2: np.ndarray,
+    left: np.ndarray,
+    right: np.ndarray,
+    given: np.ndarray,
+    exchanged: np.ndarray,
+) -> None:
+    """Chi-square given (V, P, K) and exchanged (V, P, K) of the joint pairs (left, right (K,)) of pixels uv
+    (V, P, J, 2+) against the projections of 3D joints (P, J): hom (V, 3, P J) their matmul with the views'
+    M (V, 3, 4); w2 (V, P, J) 1 / sigma^2. side_swaps' formula, same order."""
+    J = uv.shape[2]
+    for v in range(uv.shape[0]):
+        for p in range(uv.shape[1]):
+            for k in range(len(left)):
+                a, b = left[k], right[k]
+                xa, ya, _ = _pixel(hom, proj, v, p * J + a)
+                xb, yb, _ = _pixel(hom, proj, v, p * J + b)
+                d_aa = _sq(uv[v, p, a, 0] - xa, uv[v, p, a, 1] - ya)
+                d_bb = _sq(uv[v, p, b, 0] - xb, uv[v, p, b, 1] - yb)
+                d_ba = _sq(uv[v, p, b, 0] - xa, uv[v, p, b, 1] - ya)
+                d_ab = _sq(uv[v, p, a, 0] - xb, uv[v, p, a, 1] - yb)
+                given[v, p, k] = w2[v, p, a] * d_aa + w2[v, p, b] * d_bb
+                exchanged[v, p, k] = w2[v, p, b] * d_ba + w2[v, p, a] * d_ab
+
+
+@njit(**_INNER)
+def _sq(dx: float, dy: float) -> float:
+    """dx^2 + dy^2."""
+    return dx * dx + dy * dy
+
+
+@njit(**_JIT)
+def noise_medians(
+    hom: np.ndarray,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w: np.ndarray,
+    medians: np.ndarray,
+    ratio: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """out (P,): each person's median over joints seen in n >= 2 views of RSS / median(chi^2(2n - 3)), -1 without
+    any; RSS the squared residuals of pixels uv (V, P, J, 2+) in units of 1/w (V, P, J) against hom (see
+    :func:`pair_chi2s`); medians: chi^2 medians by degrees of freedom; ratio (J,) scratch. noise_scale's formula."""
+    V, P, J = w.shape
+    for p in range(P):
+        n = 0
+        for j in range(J):
+            rss, views = 0.0, 0
+            for v in range(V):
+                if w[v, p, j] > 0:
+                    x, y, _ = _pixel(hom, proj, v, p * J + j)
+                    rss += _sq(uv[v, p, j, 0] - x, uv[v, p, j, 1] - y) * (w[v, p, j] * w[v, p, j])
+                    views += 1
+            value = rss / medians[min(2 * views - 3, len(medians) - 1)] if views >= 2 else np.inf
+            n += views >= 2
+            i = j  # insertion sort, NaN last as np.sort
+            while i > 0 and (value < ratio[i - 1] or (np.isnan(ratio[i - 1]) and not np.isnan(value))):
+                ratio[i] = ratio[i - 1]
+                i -= 1
+            ratio[i] = value
+        a, b = ratio[max(n - 1, 0) // 2], ratio[min(n // 2, J - 1)]
+        out[p] = (a if n % 2 == 1 else 0.5 * (a + b)) if n > 0 else -1.0
+
+
+@njit(**_JIT)
+def mean_variances(info: np.ndarray, tie: np.ndarray, out: np.ndarray) -> None:
+    """out (P, J): a third of the trace of (info + tie I)^-1 per joint, info (P, J, 3, 3), tie (P, J); the
+    inverse by cofactors over the determinant as data.geometry.linalg.inverse_3x3 (inf / NaN where singular)."""
+    for p in range(info.shape[0]):
+        for j in range(info.shape[1]):
+            t = tie[p, j]
+            a00, a01, a02 = info[p, j, 0, 0] + t, info[p, j, 0, 1] + 0.0, info[p, j, 0, 2] + 0.0
+            a10, a11, a12 = info[p, j, 1, 0] + 0.0, info[p, j, 1, 1] + t, info[p, j, 1, 2] + 0.0
+            a20, a21, a22 = info[p, j, 2, 0] + 0.0, info[p, j, 2, 1] + 0.0, info[p, j, 2, 2] + t
+            c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
+            c11, c22 = a22 * a00 - a20 * a02, a00 * a11 - a01 * a10
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            out[p, j] = (c00 / det + c11 / det + c22 / det) / 3
