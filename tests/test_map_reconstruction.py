@@ -19,7 +19,7 @@ from data.bone_lengths import (
     estimate_bone_table,
     resolve_bone_table,
 )
-from data.geometry.triangulation import RQI_MIN_POINTS, smallest_eigenvectors, triangulate_dlt
+from data.geometry.triangulation import smallest_eigenvectors, triangulate_dlt
 from data.synthetic import SyntheticConfig, generate_sequence
 from data.synthetic.body import mean_body, pose_joints
 from data.synthetic.observe import bbox_from_keypoints
@@ -398,7 +398,10 @@ def test_inverse_3x3_and_smallest_eigenvectors_match_lapack():
     N = rows.transpose(0, 2, 1) @ rows
     ours, ref = smallest_eigenvectors(N), np.linalg.eigh(N)[1][..., 0]
     cos = np.abs((ours * ref).sum(axis=1))
-    assert len(N) >= RQI_MIN_POINTS and np.all(1 - cos < 1e-12)
+    assert np.all(1 - cos < 1e-12)
+    np.testing.assert_allclose((ours * ours).sum(axis=1), 1.0, rtol=1e-14)
+    scaled = smallest_eigenvectors(N[:50] * 1e12)  # the stopping rule is relative: any scale
+    assert np.all(1 - np.abs((scaled * ref[:50]).sum(axis=1)) < 1e-12)
 
 
 # --- stages -----------------------------------------------------------------------------------------
