@@ -103,21 +103,21 @@ def shelf_candidates(cfg, rig) -> list[list]:
 
 
 def shelf_grouper(cfg):
-    """The configured grouper with the dataset's grouping keys: (candidates, pafs) -> ViewDetections."""
+    """The configured grouper with the dataset's grouping keys: FrameCandidates -> ViewDetections."""
     ds, grouper = cfg.dataset, instantiate(cfg.dataset.grouper)
     keys = dict(min_paf=ds.min_paf, min_joints=ds.min_joints, min_mean_score=ds.min_mean_score, margin=ds.bbox_margin)
-    return lambda candidates, pafs: grouper(candidates, pafs, **keys)
+    return lambda view: grouper(view, **keys)
 
 
 def grouping_times(frames: list[list], grouper, repeats: int) -> np.ndarray:
-    """Seconds per frame of grouping every view with grouper(candidates, pafs): (repeats * F,)."""
-    grouper(frames[0][0].candidates, frames[0][0].pafs)
+    """Seconds per frame of grouping every view with grouper(FrameCandidates): (repeats * F,)."""
+    grouper(frames[0][0])
     out = []
     for _ in range(repeats):
         for views in frames:
             t0 = time.perf_counter()
             for view in views:
-                grouper(view.candidates, view.pafs)
+                grouper(view)
             out.append(time.perf_counter() - t0)
     return np.array(out)
 
@@ -155,8 +155,8 @@ def reference_rows(kept: dict, repeats: int) -> list[list]:
     if "shelf" in kept:
         frames = shelf_candidates(compose("eval", overrides=kept["shelf"][1]), kept["shelf"][0].rig)
         ours, ref = interleaved(
-            lambda: grouping_times(frames, group_people, 1),
-            lambda: grouping_times(frames, reference_grouping.group_people, 1),
+            lambda: grouping_times(frames, lambda v: group_people(v.candidates, v.pafs), 1),
+            lambda: grouping_times(frames, lambda v: reference_grouping.group_people(v.candidates, v.pafs), 1),
             repeats,
         )
         rows.append(["PAF grouping vs frozen pure Python", "Shelf 300-600", 1e3 * ours, 1e3 * ref, ref / ours])

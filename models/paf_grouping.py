@@ -12,10 +12,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from data.formats.fourd_detections import BODY25_NUM_JOINTS, BODY25_PAF_LIMBS
+from data.formats.fourd_detections import BODY25_NUM_JOINTS, BODY25_PAF_LIMBS, FrameCandidates, PackedCandidates
 from data.formats.openpose_json import keypoints_to_view_detections
 from data.keypoints import BODY25_TO_COCO23, to_coco23
 from data.multiview import ViewDetections
+
+BODY25_LIMB_ARRAY = np.array(BODY25_PAF_LIMBS, dtype=np.int64)  # (26, 2)
 
 
 def limb_connections(paf: np.ndarray, min_paf: float) -> np.ndarray:
@@ -113,6 +115,15 @@ def group_people(
     OpenPose's minimum person score, which there also averages in the PAF scores).
     Persons come out in order of creation; missing joints are all 0.
     """
+    packed = pack_candidates(candidates, pafs, limbs)
+    return group_packed(packed, np.array(limbs).reshape(-1, 2), min_paf, min_joints, min_mean_score)
+
+
+def pack_candidates(
+    candidates: list[np.ndarray], pafs: list[np.ndarray], limbs: tuple[tuple[int, int], ...] = BODY25_PAF_LIMBS
+) -> PackedCandidates:
+    """J candidate arrays (n_j, 3) and L PAF matrices (n_a, n_b) -> PackedCandidates; a PAF shape that does not
+    fit its limb's candidates stops with the limb named."""
     if len(pafs) != len(limbs):
         raise ValueError(f"group_people: {len(pafs)} PAF matrices for {len(limbs)} limbs")
     cands = [np.asarray(c, dtype=np.float64).reshape(-1, 3) for c in candidates]
@@ -123,11 +134,20 @@ def group_people(
             raise ValueError(
                 f"group_people: PAF of limb ({a}, {b}) has shape {paf.shape}, expected ({sizes[a]}, {sizes[b]})"
             )
-    paf_flat = np.concatenate([p.reshape(-1) for p in pafs] or [np.zeros(0)])
-    paf_start = np.cumsum([0] + [p.size for p in pafs])
-    cand_start = np.cumsum([0, *sizes])
-    slots = _assemble(paf_flat, paf_start, np.array(limbs).reshape(-1, 2), cand_start, float(min_paf))
-    return _persons(slots, np.concatenate(cands), cand_start, min_joints, min_mean_score)
+    return PackedCandidates(
+        np.concatenate(cands),
+        np.cumsum([0, *sizes]),
+        np.concatenate([p.reshape(-1) for p in pafs] or [np.zeros(0)]),
+        np.cumsum([0] + [p.size for p in pafs]),
+    )
+
+
+def group_packed(
+    packed: PackedCandidates, limbs: np.ndarray, min_paf: float, min_joints: int, min_mean_score: float
+) -> np.ndarray:
+    """:func:`group_people` of packed candidates, limbs (L, 2) int -> (N, J, 3)."""
+    slots = _assemble(packed.paf_values, packed.paf_start, limbs, packed.joint_start, float(min_paf))
+    return _persons(slots, packed.points, packed.joint_start, min_joints, min_mean_score)
 
 
 def _persons(
@@ -155,8 +175,7 @@ def grouped_to_view_detections(persons: np.ndarray, margin: float = 0.1) -> View
 
 
 def group_view(
-    candidates: list[np.ndarray],
-    pafs: list[np.ndarray],
+    frame: FrameCandidates,
     min_paf: float = 0.05,
     min_joints: int = 8,
     min_mean_score: float = 0.4,
@@ -164,9 +183,10 @@ def group_view(
 ) -> ViewDetections:
     """One camera frame's BODY_25 candidates grouped into persons, as COCO-23 ViewDetections.
 
-    :func:`group_people` then :func:`grouped_to_view_detections`; the grouper ``configs/dataset/shelf.yaml``
-    gives :func:`data.datasets.shelf.load_shelf` (a dataset loader may not import this stage).
+    :func:`group_people` (of the reader's packed arrays where it has them) then
+    :func:`grouped_to_view_detections`; the grouper ``configs/dataset/shelf.yaml`` gives
+    :func:`data.datasets.shelf.load_shelf` (a dataset loader may not import this stage).
     """
-    return grouped_to_view_detections(
-        group_people(candidates, pafs, min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score), margin
-    )
+    packed = frame.packed if frame.packed is not None else pack_candidates(frame.candidates, frame.pafs)
+    persons = group_packed(packed, BODY25_LIMB_ARRAY, min_paf, min_joints, min_mean_score)
+    return grouped_to_view_detections(persons, margin)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from benchmarks import reference_grouping as reference
-from data.formats.fourd_detections import BODY25_PAF_LIMBS, load_4dassoc_detections
+from data.formats.fourd_detections import BODY25_PAF_LIMBS, FrameCandidates, load_4dassoc_detections
 from data.formats.openpose_json import keypoints_to_view_detections
-from models.paf_grouping import group_people, limb_connections
+from models.paf_grouping import group_people, group_view, limb_connections, pack_candidates
 
 SHELF = Path("shelf") / "4d_association"
 
@@ -61,3 +61,16 @@ def test_view_detections_of_persons_with_and_without_joints() -> None:
     np.testing.assert_allclose(dets.bboxes, [[8, 16, 24, 48], [0, 0, 0, 0], [100, 200, 0, 0]])
     np.testing.assert_allclose(dets.scores, [0.75, 0.0, 0.25])
     assert keypoints[1].sum() == 0 and dets.keypoints is not keypoints
+
+
+def test_group_view_of_the_readers_packed_arrays_and_of_lists(shared_data: Path) -> None:
+    frames = load_4dassoc_detections(shared_data / SHELF / "detection" / "1.txt")[::20]
+    for frame in frames:
+        assert frame.packed is not None
+        from_lists = FrameCandidates(frame.candidates, frame.pafs)  # packed by the grouping
+        a, b = group_view(frame), group_view(from_lists)
+        np.testing.assert_array_equal(a.keypoints, b.keypoints)
+        np.testing.assert_array_equal(a.bboxes, b.bboxes)
+        packed = pack_candidates(frame.candidates, frame.pafs)
+        for field in ("points", "joint_start", "paf_values", "paf_start"):
+            np.testing.assert_array_equal(getattr(frame.packed, field), getattr(packed, field))

@@ -57,7 +57,7 @@ def load_shelf(
     Shelf frame numbers. ``min_paf``, ``min_joints``, ``min_mean_score`` go to group_people;
     ``drop_feet``: the 6 foot keypoints of every detection are removed (score 0, ankles kept), as a
     COCO-17 detector would give them;
-    ``bbox_margin`` grows the boxes around the joints. ``grouper``: ``grouper(candidates, pafs, min_paf=,
+    ``bbox_margin`` grows the boxes around the joints. ``grouper``: ``grouper(frame_candidates, min_paf=,
     min_joints=, min_mean_score=, margin=) -> ViewDetections`` (``models.paf_grouping.group_view``), needed
     unless ``poses2d`` is given. ``poses2d``: grouped COCO-23 input instead of the
     detection files (no grouping). ``baseline``: None = no 4D Association comparison. ``alpha``: PCP.
@@ -157,10 +157,7 @@ def _grouped_views(
         _camera_candidates(folder, name, rig.cameras[v].size, numbers, first) for v, name in enumerate(rig.names)
     ]
     t0 = time.perf_counter()
-    views = {
-        n: [grouper(c[i].candidates, c[i].pafs, **grouping, margin=margin) for c in per_camera]
-        for i, n in enumerate(numbers)
-    }
+    views = {n: [grouper(c[i], **grouping, margin=margin) for c in per_camera] for i, n in enumerate(numbers)}
     return views, time.perf_counter() - t0
 
 

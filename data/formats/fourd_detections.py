@@ -6,7 +6,7 @@ matrix of PAF scores between the candidates of the limb's two joints. See ../sha
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -46,15 +46,31 @@ BODY25_PAF_LIMBS: tuple[tuple[int, int], ...] = (
 
 
 @dataclass
+class PackedCandidates:
+    """A frame's candidates and PAFs as four flat arrays (what the compiled grouping reads).
+
+    points (M, 3): the candidates of joint j at points[joint_start[j]:joint_start[j + 1]] (joint_start (J + 1,));
+    paf_values (K,): limb k's PAF matrix row-major at paf_values[paf_start[k]:paf_start[k + 1]] (paf_start (L + 1,)).
+    """
+
+    points: np.ndarray
+    joint_start: np.ndarray
+    paf_values: np.ndarray
+    paf_start: np.ndarray
+
+
+@dataclass
 class FrameCandidates:
     """One camera frame of ungrouped detections.
 
     candidates: 25 arrays (n_j, 3), x, y in pixels and score, one per BODY_25 joint.
     pafs: 26 arrays (n_a, n_b), PAF scores between the candidates of limb (a, b) of BODY25_PAF_LIMBS.
+    packed: the same numbers as PackedCandidates, when the reader has them (None: built by the grouping).
     """
 
     candidates: list[np.ndarray]
     pafs: list[np.ndarray]
+    packed: PackedCandidates | None = field(default=None, repr=False)
 
 
 class _Layout:
@@ -144,16 +160,22 @@ def load_4dassoc_detections(path: str | Path, image_size: tuple[int, int] = (103
     ends = np.cumsum(counts, axis=1)
     first = np.concatenate([[0], ends[:-1, -1].cumsum()]) if num_frames else np.zeros(0, dtype=np.int64)
     frames = []
+    limbs = np.array(BODY25_PAF_LIMBS)
+    paf_sizes = counts[:, limbs[:, 0]] * counts[:, limbs[:, 1]]
     for f in range(num_frames):
-        bounds = (first[f] + np.concatenate([[0], ends[f]])).tolist()
-        sizes = counts[f].tolist()
+        joint_start = np.concatenate([[0], ends[f]])
+        paf_start = np.concatenate([[0], np.cumsum(paf_sizes[f])])
+        frame_points = points[first[f] : first[f] + joint_start[-1]]
+        paf_values = layout.values[paf_pos[f, 0] : paf_pos[f, 0] + paf_start[-1]]  # a frame's PAFs lie in a row
+        bounds, sizes, paf_bounds = joint_start.tolist(), counts[f].tolist(), paf_start.tolist()
         frames.append(
             FrameCandidates(
-                [points[bounds[j] : bounds[j + 1]] for j in range(BODY25_NUM_JOINTS)],
+                [frame_points[bounds[j] : bounds[j + 1]] for j in range(BODY25_NUM_JOINTS)],
                 [
-                    layout.values[p : p + sizes[a] * sizes[b]].reshape(sizes[a], sizes[b])
-                    for p, (a, b) in zip(paf_pos[f].tolist(), BODY25_PAF_LIMBS)
+                    paf_values[paf_bounds[k] : paf_bounds[k + 1]].reshape(sizes[a], sizes[b])
+                    for k, (a, b) in enumerate(BODY25_PAF_LIMBS)
                 ],
+                PackedCandidates(frame_points, joint_start, paf_values, paf_start),
             )
         )
     return frames
