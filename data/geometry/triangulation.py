@@ -24,61 +24,65 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
     V, P, J, _ = poses2d.shape
     if proj.shape != (V, 3, 4):
         raise ValueError(f"proj has shape {proj.shape}, expected ({V}, 3, 4) for {V} views")
-    xy, score = poses2d[..., :2], poses2d[..., 2]
-    finite = np.isfinite(xy[..., 0]) & np.isfinite(xy[..., 1]) & np.isfinite(score)
-    score = np.where(finite, np.clip(np.where(finite, score, 0.0), 0.0, None), 0.0)
-    xy = np.where(score[..., None] > 0, xy, 0.0)
-
-    seen = (score > 0).sum(axis=0).reshape(P * J)
+    # the right singular vector of the smallest singular value of the stacked rows A is the eigenvector of
+    # the smallest eigenvalue of A^T A (a 4x4 eigenproblem is cheaper than the SVD)
+    N = np.empty((P * J, 4, 4))
+    conf = np.empty(P * J)
+    solve = np.empty(P * J, dtype=np.bool_)
+    _normal_matrices(
+        np.ascontiguousarray(poses2d.reshape(V, P * J, 3)), np.ascontiguousarray(proj), min_views, N, conf, solve
+    )
+    usable = solve & np.isfinite(N).all(axis=(1, 2))  # pixels so large that the rows overflow: not solvable
+    X = np.zeros((P * J, 4))
+    if usable.any():
+        X[usable] = smallest_eigenvectors(N[usable])
+    ok = usable & (np.abs(X[:, 3]) > 1e-12)
     out = np.zeros((P * J, 4))
-    solve = seen >= min_views
-    if np.any(solve):
-        # the right singular vector of the smallest singular value of the stacked rows A is the
-        # eigenvector of the smallest eigenvalue of A^T A (a 4x4 eigenproblem is cheaper than the SVD)
-        # the DLT is invariant to a common scale of a point's weights: scores relative to their largest,
-        # so that huge scores cannot overflow the squared weights
-        s = score.reshape(V, P * J)[:, solve]
-        with np.errstate(over="ignore", invalid="ignore"):
-            A_tA = _normal_matrices(
-                xy.reshape(V, P * J, 2)[:, solve], s / np.where(s.max(axis=0) > 0, s.max(axis=0), 1.0), proj
-            )
-        usable = np.isfinite(A_tA).all(axis=(1, 2))  # pixels so large that the rows overflow: not solvable
-        X = np.zeros((len(A_tA), 4))
-        X[usable] = smallest_eigenvectors(A_tA[usable]) if usable.any() else X[usable]
-        w = X[:, 3:4]
-        ok = (np.abs(w[:, 0]) > 1e-12) & usable
-        pts = np.where(ok[:, None], X[:, :3] / np.where(ok, w[:, 0], 1.0)[:, None], 0.0)
-        conf = score.reshape(V, P * J)[:, solve].sum(axis=0) / seen[solve]
-        out[solve, :3] = pts
-        out[solve, 3] = np.where(ok, conf, 0.0)
+    out[ok, :3] = X[ok, :3] / X[ok, 3:4]
+    out[ok, 3] = conf[ok]
     return out.reshape(P, J, 4)
 
 
-def _normal_matrices(xy: np.ndarray, score: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """A^T A of the normalised, score-weighted DLT rows of n points: (V, n, 2), (V, n), (V, 3, 4) -> (n, 4, 4).
+@numba.njit(cache=True, error_model="numpy")
+def _normal_matrices(
+    poses: np.ndarray, proj: np.ndarray, min_views: int, N: np.ndarray, conf: np.ndarray, solve: np.ndarray
+) -> None:
+    """A^T A of the normalised, score-weighted DLT rows of n points: poses (V, n, 3), proj (V, 3, 4) -> N (n, 4, 4),
+    the mean score of the views that see each point conf (n,) and whether min_views see it, solve (n,).
 
-    Row r (x or y) of view v is a = (u_r P_3 - P_r) s / |u_r P_3 - P_r|; a a^T = u_r^2 P_3 P_3^T -
-    u_r (P_3 P_r^T + P_r P_3^T) + P_r P_r^T, so A^T A is 5 coefficients per view against constant
-    matrices: one matrix product for all points.
+    A view sees a point when its pixel and score are finite and the score > 0. Row r (x or y) of view v is
+    a = (u_r P_3 - P_r) w / |u_r P_3 - P_r| with w the score over the point's largest (the DLT is invariant
+    to a common scale of the weights; huge scores cannot overflow the squares).
     """
-    V, n, _ = xy.shape
-    u = np.moveaxis(xy, -1, 0)  # (2, V, n)
-    P3, Pr = proj[:, 2], proj[:, :2].transpose(1, 0, 2)  # (V, 4), (2, V, 4)
-    norm2 = u * u * (P3 * P3).sum(-1)[:, None] - 2.0 * u * (Pr * P3).sum(-1)[..., None] + (Pr * Pr).sum(-1)[..., None]
-    weight = score * score / np.where(norm2 > 0, norm2, 1.0)
-    wu = weight * u
-    coef = np.concatenate([weight, -wu, (wu * u).sum(axis=0, keepdims=True)])  # (5, V, n)
-    outer = lambda a, b: (a[..., :, None] * b[..., None, :]).reshape(V, 16)  # noqa: E731
-    mats = np.stack(
-        [
-            outer(Pr[0], Pr[0]),
-            outer(Pr[1], Pr[1]),
-            outer(P3, Pr[0]) + outer(Pr[0], P3),
-            outer(P3, Pr[1]) + outer(Pr[1], P3),
-            outer(P3, P3),
-        ]
-    )  # (5, V, 16)
-    return (coef.reshape(5 * V, n).T @ mats.reshape(5 * V, 16)).reshape(n, 4, 4)
+    V, n = poses.shape[0], poses.shape[1]
+    a = np.empty(4)
+    for i in range(n):
+        seen, total, top = 0, 0.0, 0.0
+        for v in range(V):
+            x, y, s = poses[v, i, 0], poses[v, i, 1], poses[v, i, 2]
+            if np.isfinite(x) and np.isfinite(y) and np.isfinite(s) and s > 0:
+                seen += 1
+                total += s
+                top = max(top, s)
+        conf[i] = total / seen if seen else 0.0
+        solve[i] = seen >= min_views
+        N[i] = 0.0
+        if not solve[i]:
+            continue
+        for v in range(V):
+            x, y, s = poses[v, i, 0], poses[v, i, 1], poses[v, i, 2]
+            if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(s) and s > 0):
+                continue
+            for r in range(2):
+                u = x if r == 0 else y
+                norm2 = 0.0
+                for k in range(4):
+                    a[k] = u * proj[v, 2, k] - proj[v, r, k]
+                    norm2 += a[k] * a[k]
+                weight = (s / top) ** 2 / (norm2 if norm2 > 0 else 1.0)
+                for k in range(4):
+                    for m in range(4):
+                        N[i, k, m] += weight * a[k] * a[m]
 
 
 def smallest_eigenvectors(N: np.ndarray) -> np.ndarray:
