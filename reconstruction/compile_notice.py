@@ -1,5 +1,6 @@
 """One line for the user while numba compiles: the first run after an install (or a change of the kernels'
-code) compiles them for 15-35 s, silently; later runs load them from numba's on-disk cache in ~0.2 s."""
+code) compiles them for about 13 s on one core (README), silently; later runs load them from numba's on-disk
+cache in ~0.2 s."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ import threading
 from contextlib import contextmanager
 from typing import Iterator
 
-# loading the cached kernels took 0.17 s, compiling them 14.7 s (MAP) + 1.6 s (evidence) on a shared 2-core CPU:
-# a block still running after 1 s is compiling
+# loading the cached kernels takes ~0.2 s, compiling them ~13 s CPU in all (MAP solver ~7, evidence matcher ~5,
+# measured with an empty NUMBA_CACHE_DIR): a block still running after 1 s is compiling
 NOTICE_AFTER_S = 1.0
 
 
@@ -20,7 +21,7 @@ def compile_notice(what: str, after_s: float = NOTICE_AFTER_S) -> Iterator[None]
         print,
         [
             f"Compiling the {what} numba kernels (once after an install or a code "
-            "change, 15-35 s; later runs load them from numba's cache) ..."
+            "change, about 15 s in all; later runs load them from numba's cache) ..."
         ],
         {"flush": True},
     )

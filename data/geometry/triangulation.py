@@ -66,7 +66,9 @@ def _normal_matrices(
                 top = max(top, s)
         conf[i] = total / seen if seen else 0.0
         solve[i] = seen >= min_views
-        N[i] = 0.0
+        for k in range(4):
+            for m in range(4):
+                N[i, k, m] = 0.0
         if not solve[i]:
             continue
         for v in range(V):
@@ -135,7 +137,8 @@ def _rayleigh_quotient(N: np.ndarray, iterations: int, tol: float, out: np.ndarr
             z[3] = z_w
             _normalise(z, True)
             if np.isfinite(z[0]) and np.isfinite(z[1]) and np.isfinite(z[2]) and np.isfinite(z[3]):
-                v[:] = z
+                for r in range(4):  # element-wise: a slice assignment compiles numba's shape-error formatting
+                    v[r] = z[r]
         rho = _quadratic(A, v)
         resid = 0.0
         for r in range(4):
@@ -143,7 +146,8 @@ def _rayleigh_quotient(N: np.ndarray, iterations: int, tol: float, out: np.ndarr
             resid += (Nv - rho * v[r]) ** 2
         gap = 1.0 / (B_inv[0, 0] + B_inv[1, 1] + B_inv[2, 2]) - rho
         ok[i] = pd and gap > 0 and np.sqrt(resid) <= tol * gap
-        out[i] = v
+        for r in range(4):
+            out[i, r] = v[r]
 
 
 @numba.njit(cache=True, error_model="numpy")
