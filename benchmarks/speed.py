@@ -191,13 +191,15 @@ def dashes(rows: list[list]) -> list[list]:
     return [["-" if isinstance(c, float) and np.isnan(c) else c for c in row] for row in rows]
 
 
-def process_seconds(args: list[str], env: dict[str, str]) -> float:
-    """Wall seconds of one `python eval.py ...` subprocess from the repository root."""
+def process_seconds(args: list[str], env: dict[str, str], runs: str) -> float:
+    """Wall seconds of one `python eval.py ...` subprocess from the repository root, its outputs in a new folder
+    under runs."""
+    command = [sys.executable, "eval.py", *args, f"hydra.run.dir={tempfile.mkdtemp(dir=runs)}"]
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "eval.py", *args], cwd=ROOT, env=env, capture_output=True, text=True)
+    done = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True)
     seconds = time.perf_counter() - t0
     if done.returncode != 0:
-        raise RuntimeError(f"python eval.py {' '.join(args)} failed:\n{done.stderr[-2000:]}")
+        raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr[-2000:]}")
     return seconds
 
 
@@ -205,15 +207,16 @@ def process_rows(data: str, repeats: int) -> list[list]:
     """Table 3: (command, seconds, target, issue's figure, figure / this)."""
     env = dict(os.environ)
     with tempfile.TemporaryDirectory() as out:
-        common = ["progress=false", f"hydra.run.dir={out}/run"]
+        common = ["progress=false"]
         shelf = ["dataset=shelf", f"dataset.root={data}/shelf", *common]
-        process_seconds(common, env)  # fills the numba cache of this checkout
-        process_seconds(shelf, env)
+        process_seconds(common, env, out)  # fills the numba cache of this checkout
+        process_seconds(shelf, env, out)
         runs = {
-            "python eval.py (warm)": [process_seconds(common, env) for _ in range(repeats)],
-            "python eval.py dataset=shelf (warm)": [process_seconds(shelf, env) for _ in range(repeats)],
+            "python eval.py (warm)": [process_seconds(common, env, out) for _ in range(repeats)],
+            "python eval.py dataset=shelf (warm)": [process_seconds(shelf, env, out) for _ in range(repeats)],
             "python eval.py, empty numba cache": [
-                process_seconds(common, {**env, "NUMBA_CACHE_DIR": tempfile.mkdtemp(dir=out)}) for _ in range(repeats)
+                process_seconds(common, {**env, "NUMBA_CACHE_DIR": tempfile.mkdtemp(dir=out)}, out)
+                for _ in range(repeats)
             ],
         }
     rows = []
