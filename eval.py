@@ -19,6 +19,7 @@ from pathlib import Path
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import InstantiationException
+from hydra.types import RunMode
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 from omegaconf.errors import MissingMandatoryValue
@@ -37,6 +38,9 @@ from models.front_end import Pose2DFrontEnd
 from reconstruction.pipeline import MultiViewPipeline
 from run_folders import register_resolvers
 
+_SINGLE_RUN: list[
+    Path
+] = []  # main() notes a plain (not multirun) run here: only then may the process skip its teardown
 PROTOCOL = (
     "absolute MPJPE (mm, no root alignment) over all frames; each GT person matched one-to-one "
     "to a prediction by Hungarian on mean joint distance (unmatched beyond {max_dist_m} m); "
@@ -207,6 +211,8 @@ def main(cfg: DictConfig) -> dict:
     """Hydra entry point; returns the metrics (for sweeps). Bad input files and bad config values stop
     with one message (a ValueError while building the dataset, matcher or reconstruction is one of them)."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    if HydraConfig.get().mode == RunMode.RUN:
+        _SINGLE_RUN.append(out_dir)
     warnings.showwarning = _one_line_warning
     if cfg.checkpoint:
         return run_pose2d(cfg, out_dir)
@@ -228,9 +234,11 @@ def main(cfg: DictConfig) -> dict:
 
 register_resolvers()  # ${run_id:} in the run folder names, before hydra.main composes the config
 
+
 def quick_exit() -> None:
     """Leave without the interpreter's teardown (about 0.4 s of freeing numba's, scipy's and torch's objects
-    module by module): every output is written and closed by now; the streams and Hydra's log file are flushed."""
+    module by module): every output is written and closed by now; the streams and Hydra's log file are flushed.
+    Only after a single run: a sweep's launcher (joblib) has worker processes to shut down first."""
     logging.shutdown()
     sys.stdout.flush()
     sys.stderr.flush()
@@ -240,4 +248,5 @@ def quick_exit() -> None:
 if __name__ == "__main__":
     exit_on_sigterm()
     main()
-    quick_exit()
+    if _SINGLE_RUN:
+        quick_exit()

@@ -19,7 +19,10 @@ def test_a_two_job_sweep_runs_in_parallel_with_the_joblib_launcher(tmp_path):
     command = [sys.executable, "eval.py", "-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
     command += ["dataset.num_frames=2", "dataset.num_persons=3", "dataset.seed=0,1", "progress=false"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    done = subprocess.run([*command, f"hydra.sweep.dir={sweep}"], cwd=REPO, env=env, capture_output=True, text=True)
+    # the timeout: a parent that left without shutting its joblib workers down held the pipes for their 300 s idle time
+    done = subprocess.run(
+        [*command, f"hydra.sweep.dir={sweep}"], cwd=REPO, env=env, capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     metrics = [json.loads((sweep / str(job) / "metrics.json").read_text())["metrics"] for job in (0, 1)]
     assert metrics[0]["num_gt"] == metrics[1]["num_gt"] == 6
