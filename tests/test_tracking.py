@@ -13,7 +13,7 @@ from data.synthetic.body import mean_body, pose_joints
 from evaluation.identity import IdentityEvaluator
 from reconstruction.solver.map_solver import combine_estimates
 from tracking import Tracker
-from tracking.tracker import CORE_JOINTS, mean_distances, robust_lengths
+from tracking.tracker import CORE_JOINTS, mean_distances, near_pairs, robust_lengths
 
 FPS = 25.0
 
@@ -288,3 +288,15 @@ def test_a_tracked_persons_own_skeleton_sharpens_the_maps_bones():
     assert np.all(count == 30)
     assert np.abs(median - true_bones).mean() < 0.5 * np.mean(measured)  # the track knows the body better
     assert errors[True] < errors[False]  # and the MAP's bones follow
+
+
+@pytest.mark.parametrize("sizes", [(7, 5), (300, 200)])  # the dense path and the KD-tree path
+def test_near_pairs_are_the_brute_force_pairs(sizes: tuple[int, int]) -> None:
+    rng = np.random.default_rng(3)
+    a, b = rng.uniform(-10, 10, (sizes[0], 3)), rng.uniform(-10, 10, (sizes[1], 3))
+    a[1, 2] = np.nan  # no pairs for a point with a non-finite coordinate
+    rows, cols = near_pairs(a, b, 2.5)
+    dist = np.linalg.norm(a[:, None] - b[None], axis=-1)
+    want = set(zip(*np.nonzero(dist <= 2.5)))
+    assert set(zip(rows.tolist(), cols.tolist())) == want and len(rows) == len(want) > 0
+    assert 1 not in set(rows.tolist())
