@@ -31,7 +31,7 @@ README = REPO / "README.md"
 DOCS = (README, *sorted((REPO / "docs").glob("*.md")))  # the front page and the reference pages it links
 CONFIGS = REPO / "configs"
 PLACEHOLDER = "PLACEHOLDER"  # stands for <run dir>, <date_time>, <.pth>, ... and `...`
-RUN_TIMEOUT_S = 120  # generous: the first run after an install compiles numba's kernels (15-35 s)
+RUN_TIMEOUT_S = 120  # generous: the first run after an install compiles numba's kernels (about 15 s)
 
 
 @dataclass(frozen=True)
