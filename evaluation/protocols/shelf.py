@@ -364,9 +364,7 @@ class ShelfProtocol:
         frames = []
         for frame, pred in sorted(self.predictions.items()):
             chosen = {str(a + 1): select_prediction(pred, np.asarray(g)[:, :3])[0] for a, g in self.gt[frame].items()}
-            frames.append(
-                {"frame": frame, "chosen_for_actor": chosen, "poses": [[_point(p) for p in pose] for pose in pred]}
-            )
+            frames.append({"frame": frame, "chosen_for_actor": chosen, "poses": [_points(pose) for pose in pred]})
         doc = {
             "joints": [*SHELF14_NAMES, "mid_hip"],
             "units": "m",
@@ -379,9 +377,11 @@ class ShelfProtocol:
         return path
 
 
-def _point(xyz: np.ndarray) -> list[float] | None:
-    """A joint for JSON: [x, y, z] rounded to 0.1 mm, or None when missing."""
-    return [round(float(v), 4) for v in xyz] if np.all(np.isfinite(xyz)) else None
+def _points(pose: np.ndarray) -> list[list[float] | None]:
+    """A pose's joints for JSON: (K, 3) -> K [x, y, z] rounded to 0.1 mm, or None where missing."""
+    pose = np.asarray(pose, dtype=np.float64)[:, :3]
+    finite = np.isfinite(pose).all(axis=1).tolist()
+    return [xyz if ok else None for xyz, ok in zip(np.round(pose, 4).tolist(), finite)]
 
 
 def _headline(summary: dict) -> str:
