@@ -12,17 +12,21 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from data.formats.fourd_detections import BODY25_NUM_JOINTS, BODY25_PAF_LIMBS, FrameCandidates, PackedCandidates
+from data.formats.fourd_detections import (
+    BODY25_LIMB_ARRAY,
+    BODY25_NUM_JOINTS,
+    BODY25_PAF_LIMBS,
+    FrameCandidates,
+    PackedCandidates,
+)
 from data.formats.openpose_json import keypoints_to_view_detections
 from data.keypoints import BODY25_TO_COCO23, to_coco23
 from data.multiview import ViewDetections
 
-BODY25_LIMB_ARRAY = np.array(BODY25_PAF_LIMBS, dtype=np.int64)  # (26, 2)
-
 
 def limb_connections(paf: np.ndarray, min_paf: float) -> np.ndarray:
     """Greedy one-to-one pairs of a PAF matrix (n_a, n_b) -> (C, 3) rows (i, j, score), best first."""
-    paf = np.ascontiguousarray(paf, dtype=np.float64).reshape(np.shape(paf))
+    paf = np.ascontiguousarray(paf, dtype=np.float64)
     pairs = np.empty((min(paf.shape), 2), dtype=np.int64)
     count = _greedy_pairs(paf.ravel(), 0, paf.shape[0], paf.shape[1], float(min_paf), pairs)
     rows = pairs[:count]

@@ -44,6 +44,8 @@ BODY25_PAF_LIMBS: tuple[tuple[int, int], ...] = (
     (11, 24),
 )
 
+BODY25_LIMB_ARRAY = np.array(BODY25_PAF_LIMBS, dtype=np.int64)  # the limbs as (26, 2) joint pairs
+
 
 @dataclass
 class PackedCandidates:
@@ -160,8 +162,7 @@ def load_4dassoc_detections(path: str | Path, image_size: tuple[int, int] = (103
     ends = np.cumsum(counts, axis=1)
     first = np.concatenate([[0], ends[:-1, -1].cumsum()]) if num_frames else np.zeros(0, dtype=np.int64)
     frames = []
-    limbs = np.array(BODY25_PAF_LIMBS)
-    paf_sizes = counts[:, limbs[:, 0]] * counts[:, limbs[:, 1]]
+    paf_sizes = counts[:, BODY25_LIMB_ARRAY[:, 0]] * counts[:, BODY25_LIMB_ARRAY[:, 1]]
     for f in range(num_frames):
         joint_start = np.concatenate([[0], ends[f]])
         paf_start = np.concatenate([[0], np.cumsum(paf_sizes[f])])
