@@ -74,7 +74,7 @@ from reconstruction.solver.person_prior import (
 )
 from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.solver.prior_kernels import mean_variances
-from reconstruction.solver.side_labels import chain_sides, consistent_sides
+from reconstruction.solver.side_labels import chain_sides, consistent_sides, facing_sides
 from reconstruction.solver.side_swaps import apply_swaps, find_swaps
 
 SOLVERS = ("compiled", "numpy")
@@ -486,7 +486,7 @@ class MAPReconstruction:
             poses2d_und = consistent_sides(poses2d_und, proj)
         dlt = triangulate_dlt(poses2d_und, proj, self.min_views)
         if self.fix_sides:  # ... and with the body (limb pairs the wrong way round for their parents)
-            poses2d_und, dlt = chain_sides(poses2d_und, dlt)
+            poses2d_und, dlt = chain_sides(*facing_sides(poses2d_und, dlt))
         uv, inv_sigma = self._observations(poses2d_und, bboxes)
         if self.fix_swaps:  # left / right swaps of the detector, undone
             swaps = find_swaps(poses2d_und, inv_sigma, proj, dlt if self.min_views == 2 else None)

@@ -1,22 +1,26 @@
 """Left / right labels of a person's joint pairs made consistent across views, then with the body, before the DLT.
 
 A 2D network that cannot tell a person's left arm from the right (a symmetric body seen from behind; the
-synthetic capsule bodies for all arms) labels each view's pair at random. :func:`consistent_sides` finds,
-per person and joint pair, the labelling of the views that the epipolar geometry agrees with best (every
-labelling of the views that see both joints is tried; the two labellings that differ by exchanging every
-view fit equally, the one that changes fewer views is kept), and relabels when it fits clearly better
-than the labels as given. The pair is then consistent, but the whole pair may still be the wrong way round:
-:func:`chain_sides` exchanges a limb pair (elbows, wrists, knees, ankles, feet) whose triangulated joints sit
-farther from their parent pair (shoulders, elbows, hips, knees, ankles) as labelled than exchanged. Labels
-that agree across views and with the body, what an accurate detector gives, are never changed.
+synthetic capsule bodies for all arms) labels each view's pair at random. Three steps, each leaving alone
+what an accurate detector gives (labels that agree across views and with the body):
+
+1. :func:`consistent_sides`: per person and joint pair, the labelling of the views whose triangulated pair
+   reprojects best (:func:`best_labellings`: seeded by every two views, so a minority of wrong views cannot
+   pull the points), kept where it fits clearly better than the labels as given. Of the two labellings that
+   differ by exchanging every view, the one changing fewer views is kept: the pair is now consistent, but
+   may be the wrong way round.
+2. :func:`facing_sides`: the central pairs (eyes, ears, shoulders, hips) turned to the way the body faces,
+   which the label-free joints tell (nose in front of the ears, toes in front of the heels).
+3. :func:`chain_sides`: a limb pair (elbows, wrists, knees, ankles, feet) exchanged where its triangulated
+   joints sit farther from their parent pair (shoulders, elbows, hips, knees, ankles) as labelled than
+   exchanged.
 """
 
 from __future__ import annotations
 
-from itertools import combinations
-
 import numpy as np
 
+from data.geometry.triangulation import smallest_eigenvectors
 from data.keypoints import FLIP_PAIRS
 
 # (child pair, parent pair) along the limbs, parents first: a child is judged after its parent is settled
@@ -24,67 +28,158 @@ CHAINS = (((7, 8), (5, 6)), ((9, 10), (7, 8)), ((13, 14), (11, 12)), ((15, 16), 
 CHAINS += tuple((child, (15, 16)) for child in ((17, 20), (18, 21), (19, 22)))
 
 
-def fundamental_from_projections(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
-    """F with x_b^T F x_a = 0 for two cameras' projection matrices (3, 4) x2 -> (3, 3), unit norm."""
-    centre = np.linalg.svd(pa)[2][-1]  # null vector of pa: camera a's centre
-    e = pb @ centre
-    ex = np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
-    F = ex @ pb @ np.linalg.pinv(pa)
-    return F / np.linalg.norm(F)
+def _normals(points: np.ndarray, proj: np.ndarray) -> np.ndarray:
+    """The DLT's normal matrix of each observation: points (..., V, 2) in cameras proj (V, 3, 4) -> (..., V, 4, 4)."""
+    rows = np.stack(
+        [points[..., :1] * proj[:, 2] - proj[:, 0], points[..., 1:2] * proj[:, 2] - proj[:, 1]], axis=-2
+    )  # (..., V, 2, 4), unit rows as triangulate_dlt
+    rows /= np.maximum(np.linalg.norm(rows, axis=-1, keepdims=True), 1e-12)
+    return rows.transpose(*range(rows.ndim - 2), -1, -2) @ rows
 
 
-def epipolar_distance(xa: np.ndarray, xb: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Symmetric point-to-epipolar-line distance (px): points (..., 2) in view a and b, F (3, 3) -> (...)."""
-    ha = np.concatenate([xa, np.ones(xa.shape[:-1] + (1,))], axis=-1)
-    hb = np.concatenate([xb, np.ones(xb.shape[:-1] + (1,))], axis=-1)
-    la, lb = hb @ F, ha @ F.T  # b's line in a, a's line in b
-    num = np.abs(np.sum(hb * lb, axis=-1))
-    norm = lambda line: np.maximum(np.linalg.norm(line[..., :2], axis=-1), 1e-12)  # noqa: E731
-    return 0.5 * num * (1 / norm(lb) + 1 / norm(la))
+def _solve(N: np.ndarray) -> np.ndarray:
+    """Summed normal matrices (..., 4, 4) -> the points (..., 3) they triangulate."""
+    X = smallest_eigenvectors(N.reshape(-1, 4, 4)).reshape(N.shape[:-1])
+    w = X[..., 3:]
+    return X[..., :3] / np.where(np.abs(w) > 1e-12, w, 1e-12)
 
 
-def _labelling_energies(same: np.ndarray, swap: np.ndarray) -> np.ndarray:
-    """Pairwise costs (n, n) as labelled alike / exchanged -> energy of every labelling (2^n,) (bit v = view v
-    exchanged)."""
-    n = len(same)
-    bits = (np.arange(2**n)[:, None] >> np.arange(n)) & 1  # (2^n, n)
-    differ = bits[:, :, None] != bits[:, None, :]  # (2^n, n, n)
-    upper = np.triu(np.ones((n, n), bool), 1)
-    return np.where(differ, swap, same)[:, upper].sum(axis=1)
+def _project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points X (..., 3) in the cameras (V, 3, 4) -> pixels (..., V, 2), in front of the camera (..., V)."""
+    V = len(proj)
+    h = (X.reshape(-1, 3) @ proj[:, :, :3].reshape(V * 3, 3).T).reshape(*X.shape[:-1], V, 3) + proj[:, :, 3]
+    z = h[..., 2]
+    return h[..., :2] / np.where(np.abs(z) > 1e-9, z, 1e-9)[..., None], z > 0
+
+
+def _errors(uv: np.ndarray, front: np.ndarray, points: np.ndarray, cap_px: float) -> np.ndarray:
+    """Distances (..., V) px of projections uv (..., V, 2) to points (..., V, 2), capped (also behind a camera)."""
+    d = np.hypot(uv[..., 0] - points[..., 0], uv[..., 1] - points[..., 1])
+    return np.where(front, np.minimum(d, cap_px), cap_px)
+
+
+def _view_costs(A, B, proj, xl, xr, seen, cap_px):
+    """Costs (..., V) of every view labelled as given and exchanged for the pair's 3D points A, B (..., 3)
+    (0 where the view does not see both joints)."""
+    (ua, fa), (ub, fb) = _project(A, proj), _project(B, proj)
+    keep = _errors(ua, fa, xl, cap_px) + _errors(ub, fb, xr, cap_px)
+    swap = _errors(ua, fa, xr, cap_px) + _errors(ub, fb, xl, cap_px)
+    return keep * seen, swap * seen
+
+
+def best_labellings(
+    xl: np.ndarray, xr: np.ndarray, seen: np.ndarray, proj: np.ndarray, cap_px: float = 50.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Q joint pairs: points (Q, V, 2) as labelled left and right, the views that see both (Q, V), cameras
+    (V, 3, 4) -> (views to exchange (Q, V) bool, cost of that labelling (Q,), cost as given (Q,)), costs in px
+    summed over the views and both joints (reprojection distances capped at cap_px).
+
+    Every two views and their two relative labellings seed a pair of 3D points; every other view takes the
+    labelling its points reproject nearer to; the best seed is refined by triangulating from all its views.
+    Reprojection, unlike the epipolar distance of view pairs, tells the two joints apart also when they sit
+    at one height in front of a ring of cameras at one height (each view pair's epipolar lines then run
+    through both joints). Of the two labellings that differ by exchanging every view, the one changing fewer
+    views is returned.
+    """
+    Q, V = seen.shape
+    Ml, Mr = _normals(xl, proj), _normals(xr, proj)  # (Q, V, 4, 4)
+    i, j = np.triu_indices(V, 1)
+    pair_seen = seen[:, i] & seen[:, j]  # (Q, S)
+    costs, seeds = [], []
+    for exchanged in (False, True):  # view j as labelled, then exchanged
+        NA = Ml[:, i] + (Mr if exchanged else Ml)[:, j]
+        NB = Mr[:, i] + (Ml if exchanged else Mr)[:, j]
+        keep, swap = _view_costs(_solve(NA), _solve(NB), proj, xl[:, None], xr[:, None], seen[:, None], cap_px)
+        costs.append(np.where(pair_seen, np.minimum(keep, swap).sum(-1), np.inf))
+        seeds.append(swap < keep)
+    costs, seeds = np.concatenate(costs, 1), np.concatenate(seeds, 1)  # (Q, 2S), (Q, 2S, V)
+    labels = seeds[np.arange(Q), np.argmin(costs, axis=1)]
+    for _ in range(2):  # refine: triangulate from every view as labelled, relabel
+        flip = (labels & seen)[..., None, None]
+        A = _solve((np.where(flip, Mr, Ml) * seen[..., None, None]).sum(1))
+        B = _solve((np.where(flip, Ml, Mr) * seen[..., None, None]).sum(1))
+        keep, swap = _view_costs(A, B, proj, xl, xr, seen, cap_px)
+        labels = (swap < keep) & seen
+    cost = np.where(labels, swap, keep).sum(-1)
+    labels ^= (2 * labels.sum(-1) > seen.sum(-1))[:, None]  # the fewer views changed
+    A, B = _solve((Ml * seen[..., None, None]).sum(1)), _solve((Mr * seen[..., None, None]).sum(1))
+    return labels & seen, cost, _view_costs(A, B, proj, xl, xr, seen, cap_px)[0].sum(-1)
 
 
 def consistent_sides(
     poses2d: np.ndarray, proj: np.ndarray, cap_px: float = 50.0, ratio: float = 0.9, min_gain_px: float = 20.0
 ) -> np.ndarray:
     """poses2d (V, P, J, 3) undistorted px + score, proj (V, 3, 4) -> a copy with each person's joint pairs
-    labelled consistently across the views that see both joints (distances capped at cap_px; relabelled when
-    the best labelling's cost is below ratio of the given one and lower by min_gain_px)."""
+    labelled consistently across the views that see both joints (:func:`best_labellings`; relabelled where the
+    best labelling's cost is below ratio of the given one and lower by min_gain_px)."""
     V, P = poses2d.shape[:2]
     out = poses2d.copy()
     if V < 2 or P == 0:
         return out
-    view_pairs = list(combinations(range(V), 2))
-    Fs = {(a, b): fundamental_from_projections(proj[a], proj[b]) for a, b in view_pairs}
     left, right = np.array([p[0] for p in FLIP_PAIRS]), np.array([p[1] for p in FLIP_PAIRS])
     both = (poses2d[..., left, 2] > 0) & (poses2d[..., right, 2] > 0)  # (V, P, K)
-    xy = poses2d[..., :2]
-    same = np.zeros((V, V, P, len(left)))
-    swap = np.zeros_like(same)
-    for a, b in view_pairs:
-        d = lambda i, j: np.minimum(epipolar_distance(xy[a][:, i], xy[b][:, j], Fs[a, b]), cap_px)  # noqa: E731
-        same[a, b] = d(left, left) + d(right, right)
-        swap[a, b] = d(left, right) + d(right, left)
-    suspect = ((swap < same - min_gain_px) & both[:, None] & both[None, :]).any(axis=(0, 1))  # (P, K)
-    for p, k in zip(*np.nonzero(suspect)):
-        views = np.flatnonzero(both[:, p, k])
-        energies = _labelling_energies(same[views][:, views, p, k], swap[views][:, views, p, k])
-        flips = (np.arange(len(energies))[:, None] >> np.arange(len(views))) & 1
-        order = np.lexsort((flips.sum(1), energies))  # lowest energy, then fewest views changed
-        best = order[0]
-        if energies[best] < ratio * energies[0] and energies[0] - energies[best] > min_gain_px:
-            for v in views[flips[best] == 1]:
-                out[v, p, [left[k], right[k]]] = out[v, p, [right[k], left[k]]]
+    p, k = np.nonzero(both.sum(axis=0) >= 2)
+    if len(p) == 0:
+        return out
+    xl = poses2d[:, p, left[k], :2].transpose(1, 0, 2)  # (Q, V, 2)
+    xr = poses2d[:, p, right[k], :2].transpose(1, 0, 2)
+    labels, cost, given = best_labellings(xl, xr, both[:, p, k].T, proj, cap_px)
+    apply = labels & ((cost < ratio * given) & (given - cost > min_gain_px))[:, None]
+    q, v = np.nonzero(apply)
+    out[v, p[q], left[k[q]]], out[v, p[q], right[k[q]]] = poses2d[v, p[q], right[k[q]]], poses2d[v, p[q], left[k[q]]]
     return out
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """Vectors (..., 3) scaled to unit length (zero vectors stay zero)."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(norm > 1e-9, v / np.maximum(norm, 1e-9), 0.0)
+
+
+def _across(v: np.ndarray, up: np.ndarray, min_share: float) -> np.ndarray:
+    """Directions v (P, 3) with their component along unit up (P, 3) removed, as unit vectors; zero where less
+    than min_share of v's length is left (a face looking down, a foot pointing at the sky)."""
+    flat = v - (v * up).sum(-1, keepdims=True) * up
+    share = np.linalg.norm(flat, axis=-1) / np.maximum(np.linalg.norm(v, axis=-1), 1e-9)
+    return _unit(flat) * (share >= min_share)[:, None]
+
+
+def facing_directions(X: np.ndarray, min_share: float = 0.5) -> np.ndarray:
+    """The DLT X (P, J, 4) -> each person's left direction (P, 3), zero where unknown, from joints whose labels
+    do not matter: up from the hips' to the shoulders' midpoint, forward from the ears' midpoint to the nose
+    and from the heels' to the toes' midpoint, each across up (:func:`_across`); left = up x forward (a
+    right-handed world). Where the head and the feet disagree (forward directions more than 90 degrees apart),
+    zero."""
+    ok = X[..., 3] > 0
+
+    def mid(joints: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        seen = ok[:, joints]
+        centre = (X[:, joints, :3] * seen[..., None]).sum(1) / np.maximum(seen.sum(1), 1)[:, None]
+        return centre, seen.all(1) if len(joints) == 2 else seen.any(1)
+
+    (shoulders, s_ok), (hips, h_ok), (ears, e_ok) = mid([5, 6]), mid([11, 12]), mid([3, 4])
+    (toes, t_ok), (heels, f_ok) = mid([17, 18, 20, 21]), mid([19, 22])
+    up = _unit(shoulders - hips) * (s_ok & h_ok)[:, None]
+    head = _across(X[:, 0, :3] - ears, up, min_share) * (e_ok & ok[:, 0])[:, None]
+    feet = _across(toes - heels, up, min_share) * (t_ok & f_ok)[:, None]
+    agree = (head * feet).sum(-1) >= 0
+    return np.cross(up, _unit(head + feet)) * agree[:, None]
+
+
+def facing_sides(poses2d: np.ndarray, X: np.ndarray, min_cos: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """poses2d (V, P, J, 3), the DLT X (P, J, 4) -> copies with the body's central pairs (eyes, ears, shoulders,
+    hips) exchanged in every view and in X where left - right points to the person's right
+    (:func:`facing_directions`) by more than min_cos; the limbs follow their parents in :func:`chain_sides`."""
+    poses2d, X = poses2d.copy(), X.copy()
+    left = facing_directions(X)
+    for a, b in ((1, 2), (3, 4), (5, 6), (11, 12)):
+        ok = (X[:, a, 3] > 0) & (X[:, b, 3] > 0)
+        cos = (_unit(X[:, a, :3] - X[:, b, :3]) * left).sum(-1)
+        flip = np.flatnonzero(ok & (cos < -min_cos))
+        if len(flip):
+            X[flip[:, None], [a, b]] = X[flip[:, None], [b, a]]
+            poses2d[:, flip[:, None], [a, b]] = poses2d[:, flip[:, None], [b, a]]
+    return poses2d, X
 
 
 def chain_sides(poses2d: np.ndarray, X: np.ndarray, ratio: float = 0.9) -> tuple[np.ndarray, np.ndarray]:
