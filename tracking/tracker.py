@@ -40,10 +40,10 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from data.bone_lengths import BONE_PAIRS, bone_lengths
+from reconstruction.matching.sparse_assignment import linear_sum_assignment
 
 MAD_TO_SD = 1.4826  # SD of a normal distribution per median absolute deviation
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,

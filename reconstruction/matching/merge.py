@@ -12,7 +12,8 @@ from itertools import combinations
 from typing import Callable
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
+
+from reconstruction.matching.sparse_assignment import linear_sum_assignment
 
 PairCost = Callable[[int, int], np.ndarray]  # (view a, view b) -> (N_a, N_b) edge costs
 
