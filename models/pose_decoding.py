@@ -21,6 +21,8 @@ from models.heatmap_codec import MultiModalHeatmapCodec
 from models.joint_association import associate_joints
 
 DECODERS = ("single", "association")
+# the pairs separate_pairs keeps apart: shoulders down; the eyes and ears sit closer than min_sep anyway
+SEPARATED_PAIRS = tuple((a, b) for a, b in FLIP_PAIRS if a >= 5)
 
 
 def single_peaks(
@@ -75,13 +77,14 @@ def separate_pairs(
     best other candidate (min_sep x height or more from the kept joint, inside the box grown by a tenth,
     scoring at least min_ratio of the joint it replaces) scores higher moves there. Which arm gets which label
     stays the network's guess; the 3D stage makes the labels consistent (reconstruction/solver/side_labels.py).
+    The face's pairs (eyes, ears) are left alone: they sit closer than min_sep on every person.
     """
     out = np.array(keypoints, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     for b in range(len(out)):
         x, y, w, h = boxes[b]
         sep, low, high = min_sep * h, np.array([x - 0.1 * w, y - 0.1 * h]), np.array([x + 1.1 * w, y + 1.1 * h])
-        for left, right in FLIP_PAIRS:
+        for left, right in SEPARATED_PAIRS:
             kl, kr = out[b, left], out[b, right]
             if kl[2] <= 0 or kr[2] <= 0 or np.hypot(*(kl[:2] - kr[:2])) >= sep:
                 continue

@@ -116,3 +116,6 @@ def test_separate_pairs_moves_one_of_two_joints_on_one_spot_to_its_other_candida
     lonely = cands.copy()
     lonely[0, 10, 1] = 0.0
     np.testing.assert_array_equal(separate_pairs(kp, lonely, boxes), kp)  # no other candidate: unchanged
+    eyes = lonely.copy()
+    eyes[0, 2, 1] = [70.0, 100.0, 0.9]  # the right eye channel's strong other peak
+    np.testing.assert_array_equal(separate_pairs(kp, eyes, boxes), kp)  # the face's pairs are left alone
