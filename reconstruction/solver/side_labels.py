@@ -22,6 +22,8 @@ import numpy as np
 
 from data.geometry.triangulation import smallest_eigenvectors
 from data.keypoints import FLIP_PAIRS
+from reconstruction.solver.map_estimation import EPS_DEPTH
+from reconstruction.solver.person_prior import project
 
 # (child pair, parent pair) along the limbs, parents first: a child is judged after its parent is settled
 CHAINS = (((7, 8), (5, 6)), ((9, 10), (7, 8)), ((13, 14), (11, 12)), ((15, 16), (13, 14)))
@@ -45,11 +47,11 @@ def _solve(N: np.ndarray) -> np.ndarray:
 
 
 def _project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points X (..., 3) in the cameras (V, 3, 4) -> pixels (..., V, 2), in front of the camera (..., V)."""
-    V = len(proj)
-    h = (X.reshape(-1, 3) @ proj[:, :, :3].reshape(V * 3, 3).T).reshape(*X.shape[:-1], V, 3) + proj[:, :, 3]
-    z = h[..., 2]
-    return h[..., :2] / np.where(np.abs(z) > 1e-9, z, 1e-9)[..., None], z > 0
+    """Points X (..., 3) in the cameras (V, 3, 4) -> pixels (..., V, 2), in front of the camera (..., V)
+    (:func:`~reconstruction.solver.person_prior.project`, views moved last)."""
+    uv, z = project(X.reshape(-1, 1, 3), proj)  # (V, n, 1, 2), depths clamped to EPS_DEPTH
+    shape = (*X.shape[:-1], len(proj))
+    return np.moveaxis(uv[:, :, 0], 0, 1).reshape(*shape, 2), (z[:, :, 0] > EPS_DEPTH).T.reshape(shape)
 
 
 def _errors(uv: np.ndarray, front: np.ndarray, points: np.ndarray, cap_px: float) -> np.ndarray:
@@ -152,13 +154,14 @@ def facing_directions(X: np.ndarray, min_share: float = 0.5) -> np.ndarray:
     zero."""
     ok = X[..., 3] > 0
 
-    def mid(joints: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    def mid(joints: list[int], all_seen: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Midpoint (P, 3) of the seen joints; known (P,) when all (or, all_seen False, any) are seen."""
         seen = ok[:, joints]
         centre = (X[:, joints, :3] * seen[..., None]).sum(1) / np.maximum(seen.sum(1), 1)[:, None]
-        return centre, seen.all(1) if len(joints) == 2 else seen.any(1)
+        return centre, seen.all(1) if all_seen else seen.any(1)
 
     (shoulders, s_ok), (hips, h_ok), (ears, e_ok) = mid([5, 6]), mid([11, 12]), mid([3, 4])
-    (toes, t_ok), (heels, f_ok) = mid([17, 18, 20, 21]), mid([19, 22])
+    (toes, t_ok), (heels, f_ok) = mid([17, 18, 20, 21], all_seen=False), mid([19, 22])
     up = _unit(shoulders - hips) * (s_ok & h_ok)[:, None]
     head = _across(X[:, 0, :3] - ears, up, min_share) * (e_ok & ok[:, 0])[:, None]
     feet = _across(toes - heels, up, min_share) * (t_ok & f_ok)[:, None]
