@@ -201,6 +201,7 @@ class EvidenceMatcher:
         self.link_scale = float(link_scale)
         self.last_noise_scale = 1.0
         self._fundamentals: dict[int, tuple[Rig, np.ndarray]] = {}
+        self._rows_hint = 0  # rows of the detection-pair buffers: the last frame's count, with a margin
         with compile_notice("evidence matcher"):  # one line while numba compiles (first run)
             warm_up()
         self.feet = FeetMatcher(min_views=min_views, **{"pixel_sigma": 5.0, **(feet or {})})
@@ -272,7 +273,8 @@ class EvidenceMatcher:
         as soon as the link test fails.
         """
         sizes = np.diff(stacked[2])[view_pairs].reshape(-1, 2)
-        room = int(sizes.prod(axis=1).max(initial=0)) + 4 * len(stacked[1])
+        # room for the largest view pair, or for the last frame's rows (a crowd's frames are alike: no regrowing)
+        room = max(int(sizes.prod(axis=1).max(initial=0)) + 4 * len(stacked[1]), self._rows_hint)
         out = [
             np.empty((room, 4), np.int64),
             np.empty((room, 2)),
@@ -288,6 +290,7 @@ class EvidenceMatcher:
         first = out[3]  # rows computed at the loosest scale
         self._run_pairs(stacked, view_pairs, done, scale2, (*calibration, 0), out, sizes)
         ints, floats = out[0][: out[3]], out[1][: out[3]]
+        self._rows_hint = int(1.25 * out[3]) + int(sizes.prod(axis=1).max(initial=0))
         used = np.where(np.arange(len(ints)) < first, loosest, scale2)
         feet = floats[:, 1]
         body = (floats[:, 0] - np.where(np.isfinite(feet), feet, 0.0)) * used  # model units: the kernel's scale undone

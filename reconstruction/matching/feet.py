@@ -20,10 +20,10 @@ from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT
 from data.multiview import ViewDetections
 from reconstruction.matching.feet_uncertainty import (
     joint_sigmas,
-    joints_on_planes,
     location_covariance,
     mahalanobis_distances,
     mean_covariance,
+    views_joints_on_planes,
 )
 from reconstruction.matching.merge import match_pairs
 
@@ -150,7 +150,7 @@ def views_feet_features(
     uv = np.where(finite[..., None], uv, 0.0)
     heights = np.array([foot_joint_height_m] * 6 + [ankle_height_m] * 2, dtype=np.float64)
     sigma = None if pixel_sigma is None else joint_sigmas(score, pixel_sigma, sigma_score_power)
-    ground, depth, cov = _views_on_planes(cameras, [len(k) for k in kps], uv, heights, sigma)
+    ground, depth, cov = views_joints_on_planes(cameras, [len(k) for k in kps], uv, heights, sigma)
     ground_ok = np.isfinite(ground).all(axis=-1)
     ground = np.where(ground_ok[..., None], ground, 0.0)
     cov = np.zeros(ground.shape + (2,)) if cov is None else np.where(ground_ok[..., None, None], cov, 0.0)
@@ -171,22 +171,6 @@ def views_feet_features(
     reason = np.where(feet[0][2] | feet[1][2], "", np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))
     covs = (feet[0][1], feet[1][1]) if pixel_sigma is not None else (None, None)
     return features_from_feet(feet[0][0], feet[1][0], feet[0][2], feet[1][2], reason, *covs)
-
-
-def _views_on_planes(
-    cameras: list[Camera], counts: list[int], uv: np.ndarray, heights: np.ndarray, sigma: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """:func:`joints_on_planes` of the stacked detections of V views, view by view: (N, K, 2) -> (N, K, 2),
-    (N, K), (N, K, 2, 2) or None."""
-    if len(cameras) == 1:
-        return joints_on_planes(cameras[0], uv, heights, sigma)
-    ends = np.cumsum(counts)
-    parts = [
-        joints_on_planes(cam, uv[e - n : e], heights, None if sigma is None else sigma[e - n : e])
-        for cam, n, e in zip(cameras, counts, ends)
-    ]
-    cov = None if sigma is None else np.concatenate([c for _, _, c in parts])
-    return np.concatenate([g for g, _, _ in parts]), np.concatenate([d for _, d, _ in parts]), cov
 
 
 def split_features(features: FeetFeatures, counts: list[int]) -> list[FeetFeatures]:

@@ -17,7 +17,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from data.geometry.camera import Camera, apply_homography
+from data.geometry.camera import Camera
 
 _DIFF_STEP_PX = 0.5  # central-difference step of the undistortion Jacobian
 _TINY = 1e-12  # relative size under which a homography's H[2, 2] counts as 0
@@ -86,27 +86,63 @@ def joints_on_planes(
     (N, K) px) is given. Joints at the height of the camera's centre get NaN (no point on that plane);
     callers treat non-finite points as unusable."""
     uv = np.asarray(uv, dtype=np.float64)
+    return views_joints_on_planes([camera], [len(uv)], uv, heights, sigma_px)
+
+
+def views_joints_on_planes(
+    cameras: list[Camera],
+    counts: list[int],
+    uv: np.ndarray,
+    heights: np.ndarray,
+    sigma_px: float | np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """:func:`joints_on_planes` of the detections of V views stacked in view order (counts[v] rows of view v):
+    uv (N, K, 2) -> (N, K, 2), (N, K), (N, K, 2, 2) or None. One pass over all views: only the undistortion
+    and its Jacobian are per view (distorted cameras)."""
+    uv = np.asarray(uv, dtype=np.float64)
     heights = np.broadcast_to(np.asarray(heights, dtype=np.float64), uv.shape[1:2])
-    und = camera.undistort_points(uv)
-    xy = np.zeros(uv.shape)
-    J = np.zeros(uv.shape + (2,))
-    for h in np.unique(heights):
-        cols = heights == h
-        H = cached_image_to_plane(camera, float(h))
-        if H is None:  # camera centre on this plane: its joints have no place on it (dropped as unusable)
-            xy[:, cols] = np.nan
-            J[:, cols] = np.nan
-            continue
-        xy[:, cols] = apply_homography(H, und[:, cols])
-        J[:, cols] = homography_jacobian(H, und[:, cols])
-    point = np.concatenate([xy, np.broadcast_to(heights[None, :, None], uv.shape[:2] + (1,))], axis=-1)
-    depth = camera.depth(point)
+    levels, level = np.unique(heights, return_inverse=True)
+    view = np.repeat(np.arange(len(cameras)), counts)
+    H = np.full((len(cameras), len(levels), 3, 3), np.nan)  # NaN: camera centre on that plane (no mapping)
+    for v, camera in enumerate(cameras):
+        for k, h in enumerate(levels):
+            Hk = cached_image_to_plane(camera, float(h))
+            if Hk is not None:
+                H[v, k] = Hk
+    und = _undistorted(cameras, view, uv)
+    Hs = H[view[:, None], level[None, :]]  # (N, K, 3, 3)
+    w = Hs[..., 0] * und[..., 0, None] + Hs[..., 1] * und[..., 1, None] + Hs[..., 2]  # (N, K, 3)
+    xy = w[..., :2] / w[..., 2:3]
+    J = (Hs[..., :2, :2] - xy[..., :, None] * Hs[..., 2, None, :2]) / w[..., 2, None, None]  # d xy / d und
+    R = np.array([c.R[2] for c in cameras]).reshape(-1, 3)[view]  # optical axes: (N, 3)
+    t = np.array([c.t[2] for c in cameras])[view]
+    depth = xy[..., 0] * R[:, 0, None] + xy[..., 1] * R[:, 1, None] + heights * R[:, 2, None] + t[:, None]
     if sigma_px is None:
         return xy, depth, None
-    if camera.has_distortion:  # else the undistortion's Jacobian is the identity: J @ I = J
-        J = J @ undistortion_jacobian(camera, uv)
+    J = _with_undistortion(cameras, view, uv, J)
     var = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64) ** 2, uv.shape[:2])
     return xy, depth, var[..., None, None] * (J @ np.swapaxes(J, -1, -2))
+
+
+def _undistorted(cameras: list[Camera], view: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Undistorted pixels of the stacked detections, view by view where a camera has distortion: (N, K, 2)."""
+    und = uv.copy()
+    for v, camera in enumerate(cameras):
+        if camera.has_distortion:
+            rows = view == v
+            und[rows] = camera.undistort_points(uv[rows])
+    return und
+
+
+def _with_undistortion(cameras: list[Camera], view: np.ndarray, uv: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """d(plane)/d(distorted px) = J @ d(undistorted)/d(distorted) for the views with distortion (identity else):
+    (N, K, 2, 2) -> (N, K, 2, 2), a new array."""
+    J = J.copy()
+    for v, camera in enumerate(cameras):
+        if camera.has_distortion:
+            rows = view == v
+            J[rows] = J[rows] @ undistortion_jacobian(camera, uv[rows])
+    return J
 
 
 def joint_sigmas(score: np.ndarray, sigma_px: float, score_power: float = 0.0) -> np.ndarray:
