@@ -155,37 +155,6 @@ def test_the_sparse_chi_square_equals_a_dense_reference():
     np.testing.assert_array_equal(dof, n[passes])
 
 
-def test_the_ground_plane_window_keeps_every_pair_the_full_scan_keeps():
-    # random crowd feet (elongated covariances, some detections without feet) and bodies, 3 views: the window
-    # over ground X visits fewer pairs but returns the same rows, bit for bit, as the scan of every pair
-    rng = np.random.default_rng(7)
-    rig = ring_rig(3, 6.0, 2.5)
-    counts = np.array([60, 45, 70])
-    N, J = counts.sum(), 8
-    uv = rng.uniform(0, 600, (N, J, 2))
-    var = np.where(rng.random((N, J)) < 0.2, 0.0, rng.uniform(1, 9, (N, J)))
-    p = rng.uniform(-5, 5, (N, 2))
-    A = rng.normal(0, 1, (N, 2, 2)) * np.array([0.1, 0.01])[:, None]
-    cov = A @ np.swapaxes(A, 1, 2)
-    has_p = rng.random(N) < 0.85
-    Fs = np.zeros((3, 3, 3, 3))
-    for a, b in ((0, 1), (0, 2), (1, 2)):
-        Fs[a, b] = fundamental_matrix(rig[a], rig[b])
-    view_pairs = np.array([[0, 1], [1, 2], [0, 2]])
-    offsets = np.concatenate([[0], np.cumsum(counts)])
-    limits = gate_limits(1e-3, J + 2) * 4.0
-    rows = []
-    for window in (True, False):
-        out = (np.empty((10_000, 4), np.int64), np.empty((10_000, 2)), np.empty(200), 0, 0)
-        stacked = (uv, var, offsets, has_p, p, cov, 0.05**2, Fs, view_pairs, 0, limits, 2, 9.0, 1.0)
-        n, nr, done = pairs_chi2(*stacked, np.ones(J + 3), 2.0, 0, *out, window)
-        assert done == 3
-        rows.append((out[0][:n].copy(), out[1][:n].copy()))
-    assert 100 < len(rows[0][0]) < 0.5 * np.sum(counts[view_pairs].prod(axis=1))  # the feet test cuts
-    np.testing.assert_array_equal(rows[0][0], rows[1][0])
-    np.testing.assert_array_equal(rows[0][1], rows[1][1])
-
-
 def test_complete_linkage_never_joins_persons_whose_cross_pair_disagrees():
     # edges a0-b0 and b0-c0 pass, a0-c0 does not: c0 stays out; counts 1 per view
     edges = np.array([[0, 0, 1, 0, -5.0], [1, 0, 2, 0, -4.0]])

@@ -51,82 +51,18 @@ def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def _sorted_feet(has_p, p, cov, sb, nb):
-    """View b's detections (sb:sb + nb) whose feet X variance is at most 4x their median, sorted by ground X:
-    X (M,), their indices in b (M,); the other indices (feet far from the camera, or none: always visited);
-    the largest X variance of the M."""
-    ids, others = np.empty(nb, dtype=np.int64), np.empty(nb, dtype=np.int64)
-    m, o = 0, 0
-    for bj in range(nb):
-        if has_p[sb + bj]:
-            ids[m] = bj
-            m += 1
-    spread = np.empty(m)
-    for k in range(m):
-        spread[k] = cov[sb + ids[k], 0, 0]
-    narrow = 4.0 * np.median(spread) if m > 0 else 0.0
-    xs, kept, widest, m2 = np.empty(m), np.empty(m, dtype=np.int64), 0.0, 0
-    for bj in range(nb):
-        j = sb + bj
-        if has_p[j] and cov[j, 0, 0] <= narrow:
-            xs[m2], kept[m2] = p[j, 0], bj
-            widest = max(widest, cov[j, 0, 0])
-            m2 += 1
-        else:
-            others[o] = bj
-            o += 1
-    order = np.argsort(xs[:m2], kind="mergesort")
-    return xs[:m2][order], kept[:m2][order], others[:o], widest
-
-
-@njit(cache=True, error_model="numpy")
-def _feet_window(xs, ids, others, x, reach2, out):
-    """The detections of b worth testing against feet at ground X x: those whose feet X is within
-    sqrt(reach2) of x (a pair fails the feet test d^T S^-1 d <= far when dx^2 > far S_xx, since
-    d^T S^-1 d >= dx^2 / S_xx for positive definite S; reach2 >= far S_xx) and the others -> count in out."""
-    half = np.sqrt(reach2 * (1.0 + 1e-6))  # a margin far above rounding: only pairs the test rejects are left out
-    lo, hi = np.searchsorted(xs, x - half, side="left"), np.searchsorted(xs, x + half, side="right")
-    m = hi - lo
-    out[:m] = ids[lo:hi]
-    out[m : m + len(others)] = others
-    return m + len(others)
-
-
-@njit(cache=True, error_model="numpy")
-def _sort_rows(ints, floats, start, n):
-    """Insertion sort of rows start:n of ints / floats by j (ints[:, 2]): one detection's few passing pairs."""
-    for r in range(start + 1, n):
-        k = r
-        while k > start and ints[k - 1, 2] > ints[k, 2]:
-            for c in range(4):
-                ints[k - 1, c], ints[k, c] = ints[k, c], ints[k - 1, c]
-            for c in range(2):
-                floats[k - 1, c], floats[k, c] = floats[k, c], floats[k - 1, c]
-            k -= 1
-
-
-@njit(cache=True, error_model="numpy")
 def _view_pair(
-    uv, var, masks, has_p, p, cov, floor2, F, sa, na, sb, nb, limits, min_dof, cap, scale2, q, ints, floats, n, window
+    uv, var, masks, has_p, p, cov, floor2, F, sa, na, sb, nb, limits, min_dof, cap, scale2, q, ints, floats, n
 ):
     """Append the detection pairs of views a (detections sa:sa + na) and b (sb:sb + nb) that pass to ints
     (view pair q, i, j, dof) and floats (chi^2, feet) from row n (see pairs_chi2): -> the new n. One loop, no
-    calls per pair: numba's reference counting of array arguments would cost more than an unrelated pair.
-    With window, a detection with feet visits only the detections of b whose feet are near enough in X to
-    pass the feet test (:func:`_feet_window`), and those without feet; the rows are the same."""
+    calls per pair: numba's reference counting of array arguments would cost more than an unrelated pair."""
     J = var.shape[1]
     la, lb = _lines(uv[sa : sa + na], F, False), _lines(uv[sb : sb + nb], F, True)
     far = limits[2 + J] * (1.0 + 1e-9)  # above it, rounding cannot bring the feet term back under the limit
-    xs, ids, others, widest = _sorted_feet(has_p, p, cov, sb, nb)
-    window = window and floor2 > 0.0  # the floor makes every feet covariance positive definite
-    candidates = np.arange(nb)
     for ai in range(na):
         i = sa + ai
-        m, start = nb, n
-        if window and has_p[i]:
-            m = _feet_window(xs, ids, others, p[i, 0], far * (cov[i, 0, 0] + widest + floor2), candidates)
-        for c in range(m):
-            bj = candidates[c] if m < nb else c
+        for bj in range(nb):
             j = sb + bj
             f = np.nan
             if has_p[i] and has_p[j]:
@@ -169,8 +105,6 @@ def _view_pair(
             ints[n, 0], ints[n, 1], ints[n, 2], ints[n, 3] = q, i, j, dof
             floats[n, 0], floats[n, 1] = d2, f
             n += 1
-        if m < nb:  # visited in the window's order: the rows back in the order of j
-            _sort_rows(ints, floats, start, n)
     return n
 
 
@@ -198,7 +132,6 @@ def pairs_chi2(
     ratios,
     n,
     nr,
-    window=True,
 ):
     """The detection pairs of the view pairs (a, b) (rows q0, q0 + 1, ... of view_pairs) that pass -> (rows of
     ints / floats used, of ratios used, view pairs done); it stops before a view pair that ints has no room
@@ -213,7 +146,6 @@ def pairs_chi2(
     global indices, dof), floats (M, 2) (chi^2, inf where untestable and kept as linked; feet term, NaN where
     none). With sample > 0, the body chi^2 / medians[body dof] (medians (D + 1,)) of each view pair's mutual best
     partners (cost 0.5 chi^2 - evidence_per_dof * dof) go to ratios (R,), until there are sample of them.
-    window=False visits every pair (the reference of the ground-plane window; same rows).
     """
     masks = _masks(var)
     for q in range(q0, len(view_pairs)):
@@ -225,27 +157,7 @@ def pairs_chi2(
         first = n
         F = fundamentals[a, b]
         n = _view_pair(
-            uv,
-            var,
-            masks,
-            has_p,
-            p,
-            cov,
-            floor2,
-            F,
-            sa,
-            na,
-            sb,
-            nb,
-            limits,
-            min_dof,
-            cap,
-            scale2,
-            q,
-            ints,
-            floats,
-            n,
-            window,
+            uv, var, masks, has_p, p, cov, floor2, F, sa, na, sb, nb, limits, min_dof, cap, scale2, q, ints, floats, n
         )  # noqa: E501
         if sample > 0:
             nr = _mutual_best_ratios(
