@@ -35,7 +35,10 @@ from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
 from models.front_end import Pose2DFrontEnd
+from reconstruction.compile_ahead import compile_ahead
 from reconstruction.pipeline import MultiViewPipeline
+from reconstruction.solver.map_solver import SOLVES_WARM_UP
+from reconstruction.solver.pose_kernels import solve_all
 from run_folders import register_resolvers
 
 _SINGLE_RUN: list[
@@ -56,7 +59,7 @@ def check_config(cfg: DictConfig) -> None:
     check_number(cfg, "evaluation.alpha")
     check_number(cfg, "vis_sequence_max_mb")
     check_int(cfg, "vis_frame", 0, nullable=True)
-    for key in ("vis", "vis_sequence", "progress", "overwrite"):
+    for key in ("vis", "vis_sequence", "progress", "overwrite", "compile_ahead"):
         check_bool(cfg, key)
 
 
@@ -74,9 +77,17 @@ def check_sequence(cfg: DictConfig, sequence) -> None:
         )
 
 
+def start_compiles(cfg: DictConfig) -> None:
+    """On a first run (numba's cache cold), the MAP solver's kernels compile in a second process while this one
+    loads the data and compiles the matcher's (``compile_ahead``; reconstruction/compile_ahead.py)."""
+    if cfg.compile_ahead and cfg.reconstruction.get("solver") == "compiled":
+        compile_ahead(SOLVES_WARM_UP, solve_all)
+
+
 def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     """Evaluate the configured dataset, matcher and reconstruction; write outputs and report.txt into out_dir."""
     check_config(cfg)
+    start_compiles(cfg)
     t0 = time.perf_counter()
     sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))  # protocols: evaluation/protocols
     t_data = time.perf_counter() - t0

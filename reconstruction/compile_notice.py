@@ -1,6 +1,6 @@
 """One line for the user while numba compiles: the first run after an install (or a change of the kernels'
-code) compiles them for about 13 s on one core (README), silently; later runs load them from numba's on-disk
-cache in ~0.2 s."""
+code) compiles them for about 13-28 s of CPU (README; on two cores the MAP solver's compile in a second process
+meanwhile, reconstruction/compile_ahead.py), silently; later runs load them from numba's on-disk cache in ~0.2 s."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import threading
 from contextlib import contextmanager
 from typing import Iterator
 
-# loading the cached kernels takes ~0.2 s, compiling them ~13 s CPU in all (MAP solver ~7, evidence matcher ~5,
-# measured with an empty NUMBA_CACHE_DIR): a block still running after 1 s is compiling
+# loading the cached kernels takes ~0.2 s, compiling them 13-28 s of CPU in all by the machine (MAP solver about
+# 60 %, evidence matcher about 35 %, measured with an empty NUMBA_CACHE_DIR): a block still running after 1 s is compiling
 NOTICE_AFTER_S = 1.0
 
 
@@ -21,7 +21,7 @@ def compile_notice(what: str, after_s: float = NOTICE_AFTER_S) -> Iterator[None]
         print,
         [
             f"Compiling the {what} numba kernels (once after an install or a code "
-            "change, about 15 s in all; later runs load them from numba's cache) ..."
+            "change, 10-30 s in all; later runs load them from numba's cache) ..."
         ],
         {"flush": True},
     )

@@ -11,6 +11,7 @@ from reconstruction.matching.feet_uncertainty import (
     joints_on_planes,
     mahalanobis_distances,
     plane_to_image_homography,
+    views_joints_on_planes,
 )
 from tests.test_feet_matching import crowd, matched_id_sets, ring_rig, scene
 
@@ -34,6 +35,29 @@ def test_ground_covariance_matches_monte_carlo(dist):
     np.testing.assert_allclose(ground, cam.image_to_ground(uv), atol=1e-9)
     assert np.linalg.norm(cov - mc) / np.linalg.norm(mc) < 0.1
     np.testing.assert_allclose(np.linalg.eigvalsh(cov), np.linalg.eigvalsh(mc), rtol=0.1)
+
+
+def test_all_views_at_once_equal_view_by_view_and_land_on_the_truth():
+    # 4 cameras (two with distortion), one with no detections, planes at three heights: the stacked call equals
+    # one call per camera, and the points land on the truth
+    plain, distorted = ring_rig(4), ring_rig(4, dist=DIST)
+    cams, counts = [plain[0], distorted[1], plain[2], distorted[3]], [5, 0, 7, 3]
+    heights = np.array([0.0, 0.07, 1.0])
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-2, 2, (sum(counts), 3, 2))
+    X = np.concatenate([xy, np.broadcast_to(heights[None, :, None], xy.shape[:2] + (1,))], axis=-1)
+    view = np.repeat(np.arange(4), counts)
+    uv = np.stack([cams[v].project(X[n]) for n, v in enumerate(view)])
+    sigma = rng.uniform(1, 5, uv.shape[:2])
+    ground, depth, cov = views_joints_on_planes(cams, counts, uv, heights, sigma)
+    ends = np.cumsum(counts)
+    for v, cam in enumerate(cams):
+        rows = slice(ends[v] - counts[v], ends[v])
+        one = joints_on_planes(cam, uv[rows], heights, sigma[rows])
+        for got, want in zip((ground[rows], depth[rows], cov[rows]), one):
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(ground, xy, atol=1e-6)
+    assert np.all(depth > 0)
 
 
 def test_ground_covariance_grows_with_distance():

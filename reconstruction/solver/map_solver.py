@@ -44,6 +44,7 @@ import numpy as np
 from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from data.geometry.camera import Rig
 from data.geometry.triangulation import triangulate_dlt
+from reconstruction.compile_ahead import wait_for
 from reconstruction.compile_notice import compile_notice
 from reconstruction.solver.block_solver import (
     EliminationPlan,
@@ -318,20 +319,25 @@ def output_confidence(
     return np.where((views >= output_min_views) & placed[:, None], conf, 0.0)
 
 
-@lru_cache(maxsize=1)
-def warm_up() -> None:
-    """Compile the numba kernels (or load them from numba's on-disk cache) once per process, on a tiny problem.
+# the warm-up that a second process may compile ahead on a first run (reconstruction/compile_ahead.py)
+SOLVES_WARM_UP = "reconstruction.solver.map_solver:warm_up_solves"
 
-    Called when a stage is built, so that the first frame's time is the solve's, not the compiler's.
-    """
+
+def _tiny_problem() -> tuple[np.ndarray, np.ndarray]:
+    """The mean pose seen by two views facing each other and one beside: poses2d (3, 1, J, 3), proj (3, 3, 4)."""
     J = len(MEAN_POSE)
     M = np.hstack([np.eye(3), [[0.0], [0.0], [5.0]]])
     side = np.array([[0.0, 0, 1, 0], [0, 1, 0, 0], [-1, 0, 0, 0], [0, 0, 0, 1]])
-    proj = np.stack([M, M @ np.diag([1.0, -1.0, -1.0, 1.0]), M @ side])  # two views facing each other, one beside
+    proj = np.stack([M, M @ np.diag([1.0, -1.0, -1.0, 1.0]), M @ side])
     hom = np.einsum("vab,jb->vja", proj, np.hstack([MEAN_POSE, np.ones((J, 1))]))[:, None]
-    poses2d = np.concatenate([hom[..., :2] / hom[..., 2:], np.ones(hom.shape[:-1] + (1,))], axis=-1)
-    X, _ = initial_poses(triangulate_dlt(poses2d, proj), poses2d, proj)
-    X = reinitialise_outliers(X, poses2d, proj)
+    return np.concatenate([hom[..., :2] / hom[..., 2:], np.ones(hom.shape[:-1] + (1,))], axis=-1), proj
+
+
+def warm_up_solves() -> None:
+    """Compile (or load) the solver's and the prior's kernels on a tiny problem started at the mean pose: no
+    DLT or start poses needed (their kernels are :func:`warm_up`'s), so a second process can compile these alone."""
+    poses2d, proj = _tiny_problem()
+    X = np.array(MEAN_POSE, dtype=np.float64)[None]
     for weight in (np.zeros(len(BONE_PAIRS)), np.ones(len(BONE_PAIRS))):
         for robust in ROBUST_LOSSES:
             solve_poses_compiled(
@@ -339,12 +345,27 @@ def warm_up() -> None:
                 X,
                 max_iterations=2,
             )
-    w = poses2d[..., 2]  # the prior's and the swap test's kernels (prior_kernels.py)
+    w = poses2d[..., 2]  # the prior's kernels (prior_kernels.py)
     info = joint_information(X, proj, w)
     noise_scale(X, poses2d[..., :2], w, proj)
     bone_variances(X, info, BONE_PAIRS, w.sum(axis=0) >= 2)
-    find_swaps(poses2d, w, proj)
     mean_variances(info, np.zeros(X.shape[:2]), np.empty(X.shape[:2]))
+
+
+@lru_cache(maxsize=1)
+def warm_up() -> None:
+    """Compile the numba kernels (or load them from numba's on-disk cache) once per process, on a tiny problem.
+
+    Called when a stage is built, so that the first frame's time is the solve's, not the compiler's. The DLT's,
+    start poses' and swap test's kernels compile here first; then :func:`warm_up_solves`, after the second process
+    that compiles it ahead on a first run (:func:`~reconstruction.compile_ahead.compile_ahead`), if any.
+    """
+    poses2d, proj = _tiny_problem()
+    X, _ = initial_poses(triangulate_dlt(poses2d, proj), poses2d, proj)
+    reinitialise_outliers(X, poses2d, proj)
+    find_swaps(poses2d, poses2d[..., 2], proj)
+    wait_for(SOLVES_WARM_UP)
+    warm_up_solves()
 
 
 class MAPReconstruction:
