@@ -107,6 +107,40 @@ class _Layout:
 
     def frames(self, num_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Walk num_frames frames: cand_pos (F, 25), counts (F, 25), paf_pos (F, 26)."""
+        return self._frames_unchecked(num_frames) or self._frames_checked(num_frames)
+
+    def _frames_unchecked(self, num_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """:meth:`frames` of a well-formed file in one tight loop; None at the first problem (nothing moved), for
+        :meth:`_frames_checked` to name it."""
+        numbers, pos, end = self.numbers, self.pos, min(len(self.numbers), self.first_bad)
+        J, limbs = BODY25_NUM_JOINTS, BODY25_PAF_LIMBS
+        cand_pos, counts, paf_pos = [0] * (num_frames * J), [0] * (num_frames * J), [0] * (num_frames * len(limbs))
+        for f in range(num_frames):
+            base, paf_base = f * J, f * len(limbs)
+            for j in range(J):
+                if pos >= end:
+                    return None
+                value = numbers[pos]
+                n = int(value)
+                if n < 0 or n != value:
+                    return None
+                cand_pos[base + j], counts[base + j] = pos + 1, n
+                pos += 1 + 3 * n
+            for k, (a, b) in enumerate(limbs):
+                paf_pos[paf_base + k] = pos
+                pos += counts[base + a] * counts[base + b]
+            if pos > end:
+                return None
+        self.pos = pos
+        shape = (num_frames, J)
+        return (
+            np.array(cand_pos, dtype=np.int64).reshape(shape),
+            np.array(counts, dtype=np.int64).reshape(shape),
+            np.array(paf_pos, dtype=np.int64).reshape(num_frames, len(limbs)),
+        )
+
+    def _frames_checked(self, num_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`frames` block by block, each checked: an error names the first bad block."""
         cand_pos = np.zeros((num_frames, BODY25_NUM_JOINTS), dtype=np.int64)
         counts = np.zeros_like(cand_pos)
         paf_pos = np.zeros((num_frames, len(BODY25_PAF_LIMBS)), dtype=np.int64)
