@@ -121,7 +121,14 @@ def views_joints_on_planes(
         return xy, depth, None
     J = _with_undistortion(cameras, view, uv, J)
     var = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64) ** 2, uv.shape[:2])
-    return xy, depth, var[..., None, None] * (J @ np.swapaxes(J, -1, -2))
+    return xy, depth, var[..., None, None] * _outer_rows(J)
+
+
+def _outer_rows(J: np.ndarray) -> np.ndarray:
+    """J J^T of 2x2 matrices, element by element (numpy's stacked matmul of tiny matrices is slow): (..., 2, 2)."""
+    a, b, c, d = J[..., 0, 0], J[..., 0, 1], J[..., 1, 0], J[..., 1, 1]
+    off = a * c + b * d
+    return np.stack([np.stack([a * a + b * b, off], -1), np.stack([off, c * c + d * d], -1)], -2)
 
 
 def _undistorted(cameras: list[Camera], view: np.ndarray, uv: np.ndarray) -> np.ndarray:

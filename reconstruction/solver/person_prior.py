@@ -143,14 +143,15 @@ def person_bone_lengths(
     A[np.arange(L), 1 + groups] = bone_ref * proportion_sd
     y = lengths - bone_ref
     use = np.isfinite(variances) & np.isfinite(lengths)
+    outer = (A[:, :, None] * A[:, None, :]).reshape(L, -1)  # a_l a_l^T of every bone, flattened: (L, (1 + G)^2)
     for _ in range(2):  # once, then without the outlying bones
         noise = np.where(use, variances, 0.0) + tie_sd**2
         w = np.where(use, 1.0 / noise, 0.0)  # (P, L)
-        precision = np.eye(1 + G) + (A.T[None] * w[:, None, :]) @ A  # (P, 1 + G, 1 + G)
+        precision = np.eye(1 + G) + (w @ outer).reshape(P, 1 + G, 1 + G)  # I + sum_l w_l a_l a_l^T
         cov = np.linalg.inv(precision)
-        theta = (cov @ (A.T @ (w * np.where(use, y, 0.0)).T).T[..., None])[..., 0]  # (P, 1 + G)
+        theta = np.einsum("pgh,ph->pg", cov, (w * np.where(use, y, 0.0)) @ A)  # (P, 1 + G)
         mean = bone_ref + theta @ A.T
-        var = np.sum((A[None] @ cov) * A[None], axis=-1)  # (P, L)
+        var = cov.reshape(P, -1) @ outer.T  # a_l^T cov a_l: (P, L)
         z = np.abs(np.where(use, lengths, mean) - mean) / np.sqrt(noise + var)
         outlier = use & (z > OUTLIER_SD)
         if not outlier.any():
