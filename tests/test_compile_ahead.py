@@ -46,3 +46,11 @@ def test_a_second_process_fills_the_cache_of_a_cold_kernel(tmp_path, monkeypatch
 def test_nothing_is_started_for_what_is_not_a_cached_kernel():
     assert not cache_is_cold(len)
     assert not compile_ahead("math:sqrt", len)
+
+
+def test_the_map_solvers_ahead_target_names_its_warm_up():
+    # eval.py starts this target by name in a second process: a rename must not leave it silently failing
+    from reconstruction.solver import map_solver
+
+    module, function = map_solver.SOLVES_WARM_UP.split(":")
+    assert getattr(importlib.import_module(module), function) is map_solver.warm_up_solves
