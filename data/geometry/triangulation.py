@@ -131,10 +131,12 @@ def _rayleigh_quotient(N: np.ndarray, iterations: int, tol: float, out: np.ndarr
                 z[r] = Cc  # C^-1 c, until z's own entries below
                 cc_c += A[r, 3] * Cc
                 cc_v += A[r, 3] * cv[r]
-            z_w = (v[3] - cc_v) / (A[3, 3] - rho - cc_c)
+            # z = (N - rho I)^-1 v times the Schur complement s = d - rho - c^T C^-1 c, which vanishes as rho converges:
+            # the direction without the division, so a converged rho (s = 0 or its rounding) still gives a step
+            num, s = v[3] - cc_v, A[3, 3] - rho - cc_c
             for r in range(3):
-                z[r] = cv[r] - z[r] * z_w
-            z[3] = z_w
+                z[r] = s * cv[r] - z[r] * num
+            z[3] = num
             _normalise(z, True)
             if np.isfinite(z[0]) and np.isfinite(z[1]) and np.isfinite(z[2]) and np.isfinite(z[3]):
                 for r in range(4):  # element-wise: a slice assignment compiles numba's shape-error formatting
