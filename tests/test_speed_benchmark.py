@@ -19,3 +19,10 @@ def test_speed_table_of_one_small_crowd(tmp_path: Path) -> None:
     assert frames == "2" and grouping == "-"  # synthetic detections: no PAF grouping
     assert abs(sum(map(float, stages)) - float(total)) < 0.05 + 0.01 * float(total)  # medians: close, not equal
     assert cells[7:] == ["-", "-", "-"]  # no target, no figure of the issue for this setting
+
+
+def test_a_filter_that_matches_no_setting_prints_empty_tables() -> None:
+    text = speed.main(["--only", "no such setting", "--skip-process"])
+    header = next(line for line in text.splitlines() if line.startswith("| setting"))
+    following = text.splitlines()[text.splitlines().index(header) + 2 :]
+    assert not following or not following[0].startswith("| ")  # the header and its rule, no rows
