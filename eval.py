@@ -24,6 +24,7 @@ import warnings
 from pathlib import Path
 
 import hydra
+import numpy as np
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import InstantiationException
 from hydra.types import RunMode
@@ -42,12 +43,12 @@ from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
 from models.front_end import Pose2DFrontEnd
-from reconstruction.compile_ahead import compile_ahead
+from reconstruction.compile_ahead import interpret_until_compiled
 from reconstruction.pipeline import MultiViewPipeline
-from reconstruction.solver.map_solver import SOLVES_WARM_UP
 from reconstruction.solver.pose_kernels import solve_all
 from run_folders import register_resolvers
 
+KERNEL_PACKAGES = ("data", "models", "reconstruction", "tracking", "evaluation")  # where the numba kernels are held
 _SINGLE_RUN: list[
     Path
 ] = []  # main() notes a plain (not multirun) run here: only then may the process skip its teardown
@@ -93,10 +94,29 @@ def settle_startup_objects() -> None:
 
 
 def start_compiles(cfg: DictConfig) -> None:
-    """On a first run (numba's cache cold), the MAP solver's kernels compile in a second process while this one
-    loads the data and compiles the matcher's (``compile_ahead``; reconstruction/compile_ahead.py)."""
-    if cfg.compile_ahead and cfg.reconstruction.get("solver") == "compiled":
-        compile_ahead(SOLVES_WARM_UP, solve_all)
+    """On a first run (numba's cache cold), every kernel compiles in a background process that outlives this one,
+    while this run uses them as Python and the MAP's numpy solver until it ends (``compile_ahead``;
+    reconstruction/compile_ahead.py): a small first job does not wait for the compiler."""
+    if cfg.compile_ahead and interpret_until_compiled("eval:compile_kernels", solve_all, KERNEL_PACKAGES):
+        print(
+            "numba's cache is empty (first run after an install or a change of the kernels): the kernels compile in "
+            "a background process (about 15 s of CPU; later runs load them); until then they run as Python.",
+            flush=True,
+        )
+
+
+def compile_kernels() -> None:
+    """Compile (or load) every numba kernel a run uses, on tiny inputs: the background process of a first run."""
+    from models.paf_grouping import BODY25_PAF_LIMBS, group_people
+    from reconstruction.matching import evidence
+    from reconstruction.matching.sparse_assignment import linear_sum_assignment
+    from reconstruction.solver import map_solver
+
+    evidence.warm_up()
+    map_solver.warm_up()
+    linear_sum_assignment(np.ones((2, 3)))
+    one = np.array([[10.0, 10.0, 0.9]])
+    group_people([one] * 25, [np.ones((1, 1))] * len(BODY25_PAF_LIMBS), min_joints=1)
 
 
 def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:

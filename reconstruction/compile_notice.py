@@ -1,6 +1,6 @@
 """One line for the user while numba compiles: the first run after an install (or a change of the kernels'
-code) compiles them for about 13-28 s of CPU (README; on two cores the MAP solver's compile in a second process
-meanwhile, reconstruction/compile_ahead.py), silently; later runs load them from numba's on-disk cache in ~0.2 s."""
+code) compiles them for about 13-28 s of CPU (README; with two cores, in a background process while the run uses
+them as Python, reconstruction/compile_ahead.py), silently; later runs load them from numba's cache in ~0.2 s."""
 
 from __future__ import annotations
 

@@ -44,7 +44,7 @@ import numpy as np
 from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from data.geometry.camera import Rig
 from data.geometry.triangulation import triangulate_dlt
-from reconstruction.compile_ahead import wait_for
+from reconstruction.compile_ahead import kernels_interpreted
 from reconstruction.compile_notice import compile_notice
 from reconstruction.solver.block_solver import (
     EliminationPlan,
@@ -319,10 +319,6 @@ def output_confidence(
     return np.where((views >= output_min_views) & placed[:, None], conf, 0.0)
 
 
-# the warm-up that a second process may compile ahead on a first run (reconstruction/compile_ahead.py)
-SOLVES_WARM_UP = "reconstruction.solver.map_solver:warm_up_solves"
-
-
 def _tiny_problem() -> tuple[np.ndarray, np.ndarray]:
     """The mean pose seen by two views facing each other and one beside: poses2d (3, 1, J, 3), proj (3, 3, 4)."""
     J = len(MEAN_POSE)
@@ -334,8 +330,7 @@ def _tiny_problem() -> tuple[np.ndarray, np.ndarray]:
 
 
 def warm_up_solves() -> None:
-    """Compile (or load) the solver's and the prior's kernels on a tiny problem started at the mean pose: no
-    DLT or start poses needed (their kernels are :func:`warm_up`'s), so a second process can compile these alone."""
+    """Compile (or load) the solver's and the prior's kernels on a tiny problem started at the mean pose."""
     poses2d, proj = _tiny_problem()
     X = np.array(MEAN_POSE, dtype=np.float64)[None]
     for weight in (np.zeros(len(BONE_PAIRS)), np.ones(len(BONE_PAIRS))):
@@ -356,15 +351,13 @@ def warm_up_solves() -> None:
 def warm_up() -> None:
     """Compile the numba kernels (or load them from numba's on-disk cache) once per process, on a tiny problem.
 
-    Called when a stage is built, so that the first frame's time is the solve's, not the compiler's. The DLT's,
-    start poses' and swap test's kernels compile here first; then :func:`warm_up_solves`, after the second process
-    that compiles it ahead on a first run (:func:`~reconstruction.compile_ahead.compile_ahead`), if any.
+    Called when a stage is built, so that the first frame's time is the solve's, not the compiler's: the DLT's,
+    start poses', swap test's, solver's and prior's kernels.
     """
     poses2d, proj = _tiny_problem()
     X, _ = initial_poses(triangulate_dlt(poses2d, proj), poses2d, proj)
     reinitialise_outliers(X, poses2d, proj)
     find_swaps(poses2d, poses2d[..., 2], proj)
-    wait_for(SOLVES_WARM_UP)
     warm_up_solves()
 
 
@@ -528,7 +521,8 @@ class MAPReconstruction:
         und, uv, inv_sigma = poses2d_und[:, idx], uv[:, idx], inv_sigma[:, idx]
         Xp = X[idx]
         self._bone_measurements = self._mle_information = None
-        solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
+        # while a first run's kernels compile (compile_ahead.interpret_until_compiled): the numpy solver, same optimum
+        solve_fn = solve_poses_compiled if self.solver == "compiled" and not kernels_interpreted() else solve_poses
         for k, prior in enumerate(stages):
             if k == 0:
                 problem = self._problem(uv, inv_sigma, proj, Xp, prior)
