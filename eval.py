@@ -48,6 +48,7 @@ from reconstruction.pipeline import MultiViewPipeline
 from reconstruction.solver.pose_kernels import solve_all
 from run_folders import register_resolvers
 
+AS_SCRIPT = __name__ == "__main__"  # python eval.py (not a module that imported eval)
 KERNEL_PACKAGES = ("data", "models", "reconstruction", "tracking", "evaluation")  # where the numba kernels are held
 _SINGLE_RUN: list[
     Path
@@ -96,8 +97,9 @@ def settle_startup_objects() -> None:
 def start_compiles(cfg: DictConfig) -> None:
     """On a first run (numba's cache cold), every kernel compiles in a background process that outlives this one,
     while this run uses them as Python and the MAP's numpy solver until it ends (``compile_ahead``;
-    reconstruction/compile_ahead.py): a small first job does not wait for the compiler."""
-    if cfg.compile_ahead and interpret_until_compiled("eval:compile_kernels", solve_all, KERNEL_PACKAGES):
+    reconstruction/compile_ahead.py): a small first job does not wait for the compiler. Only when eval.py runs as a
+    script: a module that imports it (the tests) keeps its kernels as they are and compiles them as it goes."""
+    if cfg.compile_ahead and AS_SCRIPT and interpret_until_compiled("eval:compile_kernels", solve_all, KERNEL_PACKAGES):
         print(
             "numba's cache is empty (first run after an install or a change of the kernels): the kernels compile in "
             "a background process (about 15 s of CPU; later runs load them); until then they run as Python.",

@@ -134,3 +134,19 @@ def _compile_running() -> bool:
         except OSError:
             continue
     return False
+
+
+def test_a_module_that_imports_eval_keeps_its_kernels(monkeypatch):
+    # the tests run eval.run() in-process: they must not swap this process's kernels for Python behind its back
+    from omegaconf import OmegaConf
+
+    import eval as eval_script
+
+    calls = []
+    monkeypatch.setattr(eval_script, "interpret_until_compiled", lambda *args: calls.append(args) or True)
+    eval_script.start_compiles(OmegaConf.create({"compile_ahead": True}))
+    assert not eval_script.AS_SCRIPT and not calls
+    monkeypatch.setattr(eval_script, "AS_SCRIPT", True)  # as `python eval.py` runs it
+    eval_script.start_compiles(OmegaConf.create({"compile_ahead": True}))
+    eval_script.start_compiles(OmegaConf.create({"compile_ahead": False}))
+    assert len(calls) == 1 and calls[0][0] == "eval:compile_kernels"
