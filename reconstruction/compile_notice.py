@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import threading
 from contextlib import contextmanager
-from typing import Iterator
+from typing import Callable, Iterator
+
+from reconstruction.compile_ahead import kernels_interpreted
 
 # loading the cached kernels takes ~0.2 s, compiling them 13-28 s of CPU in all by the machine (MAP solver about
 # 60 %, evidence matcher about 35 %, measured with an empty NUMBA_CACHE_DIR): a block still running after 1 s is compiling
@@ -31,3 +33,12 @@ def compile_notice(what: str, after_s: float = NOTICE_AFTER_S) -> Iterator[None]
         yield
     finally:
         timer.cancel()
+
+
+def warm_up_kernels(what: str, warm_up: Callable[[], None]) -> None:
+    """Run a stage's warm-up of its numba kernels under :func:`compile_notice`; nothing while the kernels run as
+    Python (a first run's background compile, reconstruction/compile_ahead.py: nothing to compile here)."""
+    if kernels_interpreted():
+        return
+    with compile_notice(what):
+        warm_up()

@@ -150,3 +150,13 @@ def test_a_module_that_imports_eval_keeps_its_kernels(monkeypatch):
     eval_script.start_compiles(OmegaConf.create({"compile_ahead": True}))
     eval_script.start_compiles(OmegaConf.create({"compile_ahead": False}))
     assert len(calls) == 1 and calls[0][0] == "eval:compile_kernels"
+
+
+def test_a_stage_warms_its_kernels_up_only_when_they_are_compiled(monkeypatch):
+    from reconstruction import compile_notice
+
+    calls = []
+    compile_notice.warm_up_kernels("test", lambda: calls.append("warm"))
+    monkeypatch.setattr(compile_notice, "kernels_interpreted", lambda: True)  # a first run's Python kernels
+    compile_notice.warm_up_kernels("test", lambda: calls.append("interpreted"))
+    assert calls == ["warm"]

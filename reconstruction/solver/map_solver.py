@@ -45,7 +45,7 @@ from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, r
 from data.geometry.camera import Rig
 from data.geometry.triangulation import triangulate_dlt
 from reconstruction.compile_ahead import kernels_interpreted
-from reconstruction.compile_notice import compile_notice
+from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.solver.block_solver import (
     EliminationPlan,
     elimination_plan,
@@ -452,8 +452,7 @@ class MAPReconstruction:
         self.single_view_score, self.unseen_score = float(single_view_score), float(unseen_score)
         self.mle_first = bool(mle_first)
         self.solver = solver
-        with compile_notice("MAP solver"):  # one line while numba compiles (first run)
-            warm_up()
+        warm_up_kernels("MAP solver", warm_up)  # one line while numba compiles (first run)
 
     def problem(
         self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, anchor: np.ndarray, prior: bool
