@@ -48,6 +48,7 @@ from data.formats.atomic_io import atomic_write_text  # noqa: E402
 from data.formats.fourd_detections import load_4dassoc_detections  # noqa: E402
 from evaluation.report import format_table  # noqa: E402
 from models.paf_grouping import group_people  # noqa: E402
+from reconstruction.compile_ahead import wait_for_background_compile  # noqa: E402
 from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -209,23 +210,6 @@ def process_seconds(args: list[str], env: dict[str, str], runs: str, all_cores: 
     return seconds
 
 
-def wait_for_background_compile(limit_s: float = 600.0) -> None:
-    """Wait while a first run's background compile (eval.compile_kernels) runs on this machine (Linux /proc)."""
-    end = time.monotonic() + limit_s
-    while time.monotonic() < end and any(
-        b"compile_kernels" in _read(cmdline) for cmdline in Path("/proc").glob("[0-9]*/cmdline")
-    ):
-        time.sleep(0.1)
-
-
-def _read(path: Path) -> bytes:
-    """A file's bytes, empty if it vanished (a /proc entry of a process that ended)."""
-    try:
-        return path.read_bytes()
-    except OSError:
-        return b""
-
-
 def process_rows(data: str, repeats: int) -> list[list]:
     """Table 3: (command, seconds, target, issue's figure, figure / this)."""
     env = dict(os.environ)
@@ -246,7 +230,7 @@ def process_rows(data: str, repeats: int) -> list[list]:
                     cold = {**env, "NUMBA_CACHE_DIR": tempfile.mkdtemp(dir=out)}
                     t0 = time.perf_counter()
                     runs[key].append(process_seconds([*args, *extra], cold, out, True))
-                    wait_for_background_compile()  # it outlives the run; the next measurement has the machine alone
+                    wait_for_background_compile(cold["NUMBA_CACHE_DIR"])  # it outlives the run: the next one runs alone
                     filled.append(time.perf_counter() - t0)
                 if not extra:
                     runs[f"{name}, empty numba cache: until its background compile has filled the cache"] = filled

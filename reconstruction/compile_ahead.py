@@ -8,6 +8,10 @@ the cache filled, and meanwhile gives every module that holds a kernel its Pytho
 numpy's floating-point and overflow errors ignored, as the kernels' error_model does); when that process ends, the
 modules get their kernels back and later calls load the compiled code from the cache. The MAP stage uses its numpy
 solver while the kernels are interpreted (:func:`kernels_interpreted`). With a warm cache nothing is started.
+
+The background process holds an exclusive lock (POSIX ``flock``) on a file in numba's cache folder while it
+compiles: a second first run on the same cache starts no compile of its own, runs its kernels as Python too and
+takes the compiled ones when the lock is released; :func:`wait_for_background_compile` waits for it likewise.
 """
 
 from __future__ import annotations
@@ -17,6 +21,8 @@ import os
 import subprocess
 import sys
 import threading
+import time
+from pathlib import Path
 from types import ModuleType
 from typing import Any, Callable
 
@@ -24,6 +30,12 @@ import numpy as np
 
 _INTERPRETED: dict[tuple[ModuleType, str], Any] = {}  # (module, name) -> the numba dispatcher it held
 _SWAP = threading.Lock()
+LOCK_FILE = "background_compile.lock"
+
+try:
+    import fcntl
+except ImportError:  # Windows: no lock; each first run compiles in a background process of its own
+    fcntl = None
 
 
 def cache_is_cold(kernel: Any) -> bool:
@@ -37,25 +49,40 @@ def cache_is_cold(kernel: Any) -> bool:
 
 def interpret_until_compiled(target: str, kernel: Any, packages: tuple[str, ...]) -> bool:
     """On a first run (``kernel`` not cached) with a second usable core: start ``target`` ("package.module:function",
-    a warm-up that compiles every kernel a run uses) in a background process that outlives this one, and run the
-    numba kernels of the loaded modules of ``packages`` as Python until it ends -> started."""
+    a warm-up that compiles every kernel a run uses) in a background process that outlives this one (unless another
+    first run's holds the cache's lock), and run the numba kernels of the loaded modules of ``packages`` as Python
+    until that process ends -> True."""
     if _INTERPRETED or _usable_cores() < 2 or not cache_is_cold(kernel):
         return False
-    module, function = target.split(":")
-    process = subprocess.Popen(
-        [sys.executable, "-c", f"import {module}; {module}.{function}()"],
-        env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)},  # this process's imports
-        stdin=subprocess.DEVNULL,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,  # not stopped with this process (nor by its Ctrl-C): the next run finds the cache full
-    )
+    lock = _open_lock()
+    if lock is not None and not _try_lock(lock):  # another first run's background compile holds it: wait for that
+        waiter = functools.partial(_wait_lock, lock)
+    else:
+        process = _start_detached(target, lock)
+        waiter = process.wait
     with _SWAP:
         for holder, name, dispatcher in _dispatchers(packages):
             _INTERPRETED[holder, name] = dispatcher
             setattr(holder, name, _as_python(dispatcher))
-    threading.Thread(target=_compiled_when_done, args=(process,), daemon=True).start()
+    threading.Thread(target=_compiled_when_done, args=(waiter,), daemon=True).start()
     return True
+
+
+def wait_for_background_compile(cache_dir: str | Path | None = None, timeout_s: float = 600.0) -> bool:
+    """Wait until no background compile holds the lock of numba's cache folder ``cache_dir`` (None: this process's,
+    NUMBA_CACHE_DIR or the default) -> whether it was released within timeout_s (True at once if none, or no locking)."""
+    lock = _open_lock(cache_dir)
+    if lock is None:
+        return True
+    try:
+        end = time.monotonic() + timeout_s
+        while not _try_lock(lock):
+            if time.monotonic() > end:
+                return False
+            time.sleep(0.05)
+        return True
+    finally:
+        os.close(lock)
 
 
 def kernels_interpreted() -> bool:
@@ -95,10 +122,66 @@ def _as_python(kernel: Any) -> Callable:
     return call
 
 
-def _compiled_when_done(process: subprocess.Popen) -> None:
+def _compiled_when_done(wait: Callable[[], Any]) -> None:
     """Wait for the background compile, then give every module its kernels back (they load from the cache)."""
-    process.wait()
+    wait()
     with _SWAP:
         for (holder, name), kernel in _INTERPRETED.items():
             setattr(holder, name, kernel)
         _INTERPRETED.clear()
+
+
+def _start_detached(target: str, lock: int | None) -> subprocess.Popen:
+    """``target`` ("package.module:function") in a Python process of its own session, which inherits the lock (held
+    until it exits) and outlives this one (nor does this one's Ctrl-C stop it): the next run finds the cache full."""
+    module, function = target.split(":")
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-c", f"import {module}; {module}.{function}()"],
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)},  # this process's imports
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+            pass_fds=() if lock is None else (lock,),
+        )
+    finally:
+        if lock is not None:
+            os.close(lock)  # the child's copy keeps the lock
+
+
+def _lock_path(cache_dir: str | Path | None = None) -> Path:
+    """The lock file in numba's cache folder: cache_dir, else NUMBA_CACHE_DIR, else this package's __pycache__
+    (numba's default keeps each kernel's cache beside its source)."""
+    folder = cache_dir or os.environ.get("NUMBA_CACHE_DIR") or Path(__file__).resolve().parent / "__pycache__"
+    return Path(folder) / LOCK_FILE
+
+
+def _open_lock(cache_dir: str | Path | None = None) -> int | None:
+    """A descriptor of the lock file (created if needed), None where there is no locking or the folder is not
+    writable."""
+    if fcntl is None:
+        return None
+    path = _lock_path(cache_dir)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        return None
+
+
+def _try_lock(fd: int) -> bool:
+    """Take the exclusive lock of fd without waiting -> taken."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return True
+    except OSError:
+        return False
+
+
+def _wait_lock(fd: int) -> None:
+    """Wait for the exclusive lock of fd (another process's compile to end), then release it and close fd."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    finally:
+        os.close(fd)

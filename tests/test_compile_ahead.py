@@ -13,7 +13,12 @@ import pytest
 from numba.core.dispatcher import Dispatcher
 
 from reconstruction import compile_ahead
-from reconstruction.compile_ahead import cache_is_cold, interpret_until_compiled, kernels_interpreted
+from reconstruction.compile_ahead import (
+    cache_is_cold,
+    interpret_until_compiled,
+    kernels_interpreted,
+    wait_for_background_compile,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNEL_MODULE = """
@@ -75,6 +80,27 @@ def test_kernels_run_as_python_until_the_background_compile_fills_the_cache(tmp_
     assert not interpret_until_compiled("ahead_pkg_a.kernels:warm_up", compiled, ("ahead_pkg_a",))  # warm now
 
 
+@pytest.mark.skipif(compile_ahead.fcntl is None or compile_ahead._usable_cores() < 2, reason="POSIX locks, 2 cores")
+def test_a_second_first_run_waits_for_the_compile_that_holds_the_lock(tmp_path, monkeypatch):
+    import fcntl
+
+    kernels, user = _fresh_package(tmp_path, monkeypatch, "ahead_pkg_c")
+    (tmp_path / "cache").mkdir()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))  # the lock's folder (numba read it at import)
+    started = []
+    monkeypatch.setattr(compile_ahead, "_start_detached", lambda *args: started.append(args))
+    held = os.open(tmp_path / "cache" / compile_ahead.LOCK_FILE, os.O_RDWR | os.O_CREAT)
+    fcntl.flock(held, fcntl.LOCK_EX)  # another first run's background compile
+    compiled = kernels.twice_inverse
+    assert interpret_until_compiled("ahead_pkg_c.kernels:warm_up", compiled, ("ahead_pkg_c",))
+    assert not started and not wait_for_background_compile(timeout_s=0.2)  # no compile of its own; still held
+    assert kernels_interpreted() and user.twice_inverse(np.float64(2.0)) == 1.0
+    os.close(held)  # that compile ends
+    _wait_until(lambda: not kernels_interpreted())
+    assert wait_for_background_compile(timeout_s=1.0)
+    assert user.twice_inverse is compiled
+
+
 def test_nothing_is_started_with_a_warm_cache_or_for_what_is_not_a_cached_kernel(tmp_path, monkeypatch):
     kernels, _ = _fresh_package(tmp_path, monkeypatch, "ahead_pkg_b")
     kernels.warm_up()  # compiled and cached here
@@ -115,7 +141,7 @@ def test_a_first_run_reports_as_a_warm_one_and_leaves_the_cache_filled(tmp_path)
         assert done.returncode == 0, done.stderr
         runs.append((done.stdout, (out / "poses3d.json").read_text()))
         if k == 0:  # the background compile outlives the first run: wait for its cache
-            _wait_until(lambda: not _compile_running(), 300.0)
+            assert wait_for_background_compile(tmp_path / "numba", 300.0)
     first, second = runs
     if compile_ahead._usable_cores() >= 2:
         assert "compile in a background process" in first[0]
@@ -123,17 +149,6 @@ def test_a_first_run_reports_as_a_warm_one_and_leaves_the_cache_filled(tmp_path)
     assert first[1] == second[1]  # poses3d.json, to its 1e-6 m rounding
     metrics = lambda text: text[text.index("Synthetic crowd") : text.index("Frames:")]  # noqa: E731 (not timings)
     assert metrics(first[0]) == metrics(second[0])
-
-
-def _compile_running() -> bool:
-    """Whether a background compile (eval.compile_kernels) is running on this machine (Linux /proc; else False)."""
-    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
-        try:
-            if b"compile_kernels" in cmdline.read_bytes():
-                return True
-        except OSError:
-            continue
-    return False
 
 
 def test_a_module_that_imports_eval_keeps_its_kernels(monkeypatch):
