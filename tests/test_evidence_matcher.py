@@ -85,6 +85,7 @@ def _two_views(uv_a, var_a, uv_b, var_b, F, feet_dx=None):
 
 def _chi2(stacked, limits, min_dof=1, cap=1e9):
     """Detection pairs (i, j local) that pass, their chi^2 and dof, for two views."""
+    assert len(limits) >= stacked[1].shape[1] + 3  # the kernel's contract: a limit for every dof up to feet + J
     room = int(np.prod(np.diff(stacked[2])))
     out = (np.empty((room, 4), np.int64), np.empty((room, 2)), np.empty(0), 0, 0)
     fixed = (limits, min_dof, cap, 1.0, np.ones(len(limits)), 2.0, 0)
@@ -104,7 +105,7 @@ def test_the_gate_rejects_true_pairs_at_its_nominal_rate_whatever_the_degrees_of
         X = rng.uniform([-1, -1, 0.2], [1, 1, 1.8], (400, joints, 3))
         uv = [rig[v].project(X) + rng.normal(0, 2.0, X.shape[:2] + (2,)) for v in (0, 1)]
         var = np.full((400, joints), 4.0)
-        i, j, chi2, dof = _chi2(_two_views(uv[0], var, uv[1], var, F), gate_limits(rate, joints))
+        i, j, chi2, dof = _chi2(_two_views(uv[0], var, uv[1], var, F), gate_limits(rate, joints + 2))
         same = i == j
         rejected = 1 - np.sum(same) / 400
         assert abs(rejected - rate) < 3 * np.sqrt(rate * (1 - rate) / 400), (joints, rejected)
@@ -137,7 +138,7 @@ def test_the_sparse_chi_square_equals_a_dense_reference():
     uv = [rig[v].project(X[rng.permutation(30)[: 20 + 5 * v]]) + rng.normal(0, 3.0, (20 + 5 * v, 6, 2)) for v in (0, 1)]
     var = [np.where(rng.random((len(u), 6)) < 0.3, 0.0, 4.0) for u in uv]
     uv = [np.where(v[..., None] > 0, u, 0.0) for u, v in zip(uv, var)]
-    limits, cap = gate_limits(1e-2, 6), 30.0
+    limits, cap = gate_limits(1e-2, 6 + 2), 30.0
     i, j, chi2, dof = _chi2(_two_views(uv[0], var[0], uv[1], var[1], F), limits, 2, cap)
     ha = np.concatenate([uv[0], np.ones((20, 6, 1))], -1)
     hb = np.concatenate([uv[1], np.ones((25, 6, 1))], -1)

@@ -140,7 +140,7 @@ def pairs_chi2(
     Detections of all views are stacked (view v: offsets[v]:offsets[v + 1]): uv (N, J, 2) undistorted pixels,
     var (N, J) pixel variances (0 = joint not usable), has_p (N,), p (N, 2), cov (N, 2, 2) the feet midpoint
     on the ground and its covariance; fundamentals (V, V, 3, 3) with x_b^T F[a, b] x_a = 0. A pair passes when
-    its chi^2 = feet + body / scale2 passes limits (D + 1,) at its dof (>= min_dof); one joint adds at most
+    its chi^2 = feet + body / scale2 passes limits (D + 1,), D >= J + 2, at its dof (>= min_dof); one joint adds at most
     cap (an outlying joint, e.g. a left / right swap, counts as a bad joint, not as a wrong person); the loop
     over joints stops as soon as a pair fails. Out, from rows n and nr: ints (M, 4) (view pair row, i, j
     global indices, dof), floats (M, 2) (chi^2, inf where untestable and kept as linked; feet term, NaN where
