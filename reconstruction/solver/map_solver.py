@@ -329,7 +329,7 @@ def _tiny_problem() -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([hom[..., :2] / hom[..., 2:], np.ones(hom.shape[:-1] + (1,))], axis=-1), proj
 
 
-def warm_up_solves() -> None:
+def _warm_up_solves() -> None:
     """Compile (or load) the solver's and the prior's kernels on a tiny problem started at the mean pose."""
     poses2d, proj = _tiny_problem()
     X = np.array(MEAN_POSE, dtype=np.float64)[None]
@@ -358,7 +358,7 @@ def warm_up() -> None:
     X, _ = initial_poses(triangulate_dlt(poses2d, proj), poses2d, proj)
     reinitialise_outliers(X, poses2d, proj)
     find_swaps(poses2d, poses2d[..., 2], proj)
-    warm_up_solves()
+    _warm_up_solves()
 
 
 class MAPReconstruction:
