@@ -49,6 +49,7 @@ from reconstruction.solver.pose_kernels import solve_all
 from run_folders import register_resolvers
 
 AS_SCRIPT = __name__ == "__main__"  # python eval.py (not a module that imported eval)
+FIRST_RUN_COMPILE = "eval:compile_kernels"  # the background compile of a first run (compile_ahead.py)
 KERNEL_PACKAGES = ("data", "models", "reconstruction", "tracking", "evaluation")  # where the numba kernels are held
 _SINGLE_RUN: list[
     Path
@@ -99,7 +100,7 @@ def start_compiles(cfg: DictConfig) -> None:
     while this run uses them as Python and the MAP's numpy solver until it ends (``compile_ahead``;
     reconstruction/compile_ahead.py): a small first job does not wait for the compiler. Only when eval.py runs as a
     script: a module that imports it (the tests) keeps its kernels as they are and compiles them as it goes."""
-    if cfg.compile_ahead and AS_SCRIPT and interpret_until_compiled("eval:compile_kernels", solve_all, KERNEL_PACKAGES):
+    if cfg.compile_ahead and AS_SCRIPT and interpret_until_compiled(FIRST_RUN_COMPILE, solve_all, KERNEL_PACKAGES):
         print(
             "numba's cache is empty (first run after an install or a change of the kernels): the kernels compile in "
             "a background process (about 15 s of CPU; later runs load them); until then they run as Python.",

@@ -9,9 +9,10 @@ numpy's floating-point and overflow errors ignored, as the kernels' error_model 
 modules get their kernels back and later calls load the compiled code from the cache. The MAP stage uses its numpy
 solver while the kernels are interpreted (:func:`kernels_interpreted`). With a warm cache nothing is started.
 
-The background process holds an exclusive lock (POSIX ``flock``) on a file in numba's cache folder while it
-compiles: a second first run on the same cache starts no compile of its own, runs its kernels as Python too and
-takes the compiled ones when the lock is released; :func:`wait_for_background_compile` waits for it likewise.
+The background process holds an exclusive lock (POSIX ``flock``) on a file named after its target in numba's cache
+folder while it compiles: a second first run of that target on the same cache starts no compile of its own, runs its
+kernels as Python too and takes the compiled ones when the lock is released; :func:`wait_for_background_compile`
+waits for it likewise.
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ import numpy as np
 
 _INTERPRETED: dict[tuple[ModuleType, str], Any] = {}  # (module, name) -> the numba dispatcher it held
 _SWAP = threading.Lock()
-LOCK_FILE = "background_compile.lock"
 
 try:
     import fcntl
@@ -54,7 +54,7 @@ def interpret_until_compiled(target: str, kernel: Any, packages: tuple[str, ...]
     until that process ends -> True."""
     if _INTERPRETED or _usable_cores() < 2 or not cache_is_cold(kernel):
         return False
-    lock = _open_lock()
+    lock = _open_lock(target)
     if lock is not None and not _try_lock(lock):  # another first run's background compile holds it: wait for that
         waiter = functools.partial(_wait_lock, lock)
     else:
@@ -68,10 +68,10 @@ def interpret_until_compiled(target: str, kernel: Any, packages: tuple[str, ...]
     return True
 
 
-def wait_for_background_compile(cache_dir: str | Path | None = None, timeout_s: float = 600.0) -> bool:
-    """Wait until no background compile holds the lock of numba's cache folder ``cache_dir`` (None: this process's,
-    NUMBA_CACHE_DIR or the default) -> whether it was released within timeout_s (True at once if none, or no locking)."""
-    lock = _open_lock(cache_dir)
+def wait_for_background_compile(target: str, cache_dir: str | Path | None = None, timeout_s: float = 600.0) -> bool:
+    """Wait until no background compile of ``target`` holds its lock in numba's cache folder ``cache_dir`` (None: this
+    process's, NUMBA_CACHE_DIR or the default) -> whether released within timeout_s (True at once if none, or no lock)."""
+    lock = _open_lock(target, cache_dir)
     if lock is None:
         return True
     try:
@@ -150,19 +150,19 @@ def _start_detached(target: str, lock: int | None) -> subprocess.Popen:
             os.close(lock)  # the child's copy keeps the lock
 
 
-def _lock_path(cache_dir: str | Path | None = None) -> Path:
-    """The lock file in numba's cache folder: cache_dir, else NUMBA_CACHE_DIR, else this package's __pycache__
-    (numba's default keeps each kernel's cache beside its source)."""
+def lock_path(target: str, cache_dir: str | Path | None = None) -> Path:
+    """The lock file of target's background compile in numba's cache folder: cache_dir, else NUMBA_CACHE_DIR, else
+    this package's __pycache__ (numba's default keeps each kernel's cache beside its source)."""
     folder = cache_dir or os.environ.get("NUMBA_CACHE_DIR") or Path(__file__).resolve().parent / "__pycache__"
-    return Path(folder) / LOCK_FILE
+    return Path(folder) / f"background_compile.{target.replace(':', '.')}.lock"
 
 
-def _open_lock(cache_dir: str | Path | None = None) -> int | None:
+def _open_lock(target: str, cache_dir: str | Path | None = None) -> int | None:
     """A descriptor of the lock file (created if needed), None where there is no locking or the folder is not
     writable."""
     if fcntl is None:
         return None
-    path = _lock_path(cache_dir)
+    path = lock_path(target, cache_dir)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         return os.open(path, os.O_RDWR | os.O_CREAT, 0o644)

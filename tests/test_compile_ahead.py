@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from numba.core.dispatcher import Dispatcher
 
+import eval as eval_script
 from reconstruction import compile_ahead
 from reconstruction.compile_ahead import (
     cache_is_cold,
@@ -89,15 +90,15 @@ def test_a_second_first_run_waits_for_the_compile_that_holds_the_lock(tmp_path, 
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))  # the lock's folder (numba read it at import)
     started = []
     monkeypatch.setattr(compile_ahead, "_start_detached", lambda *args: started.append(args))
-    held = os.open(tmp_path / "cache" / compile_ahead.LOCK_FILE, os.O_RDWR | os.O_CREAT)
+    held = os.open(compile_ahead.lock_path("ahead_pkg_c.kernels:warm_up"), os.O_RDWR | os.O_CREAT)
     fcntl.flock(held, fcntl.LOCK_EX)  # another first run's background compile
     compiled = kernels.twice_inverse
     assert interpret_until_compiled("ahead_pkg_c.kernels:warm_up", compiled, ("ahead_pkg_c",))
-    assert not started and not wait_for_background_compile(timeout_s=0.2)  # no compile of its own; still held
+    assert not started and not wait_for_background_compile("ahead_pkg_c.kernels:warm_up", timeout_s=0.2)  # held
     assert kernels_interpreted() and user.twice_inverse(np.float64(2.0)) == 1.0
     os.close(held)  # that compile ends
     _wait_until(lambda: not kernels_interpreted())
-    assert wait_for_background_compile(timeout_s=1.0)
+    assert wait_for_background_compile("ahead_pkg_c.kernels:warm_up", timeout_s=1.0)
     assert user.twice_inverse is compiled
 
 
@@ -141,7 +142,7 @@ def test_a_first_run_reports_as_a_warm_one_and_leaves_the_cache_filled(tmp_path)
         assert done.returncode == 0, done.stderr
         runs.append((done.stdout, (out / "poses3d.json").read_text()))
         if k == 0:  # the background compile outlives the first run: wait for its cache
-            assert wait_for_background_compile(tmp_path / "numba", 300.0)
+            assert wait_for_background_compile(eval_script.FIRST_RUN_COMPILE, tmp_path / "numba", 300.0)
     first, second = runs
     if compile_ahead._usable_cores() >= 2:
         assert "compile in a background process" in first[0]
@@ -154,8 +155,6 @@ def test_a_first_run_reports_as_a_warm_one_and_leaves_the_cache_filled(tmp_path)
 def test_a_module_that_imports_eval_keeps_its_kernels(monkeypatch):
     # the tests run eval.run() in-process: they must not swap this process's kernels for Python behind its back
     from omegaconf import OmegaConf
-
-    import eval as eval_script
 
     calls = []
     monkeypatch.setattr(eval_script, "interpret_until_compiled", lambda *args: calls.append(args) or True)
