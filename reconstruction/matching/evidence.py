@@ -46,7 +46,12 @@ from data.geometry.camera import Rig
 from data.multiview import ViewDetections
 from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching.epipolar import fundamental_matrix
-from reconstruction.matching.evidence_kernels import merge_linked, pairs_chi2
+from reconstruction.matching.evidence_kernels import (
+    calibrated_chi2,
+    gated_rows,
+    merge_in_cost_order,
+    pairs_chi2,
+)
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import _as_edges
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
@@ -56,12 +61,6 @@ from reconstruction.solver.person_prior import chi2_medians
 TOO_LITTLE_EVIDENCE = "too_little_evidence"  # no usable foot and fewer than min_dof usable joints
 NON_FINITE_KEYPOINTS = "non_finite_keypoints"  # ... and some keypoints were NaN / inf (treated as missing)
 CALIBRATION_SAMPLE = 400  # mutual best pairs enough for the median of the noise calibration
-
-
-def calibrated(body: np.ndarray, feet: np.ndarray, scale2: float) -> np.ndarray:
-    """D^2 = feet + body / scale2: (Na, Nb) x2 -> (Na, Nb). The feet term keeps its own model (its ground
-    floor is foot size and calibration, not pixel noise); a missing feet term (NaN) adds nothing."""
-    return np.where(np.isfinite(feet), feet, 0.0) + body / scale2
 
 
 @lru_cache(maxsize=16)
@@ -107,18 +106,39 @@ def merge_complete(
     both feet, no joint usable in both) has nothing to test and counts as linked."""
     edges = _as_edges(edges)
     counts = np.asarray(num_detections, dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    ga = offsets[edges[:, 0].astype(np.int64)] + edges[:, 1].astype(np.int64)
+    gb = offsets[edges[:, 2].astype(np.int64)] + edges[:, 3].astype(np.int64)
+    return _merge(ga, gb, edges[:, 4], counts, linked, min_views, evidence)
+
+
+def _merge(
+    ga: np.ndarray,
+    gb: np.ndarray,
+    cost: np.ndarray,
+    counts: np.ndarray,
+    linked: np.ndarray,
+    min_views: int,
+    evidence: tuple[np.ndarray, np.ndarray] | None,
+) -> np.ndarray:
+    """:func:`merge_complete` of edges given by global detection indices ga, gb (E,) and cost (E,), views of
+    counts (V,) detections: -> (P, V)."""
     if len(counts) > 62:
         raise ValueError(f"complete-linkage merging keeps views in a 64-bit mask: at most 62 views, got {len(counts)}")
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     view_of = np.repeat(np.arange(len(counts)), counts).astype(np.int64)
-    ga = offsets[edges[:, 0].astype(np.int64)] + edges[:, 1].astype(np.int64)
-    gb = offsets[edges[:, 2].astype(np.int64)] + edges[:, 3].astype(np.int64)
-    order = np.lexsort((gb, ga, edges[:, 4]))
     has_feet, var = evidence if evidence is not None else (np.ones(offsets[-1], bool), np.ones((offsets[-1], 1)))
     links = np.ascontiguousarray(np.asarray(linked, dtype=np.int64).reshape(-1, 2))
-    root = merge_linked(ga[order], gb[order], view_of, links, has_feet, np.ascontiguousarray(var, np.float64))
-    roots, person, size = np.unique(root, return_inverse=True, return_counts=True)
-    rows = np.full((len(roots), len(counts)), -1, dtype=np.int64)
+    person, size = merge_in_cost_order(
+        np.ascontiguousarray(ga, np.int64),
+        np.ascontiguousarray(gb, np.int64),
+        np.ascontiguousarray(cost, np.float64),
+        view_of,
+        links,
+        np.ascontiguousarray(has_feet, bool),
+        np.ascontiguousarray(var, np.float64),
+    )
+    rows = np.full((len(size), len(counts)), -1, dtype=np.int64)
     rows[person, view_of] = np.arange(offsets[-1]) - offsets[view_of]
     return rows[size >= min_views]
 
@@ -133,7 +153,10 @@ def warm_up() -> None:
     out = (np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty(1), 0, 0)
     pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, 0, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1, *out)
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
-    merge_linked(one[:1], one[1:2], one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
+    merge_in_cost_order(one[:1], one[1:2], np.zeros(1), one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
+    ints = np.zeros((1, 4), np.int64)  # the column views of pairs_chi2's output, as __call__ passes them
+    d2 = calibrated_chi2(out[1], 0, 1.0, 1.0)
+    gated_rows(ints[:, 0], ints[:, 1], ints[:, 2], d2, ints[:, 3], limits, 4.0, 2.0, one, pairs, 1)
 
 
 class EvidenceMatcher:
@@ -248,18 +271,15 @@ class EvidenceMatcher:
         ev = self.frame_evidence(views, rig)
         self.last_noise_scale = float(np.sqrt(ev.scale2))
         limits = gate_limits(self.reject_rate, next((v.keypoints.shape[1] for v in views if len(v)), 23) + 2)
-        limits = limits[ev.dof]
-        ok = (ev.d2 <= limits) & np.isfinite(ev.d2)  # inf: a pair kept only as linked, not testable
-        linked = ev.d2 <= limits * self.link_scale**2
-        cost = 0.5 * ev.d2[ok] - self.evidence_per_dof * ev.dof[ok]
-        pair = ev.pair[ok]
-        va, vb = ev.view_pairs[pair, 0], ev.view_pairs[pair, 1]
-        da, db = ev.gi[ok] - ev.offsets[va], ev.gj[ok] - ev.offsets[vb]
-        starts = np.searchsorted(pair, np.arange(len(ev.view_pairs) + 1))
+        starts, rows, da, db, cost, links = gated_rows(
+            ev.pair, ev.gi, ev.gj, ev.d2, ev.dof, limits, self.link_scale**2, self.evidence_per_dof, ev.offsets,
+            ev.view_pairs, len(ev.view_pairs),
+        )  # fmt: skip
         keep = solve_sparse_pairs(starts, ev.counts[ev.view_pairs], da, db, cost)
-        edges = np.column_stack([va[keep], da[keep], vb[keep], db[keep], cost[keep]])
-        links = np.column_stack([ev.gi[linked], ev.gj[linked]])
-        assignment = merge_complete(edges, links, ev.counts, self.min_views, (ev.has_feet, ev.var))
+        kept = rows[keep]
+        assignment = _merge(
+            ev.gi[kept], ev.gj[kept], cost[keep], ev.counts, links, self.min_views, (ev.has_feet, ev.var)
+        )
         self._count_reasons(assignment, ev)
         return assignment
 
@@ -290,10 +310,8 @@ class EvidenceMatcher:
         self._run_pairs(stacked, view_pairs, done, scale2, (*calibration, 0), out, sizes)
         ints, floats = out[0][: out[3]], out[1][: out[3]]
         self._rows_hint = int(1.25 * out[3]) + int(sizes.prod(axis=1).max(initial=0))
-        used = np.where(np.arange(len(ints)) < first, loosest, scale2)
-        feet = floats[:, 1]
-        body = (floats[:, 0] - np.where(np.isfinite(feet), feet, 0.0)) * used  # model units: the kernel's scale undone
-        return [ints[:, 0], ints[:, 1], ints[:, 2], calibrated(body, feet, scale2), ints[:, 3]], scale2
+        d2 = calibrated_chi2(floats, first, loosest, scale2)
+        return [ints[:, 0], ints[:, 1], ints[:, 2], d2, ints[:, 3]], scale2
 
     def _run_pairs(self, stacked, view_pairs, q0: int, scale2: float, calibration: tuple, out: list, sizes) -> int:
         """:func:`pairs_chi2` from view pair q0 at scale2 into out = [ints, floats, ratios, n, nr], growing ints and

@@ -87,8 +87,13 @@ def _view_pair(
                 possible += _popcount(masks[i, w] & masks[j, w])
             if possible < min_dof or d2 > limits[possible]:
                 continue
-            for k in range(J):
-                if var[i, k] > 0.0 and var[j, k] > 0.0:
+            failed = False
+            for w in range(masks.shape[1]):  # the joints both see, in order: the set bits of the common mask
+                common = masks[i, w] & masks[j, w]
+                while common != 0 and not failed:
+                    low = common & -common
+                    common ^= low
+                    k = 62 * w + _popcount(low - 1)
                     l0, l1, l2 = la[ai, k, 0], la[ai, k, 1], la[ai, k, 2]
                     e = uv[j, k, 0] * l0 + uv[j, k, 1] * l1 + l2
                     m0, m1 = lb[bj, k, 0], lb[bj, k, 1]
@@ -96,8 +101,7 @@ def _view_pair(
                     if denom > 0.0:
                         d2 += min(e * e / denom, cap) / scale2
                         dof += 1
-                        if d2 > limits[possible]:
-                            break
+                        failed = d2 > limits[possible]
             if dof == 0:  # joints in common but no usable line: nothing tested (kept as inf, linked; merge_linked)
                 d2 = np.inf
             elif dof < min_dof or d2 > limits[dof]:
@@ -278,3 +282,68 @@ def merge_linked(
     for i in range(n):
         parent[i] = _find(parent, i)
     return parent
+
+
+@njit(cache=True, error_model="numpy")
+def calibrated_chi2(floats: np.ndarray, first: int, loosest: float, scale2: float) -> np.ndarray:
+    """D^2 = feet + body / scale2 of the rows of :func:`pairs_chi2`: floats (E, 2) (chi^2 at the scale each row was
+    computed with, loosest for rows < first and scale2 after; feet term or NaN) -> (E,). The feet term keeps its
+    own model (its ground floor is foot size and calibration, not pixel noise); a missing one adds nothing."""
+    out = np.empty(len(floats))
+    for k in range(len(floats)):
+        feet = floats[k, 1] if np.isfinite(floats[k, 1]) else 0.0
+        body = (floats[k, 0] - feet) * (loosest if k < first else scale2)  # model units: the kernel's scale undone
+        out[k] = feet + body / scale2
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def gated_rows(pair, gi, gj, d2, dof, limits, link2, evidence_per_dof, offsets, view_pairs, num_pairs):
+    """The detection pairs (E,) (view pair row, global indices, D^2, dof) sorted by view pair, split by the tests:
+    -> starts (K + 1,), their rows (M,), local indices da, db (M,) and costs 0.5 D^2 - evidence_per_dof dof (M,) of the M rows that
+    pass (finite D^2 <= limits[dof]), view pair q's rows at starts[q]:starts[q + 1]; links (L, 2): global indices of
+    the rows that pass the link test (D^2 <= limits[dof] link2; an untestable row, inf at dof 0, does)."""
+    E = len(d2)
+    starts = np.zeros(num_pairs + 1, dtype=np.int64)
+    rows, da, db = np.empty(E, dtype=np.int64), np.empty(E, dtype=np.int64), np.empty(E, dtype=np.int64)
+    cost = np.empty(E)
+    links = np.empty((E, 2), dtype=np.int64)
+    m, n_links = 0, 0
+    for k in range(E):
+        limit = limits[dof[k]]
+        if d2[k] <= limit * link2:
+            links[n_links, 0], links[n_links, 1] = gi[k], gj[k]
+            n_links += 1
+        if d2[k] <= limit and np.isfinite(d2[k]):
+            q = pair[k]
+            rows[m] = k
+            da[m], db[m] = gi[k] - offsets[view_pairs[q, 0]], gj[k] - offsets[view_pairs[q, 1]]
+            cost[m] = 0.5 * d2[k] - evidence_per_dof * dof[k]
+            starts[q + 1] += 1
+            m += 1
+    for q in range(num_pairs):
+        starts[q + 1] += starts[q]
+    return starts, rows[:m], da[:m], db[:m], cost[:m], links[:n_links]
+
+
+@njit(cache=True, error_model="numpy")
+def merge_in_cost_order(ga, gb, cost, view_of, links, has_feet, var):
+    """:func:`merge_linked` of the edges (ga, gb) (E,) taken by increasing cost (ties by ga, then gb: as
+    np.lexsort((gb, ga, cost))) -> person of every detection (N,) (persons numbered by their smallest detection) and
+    the persons' sizes."""
+    order = np.argsort(gb, kind="mergesort")
+    order = order[np.argsort(ga[order], kind="mergesort")]
+    order = order[np.argsort(cost[order], kind="mergesort")]
+    root = merge_linked(ga[order], gb[order], view_of, links, has_feet, var)
+    n = len(root)
+    rank, size = np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    persons = 0
+    for i in range(n):
+        if root[i] == i:
+            rank[i] = persons
+            persons += 1
+    person = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        person[i] = rank[root[i]]
+        size[person[i]] += 1
+    return person, size[:persons]
