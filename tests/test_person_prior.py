@@ -14,7 +14,9 @@ from evaluation.pcp import pcp_by_part
 from evaluation.pose3d import Pose3DEvaluator
 from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstruction
 from reconstruction.solver.person_prior import (
+    OUTLIER_SD,
     PROPORTION_SD,
+    STATURE_SD,
     bone_groups,
     bone_variances,
     chi2_medians,
@@ -211,6 +213,41 @@ def test_unmeasured_bones_follow_the_stature_of_the_measured_ones():
     mean, _ = person_bone_lengths(lengths, variances, BONE_MEAN, np.full(24, 0.02), 0.01, bone_groups())
     k = BONE_NAMES.index("left_forearm")
     assert abs(mean[0, k] - own[k]) < 0.4 * abs(BONE_MEAN[k] - own[k])
+
+
+def _dense_bone_posterior(lengths, variances, ref, proportion_sd, tie_sd, groups, stature_sd=STATURE_SD):
+    """The posterior of person_bone_lengths by a dense (1 + G) x (1 + G) inverse per person (the reference)."""
+    L, G = len(ref), int(groups.max()) + 1
+    A = np.zeros((L, 1 + G))
+    A[:, 0], A[np.arange(L), 1 + groups] = ref * stature_sd, ref * proportion_sd
+    use = np.isfinite(variances) & np.isfinite(lengths)
+    for _ in range(2):
+        noise = np.where(use, variances, 0.0) + tie_sd**2
+        w = np.where(use, 1.0 / noise, 0.0)
+        cov = np.linalg.inv(np.eye(1 + G) + np.einsum("pl,lg,lh->pgh", w, A, A))
+        theta = np.einsum("pgh,ph->pg", cov, (w * np.where(use, lengths - ref, 0.0)) @ A)
+        mean, var = ref + theta @ A.T, np.einsum("lg,pgh,lh->pl", A, cov, A)
+        outlier = use & (np.abs(np.where(use, lengths, mean) - mean) / np.sqrt(noise + var) > OUTLIER_SD)
+        if not outlier.any():
+            break
+        use &= ~outlier
+    return mean, np.sqrt(var)
+
+
+def test_the_arrowhead_posterior_equals_the_dense_inverse():
+    # random people, unmeasured bones (inf / NaN) and outlying measurements (the second pass) included
+    rng = np.random.default_rng(3)
+    P, groups, sds = 40, bone_groups(), proportion_sds(BONE_MEAN, BONE_STD, ABSOLUTE_SD_M)
+    lengths = BONE_MEAN * rng.normal(1.0, 0.08, (P, 1)) + rng.normal(0, 0.01, (P, len(BONE_MEAN)))
+    variances = rng.uniform(1e-6, 4e-4, lengths.shape)
+    variances[rng.random(lengths.shape) < 0.2] = np.inf
+    lengths[rng.random(lengths.shape) < 0.05] = np.nan
+    lengths[rng.random(lengths.shape) < 0.05] *= 1.6  # outliers
+    mean, sd = person_bone_lengths(lengths, variances, BONE_MEAN, sds, 0.01, groups)
+    ref_mean, ref_sd = _dense_bone_posterior(lengths, variances, BONE_MEAN, sds, 0.01, groups)
+    np.testing.assert_allclose(mean, ref_mean, rtol=1e-12)
+    np.testing.assert_allclose(sd, ref_sd, rtol=1e-9)
+    assert np.any(np.abs(lengths - mean) > 0.1)  # outlying measurements were there to drop
 
 
 def test_noise_scale_recovers_the_true_noise_over_the_model():

@@ -343,7 +343,8 @@ def _warm_up_solves() -> None:
     w = poses2d[..., 2]  # the prior's kernels (prior_kernels.py)
     info = joint_information(X, proj, w)
     noise_scale(X, poses2d[..., :2], w, proj)
-    bone_variances(X, info, BONE_PAIRS, w.sum(axis=0) >= 2)
+    lengths, variances = bone_variances(X, info, BONE_PAIRS, w.sum(axis=0) >= 2)
+    person_bone_lengths(lengths, variances, BONE_MEAN, np.full(len(BONE_PAIRS), 0.02), 0.01, BONE_GROUPS)
     mean_variances(info, np.zeros(X.shape[:2]), np.empty(X.shape[:2]))
 
 

@@ -30,7 +30,7 @@ from scipy.special import gammaincinv
 
 from data.bone_lengths import BONE_NAMES
 from reconstruction.solver.map_estimation import EPS_DEPTH
-from reconstruction.solver.prior_kernels import bone_sums, information_sums, noise_medians
+from reconstruction.solver.prior_kernels import bone_posteriors, bone_sums, information_sums, noise_medians
 
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
@@ -135,26 +135,24 @@ def person_bone_lengths(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Posterior mean and SD of each person's bones (see the module docstring): measured lengths (P, L), their
     variances (P, L) (inf = unmeasured), population means (L,), relative proportion SDs (L,), tie SD (m),
-    groups (L,) -> (P, L), (P, L)."""
+    groups (L,) -> (P, L), (P, L). A bone measured more than OUTLIER_SD SD from its posterior is dropped and
+    the posterior redone, once (:func:`~reconstruction.solver.prior_kernels.bone_posteriors`)."""
     P, L = lengths.shape
     G = int(groups.max()) + 1 if L else 0
-    A = np.zeros((L, 1 + G))
-    A[:, 0] = bone_ref * stature_sd
-    A[np.arange(L), 1 + groups] = bone_ref * proportion_sd
-    y = lengths - bone_ref
-    use = np.isfinite(variances) & np.isfinite(lengths)
-    outer = (A[:, :, None] * A[:, None, :]).reshape(L, -1)  # a_l a_l^T of every bone, flattened: (L, (1 + G)^2)
-    for _ in range(2):  # once, then without the outlying bones
-        noise = np.where(use, variances, 0.0) + tie_sd**2
-        w = np.where(use, 1.0 / noise, 0.0)  # (P, L)
-        precision = np.eye(1 + G) + (w @ outer).reshape(P, 1 + G, 1 + G)  # I + sum_l w_l a_l a_l^T
-        cov = np.linalg.inv(precision)
-        theta = np.einsum("pgh,ph->pg", cov, (w * np.where(use, y, 0.0)) @ A)  # (P, 1 + G)
-        mean = bone_ref + theta @ A.T
-        var = cov.reshape(P, -1) @ outer.T  # a_l^T cov a_l: (P, L)
-        z = np.abs(np.where(use, lengths, mean) - mean) / np.sqrt(noise + var)
-        outlier = use & (z > OUTLIER_SD)
-        if not outlier.any():
-            break
-        use = use & ~outlier
-    return mean, np.sqrt(var)
+    bone_ref = np.ascontiguousarray(bone_ref, dtype=np.float64)
+    mean, sd = np.empty((P, L)), np.empty((P, L))
+    bone_posteriors(
+        np.ascontiguousarray(lengths, dtype=np.float64),
+        np.ascontiguousarray(variances, dtype=np.float64),
+        bone_ref,
+        bone_ref * stature_sd,
+        bone_ref * np.asarray(proportion_sd, dtype=np.float64),
+        np.ascontiguousarray(groups, dtype=np.int64),
+        float(tie_sd) ** 2,
+        OUTLIER_SD,
+        np.empty(L, dtype=bool),
+        np.empty((4, G)),
+        mean,
+        sd,
+    )
+    return mean, sd

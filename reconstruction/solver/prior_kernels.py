@@ -217,3 +217,66 @@ def mean_variances(info: np.ndarray, tie: np.ndarray, out: np.ndarray) -> None:
             c11, c22 = a22 * a00 - a20 * a02, a00 * a11 - a01 * a10
             det = a00 * c00 + a01 * c01 + a02 * c02
             out[p, j] = (c00 / det + c11 / det + c22 / det) / 3
+
+
+@njit(**_JIT)
+def bone_posteriors(
+    lengths: np.ndarray,
+    variances: np.ndarray,
+    bone_ref: np.ndarray,
+    stature: np.ndarray,
+    proportion: np.ndarray,
+    groups: np.ndarray,
+    tie2: float,
+    outlier_sd: float,
+    use: np.ndarray,
+    scratch: np.ndarray,
+    mean: np.ndarray,
+    sd: np.ndarray,
+) -> None:
+    """mean, sd (P, L): person_bone_lengths' posterior of each person's bones from lengths, variances (P, L),
+    bone_ref, stature = bone_ref stature_sd and proportion = bone_ref proportion_sd (L,), groups (L,) in 0..G - 1,
+    tie2 = tie_sd^2; use (L,) bool and scratch (4, G) are work space.
+
+    The precision I + sum_l w_l a_l a_l^T has non-zeros only in row and column 0 (stature) and on the diagonal
+    (a bone loads on the stature and on its group's proportion): an arrowhead matrix, inverted in O(L) by the
+    Schur complement s = d0 - sum_g b_g^2 / D_g of its diagonal block."""
+    P, L = lengths.shape
+    b, D, r, theta = scratch[0], scratch[1], scratch[2], scratch[3]
+    for p in range(P):
+        for l in range(L):
+            use[l] = np.isfinite(variances[p, l]) and np.isfinite(lengths[p, l])
+        for _ in range(2):  # once, then without the outlying bones
+            d0, r0 = 1.0, 0.0
+            for g in range(len(D)):
+                b[g], D[g], r[g] = 0.0, 1.0, 0.0
+            for l in range(L):
+                if use[l]:
+                    w, g = 1.0 / (variances[p, l] + tie2), groups[l]
+                    y = lengths[p, l] - bone_ref[l]
+                    d0 += w * stature[l] * stature[l]
+                    b[g] += w * stature[l] * proportion[l]
+                    D[g] += w * proportion[l] * proportion[l]
+                    r0 += w * y * stature[l]
+                    r[g] += w * y * proportion[l]
+            s, t0 = d0, r0
+            for g in range(len(D)):
+                s -= b[g] * b[g] / D[g]
+                t0 -= b[g] * r[g] / D[g]
+            t0 /= s
+            for g in range(len(D)):
+                theta[g] = (r[g] - b[g] * t0) / D[g]
+            outliers = False
+            for l in range(L):
+                g = groups[l]
+                a0, ag = stature[l], proportion[l]
+                mean[p, l] = bone_ref[l] + a0 * t0 + ag * theta[g]
+                cov0g, covgg = -b[g] / (D[g] * s), 1.0 / D[g] + b[g] * b[g] / (D[g] * D[g] * s)
+                var = a0 * a0 / s + 2.0 * a0 * ag * cov0g + ag * ag * covgg
+                sd[p, l] = np.sqrt(var)
+                noise = (variances[p, l] if use[l] else 0.0) + tie2
+                if use[l] and abs(lengths[p, l] - mean[p, l]) / np.sqrt(noise + var) > outlier_sd:
+                    use[l] = False
+                    outliers = True
+            if not outliers:
+                break
