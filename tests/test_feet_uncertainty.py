@@ -119,3 +119,42 @@ def test_default_matcher_is_mahalanobis_and_both_metrics_match_a_clean_scene():
     assert matched_id_sets(paper(views, rig), views) == truth
     with pytest.raises(ValueError):
         FeetMatcher(space="image", location_metric="mahalanobis", gate=60.0, unknown_stride_cost=10.0)
+
+
+def _numpy_foot(ground, cov, y, valid, rule, ankle, ankle_fallback):
+    """The numpy selection foot_points replaced, one side: (N, 3, 2), (N, 3, 2, 2), (N, 3), (N, 3), rule, the
+    ankle's (ground (N, 2), cov (N, 2, 2), usable (N,)) -> point (N, 2), covariance (N, 2, 2), ok (N,)."""
+    ok = valid.any(axis=1)
+    if rule == "lowest":
+        pick = np.argmax(np.where(valid, y, -np.inf), axis=1)
+        point, point_cov = ground[np.arange(len(ground)), pick], cov[np.arange(len(ground)), pick]
+    else:
+        n = np.maximum(valid.sum(axis=1), 1)
+        point = np.where(valid[..., None], ground, 0.0).sum(axis=1) / n[:, None]
+        point_cov = np.where(valid[..., None, None], cov, 0.0).sum(axis=1) / (n**2)[:, None, None]
+    if ankle_fallback:
+        use = ~ok & ankle[2]
+        point = np.where(use[:, None], ankle[0], point)
+        point_cov = np.where(use[:, None, None], ankle[1], point_cov)
+        ok = ok | use
+    return point, point_cov, ok
+
+
+@pytest.mark.parametrize("rule", ["mean", "lowest"])
+@pytest.mark.parametrize("ankle_fallback", [True, False])
+def test_foot_points_equal_the_numpy_selection(rule, ankle_fallback):
+    from reconstruction.matching.feet_kernels import foot_points
+
+    rng = np.random.default_rng(1)
+    N = 300
+    ground, cov, y = rng.normal(size=(N, 8, 2)), rng.normal(size=(N, 8, 2, 2)), rng.uniform(0, 9, (N, 8)).round()
+    usable = rng.random((N, 8)) < 0.4  # ties of y and detections without a usable foot joint included
+    point, point_cov, ok = np.empty((2, N, 2)), np.empty((2, N, 2, 2)), np.empty((2, N), bool)
+    foot_points(ground, cov, y, usable, rule == "lowest", ankle_fallback, point, point_cov, ok)
+    for s in (0, 1):
+        side, a = slice(3 * s, 3 * s + 3), 6 + s
+        ankle = (ground[:, a], cov[:, a], usable[:, a])
+        want = _numpy_foot(ground[:, side], cov[:, side], y[:, side], usable[:, side], rule, ankle, ankle_fallback)
+        for got, expected in zip((point[s], point_cov[s], ok[s]), want):
+            np.testing.assert_array_equal(got, expected)
+    assert ok.any() and not ok.all()

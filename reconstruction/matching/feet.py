@@ -18,11 +18,11 @@ import numpy as np
 from data.geometry.camera import Camera, Rig
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
+from reconstruction.matching.feet_kernels import foot_points
 from reconstruction.matching.feet_uncertainty import (
     joint_sigmas,
     location_covariance,
     mahalanobis_distances,
-    mean_covariance,
     views_joints_on_planes,
 )
 from reconstruction.matching.merge import match_pairs
@@ -85,20 +85,6 @@ def features_from_feet(
     return FeetFeatures(left, right, has_left, has_right, p, v, has_p, both, np.asarray(reason, dtype=str), cov)
 
 
-def _select_foot(
-    ground: np.ndarray, cov: np.ndarray, y: np.ndarray, valid: np.ndarray, rule: str
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One foot point per detection: ground (N, K, 2), cov (N, K, 2, 2), image y (N, K), valid (N, K)
-    -> point (N, 2), its covariance (N, 2, 2), ok (N,)."""
-    ok = valid.any(axis=1)
-    if rule == "lowest":
-        pick = np.argmax(np.where(valid, y, -np.inf), axis=1)
-        rows = np.arange(len(ground))
-        return ground[rows, pick], cov[rows, pick], ok
-    total = np.where(valid[..., None], ground, 0.0).sum(axis=1)
-    return total / np.maximum(valid.sum(axis=1), 1)[:, None], mean_covariance(cov, valid), ok
-
-
 def feet_features(
     keypoints: np.ndarray,
     camera: Camera,
@@ -156,17 +142,9 @@ def views_feet_features(
     cov = np.zeros(ground.shape + (2,)) if cov is None else np.where(ground_ok[..., None, None], cov, 0.0)
     scored = finite & (score > min_score)
     usable = scored & ground_ok & (depth > 0)
-    feet = []
-    for side in (0, 1):
-        cols = slice(3 * side, 3 * side + 3)
-        point, point_cov, ok = _select_foot(ground[:, cols], cov[:, cols], uv[:, cols, 1], usable[:, cols], rule)
-        if ankle_fallback:
-            ankle = 6 + side
-            use_ankle = ~ok & usable[:, ankle]
-            point = np.where(use_ankle[:, None], ground[:, ankle], point)
-            point_cov = np.where(use_ankle[:, None, None], cov[:, ankle], point_cov)
-            ok = ok | use_ankle
-        feet.append((point, point_cov, ok))
+    point, point_cov, ok = np.empty((2, len(kp), 2)), np.empty((2, len(kp), 2, 2)), np.empty((2, len(kp)), bool)
+    foot_points(ground, np.ascontiguousarray(cov), uv[..., 1].copy(), usable, rule == "lowest", bool(ankle_fallback), point, point_cov, ok)  # fmt: skip
+    feet = [(point[0], point_cov[0], ok[0]), (point[1], point_cov[1], ok[1])]
     considered = scored if ankle_fallback else scored[:, :6]
     reason = np.where(feet[0][2] | feet[1][2], "", np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))
     covs = (feet[0][1], feet[1][1]) if pixel_sigma is not None else (None, None)

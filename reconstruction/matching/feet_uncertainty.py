@@ -18,6 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from data.geometry.camera import Camera
+from reconstruction.matching.feet_kernels import plane_points
 
 _DIFF_STEP_PX = 0.5  # central-difference step of the undistortion Jacobian
 _TINY = 1e-12  # relative size under which a homography's H[2, 2] counts as 0
@@ -110,25 +111,17 @@ def views_joints_on_planes(
             if Hk is not None:
                 H[v, k] = Hk
     und = _undistorted(cameras, view, uv)
-    Hs = H[view[:, None], level[None, :]]  # (N, K, 3, 3)
-    w = Hs[..., 0] * und[..., 0, None] + Hs[..., 1] * und[..., 1, None] + Hs[..., 2]  # (N, K, 3)
-    xy = w[..., :2] / w[..., 2:3]
-    J = (Hs[..., :2, :2] - xy[..., :, None] * Hs[..., 2, None, :2]) / w[..., 2, None, None]  # d xy / d und
-    R = np.array([c.R[2] for c in cameras]).reshape(-1, 3)[view]  # optical axes: (N, 3)
-    t = np.array([c.t[2] for c in cameras])[view]
-    depth = xy[..., 0] * R[:, 0, None] + xy[..., 1] * R[:, 1, None] + heights * R[:, 2, None] + t[:, None]
-    if sigma_px is None:
-        return xy, depth, None
-    J = _with_undistortion(cameras, view, uv, J)
-    var = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64) ** 2, uv.shape[:2])
-    return xy, depth, var[..., None, None] * _outer_rows(J)
-
-
-def _outer_rows(J: np.ndarray) -> np.ndarray:
-    """J J^T of 2x2 matrices, element by element (numpy's stacked matmul of tiny matrices is slow): (..., 2, 2)."""
-    a, b, c, d = J[..., 0, 0], J[..., 0, 1], J[..., 1, 0], J[..., 1, 1]
-    off = a * c + b * d
-    return np.stack([np.stack([a * a + b * b, off], -1), np.stack([off, c * c + d * d], -1)], -2)
+    axis = np.array([c.R[2] for c in cameras], dtype=np.float64).reshape(-1, 3)  # optical axes: (V, 3)
+    offset = np.array([c.t[2] for c in cameras], dtype=np.float64)
+    xy, depth = np.empty(uv.shape), np.empty(uv.shape[:2])
+    var = np.zeros((0, 0)) if sigma_px is None else np.broadcast_to(np.asarray(sigma_px, np.float64) ** 2, uv.shape[:2])
+    cov = np.empty(uv.shape + (2,)) if sigma_px is not None else np.zeros((0, 0, 2, 2))
+    und_jac = _undistortion_jacobians(cameras, view, uv) if sigma_px is not None else np.zeros((0, 0, 2, 2))
+    plane_points(
+        und, H, view, level.astype(np.int64), heights.astype(np.float64), axis, offset,
+        np.ascontiguousarray(var), und_jac, xy, depth, cov,
+    )  # fmt: skip
+    return xy, depth, (None if sigma_px is None else cov)
 
 
 def _undistorted(cameras: list[Camera], view: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -141,15 +134,17 @@ def _undistorted(cameras: list[Camera], view: np.ndarray, uv: np.ndarray) -> np.
     return und
 
 
-def _with_undistortion(cameras: list[Camera], view: np.ndarray, uv: np.ndarray, J: np.ndarray) -> np.ndarray:
-    """d(plane)/d(distorted px) = J @ d(undistorted)/d(distorted) for the views with distortion (identity else):
-    (N, K, 2, 2) -> (N, K, 2, 2), a new array."""
-    J = J.copy()
+def _undistortion_jacobians(cameras: list[Camera], view: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """d(undistorted)/d(distorted) of the stacked detections (N, K, 2, 2) where a view has distortion; an empty
+    (0, 0, 2, 2) array when none has (the identity: nothing to multiply)."""
+    if not any(c.has_distortion for c in cameras):
+        return np.zeros((0, 0, 2, 2))
+    out = np.broadcast_to(np.eye(2), uv.shape[:2] + (2, 2)).copy()
     for v, camera in enumerate(cameras):
         if camera.has_distortion:
             rows = view == v
-            J[rows] = J[rows] @ undistortion_jacobian(camera, uv[rows])
-    return J
+            out[rows] = undistortion_jacobian(camera, uv[rows])
+    return out
 
 
 def joint_sigmas(score: np.ndarray, sigma_px: float, score_power: float = 0.0) -> np.ndarray:

@@ -1,0 +1,77 @@
+"""Compiled loops of the feet features (feet.py, feet_uncertainty.py): every foot joint of a frame's detections cut
+with its horizontal plane, its ground covariance, and each foot's point. Same operations in the same order as the
+numpy formulas they replace, without their (N, K, 3, 3) temporaries: bit-identical results, but for distorted
+cameras' covariances, where numpy's 2x2 matmul with the undistortion's Jacobian rounds differently (1e-15 relative)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, error_model="numpy")
+def plane_points(und, H, view, level, heights, axis, offset, var, und_jac, xy, depth, cov) -> None:
+    """Undistorted pixels und (N, K, 2) of joints at heights (K,) (plane level[k] of H) seen by view[n] -> their
+    plane (X, Y) xy (N, K, 2), depth (N, K) in the camera (optical axis (V, 3), its offset (V,)) and, with
+    var (N, K) px^2 (empty: none), covariance cov (N, K, 2, 2) of (X, Y) under isotropic pixel noise; H (V, levels,
+    3, 3) image -> plane homographies (NaN: none); und_jac (N, K, 2, 2) the undistortion's Jacobian (empty: none)."""
+    N, K = und.shape[0], und.shape[1]
+    for n in range(N):
+        v = view[n]
+        for k in range(K):
+            h = H[v, level[k]]
+            u0, u1 = und[n, k, 0], und[n, k, 1]
+            w0 = h[0, 0] * u0 + h[0, 1] * u1 + h[0, 2]
+            w1 = h[1, 0] * u0 + h[1, 1] * u1 + h[1, 2]
+            w2 = h[2, 0] * u0 + h[2, 1] * u1 + h[2, 2]
+            x, y = w0 / w2, w1 / w2
+            xy[n, k, 0], xy[n, k, 1] = x, y
+            depth[n, k] = x * axis[v, 0] + y * axis[v, 1] + heights[k] * axis[v, 2] + offset[v]
+            if len(var) == 0:
+                continue
+            a, b = (h[0, 0] - x * h[2, 0]) / w2, (h[0, 1] - x * h[2, 1]) / w2  # d xy / d und, row x
+            c, d = (h[1, 0] - y * h[2, 0]) / w2, (h[1, 1] - y * h[2, 1]) / w2  # ... row y
+            if len(und_jac):  # d xy / d distorted px = (d xy / d und) (d und / d distorted px)
+                U = und_jac[n, k]
+                a, b = a * U[0, 0] + b * U[1, 0], a * U[0, 1] + b * U[1, 1]
+                c, d = c * U[0, 0] + d * U[1, 0], c * U[0, 1] + d * U[1, 1]
+            s, off = var[n, k], a * c + b * d
+            cov[n, k, 0, 0], cov[n, k, 0, 1] = s * (a * a + b * b), s * off
+            cov[n, k, 1, 0], cov[n, k, 1, 1] = s * off, s * (c * c + d * d)
+
+
+@njit(cache=True, error_model="numpy")
+def foot_points(ground, cov, y, usable, lowest, ankle_fallback, point, point_cov, ok) -> None:
+    """Each detection's left and right foot (side s: joints 3 s .. 3 s + 2, ankle 6 + s) from its joints' ground
+    points (N, 8, 2), covariances (N, 8, 2, 2), image y (N, 8) and usable (N, 8): the lowest usable joint in the
+    image (lowest) or the mean of the usable ones (their covariance / n^2), else the ankle (ankle_fallback) ->
+    point (2, N, 2), point_cov (2, N, 2, 2), ok (2, N)."""
+    for n in range(ground.shape[0]):
+        for s in range(2):
+            count, pick, top = 0, -1, -np.inf
+            p0, p1, c00, c01, c10, c11 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+            for k in range(3 * s, 3 * s + 3):
+                if usable[n, k]:
+                    count += 1
+                    if pick < 0 or y[n, k] > top:  # np.argmax: the first of the largest
+                        pick, top = k, y[n, k]
+                    p0, p1 = p0 + ground[n, k, 0], p1 + ground[n, k, 1]
+                    c00, c01 = c00 + cov[n, k, 0, 0], c01 + cov[n, k, 0, 1]
+                    c10, c11 = c10 + cov[n, k, 1, 0], c11 + cov[n, k, 1, 1]
+            ok[s, n] = count > 0
+            if count == 0 and ankle_fallback and usable[n, 6 + s]:
+                pick, lowest_pick = 6 + s, True
+            else:
+                lowest_pick = lowest
+            if lowest_pick and pick >= 0:
+                point[s, n, 0], point[s, n, 1] = ground[n, pick, 0], ground[n, pick, 1]
+                point_cov[s, n] = cov[n, pick]
+                ok[s, n] = True
+            elif lowest_pick:  # lowest rule, nothing usable: the first joint, as np.argmax of all -inf
+                point[s, n, 0], point[s, n, 1] = ground[n, 3 * s, 0], ground[n, 3 * s, 1]
+                point_cov[s, n] = cov[n, 3 * s]
+            else:
+                m = max(count, 1)
+                point[s, n, 0], point[s, n, 1] = p0 / m, p1 / m
+                point_cov[s, n, 0, 0], point_cov[s, n, 0, 1] = c00 / (m * m), c01 / (m * m)
+                point_cov[s, n, 1, 0], point_cov[s, n, 1, 1] = c10 / (m * m), c11 / (m * m)
