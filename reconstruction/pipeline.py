@@ -60,8 +60,10 @@ def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[n
         have = assignment[:, v] >= 0
         poses2d[v, have] = dets.keypoints[assignment[have, v]]
         bboxes[v, have] = dets.bboxes[assignment[have, v]]
-    poses2d = np.where(np.isfinite(poses2d).all(axis=-1, keepdims=True), poses2d, 0.0)
-    return poses2d, np.nan_to_num(bboxes, nan=0.0, posinf=0.0, neginf=0.0)
+    finite = np.isfinite(poses2d)
+    if not finite.all():  # (the where below costs more than this test; detectors' NaN are rare)
+        poses2d = np.where(finite.all(axis=-1, keepdims=True), poses2d, 0.0)
+    return poses2d, (bboxes if np.isfinite(bboxes).all() else np.nan_to_num(bboxes, nan=0.0, posinf=0.0, neginf=0.0))
 
 
 class MultiViewPipeline:

@@ -13,7 +13,8 @@ from data.synthetic.body import mean_body, pose_joints
 from evaluation.identity import IdentityEvaluator
 from reconstruction.solver.map_solver import combine_estimates
 from tracking import Tracker
-from tracking.tracker import CORE_JOINTS, mean_distances, near_pairs, robust_lengths
+from tracking.track_kernels import centres, pair_mean_distances, robust_skeleton
+from tracking.tracker import CORE_JOINTS, _core_mask, mean_distances, near_pairs, robust_lengths
 
 FPS = 25.0
 
@@ -300,3 +301,65 @@ def test_near_pairs_are_the_brute_force_pairs(sizes: tuple[int, int]) -> None:
     want = set(zip(*np.nonzero(dist <= 2.5)))
     assert set(zip(rows.tolist(), cols.tolist())) == want and len(rows) == len(want) > 0
     assert 1 not in set(rows.tolist())
+
+
+def _numpy_centres(points, ok, core):
+    """The numpy formula the centres kernel replaced."""
+    use = ok & core
+    use = np.where(use.any(axis=1, keepdims=True), use, ok)
+    return np.where(use[..., None], points, 0.0).sum(axis=1) / np.maximum(use.sum(axis=1), 1)[:, None]
+
+
+def _numpy_pair_mean_distance(a, a_ok, b, b_ok):
+    """The numpy formula the pair distance kernel replaced."""
+    both = a_ok & b_ok
+    dist = np.sqrt(((a - b) ** 2).sum(-1))
+    n = both.sum(-1)
+    return np.where(n > 0, np.where(both, dist, 0.0).sum(-1) / np.maximum(n, 1), np.inf)
+
+
+def test_the_association_kernels_equal_the_numpy_formulas():
+    rng = np.random.default_rng(5)
+    T, P, J = 40, 30, 23
+    guess, poses = rng.normal(0, 3, (T, J, 3)), rng.normal(0, 3, (P, J, 4))
+    seen = rng.random((T, J)) < 0.7
+    seen[:4, CORE_JOINTS] = False  # no head or trunk joint: the centre of all, the distance over all shared
+    seen[4] = False  # nothing seen: no centre, no distance
+    poses[rng.random((P, J)) < 0.3, 3] = 0.0
+    poses[:3, CORE_JOINTS, 3] = 0.0
+    valid, core = poses[..., 3] > 0, _core_mask(J)
+    for points, ok in ((guess, seen), (poses, valid)):
+        out = np.empty((len(points), 3))
+        centres(points, ok, core, out)
+        with np.errstate(invalid="ignore"):
+            assert np.array_equal(out, _numpy_centres(points[..., :3], ok, core))
+    for K in (1, 2, T * P):
+        rows, cols = np.divmod(np.arange(T * P), P)
+        rows, cols = rows[::-1][:K].copy(), cols[::-1][:K].copy()  # the last: core joints in both
+        got = np.full((T, P), np.inf)
+        pair_mean_distances(guess, seen, poses, valid, core, rows, cols, got)
+        core_d = _numpy_pair_mean_distance(
+            guess[rows][:, core], seen[rows][:, core], poses[cols][:, core, :3], valid[cols][:, core]
+        )
+        left = ~np.isfinite(core_d)
+        core_d[left] = _numpy_pair_mean_distance(
+            guess[rows[left]], seen[rows[left]], poses[cols[left], :, :3], valid[cols[left]]
+        )
+        np.testing.assert_allclose(got[rows, cols], core_d, rtol=1e-15)  # numpy's sums are pairwise at times
+    assert left.any() and np.isinf(core_d).any()
+    np.testing.assert_array_equal(mean_distances(guess, seen, poses), got)  # every pair within an infinite gate
+
+
+def test_the_skeleton_kernel_equals_robust_lengths_bit_for_bit():
+    rng = np.random.default_rng(6)
+    for W in (1, 2, 5, 100):
+        bones = rng.choice([0.2, 0.3, 0.31], (W, 40)) + rng.normal(0, 0.01, (W, 40)) * (rng.random((W, 40)) < 0.8)
+        bones[rng.random(bones.shape) < 0.4] = np.nan  # unmeasured
+        bones[:, 0] = np.nan
+        bones[0, 1], bones[-1, 2] = np.inf, -np.inf
+        median, se, count = np.empty(40), np.empty(40), np.empty(40, np.int64)
+        robust_skeleton(bones, median, se, count, np.empty((2, W)))
+        with np.errstate(invalid="ignore"):
+            m, sd, n = robust_lengths(bones)
+        assert np.array_equal(median, m, equal_nan=True) and np.array_equal(count, n)
+        assert np.array_equal(se, np.where(np.isfinite(sd), sd / np.sqrt(np.maximum(n, 1)), np.inf))

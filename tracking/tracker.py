@@ -37,15 +37,17 @@ per-track views (:class:`Track`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from data.bone_lengths import BONE_PAIRS, bone_lengths
+from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching.sparse_assignment import linear_sum_assignment
+from tracking.track_kernels import MAD_TO_SD, centres, correct_tracks, pair_mean_distances
 
-MAD_TO_SD = 1.4826  # SD of a normal distribution per median absolute deviation
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
 # shoulders, hips) move with the body; arms and legs swing by tens of cm between frames at 5 fps.
 CORE_JOINTS = np.array([0, 1, 2, 3, 4, 5, 6, 11, 12])
@@ -169,6 +171,10 @@ class TrackState:
             return self
         return TrackState(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
 
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays of the compiled correction (track_kernels.correct_tracks): every field but ids, in order."""
+        return tuple(getattr(self, f) for f in self.__dataclass_fields__ if f != "ids")
+
     def extend(self, other: "TrackState") -> "TrackState":
         """These tracks followed by other's."""
         return TrackState(*(np.concatenate([getattr(self, f), getattr(other, f)]) for f in self.__dataclass_fields__))
@@ -191,17 +197,15 @@ def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max
     """Mean distance over the head and trunk joints both have (all shared joints where they share none):
     guesses (T, J, 3) with seen (T, J), poses (P, J, 4) -> (T, P) m, inf where nothing is shared. Pairs
     whose head-and-trunk centres are farther apart than max_m + BODY_SPAN_M are inf without computing."""
+    guess, seen = np.ascontiguousarray(guess, dtype=np.float64), np.ascontiguousarray(seen, dtype=bool)
+    poses3d = np.ascontiguousarray(poses3d, dtype=np.float64)
     valid = poses3d[..., 3] > 0
     core = _core_mask(poses3d.shape[1])
-    rows, cols = near_pairs(_centres(guess, seen, core), _centres(poses3d[..., :3], valid, core), max_m + BODY_SPAN_M)
+    rows, cols = near_pairs(_centres(guess, seen, core), _centres(poses3d, valid, core), max_m + BODY_SPAN_M)
     out = np.full((len(guess), len(poses3d)), np.inf)
-    out[rows, cols] = _pair_mean_distance(
-        guess[rows][:, core], seen[rows][:, core], poses3d[cols][:, core, :3], valid[cols][:, core]
+    pair_mean_distances(
+        guess, seen, poses3d, valid, core, rows.astype(np.int64, copy=False), cols.astype(np.int64, copy=False), out
     )
-    left = ~np.isfinite(out[rows, cols])  # pairs without a shared trunk joint: every joint
-    if left.any():
-        r, c = rows[left], cols[left]
-        out[r, c] = _pair_mean_distance(guess[r], seen[r], poses3d[c, :, :3], valid[c])
     return out
 
 
@@ -219,18 +223,34 @@ def near_pairs(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray,
 
 
 def _centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray) -> np.ndarray:
-    """Mean of the valid head and trunk joints (of all valid joints without any): (N, J, 3), (N, J) -> (N, 3)."""
-    use = ok & core
-    use = np.where(use.any(axis=1, keepdims=True), use, ok)
-    return np.where(use[..., None], points, 0.0).sum(axis=1) / np.maximum(use.sum(axis=1), 1)[:, None]
+    """Mean of the valid head and trunk joints (of all valid joints without any): (N, J, >= 3), (N, J) -> (N, 3)."""
+    out = np.empty((len(points), 3))
+    centres(points, ok, core, out)
+    return out
 
 
-def _pair_mean_distance(a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np.ndarray) -> np.ndarray:
-    """Mean over the joints valid in both of |a - b|, pair by pair: (K, J, 3), (K, J) x2 -> (K,), inf if none."""
-    both = a_ok & b_ok
-    dist = np.sqrt(((a - b) ** 2).sum(-1))
-    n = both.sum(-1)
-    return np.where(n > 0, np.where(both, dist, 0.0).sum(-1) / np.maximum(n, 1), np.inf)
+@lru_cache(maxsize=1)
+def warm_up() -> None:
+    """Compile the tracker's kernels (or load them from numba's cache) once per process, on one person and one
+    guess (a track's correction on none), so that a first frame is not timed with the compiler."""
+    J = len(CORE_JOINTS)
+    pose, none = np.ones((1, J, 4)), np.zeros(0, dtype=np.int64)
+    mean_distances(np.ones((1, J, 3)), np.ones((1, J), dtype=bool), pose)
+    filters, counts = (UNSEEN_VAR_M2, 1.0, 1.0, 1.0, 1.0, 1.0), (1, SKELETON_REFRESH)
+    lengths = np.ones((1, len(BONE_PAIRS)))
+    correct_tracks(
+        TrackState.empty(J, 1).arrays(),
+        none,
+        none,
+        1,
+        pose,
+        np.ones((1, J)),
+        lengths,
+        filters,
+        counts,
+        pose.copy(),
+        True,
+    )
 
 
 class Tracker:
@@ -278,6 +298,7 @@ class Tracker:
         self._pairing: tuple | None = None  # (frame, persons, track ids, person indices) of skeletons()
         self.last_frame: int | None = None
         self._next_id = 0
+        warm_up_kernels("tracker", warm_up)  # one line while numba compiles (first run)
 
     @property
     def tracks(self) -> list[Track]:
@@ -321,7 +342,7 @@ class Tracker:
                 f"tracking: frame {frame} comes after frame {self.last_frame}; frame numbers must "
                 "increase (sort the sequence, remove repeated frames)"
             )
-        poses3d = np.asarray(poses3d, dtype=np.float64)
+        poses3d = np.ascontiguousarray(poses3d, dtype=np.float64)
         if poses3d.ndim != 3 or poses3d.shape[-1] != 4:
             raise ValueError(f"tracking: poses must be (P, J, 4), got {poses3d.shape}")
         smooth = self.smooth and variance is not None  # without variances nothing to weigh: ids only
@@ -335,11 +356,8 @@ class Tracker:
         ids = np.full(len(poses3d), -1, dtype=np.int64)
         out = poses3d.copy()
         if len(tracks):
-            self._correct(st, tracks, frame, poses3d[persons], variance[persons], bones[persons])
+            self._correct(st, tracks, persons, frame, poses3d, variance, bones, out if smooth else None)
             ids[persons] = st.ids[tracks]
-            if smooth:  # confirmed tracks only: a new one may be a wrong match
-                use = (poses3d[persons, :, 3:] > 0) & st.confirmed[tracks, None, None]
-                out[persons, :, :3] = np.where(use, st.sx[tracks], poses3d[persons, :, :3])
         hit = np.zeros(len(st), dtype=bool)
         hit[tracks] = True
         st = st.select(hit | self._alive(st, frame))
@@ -469,70 +487,31 @@ class Tracker:
         self,
         st: TrackState,
         tracks: np.ndarray,
+        persons: np.ndarray,
         frame: int,
         poses3d: np.ndarray,
         variance: np.ndarray,
         lengths: np.ndarray,
+        out: np.ndarray | None,
     ) -> None:
         """Kalman predict over the frames since each track's last hit, then update with the observed joints
-        (a joint seen for the first time starts there): tracks (K,), poses (K, J, 4), variances (K, J); st
-        changed in place (the motion filter, then the smoother, then the bone lengths)."""
-        dt = (frame - st.last_frame[tracks]).astype(np.float64)[:, None]  # (K, 1)
-        self._smooth(st, tracks, dt, poses3d, variance)
-        p00, p01, p11 = st.p00[tracks], st.p01[tracks], st.p11[tracks]
-        p00 = p00 + 2 * dt * p01 + dt**2 * p11 + self.q * dt**4 / 4
-        p01 = p01 + dt * p11 + self.q * dt**3 / 2
-        p11 = p11 + self.q * dt**2
-        x = st.position[tracks] + dt[..., None] * st.velocity[tracks]
-        obs = (poses3d[..., 3] > 0) & (variance < UNSEEN_VAR_M2)  # a joint no view fixes is no measurement
-        seen = st.seen[tracks]
-        upd, new = obs & seen, obs & ~seen
-        k0, k1 = p00 / (p00 + self.r2), p01 / (p00 + self.r2)
-        innov = poses3d[..., :3] - x
-        st.position[tracks] = np.where(
-            upd[..., None], x + k0[..., None] * innov, np.where(new[..., None], poses3d[..., :3], x)
+        (a joint seen for the first time starts there), and the smoother of each joint: a random walk whose process
+        variance follows the innovations (a joint the reconstruction does not see moves on with its motion-filter
+        velocity), updated with the reconstruction's joint (its variance); then the bone lengths: tracks (K,) hit by
+        persons (K,) of poses (P, J, 4), variances (P, J), lengths (P, L); st changed in place (the smoother, then the
+        motion filter, then the bones); out (P, J, 4), unless None, takes the smoothed joints of confirmed tracks
+        (a new one may be a wrong match)."""
+        filters = (UNSEEN_VAR_M2, self.q, self.r2, self.smooth_rate, self.smooth_floor2, self.smooth_q0)
+        correct_tracks(
+            st.arrays(),
+            tracks.astype(np.int64, copy=False),
+            persons.astype(np.int64, copy=False),
+            frame,
+            poses3d,
+            variance,
+            np.ascontiguousarray(lengths),
+            filters,
+            (self.min_hits, SKELETON_REFRESH),
+            poses3d if out is None else out,
+            out is not None,
         )
-        st.velocity[tracks] = np.where(upd[..., None], st.velocity[tracks] + k1[..., None] * innov, st.velocity[tracks])
-        st.live[tracks] = obs
-        st.p00[tracks] = np.where(upd, (1 - k0) * p00, p00)
-        st.p11[tracks] = np.where(upd, p11 - k1 * p01, p11)
-        st.p01[tracks] = np.where(upd, (1 - k0) * p01, p01)
-        st.seen[tracks] = seen | obs
-        st.last_frame[tracks] = frame
-        st.hits[tracks] += 1
-        st.confirmed[tracks] |= st.hits[tracks] >= self.min_hits
-        st.bones[tracks, st.slot[tracks]] = lengths
-        st.slot[tracks] = (st.slot[tracks] + 1) % self.bone_window
-        refresh = tracks[st.hits[tracks] % SKELETON_REFRESH == 0]
-        if len(refresh):
-            median, sd, count = robust_lengths(st.bones[refresh], axis=1)
-            st.skel_median[refresh], st.skel_count[refresh] = median, count
-            st.skel_se[refresh] = np.where(np.isfinite(sd), sd / np.sqrt(np.maximum(count, 1)), np.inf)
-
-    def _smooth(
-        self, st: TrackState, tracks: np.ndarray, dt: np.ndarray, poses3d: np.ndarray, variance: np.ndarray
-    ) -> None:
-        """The smoother of each joint: a random walk whose process variance follows the innovations (a joint the
-        reconstruction does not see moves on with its motion-filter velocity), updated with the reconstruction's
-        joint (its variance):
-        tracks (K,), dt (K, 1), poses (K, J, 4), variances (K, J); st changed in place."""
-        obs = poses3d[..., 3] > 0
-        fresh = obs & ~st.seen[tracks]
-        upd = obs & st.seen[tracks]
-        # seen joints: a random walk (limbs swing; the adaptive noise follows them); unseen ones move on with the
-        # motion filter's velocity of that joint
-        unseen = (variance >= UNSEEN_VAR_M2)[..., None]
-        v = np.where(unseen, st.velocity[tracks], 0.0)
-        x = st.sx[tracks] + dt[..., None] * v
-        p, q = st.sp[tracks], st.sq[tracks]
-        innov = poses3d[..., :3] - x
-        excess = (innov**2).sum(-1) / 3 - p - variance
-        rate = np.maximum(self.smooth_rate, 1.0 / st.hits[tracks])[:, None]  # a plain mean over the first hits
-        q = np.where(upd, (1 - rate) * q + rate * np.maximum(excess, self.smooth_floor2), q)
-        p = p + dt * q
-        gain = p / (p + variance)
-        st.sx[tracks] = np.where(
-            upd[..., None], x + gain[..., None] * innov, np.where(fresh[..., None], poses3d[..., :3], x)
-        )
-        st.sp[tracks] = np.where(upd, (1 - gain) * p, np.where(fresh, variance, p))
-        st.sq[tracks] = np.where(fresh, self.smooth_q0, q)

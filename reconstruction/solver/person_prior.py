@@ -139,7 +139,7 @@ def person_bone_lengths(
     the posterior redone, once (:func:`~reconstruction.solver.prior_kernels.bone_posteriors`)."""
     P, L = lengths.shape
     G = int(groups.max()) + 1 if L else 0
-    bone_ref = np.ascontiguousarray(bone_ref, dtype=np.float64)
+    bone_ref = np.array(bone_ref, dtype=np.float64)  # a writable copy: one kernel type for read-only tables too
     mean, sd = np.empty((P, L)), np.empty((P, L))
     bone_posteriors(
         np.ascontiguousarray(lengths, dtype=np.float64),

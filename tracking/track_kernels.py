@@ -1,0 +1,295 @@
+"""Compiled (numba) loops of the tracker (tracker.py): the association's centres and pair distances, the motion
+filter's and smoother's update of the hit tracks, and the tracks' robust skeletons.
+
+Same arithmetic in the same order as the numpy formulas they replace, without their (K, J, 3) gathers and
+temporaries: bit-identical results, but for the association's mean distances, summed one joint after another where
+numpy's sum was at times pairwise (1e-16 relative).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_JIT = {"cache": True, "error_model": "numpy"}
+MAD_TO_SD = 1.4826  # SD of a normal distribution per median absolute deviation (tracker.MAD_TO_SD)
+
+
+@njit(**_JIT)
+def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray, out: np.ndarray) -> None:
+    """out (N, 3) = mean of the ok head and trunk joints (of all ok joints without any) of points (N, J, >= 3),
+    ok (N, J), core (J,): tracker._centres."""
+    N, J = ok.shape
+    for i in range(N):
+        any_core = False
+        for j in range(J):
+            any_core |= ok[i, j] and core[j]
+        n = 0
+        for j in range(J):
+            n += ok[i, j] and (core[j] or not any_core)
+        for c in range(3):
+            s = 0.0
+            for j in range(J):
+                use = ok[i, j] and (core[j] or not any_core)
+                v = points[i, j, c] if use else 0.0
+                s = v if j == 0 else s + v
+            out[i, c] = s / max(n, 1)
+
+
+@njit(**_JIT)
+def _mean_distance(
+    a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np.ndarray, core: np.ndarray, core_only: bool
+) -> float:
+    """Mean |a - b| over the joints ok in both (the head and trunk ones, core (J,), if core_only): (J, >= 3),
+    (J,) x2 -> m, inf if none."""
+    total, n = 0.0, 0
+    for j in range(len(a_ok)):
+        if (core[j] or not core_only) and a_ok[j] and b_ok[j]:
+            dx, dy, dz = a[j, 0] - b[j, 0], a[j, 1] - b[j, 1], a[j, 2] - b[j, 2]
+            total += np.sqrt(dx * dx + dy * dy + dz * dz)
+            n += 1
+    return total / n if n else np.inf
+
+
+@njit(**_JIT)
+def pair_mean_distances(
+    guess: np.ndarray,
+    seen: np.ndarray,
+    poses3d: np.ndarray,
+    valid: np.ndarray,
+    core: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """out[rows, cols] (T, P) = mean distance over the head and trunk joints both have (all shared joints where that
+    is not finite) of guesses (T, J, 3), seen (T, J) and poses (P, J, 4), valid (P, J); pairs (K,) x2."""
+    for k in range(len(rows)):
+        t, p = rows[k], cols[k]
+        d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, True)
+        if not np.isfinite(d):
+            d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, False)
+        out[t, p] = d
+
+
+@njit(**_JIT)
+def _maximum(a: float, b: float) -> float:
+    """np.maximum of two floats (NaN if either is)."""
+    return a if a >= b or np.isnan(a) else b
+
+
+@njit(**_JIT)
+def smooth_joints(
+    sx: np.ndarray,
+    sp: np.ndarray,
+    sq: np.ndarray,
+    x_seen: np.ndarray,
+    velocity: np.ndarray,
+    hits: int,
+    dt: float,
+    pose: np.ndarray,
+    variance: np.ndarray,
+    unseen_var: float,
+    rate_min: float,
+    floor2: float,
+    q0: float,
+) -> None:
+    """The smoother of one track's joints (tracker._smooth), in place: sx (J, 3), sp, sq (J,) with seen (J,),
+    velocity (J, 3), hits, dt, pose (J, 4), variance (J,)."""
+    rate = _maximum(rate_min, 1.0 / hits)
+    for j in range(len(sp)):
+        obs = pose[j, 3] > 0
+        fresh, upd = obs and not x_seen[j], obs and x_seen[j]
+        var = variance[j]
+        moving = var >= unseen_var
+        x0 = sx[j, 0] + dt * (velocity[j, 0] if moving else 0.0)
+        x1 = sx[j, 1] + dt * (velocity[j, 1] if moving else 0.0)
+        x2 = sx[j, 2] + dt * (velocity[j, 2] if moving else 0.0)
+        i0, i1, i2 = pose[j, 0] - x0, pose[j, 1] - x1, pose[j, 2] - x2
+        q = sq[j]
+        if upd:
+            excess = (i0 * i0 + i1 * i1 + i2 * i2) / 3 - sp[j] - var
+            q = (1 - rate) * q + rate * _maximum(excess, floor2)
+        p = sp[j] + dt * q
+        gain = p / (p + var)
+        if upd:
+            sx[j, 0], sx[j, 1], sx[j, 2] = x0 + gain * i0, x1 + gain * i1, x2 + gain * i2
+            sp[j] = (1 - gain) * p
+        elif fresh:
+            sx[j, 0], sx[j, 1], sx[j, 2] = pose[j, 0], pose[j, 1], pose[j, 2]
+            sp[j] = var
+        else:
+            sx[j, 0], sx[j, 1], sx[j, 2] = x0, x1, x2
+            sp[j] = p
+        sq[j] = q0 if fresh else q
+
+
+@njit(**_JIT)
+def kalman_joints(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    p00: np.ndarray,
+    p01: np.ndarray,
+    p11: np.ndarray,
+    seen: np.ndarray,
+    live: np.ndarray,
+    dt: float,
+    pose: np.ndarray,
+    variance: np.ndarray,
+    unseen_var: float,
+    q: float,
+    r2: float,
+) -> None:
+    """Constant-velocity Kalman predict over dt and update of one track's joints (tracker._correct), in place:
+    position, velocity (J, 3), covariance entries p00, p01, p11 (J,), seen, live (J,), pose (J, 4), variance (J,)."""
+    a00, a01, a11 = 2 * dt, dt**2, q * dt**4 / 4
+    b01, c11 = q * dt**3 / 2, q * dt**2
+    for j in range(len(p00)):
+        c00 = p00[j] + a00 * p01[j] + a01 * p11[j] + a11
+        c01 = p01[j] + dt * p11[j] + b01
+        d11 = p11[j] + c11
+        obs = pose[j, 3] > 0 and variance[j] < unseen_var  # a joint no view fixes is no measurement
+        upd, new = obs and seen[j], obs and not seen[j]
+        k0, k1 = c00 / (c00 + r2), c01 / (c00 + r2)
+        for c in range(3):
+            x = position[j, c] + dt * velocity[j, c]
+            innov = pose[j, c] - x
+            position[j, c] = x + k0 * innov if upd else (pose[j, c] if new else x)
+            if upd:
+                velocity[j, c] = velocity[j, c] + k1 * innov
+        live[j] = obs
+        p00[j] = (1 - k0) * c00 if upd else c00
+        p11[j] = d11 - k1 * c01 if upd else d11
+        p01[j] = (1 - k0) * c01 if upd else c01
+        seen[j] = seen[j] or obs
+
+
+@njit(**_JIT)
+def _select(buf: np.ndarray, m: int, k: int) -> float:
+    """The k-th smallest of buf[:m] (no NaN), buf reordered so that buf[k + 1:m] holds none smaller (quickselect)."""
+    lo, hi = 0, m - 1
+    while lo < hi:
+        pivot, i, j = buf[(lo + hi) // 2], lo, hi
+        while i <= j:
+            while buf[i] < pivot:
+                i += 1
+            while buf[j] > pivot:
+                j -= 1
+            if i <= j:
+                buf[i], buf[j] = buf[j], buf[i]
+                i, j = i + 1, j - 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return buf[k]
+
+
+@njit(**_JIT)
+def _sorted_median(values: np.ndarray, count: int, lo: int, hi: int, buf: np.ndarray) -> float:
+    """tracker._sorted_median of one row (W,): 0.5 (s[lo] + s[hi]) of its values sorted NaN last, NaN if count is
+    0; the order statistics of the non-NaN values picked without sorting (buf (W,) scratch)."""
+    m = 0
+    for v in values:
+        if not np.isnan(v):
+            buf[m] = v
+            m += 1
+    if count == 0 or hi >= m:  # numpy's pick would be a NaN
+        return np.nan
+    low = _select(buf, m, lo)
+    high = low
+    if hi > lo:
+        high = buf[lo + 1]
+        for i in range(lo + 2, m):
+            high = buf[i] if buf[i] < high else high
+    return 0.5 * (low + high)
+
+
+@njit(**_JIT)
+def robust_skeleton(bones: np.ndarray, median: np.ndarray, se: np.ndarray, count: np.ndarray, buf: np.ndarray) -> None:
+    """One track's robust bone lengths (tracker.robust_lengths, then the standard error as tracker._correct
+    takes it) from its window bones (W, L): median, se (L,) m and count (L,); buf (2, W) scratch."""
+    W, L = bones.shape
+    for b in range(L):
+        n = 0
+        for w in range(W):
+            n += np.isfinite(bones[w, b])
+        lo, hi = max(n - 1, 0) // 2, min(n // 2, max(W - 1, 0))
+        m = _sorted_median(bones[:, b], n, lo, hi, buf[0])
+        for w in range(W):
+            buf[1, w] = np.abs(bones[w, b] - m)
+        mad = _sorted_median(buf[1], n, lo, hi, buf[0])
+        sd = MAD_TO_SD * mad if n > 1 else np.nan
+        median[b], count[b] = m, n
+        se[b] = sd / np.sqrt(max(n, 1)) if np.isfinite(sd) else np.inf
+
+
+@njit(**_JIT)
+def correct_tracks(
+    state: tuple,
+    tracks: np.ndarray,
+    persons: np.ndarray,
+    frame: int,
+    poses3d: np.ndarray,
+    variance: np.ndarray,
+    lengths: np.ndarray,
+    filters: tuple,
+    counts: tuple,
+    out: np.ndarray,
+    smooth: bool,
+) -> None:
+    """tracker.Tracker._correct of each track k in tracks (K,) with its person persons[k] (K,) of poses (P, J, 4),
+    variances (P, J), bone lengths (P, L); state the TrackState's arrays (in its field order, without ids) changed in
+    place; filters (unseen variance, q, r2, smooth rate, smooth floor^2, smooth q0), counts (min hits, skeleton
+    refresh); with smooth, out (P, J, 4) takes the smoothed joints of the confirmed tracks' observed joints."""
+    position, velocity, p00, p01, p11, seen, last_frame, hits, confirmed = state[:9]
+    bones, slot, sx, sp, sq, live, skel_median, skel_se, skel_count = state[9:]
+    unseen_var, q, r2, rate_min, floor2, q0 = filters
+    min_hits, refresh_every = counts
+    buf = np.empty((2, bones.shape[1]))
+    for k in range(len(tracks)):
+        t, p = tracks[k], persons[k]
+        dt = float(frame - last_frame[t])
+        smooth_joints(
+            sx[t],
+            sp[t],
+            sq[t],
+            seen[t],
+            velocity[t],
+            hits[t],
+            dt,
+            poses3d[p],
+            variance[p],
+            unseen_var,
+            rate_min,
+            floor2,
+            q0,
+        )
+        kalman_joints(
+            position[t],
+            velocity[t],
+            p00[t],
+            p01[t],
+            p11[t],
+            seen[t],
+            live[t],
+            dt,
+            poses3d[p],
+            variance[p],
+            unseen_var,
+            q,
+            r2,
+        )
+        last_frame[t] = frame
+        hits[t] += 1
+        confirmed[t] |= hits[t] >= min_hits
+        bones[t, slot[t]] = lengths[p]
+        slot[t] = (slot[t] + 1) % bones.shape[1]
+        if hits[t] % refresh_every == 0:
+            robust_skeleton(bones[t], skel_median[t], skel_se[t], skel_count[t], buf)
+        if smooth and confirmed[t]:
+            for j in range(poses3d.shape[1]):
+                if poses3d[p, j, 3] > 0:
+                    out[p, j, 0], out[p, j, 1], out[p, j, 2] = sx[t, j, 0], sx[t, j, 1], sx[t, j, 2]
