@@ -51,6 +51,7 @@ from reconstruction.matching.evidence_kernels import (
     gated_rows,
     merge_in_cost_order,
     pairs_chi2,
+    usable_keypoints,
 )
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.feet_kernels import foot_points, plane_points
@@ -80,17 +81,16 @@ def joint_variances(
     score_power) of :func:`joint_sigma`. Only the undistortion is done per view (camera)."""
     kp = np.concatenate([np.asarray(v.keypoints, dtype=np.float64).reshape(-1, J, 3) for v in views])
     boxes = np.concatenate([np.asarray(v.bboxes, dtype=np.float64).reshape(-1, 4) for v in views])
-    finite = np.isfinite(kp).all(axis=-1)
-    bad = ~finite.all(axis=-1)
-    kp = np.where(finite[..., None], kp, 0.0)
-    ok = finite & (kp[..., 2] >= min_score)
-    kp = np.where(ok[..., None], kp, 0.0)
-    sigma = joint_sigma(kp, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0), *sigma_model)
+    clean, ok, bad = np.empty(kp.shape), np.empty(kp.shape[:2], dtype=bool), np.empty(len(kp), dtype=bool)
+    usable_keypoints(kp, float(min_score), clean, ok, bad)
+    sigma = joint_sigma(clean, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0), *sigma_model)
     var = np.where(ok & np.isfinite(sigma), sigma**2, 0.0)
+    if not any(cam.has_distortion for cam in cameras):  # the joints not ok are zero already
+        return np.ascontiguousarray(clean[..., :2]), var, bad
     ends = np.cumsum([len(v) for v in views])
-    uv = [cam.undistort_points(kp[e - len(v) : e, :, :2]) for v, cam, e in zip(views, cameras, ends) if len(v)]
-    uv = np.concatenate(uv) if uv else kp[..., :2]
-    return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), np.ascontiguousarray(var), bad
+    uv = [cam.undistort_points(clean[e - len(v) : e, :, :2]) for v, cam, e in zip(views, cameras, ends) if len(v)]
+    uv = np.concatenate(uv) if uv else clean[..., :2]
+    return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), var, bad
 
 
 def merge_complete(
@@ -167,6 +167,9 @@ def warm_up() -> None:
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
     merge_in_cost_order(one[:1], one[1:2], np.zeros(1), one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
     _warm_up_feet()
+    usable_keypoints(
+        uv[:, :, :1].repeat(3, axis=2), 0.2, np.empty((2, 2, 3)), np.empty((2, 2), bool), np.empty(2, bool)
+    )
     ints = np.zeros((2, 4), np.int64)  # strided column views of pairs_chi2's output, as __call__ passes them
     d2 = calibrated_chi2(np.zeros((2, 2)), 0, 1.0, 1.0)
     gated_rows(ints[:, 0], ints[:, 1], ints[:, 2], d2, ints[:, 3], limits, 4.0, 2.0, one, pairs, 1)

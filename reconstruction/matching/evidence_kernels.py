@@ -347,3 +347,21 @@ def merge_in_cost_order(ga, gb, cost, view_of, links, has_feet, var):
         person[i] = rank[root[i]]
         size[person[i]] += 1
     return person, size[:persons]
+
+
+@njit(cache=True, error_model="numpy")
+def usable_keypoints(kp: np.ndarray, min_score: float, out: np.ndarray, ok: np.ndarray, bad: np.ndarray) -> None:
+    """Keypoints (N, J, 3) -> out (N, J, 3) with the joints not ok zeroed, ok (N, J) (finite, score >= min_score)
+    and bad (N,) (some keypoint not finite)."""
+    N, J = ok.shape
+    for n in range(N):
+        bad[n] = False
+        for j in range(J):
+            x, y, s = kp[n, j, 0], kp[n, j, 1], kp[n, j, 2]
+            finite = np.isfinite(x) and np.isfinite(y) and np.isfinite(s)
+            bad[n] |= not finite
+            ok[n, j] = finite and s >= min_score
+            if ok[n, j]:
+                out[n, j, 0], out[n, j, 1], out[n, j, 2] = x, y, s
+            else:
+                out[n, j, 0], out[n, j, 1], out[n, j, 2] = 0.0, 0.0, 0.0
