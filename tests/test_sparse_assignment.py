@@ -1,4 +1,5 @@
-"""The compiled assignment of the evidence matcher: scipy's solver step for step, component by component; the
+"""The compiled assignment of the evidence matcher: scipy's solver step for step (its optimum, row-reduced, on the
+gated components), component by component; the
 dense wrapper the tracker and the evaluation use gives scipy's rows and columns, transposed and maximised too."""
 
 import numpy as np
@@ -7,7 +8,7 @@ from scipy.optimize import linear_sum_assignment
 
 from reconstruction.matching import sparse_assignment as assignment
 from reconstruction.matching.merge import solve_pair
-from reconstruction.matching.sparse_assignment import lsap, solve_sparse_pairs
+from reconstruction.matching.sparse_assignment import lsap, lsap_reduced, solve_sparse_pairs
 
 
 def test_lsap_is_scipys_solver_ties_included():
@@ -18,6 +19,22 @@ def test_lsap_is_scipys_solver_ties_included():
         # small integer costs: many ties, which a different solver would break differently
         cost = rng.integers(0, 4, (nr, nc)).astype(float) if t % 2 else rng.normal(size=(nr, nc))
         np.testing.assert_array_equal(lsap(cost), linear_sum_assignment(cost)[1])
+
+
+def test_the_row_reduced_solver_reaches_scipys_optimum_of_gated_problems():
+    # gated problems as the matcher builds them (allowed pairs, a big cost elsewhere): the same allowed pairs
+    rng = np.random.default_rng(2)
+    for _ in range(1500):
+        nr = int(rng.integers(1, 40))
+        nc = nr + int(rng.integers(0, 5))
+        allowed = rng.random((nr, nc)) < rng.integers(1, 8) / nc
+        cost = rng.normal(size=(nr, nc)) * 3 - 20
+        sub = np.where(allowed, cost, (nr + 1) * np.abs(cost[allowed]).max(initial=0) + 1)
+        rows, cols = linear_sum_assignment(sub)
+        got = lsap_reduced(sub)
+        assert np.isclose(sub[np.arange(nr), got].sum(), sub[rows, cols].sum()) and len(set(got.tolist())) == nr
+        kept = {(r, c) for r, c in zip(rows, cols) if allowed[r, c]}
+        assert {(r, c) for r, c in enumerate(got.tolist()) if allowed[r, c]} == kept
 
 
 def test_the_sparse_pairs_are_solved_as_the_dense_gated_assignment():

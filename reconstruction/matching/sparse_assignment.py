@@ -4,8 +4,9 @@
 so the solver maximises the number of allowed pairs, then minimises their cost: the objective is
 sum(cost - M) over the allowed pairs used, which splits over the connected components of the graph of
 allowed pairs. In a crowd a view pair has hundreds of components of one or a few detections, so solving
-each one alone (with the same M) is much cheaper than one dense (Na, Nb) problem. Where the optimum is
-unique (ties of float costs aside) the result is the dense solver's.
+each one alone (with the same M) is much cheaper than one dense (Na, Nb) problem, and each is started from a row
+reduction (:func:`lsap_reduced`). Where the optimum is unique (ties of float costs aside) the result is the dense
+solver's.
 
 :func:`linear_sum_assignment` is the dense solver for the tracker, the evaluation and the 2D association:
 scipy's result for a finite matrix (its algorithm step for step, :func:`lsap`, so ties break alike) without
@@ -83,6 +84,75 @@ def lsap(cost: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
+def lsap_reduced(cost: np.ndarray) -> np.ndarray:
+    """Minimum-cost assignment of a finite (nr, nc) matrix, nr <= nc: column of every row (nr,); an optimum of
+    :func:`lsap`'s problem (the same one where the optimum is unique), reached faster on gated problems.
+
+    A row reduction first (u_i = min_j c_ij, v = 0, each row given its cheapest column unless an earlier row has
+    it: feasible duals with v_j = 0 on the free columns, the pairs tight), then :func:`lsap`'s shortest augmenting
+    path for the rows left free: in a gated crowd most rows' cheapest columns differ, and few paths are searched.
+    """
+    nr, nc = cost.shape
+    u, v, spc = np.empty(nr), np.zeros(nc), np.empty(nc)
+    path, col4row, row4col = np.empty(nc, dtype=np.int64), np.full(nr, -1), np.full(nc, -1)
+    SR, SC = np.empty(nr, dtype=np.bool_), np.empty(nc, dtype=np.bool_)
+    remaining = np.empty(nc, dtype=np.int64)
+    for i in range(nr):  # row reduction: u_i = min_j c_ij, v = 0 (feasible; a free column keeps v_j = 0)
+        best, arg = cost[i, 0], 0
+        for j in range(1, nc):
+            if cost[i, j] < best:
+                best, arg = cost[i, j], j
+        u[i] = best
+        if row4col[arg] == -1:  # the row's cheapest column, unless an earlier row has it: a tight pair
+            col4row[i], row4col[arg] = arg, i
+    for cur in range(nr):
+        if col4row[cur] != -1:
+            continue
+        min_val, num_remaining, i, sink = 0.0, nc, cur, -1
+        for it in range(nc):
+            remaining[it] = nc - it - 1
+            SC[it], spc[it], path[it] = False, np.inf, -1
+        for it in range(nr):
+            SR[it] = False
+        while sink == -1:
+            index, lowest = -1, np.inf
+            SR[i] = True
+            for it in range(num_remaining):
+                j = remaining[it]
+                r = min_val + cost[i, j] - u[i] - v[j]
+                if r < spc[j]:
+                    path[j], spc[j] = i, r
+                if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
+                    lowest, index = spc[j], it
+            min_val = lowest
+            if min_val == np.inf:
+                return col4row
+            j = remaining[index]
+            if row4col[j] == -1:
+                sink = j
+            else:
+                i = row4col[j]
+            SC[j] = True
+            num_remaining -= 1
+            remaining[index] = remaining[num_remaining]
+        u[cur] += min_val
+        for i in range(nr):
+            if SR[i] and i != cur:
+                u[i] += min_val - spc[col4row[i]]
+        for j in range(nc):
+            if SC[j]:
+                v[j] -= min_val - spc[j]
+        j = sink
+        while True:
+            i = path[j]
+            row4col[j] = i
+            col4row[i], j = j, col4row[i]
+            if i == cur:
+                break
+    return col4row
+
+
+@njit(cache=True, error_model="numpy")
 def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
     """Assign one component, its entries ks (ascending, so rows ascending): -> keep[ks] of the assignment.
     row_at, col_at: scratch (na,), (nb,) of -1, left as found."""
@@ -115,7 +185,7 @@ def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
         if transpose:
             r, c = c, r
         sub[r, c], at[r, c] = cost[k], k
-    col = lsap(sub)
+    col = lsap_reduced(sub)
     for r in range(len(col)):
         if col[r] >= 0 and at[r, col[r]] >= 0:
             keep[at[r, col[r]]] = True
