@@ -26,6 +26,7 @@ class Camera:
     t: np.ndarray
     size: tuple[int, int]
     _fov_r2: float = field(init=False, repr=False)
+    _distorted: bool = field(init=False, repr=False)  # any distortion coefficient non-zero (asked per frame)
 
     def __post_init__(self) -> None:
         for key, shape in (("K", (3, 3)), ("dist", (5,)), ("R", (3, 3)), ("t", (3,))):
@@ -43,6 +44,7 @@ class Camera:
         if not (0 < w < 2**31 and 0 < h < 2**31):
             raise ValueError(f"camera {self.name!r}: size must be positive, got {self.size}")
         object.__setattr__(self, "size", (w, h))
+        object.__setattr__(self, "_distorted", bool(np.any(self.dist != 0)))
         object.__setattr__(self, "_fov_r2", self._field_of_view_r2())
 
     # --- geometry ---------------------------------------------------------------------------------
@@ -59,7 +61,7 @@ class Camera:
     @property
     def has_distortion(self) -> bool:
         """Whether any distortion coefficient is non-zero."""
-        return bool(np.any(self.dist != 0))
+        return self._distorted
 
     def world_to_camera(self, points: np.ndarray) -> np.ndarray:
         """World points to the camera frame: (..., 3) -> (..., 3)."""
@@ -240,7 +242,8 @@ class Rig:
         poses2d = np.asarray(poses2d, dtype=np.float64)
         out = poses2d.copy()
         for v, cam in enumerate(self.cameras):
-            out[v, ..., :2] = cam.undistort_points(poses2d[v, ..., :2])
+            if cam.has_distortion:
+                out[v, ..., :2] = cam.undistort_points(poses2d[v, ..., :2])
         return out
 
     def to_dict(self) -> dict:
