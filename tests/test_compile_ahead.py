@@ -174,3 +174,56 @@ def test_a_stage_warms_its_kernels_up_only_when_they_are_compiled(monkeypatch):
     monkeypatch.setattr(compile_notice, "kernels_interpreted", lambda: True)  # a first run's Python kernels
     compile_notice.warm_up_kernels("test", lambda: calls.append("interpreted"))
     assert calls == ["warm"]
+
+
+SPECIALISATIONS = """
+import sys
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+from numba.core.registry import CPUDispatcher
+
+import eval as ev
+from reconstruction.pipeline import MultiViewPipeline
+
+
+def counts():
+    kernels = {}
+    for name, module in list(sys.modules.items()):
+        if module is not None and name.split(".")[0] in ev.KERNEL_PACKAGES:
+            for obj in vars(module).values():
+                if isinstance(obj, CPUDispatcher):
+                    kernels[obj.py_func.__module__ + "." + obj.__name__] = len(obj.signatures)
+    return kernels
+
+
+ev.compile_kernels()
+before = counts()
+with initialize_config_dir(config_dir=sys.argv[1], version_base=None):
+    for overrides in sys.argv[2:]:
+        cfg = compose("eval", overrides=overrides.split())
+        sequence = instantiate(cfg.dataset, _convert_="all")
+        pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
+        for frame in sequence.frames[:3]:
+            pipeline(frame)
+after = counts()
+print({k: (before.get(k, 0), n) for k, n in after.items() if n != before.get(k, 0)})
+"""
+
+
+def test_the_warm_ups_compile_every_kernel_a_run_calls():
+    # the background compile of a first run is the stages' warm-ups: a kernel type they miss would compile in the run
+    settings = [
+        "dataset.num_frames=3",
+        "dataset.num_persons=12 dataset.num_cameras=5 dataset.num_frames=3 dataset.miss_rate=0.2",
+        "dataset=wildtrack",  # lens distortion
+        f"dataset=shelf dataset.root={ROOT.parent / 'shared' / 'data' / 'shelf'}",
+    ]
+    done = subprocess.run(
+        [sys.executable, "-c", SPECIALISATIONS, str(ROOT / "configs"), *settings],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines()[-1] == "{}", done.stdout

@@ -148,13 +148,18 @@ def test_foot_points_equal_the_numpy_selection(rule, ankle_fallback):
     rng = np.random.default_rng(1)
     N = 300
     ground, cov, y = rng.normal(size=(N, 8, 2)), rng.normal(size=(N, 8, 2, 2)), rng.uniform(0, 9, (N, 8)).round()
-    usable = rng.random((N, 8)) < 0.4  # ties of y and detections without a usable foot joint included
+    ground[rng.random((N, 8)) < 0.1, 1] = np.nan  # no point on the plane
+    depth, scored = rng.normal(1.0, 1.0, (N, 8)), rng.random((N, 8)) < 0.5  # behind the camera, low scores
     point, point_cov, ok = np.empty((2, N, 2)), np.empty((2, N, 2, 2)), np.empty((2, N), bool)
-    foot_points(ground, cov, y, usable, rule == "lowest", ankle_fallback, point, point_cov, ok)
+    foot_points(ground, cov, depth, y, scored, rule == "lowest", ankle_fallback, point, point_cov, ok)
+    ground_ok = np.isfinite(ground).all(axis=-1)  # the numpy version's preparation
+    usable = scored & ground_ok & (depth > 0)
+    ground, cov = np.where(ground_ok[..., None], ground, 0.0), np.where(ground_ok[..., None, None], cov, 0.0)
     for s in (0, 1):
         side, a = slice(3 * s, 3 * s + 3), 6 + s
         ankle = (ground[:, a], cov[:, a], usable[:, a])
         want = _numpy_foot(ground[:, side], cov[:, side], y[:, side], usable[:, side], rule, ankle, ankle_fallback)
-        for got, expected in zip((point[s], point_cov[s], ok[s]), want):
-            np.testing.assert_array_equal(got, expected)
+        np.testing.assert_array_equal(ok[s], want[2])
+        np.testing.assert_array_equal(point[s][ok[s]], want[0][ok[s]])  # a foot not ok is zeroed downstream
+        np.testing.assert_array_equal(point_cov[s][ok[s]], want[1][ok[s]])
     assert ok.any() and not ok.all()

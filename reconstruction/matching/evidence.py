@@ -150,9 +150,9 @@ def _warm_up_feet() -> None:
     ground, depth, cov = np.empty((1, 1, 2)), np.empty((1, 1)), np.empty((1, 1, 2, 2))
     H, axis, var, no_jacobian = np.zeros((1, 1, 3, 3)), np.zeros((1, 3)), np.ones((1, 1)), np.zeros((0, 0, 2, 2))
     plane_points(ground, H, index, index, row, axis, row, var, no_jacobian, ground, depth, cov)
-    joints, usable = np.zeros((1, 8, 2)), np.zeros((1, 8), bool)
+    joints, per_joint, scored = np.zeros((1, 8, 2)), np.zeros((1, 8)), np.zeros((1, 8), bool)
     point, point_cov, ok = np.empty((2, 1, 2)), np.empty((2, 1, 2, 2)), np.empty((2, 1), bool)
-    foot_points(joints, np.zeros((1, 8, 2, 2)), np.zeros((1, 8)), usable, False, True, point, point_cov, ok)
+    foot_points(joints, np.zeros((1, 8, 2, 2)), per_joint, per_joint, scored, False, True, point, point_cov, ok)
 
 
 @lru_cache(maxsize=1)

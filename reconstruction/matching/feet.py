@@ -137,13 +137,22 @@ def views_feet_features(
     heights = np.array([foot_joint_height_m] * 6 + [ankle_height_m] * 2, dtype=np.float64)
     sigma = None if pixel_sigma is None else joint_sigmas(score, pixel_sigma, sigma_score_power)
     ground, depth, cov = views_joints_on_planes(cameras, [len(k) for k in kps], uv, heights, sigma)
-    ground_ok = np.isfinite(ground).all(axis=-1)
-    ground = np.where(ground_ok[..., None], ground, 0.0)
-    cov = np.zeros(ground.shape + (2,)) if cov is None else np.where(ground_ok[..., None, None], cov, 0.0)
+    cov = np.zeros(ground.shape + (2,)) if cov is None else cov
     scored = finite & (score > min_score)
-    usable = scored & ground_ok & (depth > 0)
     point, point_cov, ok = np.empty((2, len(kp), 2)), np.empty((2, len(kp), 2, 2)), np.empty((2, len(kp)), bool)
-    foot_points(ground, np.ascontiguousarray(cov), uv[..., 1].copy(), usable, rule == "lowest", bool(ankle_fallback), point, point_cov, ok)  # fmt: skip
+    lowest = rule == "lowest"
+    foot_points(
+        ground,
+        cov,
+        depth,
+        uv[..., 1].copy(),
+        np.ascontiguousarray(scored),
+        lowest,
+        bool(ankle_fallback),
+        point,
+        point_cov,
+        ok,
+    )
     feet = [(point[0], point_cov[0], ok[0]), (point[1], point_cov[1], ok[1])]
     considered = scored if ankle_fallback else scored[:, :6]
     reason = np.where(feet[0][2] | feet[1][2], "", np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))

@@ -41,37 +41,42 @@ def plane_points(und, H, view, level, heights, axis, offset, var, und_jac, xy, d
 
 
 @njit(cache=True, error_model="numpy")
-def foot_points(ground, cov, y, usable, lowest, ankle_fallback, point, point_cov, ok) -> None:
+def foot_points(ground, cov, depth, y, scored, lowest, ankle_fallback, point, point_cov, ok) -> None:
     """Each detection's left and right foot (side s: joints 3 s .. 3 s + 2, ankle 6 + s) from its joints' ground
-    points (N, 8, 2), covariances (N, 8, 2, 2), image y (N, 8) and usable (N, 8): the lowest usable joint in the
-    image (lowest) or the mean of the usable ones (their covariance / n^2), else the ankle (ankle_fallback) ->
-    point (2, N, 2), point_cov (2, N, 2, 2), ok (2, N)."""
+    points (N, 8, 2), covariances (N, 8, 2, 2), depths (N, 8), image y (N, 8) and scored (N, 8): among the usable
+    joints (scored, a finite ground point in front of the camera) the lowest in the image (lowest) or the mean of
+    them (their covariance / n^2), else the ankle (ankle_fallback) -> point (2, N, 2), point_cov (2, N, 2, 2), ok
+    (2, N); a foot not ok gets zeros."""
     for n in range(ground.shape[0]):
         for s in range(2):
             count, pick, top = 0, -1, -np.inf
             p0, p1, c00, c01, c10, c11 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
             for k in range(3 * s, 3 * s + 3):
-                if usable[n, k]:
+                if _usable(ground, depth, scored, n, k):
                     count += 1
                     if pick < 0 or y[n, k] > top:  # np.argmax: the first of the largest
                         pick, top = k, y[n, k]
                     p0, p1 = p0 + ground[n, k, 0], p1 + ground[n, k, 1]
                     c00, c01 = c00 + cov[n, k, 0, 0], c01 + cov[n, k, 0, 1]
                     c10, c11 = c10 + cov[n, k, 1, 0], c11 + cov[n, k, 1, 1]
-            ok[s, n] = count > 0
-            if count == 0 and ankle_fallback and usable[n, 6 + s]:
-                pick, lowest_pick = 6 + s, True
+            if count == 0 and ankle_fallback and _usable(ground, depth, scored, n, 6 + s):
+                count, pick, lowest_pick = 1, 6 + s, True
             else:
                 lowest_pick = lowest
-            if lowest_pick and pick >= 0:
+            ok[s, n] = count > 0
+            if count == 0:
+                point[s, n] = 0.0
+                point_cov[s, n] = 0.0
+            elif lowest_pick:
                 point[s, n, 0], point[s, n, 1] = ground[n, pick, 0], ground[n, pick, 1]
                 point_cov[s, n] = cov[n, pick]
-                ok[s, n] = True
-            elif lowest_pick:  # lowest rule, nothing usable: the first joint, as np.argmax of all -inf
-                point[s, n, 0], point[s, n, 1] = ground[n, 3 * s, 0], ground[n, 3 * s, 1]
-                point_cov[s, n] = cov[n, 3 * s]
             else:
-                m = max(count, 1)
-                point[s, n, 0], point[s, n, 1] = p0 / m, p1 / m
-                point_cov[s, n, 0, 0], point_cov[s, n, 0, 1] = c00 / (m * m), c01 / (m * m)
-                point_cov[s, n, 1, 0], point_cov[s, n, 1, 1] = c10 / (m * m), c11 / (m * m)
+                point[s, n, 0], point[s, n, 1] = p0 / count, p1 / count
+                point_cov[s, n, 0, 0], point_cov[s, n, 0, 1] = c00 / (count * count), c01 / (count * count)
+                point_cov[s, n, 1, 0], point_cov[s, n, 1, 1] = c10 / (count * count), c11 / (count * count)
+
+
+@njit(cache=True, error_model="numpy")
+def _usable(ground, depth, scored, n, k) -> bool:
+    """Joint k of detection n: scored, its ground point finite and in front of the camera."""
+    return scored[n, k] and np.isfinite(ground[n, k, 0]) and np.isfinite(ground[n, k, 1]) and depth[n, k] > 0
