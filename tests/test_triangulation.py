@@ -100,7 +100,7 @@ def test_rayleigh_quotient_certifies_nearly_every_noisy_dlt_point():
     N, conf, solve = np.empty((2000, 4, 4)), np.empty(2000), np.empty(2000, dtype=bool)
     _normal_matrices(poses, np.ascontiguousarray(rig.projection_matrices()), 2, N, conf, solve)
     v, ok = np.empty((2000, 4)), np.empty(2000, dtype=bool)
-    _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE, v, ok)
+    _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE, np.ones(2000, dtype=bool), v, ok)
     assert ok.mean() > 0.99  # 0.82 when a converged rho stopped the steps (the Schur complement divided by 0)
     ref = np.linalg.eigh(N)[1][..., 0]
     sine = np.sqrt(np.maximum(1 - np.abs((v * ref).sum(axis=1)) ** 2, 0.0))

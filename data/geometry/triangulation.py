@@ -33,14 +33,26 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
         np.ascontiguousarray(poses2d.reshape(V, P * J, 3)), np.ascontiguousarray(proj), min_views, N, conf, solve
     )
     usable = solve & np.isfinite(N).all(axis=(1, 2))  # pixels so large that the rows overflow: not solvable
-    X = np.zeros((P * J, 4))
-    if usable.any():
-        X[usable] = smallest_eigenvectors(N[usable])
-    ok = usable & (np.abs(X[:, 3]) > 1e-12)
-    out = np.zeros((P * J, 4))
-    out[ok, :3] = X[ok, :3] / X[ok, 3:4]
-    out[ok, 3] = conf[ok]
+    X, certified = np.empty((P * J, 4)), np.empty(P * J, dtype=np.bool_)
+    _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE, usable, X, certified)
+    redo = usable & ~certified
+    if redo.any():
+        X[redo] = np.linalg.eigh(N[redo])[1][..., 0]
+    out = np.empty((P * J, 4))
+    _dehomogenised(X, usable, conf, out)
     return out.reshape(P, J, 4)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _dehomogenised(X: np.ndarray, usable: np.ndarray, conf: np.ndarray, out: np.ndarray) -> None:
+    """out (n, 4) = (X[:3] / X[3], conf) of the usable points (n,) whose X (n, 4) is not at infinity, zeros else."""
+    for i in range(len(X)):
+        if usable[i] and abs(X[i, 3]) > 1e-12:
+            for r in range(3):
+                out[i, r] = X[i, r] / X[i, 3]
+            out[i, 3] = conf[i]
+        else:
+            out[i, 0], out[i, 1], out[i, 2], out[i, 3] = 0.0, 0.0, 0.0, 0.0
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -96,15 +108,18 @@ def smallest_eigenvectors(N: np.ndarray) -> np.ndarray:
     N = np.ascontiguousarray(N, dtype=np.float64)
     v = np.empty((len(N), 4))
     ok = np.empty(len(N), dtype=np.bool_)
-    _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE, v, ok)
+    _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE, np.ones(len(N), dtype=np.bool_), v, ok)
     if not ok.all():
         v[~ok] = np.linalg.eigh(N[~ok])[1][..., 0]
     return v
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _rayleigh_quotient(N: np.ndarray, iterations: int, tol: float, out: np.ndarray, ok: np.ndarray) -> None:
-    """Rayleigh quotient iteration for the smallest eigenpair of (n, 4, 4) matrices -> out (n, 4), certified ok (n,).
+def _rayleigh_quotient(
+    N: np.ndarray, iterations: int, tol: float, use: np.ndarray, out: np.ndarray, ok: np.ndarray
+) -> None:
+    """Rayleigh quotient iteration for the smallest eigenpair of the (n, 4, 4) matrices where use (n,) -> out (n, 4),
+    certified ok (n,) (zeros, ok, where not used).
 
     With N = [[B, c], [c^T, d]], each step solves (N - rho I) z = v by the Schur complement of the 3x3
     block B - rho I, from v_0 = [-B^-1 c, 1] (the inhomogeneous least-squares point). Certificate: by
@@ -114,6 +129,9 @@ def _rayleigh_quotient(N: np.ndarray, iterations: int, tol: float, out: np.ndarr
     """
     B_inv, C_inv, v, z, cv = np.empty((3, 3)), np.empty((3, 3)), np.empty(4), np.empty(4), np.empty(3)
     for i in range(N.shape[0]):
+        if not use[i]:
+            out[i, 0], out[i, 1], out[i, 2], out[i, 3], ok[i] = 0.0, 0.0, 0.0, 0.0, True
+            continue
         A = N[i]
         det = _inverse_sym3(A, 0.0, B_inv)
         pd = A[0, 0] > 0 and A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0] > 0 and det > 0
