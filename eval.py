@@ -9,6 +9,7 @@ printed report (report.txt) into the Hydra run directory.
 from __future__ import annotations
 
 import gc
+import importlib
 
 if __name__ == "__main__":
     # The imports and Hydra's config leave ~1.1 x 10^5 long-lived objects; the collector would rescan them again and again
@@ -100,12 +101,34 @@ def start_compiles(cfg: DictConfig) -> None:
     while this run uses them as Python and the MAP's numpy solver until it ends (``compile_ahead``;
     reconstruction/compile_ahead.py): a small first job does not wait for the compiler. Only when eval.py runs as a
     script: a module that imports it (the tests) keeps its kernels as they are and compiles them as it goes."""
-    if cfg.compile_ahead and AS_SCRIPT and interpret_until_compiled(FIRST_RUN_COMPILE, solve_all, KERNEL_PACKAGES):
+    if not (cfg.compile_ahead and AS_SCRIPT):
+        return
+    for module in stage_modules(cfg):  # loaded now, so that their kernels run as Python too (not compiled here)
+        importlib.import_module(module)
+    if interpret_until_compiled(FIRST_RUN_COMPILE, solve_all, KERNEL_PACKAGES):
         print(
             "numba's cache is empty (first run after an install or a change of the kernels): the kernels compile in "
             "a background process (about 15 s of CPU; later runs load them); until then they run as Python.",
             flush=True,
         )
+
+
+def stage_modules(cfg: DictConfig) -> list[str]:
+    """The modules of the configured dataset, matcher, reconstruction and tracker (their ``_target_``s, nested ones
+    included, e.g. the dataset's grouper) that belong to KERNEL_PACKAGES."""
+    found: list[str] = []
+
+    def walk(node: object) -> None:
+        if isinstance(node, DictConfig):
+            target = node.get("_target_")
+            if isinstance(target, str) and "." in target and target.split(".")[0] in KERNEL_PACKAGES:
+                found.append(target.rsplit(".", 1)[0])
+            for key in node:
+                walk(node.get(key))
+
+    for group in ("dataset", "matching", "reconstruction", "tracking"):
+        walk(cfg.get(group))
+    return list(dict.fromkeys(found))
 
 
 def compile_kernels() -> None:

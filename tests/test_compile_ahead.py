@@ -227,3 +227,47 @@ def test_the_warm_ups_compile_every_kernel_a_run_calls():
     )
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.strip().splitlines()[-1] == "{}", done.stdout
+
+
+LATE_KERNELS = """
+import sys
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+from numba.core.registry import CPUDispatcher
+
+import eval as ev
+from reconstruction.pipeline import MultiViewPipeline
+
+
+def holders():
+    return {
+        name
+        for name, module in list(sys.modules.items())
+        if module is not None and name.split(".")[0] in ev.KERNEL_PACKAGES
+        and any(isinstance(obj, CPUDispatcher) for obj in vars(module).values())
+    }
+
+
+with initialize_config_dir(config_dir=sys.argv[1], version_base=None):
+    cfg = compose("eval", overrides=sys.argv[2:])
+for module in ev.stage_modules(cfg):
+    __import__(module)
+loaded = holders()
+sequence = instantiate(cfg.dataset, _convert_="all")
+MultiViewPipeline.from_config(cfg, sequence.rig)(sequence.frames[0])
+print(sorted(holders() - loaded))
+"""
+
+
+@pytest.mark.parametrize("overrides", [[], ["dataset=wildtrack", "tracking=off", "matching=feet_paper"]])
+def test_the_stages_kernels_are_loaded_before_a_first_run_swaps_them(overrides):
+    # a module first imported after the swap would compile its kernels in the run instead (4 s of the first run)
+    done = subprocess.run(
+        [sys.executable, "-c", LATE_KERNELS, str(ROOT / "configs"), *overrides],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout

@@ -217,7 +217,9 @@ def robust_skeleton(bones: np.ndarray, median: np.ndarray, se: np.ndarray, count
         for w in range(W):
             n += np.isfinite(bones[w, b])
         lo, hi = max(n - 1, 0) // 2, min(n // 2, max(W - 1, 0))
-        m = _sorted_median(bones[:, b], n, lo, hi, buf[0])
+        for w in range(W):  # the column into a contiguous row: one type of _sorted_median (each compiles ~0.4 s)
+            buf[1, w] = bones[w, b]
+        m = _sorted_median(buf[1], n, lo, hi, buf[0])
         for w in range(W):
             buf[1, w] = np.abs(bones[w, b] - m)
         mad = _sorted_median(buf[1], n, lo, hi, buf[0])
@@ -285,7 +287,8 @@ def correct_tracks(
         last_frame[t] = frame
         hits[t] += 1
         confirmed[t] |= hits[t] >= min_hits
-        bones[t, slot[t]] = lengths[p]
+        for b in range(bones.shape[2]):  # element-wise: an array assignment compiles numba's broadcasting
+            bones[t, slot[t], b] = lengths[p, b]
         slot[t] = (slot[t] + 1) % bones.shape[1]
         if hits[t] % refresh_every == 0:
             robust_skeleton(bones[t], skel_median[t], skel_se[t], skel_count[t], buf)

@@ -49,7 +49,7 @@ from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence_kernels import (
     calibrated_chi2,
     gated_rows,
-    merge_in_cost_order,
+    merge_persons,
     pairs_chi2,
     usable_keypoints,
 )
@@ -130,10 +130,10 @@ def _merge(
     view_of = np.repeat(np.arange(len(counts)), counts).astype(np.int64)
     has_feet, var = evidence if evidence is not None else (np.ones(offsets[-1], bool), np.ones((offsets[-1], 1)))
     links = np.ascontiguousarray(np.asarray(linked, dtype=np.int64).reshape(-1, 2))
-    person, size = merge_in_cost_order(
-        np.ascontiguousarray(ga, np.int64),
-        np.ascontiguousarray(gb, np.int64),
-        np.ascontiguousarray(cost, np.float64),
+    order = np.lexsort((gb, ga, cost))  # by cost, ties by the detections (numba's sorts cost seconds of compile)
+    person, size = merge_persons(
+        np.ascontiguousarray(ga, np.int64)[order],
+        np.ascontiguousarray(gb, np.int64)[order],
         view_of,
         links,
         np.ascontiguousarray(has_feet, bool),
@@ -165,7 +165,7 @@ def warm_up() -> None:
     out = (np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty(1), 0, 0)
     pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, 0, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1, *out)
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
-    merge_in_cost_order(one[:1], one[1:2], np.zeros(1), one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
+    merge_persons(one[:1], one[1:2], one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
     _warm_up_feet()
     usable_keypoints(
         uv[:, :, :1].repeat(3, axis=2), 0.2, np.empty((2, 2, 3)), np.empty((2, 2), bool), np.empty(2, bool)

@@ -327,14 +327,10 @@ def gated_rows(pair, gi, gj, d2, dof, limits, link2, evidence_per_dof, offsets, 
 
 
 @njit(cache=True, error_model="numpy")
-def merge_in_cost_order(ga, gb, cost, view_of, links, has_feet, var):
-    """:func:`merge_linked` of the edges (ga, gb) (E,) taken by increasing cost (ties by ga, then gb: as
-    np.lexsort((gb, ga, cost))) -> person of every detection (N,) (persons numbered by their smallest detection) and
-    the persons' sizes."""
-    order = np.argsort(gb, kind="mergesort")
-    order = order[np.argsort(ga[order], kind="mergesort")]
-    order = order[np.argsort(cost[order], kind="mergesort")]
-    root = merge_linked(ga[order], gb[order], view_of, links, has_feet, var)
+def merge_persons(ga, gb, view_of, links, has_feet, var):
+    """:func:`merge_linked` of the edges (ga, gb) (E,) in the given order -> person of every detection (N,) (persons
+    numbered by their smallest detection) and the persons' sizes."""
+    root = merge_linked(ga, gb, view_of, links, has_feet, var)
     n = len(root)
     rank, size = np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=np.int64)
     persons = 0

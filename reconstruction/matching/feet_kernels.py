@@ -64,12 +64,13 @@ def foot_points(ground, cov, depth, y, scored, lowest, ankle_fallback, point, po
             else:
                 lowest_pick = lowest
             ok[s, n] = count > 0
-            if count == 0:
-                point[s, n] = 0.0
-                point_cov[s, n] = 0.0
+            if count == 0:  # element-wise: array assignments compile numba's broadcasting (seconds)
+                point[s, n, 0], point[s, n, 1] = 0.0, 0.0
+                point_cov[s, n, 0, 0], point_cov[s, n, 0, 1], point_cov[s, n, 1, 0], point_cov[s, n, 1, 1] = 0, 0, 0, 0
             elif lowest_pick:
                 point[s, n, 0], point[s, n, 1] = ground[n, pick, 0], ground[n, pick, 1]
-                point_cov[s, n] = cov[n, pick]
+                point_cov[s, n, 0, 0], point_cov[s, n, 0, 1] = cov[n, pick, 0, 0], cov[n, pick, 0, 1]
+                point_cov[s, n, 1, 0], point_cov[s, n, 1, 1] = cov[n, pick, 1, 0], cov[n, pick, 1, 1]
             else:
                 point[s, n, 0], point[s, n, 1] = p0 / count, p1 / count
                 point_cov[s, n, 0, 0], point_cov[s, n, 0, 1] = c00 / (count * count), c01 / (count * count)
