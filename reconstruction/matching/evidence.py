@@ -45,6 +45,7 @@ from scipy.special import gammaincinv
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
 from reconstruction.compile_notice import warm_up_kernels
+from reconstruction.matching import feet_kernels
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence_kernels import (
     calibrated_chi2,
@@ -54,7 +55,6 @@ from reconstruction.matching.evidence_kernels import (
     usable_keypoints,
 )
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
-from reconstruction.matching.feet_kernels import foot_points, plane_points
 from reconstruction.matching.merge import _as_edges
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
 from reconstruction.solver.map_estimation import joint_sigma
@@ -144,17 +144,6 @@ def _merge(
     return rows[size >= min_views]
 
 
-def _warm_up_feet() -> None:
-    """Compile (or load) the feet features' kernels on one detection, with the argument types of a frame."""
-    index, row = np.zeros(1, np.int64), np.zeros(1)
-    ground, depth, cov = np.empty((1, 1, 2)), np.empty((1, 1)), np.empty((1, 1, 2, 2))
-    H, axis, var, no_jacobian = np.zeros((1, 1, 3, 3)), np.zeros((1, 3)), np.ones((1, 1)), np.zeros((0, 0, 2, 2))
-    plane_points(ground, H, index, index, row, axis, row, var, no_jacobian, ground, depth, cov)
-    joints, per_joint, scored = np.zeros((1, 8, 2)), np.zeros((1, 8)), np.zeros((1, 8), bool)
-    point, point_cov, ok = np.empty((2, 1, 2)), np.empty((2, 1, 2, 2)), np.empty((2, 1), bool)
-    foot_points(joints, np.zeros((1, 8, 2, 2)), per_joint, per_joint, scored, False, True, point, point_cov, ok)
-
-
 @lru_cache(maxsize=1)
 def warm_up() -> None:
     """Compile the kernels (or load them from numba's cache) once per process, so a first frame is not timed
@@ -166,10 +155,8 @@ def warm_up() -> None:
     pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, 0, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1, *out)
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
     merge_persons(one[:1], one[1:2], one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
-    _warm_up_feet()
-    usable_keypoints(
-        uv[:, :, :1].repeat(3, axis=2), 0.2, np.empty((2, 2, 3)), np.empty((2, 2), bool), np.empty(2, bool)
-    )
+    feet_kernels.warm_up()
+    usable_keypoints(np.zeros((2, 2, 3)), 0.2, np.empty((2, 2, 3)), np.empty((2, 2), bool), np.empty(2, bool))
     ints = np.zeros((2, 4), np.int64)  # strided column views of pairs_chi2's output, as __call__ passes them
     d2 = calibrated_chi2(np.zeros((2, 2)), 0, 1.0, 1.0)
     gated_rows(ints[:, 0], ints[:, 1], ints[:, 2], d2, ints[:, 3], limits, 4.0, 2.0, one, pairs, 1)

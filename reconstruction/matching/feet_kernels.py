@@ -5,6 +5,8 @@ cameras' covariances, where numpy's 2x2 matmul with the undistortion's Jacobian 
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from numba import njit
 
@@ -81,3 +83,15 @@ def foot_points(ground, cov, depth, y, scored, lowest, ankle_fallback, point, po
 def _usable(ground, depth, scored, n, k) -> bool:
     """Joint k of detection n: scored, its ground point finite and in front of the camera."""
     return scored[n, k] and np.isfinite(ground[n, k, 0]) and np.isfinite(ground[n, k, 1]) and depth[n, k] > 0
+
+
+@lru_cache(maxsize=1)
+def warm_up() -> None:
+    """Compile (or load) both kernels once per process on one detection, with the argument types of a frame."""
+    index, row = np.zeros(1, np.int64), np.zeros(1)
+    ground, depth, cov = np.empty((1, 1, 2)), np.empty((1, 1)), np.empty((1, 1, 2, 2))
+    H, axis, var, no_jacobian = np.zeros((1, 1, 3, 3)), np.zeros((1, 3)), np.ones((1, 1)), np.zeros((0, 0, 2, 2))
+    plane_points(ground, H, index, index, row, axis, row, var, no_jacobian, ground, depth, cov)
+    joints, per_joint, scored = np.zeros((1, 8, 2)), np.zeros((1, 8)), np.zeros((1, 8), bool)
+    point, point_cov, ok = np.empty((2, 1, 2)), np.empty((2, 1, 2, 2)), np.empty((2, 1), bool)
+    foot_points(joints, np.zeros((1, 8, 2, 2)), per_joint, per_joint, scored, False, True, point, point_cov, ok)
