@@ -99,8 +99,10 @@ def settle_startup_objects() -> None:
 def start_compiles(cfg: DictConfig) -> None:
     """On a first run (numba's cache cold), every kernel compiles in a background process that outlives this one,
     while this run uses them as Python and the MAP's numpy solver until it ends (``compile_ahead``;
-    reconstruction/compile_ahead.py): a small first job does not wait for the compiler. Only when eval.py runs as a
-    script: a module that imports it (the tests) keeps its kernels as they are and compiles them as it goes."""
+    reconstruction/compile_ahead.py): a small first job does not wait for the compiler. The configured stages'
+    modules are loaded first, so that theirs are swapped too (a module loaded later would compile in the run). Only
+    when eval.py runs as a script: a module that imports it (the tests) keeps its kernels as they are and compiles
+    them as it goes."""
     if not (cfg.compile_ahead and AS_SCRIPT):
         return
     for module in stage_modules(cfg):  # loaded now, so that their kernels run as Python too (not compiled here)
@@ -108,7 +110,7 @@ def start_compiles(cfg: DictConfig) -> None:
     if interpret_until_compiled(FIRST_RUN_COMPILE, solve_all, KERNEL_PACKAGES):
         print(
             "numba's cache is empty (first run after an install or a change of the kernels): the kernels compile in "
-            "a background process (about 15 s of CPU; later runs load them); until then they run as Python.",
+            "a background process (about 20 s of CPU; later runs load them); until then they run as Python.",
             flush=True,
         )
 

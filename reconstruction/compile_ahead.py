@@ -1,7 +1,7 @@
 """A first run that does not wait for numba: the kernels compile in a background process, run as Python meanwhile.
 
 With numba's on-disk cache cold (the first run after an install or a change of the kernels), compiling every
-kernel costs about 15 s of CPU, most of it numba's own Python (typing and lowering), not LLVM. A small job runs
+kernel costs about 20 s of CPU, most of it numba's own Python (typing and lowering), not LLVM. A small job runs
 faster than that with the kernels as the Python functions they are written as. ``interpret_until_compiled`` starts
 a warm-up that compiles every kernel in a background process, which outlives this one so that the next run finds
 the cache filled, and meanwhile gives every module that holds a kernel its Python function (numba's ``py_func``,
