@@ -218,15 +218,7 @@ def test_the_warm_ups_compile_every_kernel_a_run_calls():
         "dataset=wildtrack",  # lens distortion
         f"dataset=shelf dataset.root={ROOT.parent / 'shared' / 'data' / 'shelf'}",
     ]
-    done = subprocess.run(
-        [sys.executable, "-c", SPECIALISATIONS, str(ROOT / "configs"), *settings],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert done.returncode == 0, done.stderr[-3000:]
-    assert done.stdout.strip().splitlines()[-1] == "{}", done.stdout
+    assert _last_line(SPECIALISATIONS, *settings) == "{}"
 
 
 LATE_KERNELS = """
@@ -262,12 +254,17 @@ print(sorted(holders() - loaded))
 @pytest.mark.parametrize("overrides", [[], ["dataset=wildtrack", "tracking=off", "matching=feet_paper"]])
 def test_the_stages_kernels_are_loaded_before_a_first_run_swaps_them(overrides):
     # a module first imported after the swap would compile its kernels in the run instead (4 s of the first run)
+    assert _last_line(LATE_KERNELS, *overrides) == "[]"
+
+
+def _last_line(script: str, *args: str) -> str:
+    """The last line a script prints, run in a fresh interpreter with the configs folder and args."""
     done = subprocess.run(
-        [sys.executable, "-c", LATE_KERNELS, str(ROOT / "configs"), *overrides],
+        [sys.executable, "-c", script, str(ROOT / "configs"), *args],
         cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=300,
     )
     assert done.returncode == 0, done.stderr[-3000:]
-    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout
+    return done.stdout.strip().splitlines()[-1]

@@ -28,58 +28,12 @@ def lsap(cost: np.ndarray) -> np.ndarray:
     The shortest augmenting path algorithm of scipy's ``linear_sum_assignment`` (Crouse 2016), step for step.
     """
     nr, nc = cost.shape
-    u, v, spc = np.empty(nr), np.empty(nc), np.empty(nc)
-    path, col4row, row4col = np.empty(nc, dtype=np.int64), np.empty(nr, dtype=np.int64), np.empty(nc, dtype=np.int64)
-    SR, SC = np.empty(nr, dtype=np.bool_), np.empty(nc, dtype=np.bool_)
-    remaining = np.empty(nc, dtype=np.int64)
-    for i in range(nr):
-        u[i], col4row[i] = 0.0, -1
-    for j in range(nc):
-        v[j], path[j], row4col[j] = 0.0, -1, -1
+    u, v = np.zeros(nr), np.zeros(nc)
+    col4row, row4col = np.full(nr, -1), np.full(nc, -1)
+    work = _work(nr, nc)
     for cur in range(nr):
-        # the shortest augmenting path from row cur (scipy's augmenting_path)
-        min_val, num_remaining, i, sink = 0.0, nc, cur, -1
-        for it in range(nc):
-            remaining[it] = nc - it - 1  # reverse order, as scipy: a constant matrix gives the identity
-            SC[it], spc[it] = False, np.inf
-        for it in range(nr):
-            SR[it] = False
-        while sink == -1:
-            index, lowest = -1, np.inf
-            SR[i] = True
-            for it in range(num_remaining):
-                j = remaining[it]
-                r = min_val + cost[i, j] - u[i] - v[j]
-                if r < spc[j]:
-                    path[j], spc[j] = i, r
-                if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
-                    lowest, index = spc[j], it
-            min_val = lowest
-            if min_val == np.inf:  # infeasible (not with finite costs)
-                return col4row
-            j = remaining[index]
-            if row4col[j] == -1:
-                sink = j
-            else:
-                i = row4col[j]
-            SC[j] = True
-            num_remaining -= 1
-            remaining[index] = remaining[num_remaining]
-        # update the dual variables, then augment
-        u[cur] += min_val
-        for i in range(nr):
-            if SR[i] and i != cur:
-                u[i] += min_val - spc[col4row[i]]
-        for j in range(nc):
-            if SC[j]:
-                v[j] -= min_val - spc[j]
-        j = sink
-        while True:
-            i = path[j]
-            row4col[j] = i
-            col4row[i], j = j, col4row[i]
-            if i == cur:
-                break
+        if not _augment(cost, cur, u, v, col4row, row4col, work):  # infeasible (not with finite costs)
+            break
     return col4row
 
 
@@ -93,10 +47,8 @@ def lsap_reduced(cost: np.ndarray) -> np.ndarray:
     path for the rows left free: in a gated crowd most rows' cheapest columns differ, and few paths are searched.
     """
     nr, nc = cost.shape
-    u, v, spc = np.empty(nr), np.zeros(nc), np.empty(nc)
-    path, col4row, row4col = np.empty(nc, dtype=np.int64), np.full(nr, -1), np.full(nc, -1)
-    SR, SC = np.empty(nr, dtype=np.bool_), np.empty(nc, dtype=np.bool_)
-    remaining = np.empty(nc, dtype=np.int64)
+    u, v = np.empty(nr), np.zeros(nc)
+    col4row, row4col = np.full(nr, -1), np.full(nc, -1)
     for i in range(nr):  # row reduction: u_i = min_j c_ij, v = 0 (feasible; a free column keeps v_j = 0)
         best, arg = cost[i, 0], 0
         for j in range(1, nc):
@@ -105,51 +57,74 @@ def lsap_reduced(cost: np.ndarray) -> np.ndarray:
         u[i] = best
         if row4col[arg] == -1:  # the row's cheapest column, unless an earlier row has it: a tight pair
             col4row[i], row4col[arg] = arg, i
+    work = _work(nr, nc)
     for cur in range(nr):
-        if col4row[cur] != -1:
-            continue
-        min_val, num_remaining, i, sink = 0.0, nc, cur, -1
-        for it in range(nc):
-            remaining[it] = nc - it - 1
-            SC[it], spc[it], path[it] = False, np.inf, -1
-        for it in range(nr):
-            SR[it] = False
-        while sink == -1:
-            index, lowest = -1, np.inf
-            SR[i] = True
-            for it in range(num_remaining):
-                j = remaining[it]
-                r = min_val + cost[i, j] - u[i] - v[j]
-                if r < spc[j]:
-                    path[j], spc[j] = i, r
-                if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
-                    lowest, index = spc[j], it
-            min_val = lowest
-            if min_val == np.inf:
-                return col4row
-            j = remaining[index]
-            if row4col[j] == -1:
-                sink = j
-            else:
-                i = row4col[j]
-            SC[j] = True
-            num_remaining -= 1
-            remaining[index] = remaining[num_remaining]
-        u[cur] += min_val
-        for i in range(nr):
-            if SR[i] and i != cur:
-                u[i] += min_val - spc[col4row[i]]
-        for j in range(nc):
-            if SC[j]:
-                v[j] -= min_val - spc[j]
-        j = sink
-        while True:
-            i = path[j]
-            row4col[j] = i
-            col4row[i], j = j, col4row[i]
-            if i == cur:
-                break
+        if col4row[cur] == -1 and not _augment(cost, cur, u, v, col4row, row4col, work):
+            break
     return col4row
+
+
+@njit(cache=True, error_model="numpy")
+def _work(nr: int, nc: int) -> tuple:
+    """Scratch of :func:`_augment`: spc (nc,), path (nc,), SR (nr,), SC (nc,), remaining (nc,)."""
+    return (
+        np.empty(nc),
+        np.full(nc, -1),
+        np.empty(nr, dtype=np.bool_),
+        np.empty(nc, dtype=np.bool_),
+        np.empty(nc, dtype=np.int64),
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _augment(cost, cur, u, v, col4row, row4col, work) -> bool:
+    """Assign free row cur along the shortest augmenting path (scipy's augmenting_path), the duals u (nr,), v (nc,)
+    updated, col4row (nr,) and row4col (nc,) in place: -> False if no path (infeasible; not with finite costs)."""
+    spc, path, SR, SC, remaining = work
+    nr, nc = cost.shape
+    min_val, num_remaining, i, sink = 0.0, nc, cur, -1
+    for it in range(nc):
+        remaining[it] = nc - it - 1  # reverse order, as scipy: a constant matrix gives the identity
+        SC[it], spc[it] = False, np.inf
+    for it in range(nr):
+        SR[it] = False
+    while sink == -1:
+        index, lowest = -1, np.inf
+        SR[i] = True
+        for it in range(num_remaining):
+            j = remaining[it]
+            r = min_val + cost[i, j] - u[i] - v[j]
+            if r < spc[j]:
+                path[j], spc[j] = i, r
+            if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
+                lowest, index = spc[j], it
+        min_val = lowest
+        if min_val == np.inf:
+            return False
+        j = remaining[index]
+        if row4col[j] == -1:
+            sink = j
+        else:
+            i = row4col[j]
+        SC[j] = True
+        num_remaining -= 1
+        remaining[index] = remaining[num_remaining]
+    # update the dual variables, then augment
+    u[cur] += min_val
+    for i in range(nr):
+        if SR[i] and i != cur:
+            u[i] += min_val - spc[col4row[i]]
+    for j in range(nc):
+        if SC[j]:
+            v[j] -= min_val - spc[j]
+    j = sink
+    while True:
+        i = path[j]
+        row4col[j] = i
+        col4row[i], j = j, col4row[i]
+        if i == cur:
+            break
+    return True
 
 
 @njit(cache=True, error_model="numpy")
