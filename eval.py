@@ -30,7 +30,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.errors import InstantiationException
 from hydra.types import RunMode
 from hydra.utils import instantiate
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import MissingMandatoryValue
 
 from data.config_checks import ConfigError, check_bool, check_int, check_number
@@ -121,15 +121,23 @@ def stage_modules(cfg: DictConfig) -> list[str]:
     found: list[str] = []
 
     def walk(node: object) -> None:
-        if isinstance(node, DictConfig):
+        if isinstance(node, dict):
             target = node.get("_target_")
             if isinstance(target, str) and "." in target and target.split(".")[0] in KERNEL_PACKAGES:
                 found.append(target.rsplit(".", 1)[0])
-            for key in node:
-                walk(node.get(key))
+            for value in node.values():
+                walk(value)
+        elif isinstance(node, list):
+            for value in node:
+                walk(value)
 
-    for group in ("dataset", "matching", "reconstruction", "tracking"):
-        walk(cfg.get(group))
+    for group in (
+        "dataset",
+        "matching",
+        "reconstruction",
+        "tracking",
+    ):  # unresolved: a bad value is instantiate's to name
+        walk(OmegaConf.to_container(cfg[group], resolve=False, throw_on_missing=False) if group in cfg else None)
     return list(dict.fromkeys(found))
 
 

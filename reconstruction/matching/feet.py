@@ -19,8 +19,8 @@ from data.geometry.camera import Camera, Rig
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
 from reconstruction.compile_notice import warm_up_kernels
-from reconstruction.matching import feet_kernels
 from reconstruction.matching.feet_kernels import foot_points
+from reconstruction.matching.feet_kernels import warm_up as warm_up_feet
 from reconstruction.matching.feet_uncertainty import (
     joint_sigmas,
     location_covariance,
@@ -142,24 +142,12 @@ def views_feet_features(
     cov = np.zeros(ground.shape + (2,)) if cov is None else cov
     scored = finite & (score > min_score)
     point, point_cov, ok = np.empty((2, len(kp), 2)), np.empty((2, len(kp), 2, 2)), np.empty((2, len(kp)), bool)
-    lowest = rule == "lowest"
-    foot_points(
-        ground,
-        cov,
-        depth,
-        uv[..., 1].copy(),
-        np.ascontiguousarray(scored),
-        lowest,
-        bool(ankle_fallback),
-        point,
-        point_cov,
-        ok,
-    )
-    feet = [(point[0], point_cov[0], ok[0]), (point[1], point_cov[1], ok[1])]
+    scored_c, lowest = np.ascontiguousarray(scored), rule == "lowest"
+    foot_points(ground, cov, depth, uv[..., 1].copy(), scored_c, lowest, bool(ankle_fallback), point, point_cov, ok)
     considered = scored if ankle_fallback else scored[:, :6]
-    reason = np.where(feet[0][2] | feet[1][2], "", np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))
-    covs = (feet[0][1], feet[1][1]) if pixel_sigma is not None else (None, None)
-    return features_from_feet(feet[0][0], feet[1][0], feet[0][2], feet[1][2], reason, *covs)
+    reason = np.where(ok[0] | ok[1], "", np.where(considered.any(axis=1), FEET_ABOVE_HORIZON, NO_FOOT_JOINTS))
+    covs = (point_cov[0], point_cov[1]) if pixel_sigma is not None else (None, None)
+    return features_from_feet(point[0], point[1], ok[0], ok[1], reason, *covs)
 
 
 def split_features(features: FeetFeatures, counts: list[int]) -> list[FeetFeatures]:
@@ -291,7 +279,7 @@ class FeetMatcher:
         self.pixel_sigma, self.ground_sigma_floor = float(pixel_sigma), float(ground_sigma_floor)
         self.ankle_height_m, self.foot_joint_height_m = float(ankle_height_m), float(foot_joint_height_m)
         self.sigma_score_power, self.margin = float(sigma_score_power), float(margin)
-        warm_up_kernels("feet features", feet_kernels.warm_up)  # one line while numba compiles (first run)
+        warm_up_kernels("feet features", warm_up_feet)  # one line while numba compiles (first run)
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()
 

@@ -163,12 +163,6 @@ def location_covariance(
     return np.where(both, (cl + cr) / 4, cl + cr)
 
 
-def mean_covariance(cov: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Covariance of the mean of the valid points (independent): (N, K, 2, 2), (N, K) -> (N, 2, 2)."""
-    n = np.maximum(np.asarray(valid).sum(axis=1), 1)
-    return np.where(valid[..., None, None], cov, 0.0).sum(axis=1) / (n**2)[:, None, None]
-
-
 def mahalanobis_distances(
     pa: np.ndarray, pb: np.ndarray, cov_a: np.ndarray, cov_b: np.ndarray, floor_m: float = 0.05
 ) -> np.ndarray:
