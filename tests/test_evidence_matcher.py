@@ -13,7 +13,7 @@ from evaluation.correspondence import CorrespondenceCounts, correspondence_count
 from reconstruction.matching import EvidenceMatcher
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence import gate_limits, merge_complete
-from reconstruction.matching.evidence_kernels import pairs_chi2
+from reconstruction.matching.evidence_kernels import _linked_now, _masks, calibrated_chi2, pairs_chi2
 from reconstruction.pipeline import MultiViewPipeline
 from reconstruction.solver.map_solver import MLEMAPReconstruction
 
@@ -168,6 +168,34 @@ def test_complete_linkage_never_joins_persons_whose_cross_pair_disagrees():
     np.testing.assert_array_equal(merge_complete(edges, linked, [1, 1, 1], 2, (has_feet, var)), [[0, 0, 0]])
     var[2, 0] = 1.0
     np.testing.assert_array_equal(merge_complete(edges, linked, [1, 1, 1], 2, (has_feet, var)), [[0, 0, -1]])
+
+
+def test_a_link_test_the_merge_computes_is_the_one_computed_with_every_pair():
+    # a crowd whose calibration stops before the last view pairs: there the merge computes the link tests it
+    # asks for; each must be the test of pairs_chi2 run over every pair at the link limits
+    seq = generate_sequence(SyntheticConfig(seed=2, num_frames=1, num_persons=60, num_cameras=6, noise_px=2.0))
+    matcher, views = EvidenceMatcher(), seq.frames[0].views
+    ev = matcher.frame_evidence(views, seq.rig)
+    uv, p, cov, floor2, fundamentals, tested, limits, min_dof, cap, scale2 = ev.untested
+    untested = ~tested[ev.view_pairs[:, 0], ev.view_pairs[:, 1]]
+    assert 0 < untested.sum() < len(ev.view_pairs)
+    stacked = (uv, ev.var, ev.offsets, ev.has_feet, p, cov, floor2, fundamentals, ev.view_pairs)
+    room = int(np.prod(ev.counts[ev.view_pairs], axis=1).sum())
+    out = (np.empty((room, 4), np.int64), np.empty((room, 2)), np.empty(0), 0, 0)
+    n, _, _ = pairs_chi2(*stacked, 0, limits, min_dof, cap, scale2, np.ones(len(limits)), 2.0, 0, *out)
+    ints, d2 = out[0][:n], calibrated_chi2(out[1][:n], 0, 1.0, scale2)
+    passes = d2 <= limits[ints[:, 3]]
+    expected = {(int(i), int(j)) for q, i, j, _ in ints[passes] if untested[q]}
+    view_of, masks = np.repeat(np.arange(len(views)), ev.counts), _masks(ev.var)
+    row = (np.empty((1, 4), np.int64), np.empty((1, 2)))
+    computed = set()
+    for q in np.flatnonzero(untested):
+        a, b = ev.view_pairs[q]
+        for i in range(ev.offsets[a], ev.offsets[a + 1]):
+            for j in range(ev.offsets[b], ev.offsets[b + 1]):
+                if _linked_now(j, i, view_of, masks, ev.var, ev.has_feet, ev.untested, row):  # either order
+                    computed.add((i, j))
+    assert len(expected) > 100 and computed == expected
 
 
 def test_precise_in_a_dense_crowd_where_the_paper_matcher_merges_wrongly():

@@ -30,6 +30,9 @@ stop as soon as a pair fails (the feet term first), so the unrelated pairs of a 
 each, and only the pairs that pass are kept (a crowd has about one per detection and view, not N_a x N_b).
 Each view pair's assignment is solved one connected component of allowed pairs at a time
 (:mod:`.sparse_assignment`, scipy's solver step for step), and the merge reads the links as adjacency lists.
+The view pairs the noise calibration reads are computed under the (loosest) link test; the others under the
+gate alone, and the merge computes the link test of one of their pairs when it asks for it (100 people in 7
+views: 40-75 per frame, where computing them all took 0.5 ms of the matching's 7).
 """
 
 from __future__ import annotations
@@ -110,7 +113,7 @@ def merge_complete(
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     ga = offsets[edges[:, 0].astype(np.int64)] + edges[:, 1].astype(np.int64)
     gb = offsets[edges[:, 2].astype(np.int64)] + edges[:, 3].astype(np.int64)
-    return _merge(ga, gb, edges[:, 4], counts, linked, min_views, evidence)
+    return _merge(ga, gb, edges[:, 4], counts, linked, min_views, evidence, None)
 
 
 def _merge(
@@ -121,15 +124,19 @@ def _merge(
     linked: np.ndarray,
     min_views: int,
     evidence: tuple[np.ndarray, np.ndarray] | None,
+    untested: tuple | None,
 ) -> np.ndarray:
     """:func:`merge_complete` of edges given by global detection indices ga, gb (E,) and cost (E,), views of
-    counts (V,) detections: -> (P, V)."""
+    counts (V,) detections: -> (P, V). untested: the inputs of the link tests not among ``linked``, computed
+    when the merge asks (:func:`untested_links`), or None: every link test is in ``linked``."""
     if len(counts) > 62:
         raise ValueError(f"complete-linkage merging keeps views in a 64-bit mask: at most 62 views, got {len(counts)}")
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     view_of = np.repeat(np.arange(len(counts)), counts).astype(np.int64)
     has_feet, var = evidence if evidence is not None else (np.ones(offsets[-1], bool), np.ones((offsets[-1], 1)))
     links = np.ascontiguousarray(np.asarray(linked, dtype=np.int64).reshape(-1, 2))
+    if untested is None:
+        untested = all_tested(len(counts), var.shape[1])
     order = np.lexsort((gb, ga, cost))  # by cost, ties by the detections (numba's sorts cost seconds of compile)
     person, size = merge_persons(
         np.ascontiguousarray(ga, np.int64)[order],
@@ -138,10 +145,37 @@ def _merge(
         links,
         np.ascontiguousarray(has_feet, bool),
         np.ascontiguousarray(var, np.float64),
+        untested,
     )
     rows = np.full((len(size), len(counts)), -1, dtype=np.int64)
     rows[person, view_of] = np.arange(offsets[-1]) - offsets[view_of]
     return rows[size >= min_views]
+
+
+def untested_links(
+    stacked: tuple, tested: np.ndarray, limits: np.ndarray, min_dof: int, cap: float, scale2: float
+) -> tuple:
+    """What :func:`~reconstruction.matching.evidence_kernels.merge_linked` needs to compute a link test the merge
+    asks for: pairs_chi2's stacked inputs, tested (V, V) bool (True: every pair of the two views that passes the
+    link test is among the links), the link test's limits (D + 1,) (the gate's x link_scale^2), min_dof, cap and
+    the frame's scale2."""
+    uv, _, _, _, p, cov, floor2, fundamentals = stacked
+    return uv, p, cov, floor2, fundamentals, tested, limits, min_dof, cap, scale2
+
+
+def all_tested(V: int, J: int) -> tuple:
+    """:func:`untested_links` where every link test is among the links (a merge of given links): nothing left."""
+    stacked = (
+        np.zeros((0, J, 2)),
+        None,
+        None,
+        None,
+        np.zeros((0, 2)),
+        np.zeros((0, 2, 2)),
+        1.0,
+        np.zeros((V, V, 3, 3)),
+    )
+    return untested_links(stacked, np.ones((V, V), dtype=bool), np.full(J + 3, np.inf), 1, 1.0, 1.0)
 
 
 @lru_cache(maxsize=1)
@@ -154,7 +188,8 @@ def warm_up() -> None:
     out = (np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty(1), 0, 0)
     pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, 0, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1, *out)
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
-    merge_persons(one[:1], one[1:2], one[:2], np.array([[0, 1]]), np.ones(2, bool), var)
+    untested = untested_links((uv, var, one, None, p, cov, 1.0, F), np.zeros((2, 2), bool), limits, 1, 9.0, 1.0)
+    merge_persons(one[:1], one[1:2], one[:2], np.zeros((0, 2), np.int64), np.ones(2, bool), var, untested)
     feet_kernels.warm_up()
     usable_keypoints(np.zeros((2, 2, 3)), 0.2, np.empty((2, 2, 3)), np.empty((2, 2), bool), np.empty(2, bool))
     ints = np.zeros((2, 4), np.int64)  # strided column views of pairs_chi2's output, as __call__ passes them
@@ -265,9 +300,13 @@ class EvidenceMatcher:
             self._fundamentals_of(rig),
         )
         view_pairs = _view_pairs(counts)
-        pairs, scale2 = self._calibrated_pairs(stacked, view_pairs, J)
+        pairs, scale2, done = self._calibrated_pairs(stacked, view_pairs, J)
         usable = has_p | ((var > 0).sum(axis=1) >= self.min_dof)
-        return FrameEvidence(counts, stacked[2], view_pairs, *pairs, scale2, has_p, var, usable, bad)
+        tested = np.zeros((len(counts), len(counts)), dtype=bool)  # the calibration's view pairs: all link tests
+        tested[view_pairs[:done, 0], view_pairs[:done, 1]] = tested[view_pairs[:done, 1], view_pairs[:done, 0]] = True
+        link_limits = gate_limits(self.reject_rate, J + 2) * self.link_scale**2
+        untested = untested_links(stacked, tested, link_limits, self.min_dof, self.outlier_sd**2, scale2)
+        return FrameEvidence(counts, stacked[2], view_pairs, *pairs, scale2, has_p, var, usable, bad, untested)
 
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
         """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
@@ -281,18 +320,20 @@ class EvidenceMatcher:
         keep = solve_sparse_pairs(starts, ev.counts[ev.view_pairs], da, db, cost)
         kept = rows[keep]
         assignment = _merge(
-            ev.gi[kept], ev.gj[kept], cost[keep], ev.counts, links, self.min_views, (ev.has_feet, ev.var)
+            ev.gi[kept], ev.gj[kept], cost[keep], ev.counts, links, self.min_views, (ev.has_feet, ev.var), ev.untested
         )
         self._count_reasons(assignment, ev)
         return assignment
 
-    def _calibrated_pairs(self, stacked: tuple, view_pairs: np.ndarray, J: int) -> tuple[list[np.ndarray], float]:
+    def _calibrated_pairs(self, stacked: tuple, view_pairs: np.ndarray, J: int) -> tuple[list[np.ndarray], float, int]:
         """[view pair (E,) (row of view_pairs), i, j (E,) global detection indices, D^2 (E,) at the calibrated
-        noise, dof (E,)] of the detection pairs that pass the link test, and the frame's squared noise scale.
+        noise, dof (E,)] of the detection pairs that pass the test, the frame's squared noise scale and the
+        view pairs computed for the calibration (view_pairs[:done]).
 
-        View pairs are taken, neighbours first, under the loosest test until the calibration has its sample
-        (:meth:`noise_scale2`); the others are computed at the calibrated scale, so that their loops stop
-        as soon as the link test fails.
+        View pairs are taken, neighbours first, under the loosest link test until the calibration has its sample
+        (:meth:`noise_scale2`): every pair that passes the link test is among their rows. The others are computed
+        at the calibrated scale under the gate, so that their loops stop as soon as the gate fails; the merge
+        computes the link tests it needs of their other pairs (100 people in 7 views: 40-75 per frame).
         """
         sizes = np.diff(stacked[2])[view_pairs].reshape(-1, 2)
         # room for the largest view pair, or for the last frame's rows (a crowd's frames are alike: no regrowing)
@@ -306,20 +347,25 @@ class EvidenceMatcher:
         ]
         calibration = (chi2_medians(np.arange(J + 3)), self.evidence_per_dof)
         loosest, scale2, done = self.max_noise_scale**2, 1.0, 0
+        gate = gate_limits(self.reject_rate, J + 2)
         if self.calibrate:
-            done = self._run_pairs(stacked, view_pairs, 0, loosest, (*calibration, CALIBRATION_SAMPLE), out, sizes)
+            sample = (*calibration, CALIBRATION_SAMPLE)
+            done = self._run_pairs(stacked, view_pairs, 0, loosest, sample, out, sizes, gate * self.link_scale**2)
             scale2 = self.noise_scale2(out[2][: out[4]])
         first = out[3]  # rows computed at the loosest scale
-        self._run_pairs(stacked, view_pairs, done, scale2, (*calibration, 0), out, sizes)
+        # the gate, widened by rounding: every row gated_rows lets through (its D^2 is recomputed) is computed
+        self._run_pairs(stacked, view_pairs, done, scale2, (*calibration, 0), out, sizes, gate * (1.0 + 1e-9))
         ints, floats = out[0][: out[3]], out[1][: out[3]]
         self._rows_hint = int(1.25 * out[3]) + int(sizes.prod(axis=1).max(initial=0))
         d2 = calibrated_chi2(floats, first, loosest, scale2)
-        return [ints[:, 0], ints[:, 1], ints[:, 2], d2, ints[:, 3]], scale2
+        return [ints[:, 0], ints[:, 1], ints[:, 2], d2, ints[:, 3]], scale2, done
 
-    def _run_pairs(self, stacked, view_pairs, q0: int, scale2: float, calibration: tuple, out: list, sizes) -> int:
-        """:func:`pairs_chi2` from view pair q0 at scale2 into out = [ints, floats, ratios, n, nr], growing ints and
-        floats when a view pair needs the room: -> view pairs done."""
-        fixed = (gate_limits(self.reject_rate, stacked[1].shape[1] + 2) * self.link_scale**2, self.min_dof)
+    def _run_pairs(
+        self, stacked, view_pairs, q0: int, scale2: float, calibration: tuple, out: list, sizes, limits: np.ndarray
+    ) -> int:
+        """:func:`pairs_chi2` from view pair q0 at scale2 under limits (D + 1,) into out = [ints, floats, ratios, n,
+        nr], growing ints and floats when a view pair needs the room: -> view pairs done."""
+        fixed = (limits, self.min_dof)
         while True:
             out[3], out[4], q0 = pairs_chi2(
                 *stacked, view_pairs, q0, *fixed, self.outlier_sd**2, scale2, *calibration, *out
@@ -369,12 +415,14 @@ def _view_pairs(counts: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FrameEvidence:
-    """A frame's detections, stacked over its V views (N in all), and its detection pairs that pass the link test.
+    """A frame's detections, stacked over its V views (N in all), and its detection pairs that pass the gate (and in
+    the view pairs of the calibration, every one that passes the link test).
 
     counts (V,), offsets (V + 1,) (view v: offsets[v]:offsets[v + 1]); view_pairs (K, 2); per detection pair:
     pair (E,) its row of view_pairs, gi, gj (E,) global indices, d2 (E,) chi^2 at the calibrated noise (scale2,
     squared), dof (E,); per detection: has_feet (N,), var (N, J) joint pixel variances (0: not usable), usable
-    (N,) (feet or >= min_dof joints), bad (N,) (non-finite keypoints).
+    (N,) (feet or >= min_dof joints), bad (N,) (non-finite keypoints); untested: the link tests not among the
+    rows, for the merge (:func:`untested_links`).
     """
 
     counts: np.ndarray
@@ -390,6 +438,7 @@ class FrameEvidence:
     var: np.ndarray
     usable: np.ndarray
     bad: np.ndarray
+    untested: tuple
 
 
 def _finite(view: ViewDetections) -> ViewDetections:
