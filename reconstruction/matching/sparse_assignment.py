@@ -4,9 +4,10 @@
 so the solver maximises the number of allowed pairs, then minimises their cost: the objective is
 sum(cost - M) over the allowed pairs used, which splits over the connected components of the graph of
 allowed pairs. In a crowd a view pair has hundreds of components of one or a few detections, so solving
-each one alone (with the same M) is much cheaper than one dense (Na, Nb) problem, and each is started from a row
-reduction (:func:`lsap_reduced`). Where the optimum is unique (ties of float costs aside) the result is the dense
-solver's.
+each one alone (with the same M) is much cheaper than one dense (Na, Nb) problem. Each is solved over its allowed
+entries alone (a crowd's view pair still has a component of ~75 x 75 with ~7 entries per row), from a row
+reduction, by the shortest augmenting paths of scipy's solver (:func:`_solve_component`). Where the optimum is
+unique (ties of float costs aside) the result is the dense solver's.
 
 :func:`linear_sum_assignment` is the dense solver for the tracker, the evaluation and the 2D association:
 scipy's result for a finite matrix (its algorithm step for step, :func:`lsap`, so ties break alike) without
@@ -33,33 +34,6 @@ def lsap(cost: np.ndarray) -> np.ndarray:
     work = _work(nr, nc)
     for cur in range(nr):
         if not _augment(cost, cur, u, v, col4row, row4col, work):  # infeasible (not with finite costs)
-            break
-    return col4row
-
-
-@njit(cache=True, error_model="numpy")
-def lsap_reduced(cost: np.ndarray) -> np.ndarray:
-    """Minimum-cost assignment of a finite (nr, nc) matrix, nr <= nc: column of every row (nr,); an optimum of
-    :func:`lsap`'s problem (the same one where the optimum is unique), reached faster on gated problems.
-
-    A row reduction first (u_i = min_j c_ij, v = 0, each row given its cheapest column unless an earlier row has
-    it: feasible duals with v_j = 0 on the free columns, the pairs tight), then :func:`lsap`'s shortest augmenting
-    path for the rows left free: in a gated crowd most rows' cheapest columns differ, and few paths are searched.
-    """
-    nr, nc = cost.shape
-    u, v = np.empty(nr), np.zeros(nc)
-    col4row, row4col = np.full(nr, -1), np.full(nc, -1)
-    for i in range(nr):  # row reduction: u_i = min_j c_ij, v = 0 (feasible; a free column keeps v_j = 0)
-        best, arg = cost[i, 0], 0
-        for j in range(1, nc):
-            if cost[i, j] < best:
-                best, arg = cost[i, j], j
-        u[i] = best
-        if row4col[arg] == -1:  # the row's cheapest column, unless an earlier row has it: a tight pair
-            col4row[i], row4col[arg] = arg, i
-    work = _work(nr, nc)
-    for cur in range(nr):
-        if col4row[cur] == -1 and not _augment(cost, cur, u, v, col4row, row4col, work):
             break
     return col4row
 
@@ -129,43 +103,104 @@ def _augment(cost, cur, u, v, col4row, row4col, work) -> bool:
 
 @njit(cache=True, error_model="numpy")
 def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
-    """Assign one component, its entries ks (ascending, so rows ascending): -> keep[ks] of the assignment.
-    row_at, col_at: scratch (na,), (nb,) of -1, left as found."""
-    nr, nc = 0, 0
-    cols = np.empty(len(ks), dtype=np.int64)
-    for k in ks:
+    """Assign one component, its entries ks (ascending: rows ascending, each row's entries together): -> keep[ks]
+    of the assignment. row_at, col_at: scratch (na,), (nb,) of -1, left as found.
+
+    The dense problem (the entries not allowed at cost big) as a sparse one: each row has its allowed entries
+    and a column of its own at cost big (matched to nothing), which has the dense problem's optimum (a row the
+    dense solver gives a big entry is a row left unmatched, and there are enough columns for those). Solved by a
+    row reduction, then :func:`lsap`'s shortest augmenting paths over the entries alone (:func:`_sparse_augment`).
+    """
+    E, R, C = len(ks), 0, 0
+    cols = np.empty(E, dtype=np.int64)
+    ptr = np.zeros(E + 1, dtype=np.int64)  # row r's entries: ks[ptr[r]:ptr[r + 1]]
+    for t in range(E):
+        k = ks[t]
         if row_at[li[k]] < 0:
-            row_at[li[k]] = nr
-            nr += 1
+            row_at[li[k]] = R
+            R += 1
         if col_at[lj[k]] < 0:
-            col_at[lj[k]] = 0
-            cols[nc] = lj[k]
-            nc += 1
-    for c in range(1, nc):  # insertion sort: the columns in their order in the view
-        x, d = cols[c], c
-        while d > 0 and cols[d - 1] > x:
-            cols[d] = cols[d - 1]
-            d -= 1
-        cols[d] = x
-    for c in range(nc):
-        col_at[cols[c]] = c
-    transpose = nr > nc  # the solver wants rows <= columns, as scipy transposes
-    R, C = min(nr, nc), max(nr, nc)
-    sub, at = np.empty((R, C)), np.empty((R, C), dtype=np.int64)
+            col_at[lj[k]] = C
+            C += 1
+        cols[t] = col_at[lj[k]]
+        ptr[row_at[li[k]] + 1] = t + 1
+    n = C + R  # the real columns, then each row's own
+    u, v = np.empty(R), np.zeros(n)
+    col4row, row4col = np.full(R, -1), np.full(n, -1)
+    for r in range(R):  # row reduction: u_r = its cheapest entry, v = 0 (feasible; free columns keep v = 0)
+        best, arg = big, C + r
+        for t in range(ptr[r], ptr[r + 1]):
+            if cost[ks[t]] < best:
+                best, arg = cost[ks[t]], cols[t]
+        u[r] = best
+        if row4col[arg] == -1:  # the row's cheapest column, unless an earlier row has it: a tight pair
+            col4row[r], row4col[arg] = arg, r
+    work = (np.full(n, np.inf), np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.bool_), np.empty(n, dtype=np.int64))
+    work = (*work, np.empty(R, dtype=np.int64))
     for r in range(R):
-        for c in range(C):
-            sub[r, c], at[r, c] = big, -1
-    for k in ks:
-        r, c = row_at[li[k]], col_at[lj[k]]
-        if transpose:
-            r, c = c, r
-        sub[r, c], at[r, c] = cost[k], k
-    col = lsap_reduced(sub)
-    for r in range(len(col)):
-        if col[r] >= 0 and at[r, col[r]] >= 0:
-            keep[at[r, col[r]]] = True
+        if col4row[r] == -1:
+            _sparse_augment(r, ptr, cols, ks, cost, big, C, u, v, col4row, row4col, work)
+    for r in range(R):
+        for t in range(ptr[r], ptr[r + 1]):
+            if cols[t] == col4row[r]:
+                keep[ks[t]] = True
     for k in ks:
         row_at[li[k]], col_at[lj[k]] = -1, -1
+
+
+@njit(cache=True, error_model="numpy")
+def _sparse_augment(cur, ptr, cols, ks, cost, big, C, u, v, col4row, row4col, work) -> None:
+    """:func:`_augment` for the sparse problem of :func:`_solve_component`: only the columns reached through the
+    entries (row r's: cols[ptr[r]:ptr[r + 1]] at cost[ks[...]], and its own column C + r at big) are relaxed and
+    scanned. work: spc (n,) of inf, path (n,), scanned (n,) of False (left as found), seen (n,) and rows (R,) scratch
+    (the rows of the search tree, cur first)."""
+    spc, path, scanned, seen, rows = work
+    n_rows, n_seen, n_scanned = 0, 0, 0  # seen[:n_seen]: reached, not scanned; then scanned from the end
+    min_val, i, sink = 0.0, cur, -1
+    while sink == -1:
+        rows[n_rows] = i
+        n_rows += 1
+        for t in range(ptr[i], ptr[i + 1] + 1):
+            j, c = (cols[t], cost[ks[t]]) if t < ptr[i + 1] else (C + i, big)
+            if scanned[j]:
+                continue
+            r = min_val + c - u[i] - v[j]
+            if r < spc[j]:
+                if spc[j] == np.inf:
+                    seen[n_seen] = j
+                    n_seen += 1
+                path[j], spc[j] = i, r
+        index, lowest = -1, np.inf
+        for s in range(n_seen):  # the lowest reached column, a free one among equals (as lsap)
+            j = seen[s]
+            if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
+                lowest, index = spc[j], s
+        min_val, j = lowest, seen[index]  # the row's own column is always reached: index >= 0
+        n_seen -= 1
+        seen[index] = seen[n_seen]
+        n_scanned += 1
+        seen[len(seen) - n_scanned] = j
+        scanned[j] = True
+        if row4col[j] == -1:
+            sink = j
+        else:
+            i = row4col[j]
+    u[cur] += min_val  # the dual variables, then the augmentation (as _augment)
+    for s in range(1, n_rows):
+        u[rows[s]] += min_val - spc[col4row[rows[s]]]
+    for s in range(len(seen) - n_scanned, len(seen)):
+        v[seen[s]] -= min_val - spc[seen[s]]
+    j = sink
+    while True:
+        i = path[j]
+        row4col[j] = i
+        col4row[i], j = j, col4row[i]
+        if i == cur:
+            break
+    for s in range(n_seen):
+        spc[seen[s]] = np.inf
+    for s in range(len(seen) - n_scanned, len(seen)):
+        spc[seen[s]], scanned[seen[s]] = np.inf, False
 
 
 @njit(cache=True, error_model="numpy")
