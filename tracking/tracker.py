@@ -8,8 +8,9 @@ speed at 5 frames per second); the three axes share one 2x2 covariance per joint
 a gap in the frame numbers is a longer prediction (missed frames), never a jump the velocity believes.
 
 Association: the frame's persons against the tracks' predictions (the whole body moved with the mean
-velocity of its head and trunk joints: limbs swing, the trunk moves steadily) by Hungarian assignment
-(scipy's ``linear_sum_assignment``) on the mean distance over the head and trunk joints both have (all
+velocity of its head and trunk joints: limbs swing, the trunk moves steadily) by gated Hungarian assignment
+(the most pairs under the gate, then the least cost: the sparse solver of the matcher, scipy's algorithm over
+the pairs under the gate) on the mean distance over the head and trunk joints both have (all
 shared joints where they share none of those), to the prediction or to the last position, whichever is
 nearer (a person may stop or turn at any frame: the velocity guides, it does not bind), gated at
 ``max_distance_m`` (widened by ``gate_growth_m`` per frame since the track was last seen). A person no
@@ -45,7 +46,7 @@ from scipy.spatial import cKDTree
 
 from data.bone_lengths import BONE_PAIRS, bone_lengths
 from reconstruction.compile_notice import warm_up_kernels
-from reconstruction.matching.sparse_assignment import linear_sum_assignment
+from reconstruction.matching.sparse_assignment import solve_sparse_pairs
 from tracking.track_kernels import MAD_TO_SD, centres, correct_tracks, pair_mean_distances
 
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
@@ -438,12 +439,10 @@ class Tracker:
             np.concatenate([predicted, st.position]), np.concatenate([live, live]), poses3d, gate.max()
         )
         cost = np.minimum(both[: len(st)], both[len(st) :])
-        cost = np.where(cost <= gate[:, None], cost, np.inf)
-        if not np.isfinite(cost).any():
-            return none, none
-        rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e9))
-        ok = np.isfinite(cost[rows, cols])
-        return rows[ok].astype(np.int64), cols[ok].astype(np.int64)
+        # row-major (rows ascending, as the solver wants them) and contiguous (np.nonzero's are strided views)
+        rows, cols = np.divmod(np.flatnonzero(cost <= gate[:, None]), cost.shape[1])
+        keep = solve_sparse_pairs(np.array([0, len(rows)]), np.array([cost.shape]), rows, cols, cost[rows, cols])
+        return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
     @staticmethod
     def _body_velocity(st: TrackState) -> np.ndarray:
