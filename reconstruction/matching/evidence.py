@@ -152,15 +152,13 @@ def _merge(
     return rows[size >= min_views]
 
 
-def untested_links(
-    stacked: tuple, tested: np.ndarray, limits: np.ndarray, min_dof: int, cap: float, scale2: float
-) -> tuple:
+def untested_links(stacked: tuple, tested: np.ndarray, link_test: tuple) -> tuple:
     """What :func:`~reconstruction.matching.evidence_kernels.merge_linked` needs to compute a link test the merge
-    asks for: pairs_chi2's stacked inputs, tested (V, V) bool (True: every pair of the two views that passes the
-    link test is among the links), the link test's limits (D + 1,) (the gate's x link_scale^2), min_dof, cap and
-    the frame's scale2."""
+    asks for: from pairs_chi2's stacked inputs the pixels, feet and fundamental matrices; tested (V, V) bool
+    (True: every pair of the two views that passes the link test is among the links); link_test = (limits (D + 1,)
+    (the gate's x link_scale^2), min_dof, cap, the frame's scale2)."""
     uv, _, _, _, p, cov, floor2, fundamentals = stacked
-    return uv, p, cov, floor2, fundamentals, tested, limits, min_dof, cap, scale2
+    return uv, p, cov, floor2, fundamentals, tested, *link_test
 
 
 def all_tested(V: int, J: int) -> tuple:
@@ -175,7 +173,7 @@ def all_tested(V: int, J: int) -> tuple:
         1.0,
         np.zeros((V, V, 3, 3)),
     )
-    return untested_links(stacked, np.ones((V, V), dtype=bool), np.full(J + 3, np.inf), 1, 1.0, 1.0)
+    return untested_links(stacked, np.ones((V, V), dtype=bool), (np.full(J + 3, np.inf), 1, 1.0, 1.0))
 
 
 @lru_cache(maxsize=1)
@@ -188,7 +186,7 @@ def warm_up() -> None:
     out = (np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty(1), 0, 0)
     pairs_chi2(uv, var, one, np.ones(2, bool), p, cov, 1.0, F, pairs, 0, limits, 1, 9.0, 1.0, np.ones(5), 2.0, 1, *out)
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
-    untested = untested_links((uv, var, one, None, p, cov, 1.0, F), np.zeros((2, 2), bool), limits, 1, 9.0, 1.0)
+    untested = untested_links((uv, var, one, None, p, cov, 1.0, F), np.zeros((2, 2), bool), (limits, 1, 9.0, 1.0))
     merge_persons(one[:1], one[1:2], one[:2], np.zeros((0, 2), np.int64), np.ones(2, bool), var, untested)
     feet_kernels.warm_up()
     usable_keypoints(np.zeros((2, 2, 3)), 0.2, np.empty((2, 2, 3)), np.empty((2, 2), bool), np.empty(2, bool))
@@ -304,8 +302,13 @@ class EvidenceMatcher:
         usable = has_p | ((var > 0).sum(axis=1) >= self.min_dof)
         tested = np.zeros((len(counts), len(counts)), dtype=bool)  # the calibration's view pairs: all link tests
         tested[view_pairs[:done, 0], view_pairs[:done, 1]] = tested[view_pairs[:done, 1], view_pairs[:done, 0]] = True
-        link_limits = gate_limits(self.reject_rate, J + 2) * self.link_scale**2
-        untested = untested_links(stacked, tested, link_limits, self.min_dof, self.outlier_sd**2, scale2)
+        link_test = (
+            gate_limits(self.reject_rate, J + 2) * self.link_scale**2,
+            self.min_dof,
+            self.outlier_sd**2,
+            scale2,
+        )
+        untested = untested_links(stacked, tested, link_test)
         return FrameEvidence(counts, stacked[2], view_pairs, *pairs, scale2, has_p, var, usable, bad, untested)
 
     def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
