@@ -11,7 +11,7 @@ from typing import Callable, Iterator
 from reconstruction.compile_ahead import kernels_interpreted
 
 # loading the cached kernels takes ~0.2 s, compiling them about 20 s of CPU in all (warm-ups with an empty
-# NUMBA_CACHE_DIR: MAP solver 7.9 s, evidence matcher 5.7 s, tracker 2.6 s): a block still running after 1 s is compiling
+# NUMBA_CACHE_DIR: MAP solver 8.2 s, evidence matcher 7.0 s, tracker 2.4 s): a block still running after 1 s is compiling
 NOTICE_AFTER_S = 1.0
 
 
