@@ -254,7 +254,7 @@ def merge_linked(
     masks = _masks(var)
     n = len(view_of)
     indptr, partners = _adjacency(links, n)
-    row = (np.empty((1, 4), dtype=np.int64), np.empty((1, 2)))
+    tested, row = untested[5], (np.empty((1, 4), dtype=np.int64), np.empty((1, 2)))
     parent, tail = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
     views, nxt, size = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
     for i in range(n):
@@ -275,7 +275,7 @@ def merge_linked(
                 linked = common == 0 and not (has_feet[x] and has_feet[y])  # nothing to test
                 for t in range(indptr[x], indptr[x + 1]):  # x's partners: a short list
                     linked = linked or partners[t] == y
-                if not linked and not untested[5][view_of[x], view_of[y]]:
+                if not linked and not tested[view_of[x], view_of[y]]:
                     linked = _linked_now(x, y, view_of, masks, var, has_feet, untested, row)
                 if not linked:
                     ok = False

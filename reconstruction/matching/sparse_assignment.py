@@ -91,6 +91,14 @@ def _augment(cost, cur, u, v, col4row, row4col, work) -> bool:
     for j in range(nc):
         if SC[j]:
             v[j] -= min_val - spc[j]
+    _flip_path(cur, sink, path, col4row, row4col)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _flip_path(cur, sink, path, col4row, row4col) -> None:
+    """Augment along the shortest path from free row cur to the free column sink (path[j]: the row before column
+    j): every row on it takes the column after it, col4row (nr,) and row4col (nc,) in place."""
     j = sink
     while True:
         i = path[j]
@@ -98,7 +106,6 @@ def _augment(cost, cur, u, v, col4row, row4col, work) -> bool:
         col4row[i], j = j, col4row[i]
         if i == cur:
             break
-    return True
 
 
 @njit(cache=True, error_model="numpy")
@@ -190,13 +197,7 @@ def _sparse_augment(cur, ptr, cols, ks, cost, big, C, u, v, col4row, row4col, wo
         u[rows[s]] += min_val - spc[col4row[rows[s]]]
     for s in range(len(seen) - n_scanned, len(seen)):
         v[seen[s]] -= min_val - spc[seen[s]]
-    j = sink
-    while True:
-        i = path[j]
-        row4col[j] = i
-        col4row[i], j = j, col4row[i]
-        if i == cur:
-            break
+    _flip_path(cur, sink, path, col4row, row4col)
     for s in range(n_seen):
         spc[seen[s]] = np.inf
     for s in range(len(seen) - n_scanned, len(seen)):
