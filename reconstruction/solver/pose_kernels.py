@@ -124,6 +124,40 @@ def _joint_terms(
 
 
 @njit(**_INNER)
+def _joint_cost(
+    cost: float,
+    X0: float,
+    X1: float,
+    X2: float,
+    p: int,
+    j: int,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w: np.ndarray,
+    anchor: np.ndarray,
+    tau2: float,
+    robust: int,
+    C2: float,
+) -> float:
+    """The cost of :func:`_joint_terms` alone, by the same operations in the same order (the same number)."""
+    dx0, dx1, dx2 = X0 - anchor[p, j, 0], X1 - anchor[p, j, 1], X2 - anchor[p, j, 2]
+    cost += 0.5 * tau2 * (dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
+    for v in range(proj.shape[0]):
+        wv = w[v, p, j]
+        if wv <= 0.0:
+            continue
+        h0 = proj[v, 0, 0] * X0 + proj[v, 0, 1] * X1 + proj[v, 0, 2] * X2 + proj[v, 0, 3]
+        h1 = proj[v, 1, 0] * X0 + proj[v, 1, 1] * X1 + proj[v, 1, 2] * X2 + proj[v, 1, 3]
+        depth = max(proj[v, 2, 0] * X0 + proj[v, 2, 1] * X1 + proj[v, 2, 2] * X2 + proj[v, 2, 3], _EPS_DEPTH)
+        rx, ry = (uv[v, p, j, 0] - h0 / depth) * wv, (uv[v, p, j, 1] - h1 / depth) * wv
+        if robust == 0:
+            cost += 0.5 * (rx * rx + ry * ry)
+        else:
+            cost += 0.5 * (_robust(rx, robust, C2)[0] + _robust(ry, robust, C2)[0])
+    return cost
+
+
+@njit(**_INNER)
 def _likelihood_terms(
     x: np.ndarray,
     s: int,
@@ -379,6 +413,24 @@ def linearize(
 
 
 @njit(**_INNER)
+def _cost(x: np.ndarray, c: int, p: int, data: tuple, tau2: float, robust: int, C2: float, plan: tuple) -> float:
+    """The cost of :func:`linearize` alone (the same number): for a trial whose derivatives nobody reads."""
+    proj, uv, w, anchor, ref, bw = data
+    pos_joint, comp_start, bones_ptr, bones, _, _, bone_pa, bone_pb, _, _, _, _ = plan
+    cost = 0.0
+    for k in range(comp_start[c], comp_start[c + 1]):
+        cost = _joint_cost(cost, x[k, 0], x[k, 1], x[k, 2], p, pos_joint[k], proj, uv, w, anchor, tau2, robust, C2)
+    prior = 0.0
+    for t in range(bones_ptr[c], bones_ptr[c + 1]):
+        l = bones[t]
+        a, b = bone_pa[l], bone_pb[l]
+        d0, d1, d2 = x[a, 0] - x[b, 0], x[a, 1] - x[b, 1], x[a, 2] - x[b, 2]
+        r = bw[p, l] * (ref[p, l] - np.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
+        prior += 0.5 * r * r
+    return cost + prior
+
+
+@njit(**_INNER)
 def _abs_max(a: np.ndarray, s: int, e: int) -> float:
     """max |a[s:e]| of a (J, 3) array."""
     out = 0.0
@@ -450,7 +502,10 @@ def _solve_problem(
                 predicted += 0.5 * h[k, i] * (mu * h[k, i] - lin[1][k, i])
                 x_new[k, i] = x[k, i] + h[k, i]
         h_max = _abs_max(h, s, e) if not np.isnan(predicted) else np.nan  # NaN step: never accepted
-        f_t = linearize(x_new, c, p, data, tau2, robust, C2, plan, trial[0], trial[1], trial[2], trial[3])
+        if h_max <= xtol:  # the last trial, accepted or not (see the tests below): its derivatives go unread
+            f_t = _cost(x_new, c, p, data, tau2, robust, C2, plan)
+        else:
+            f_t = linearize(x_new, c, p, data, tau2, robust, C2, plan, trial[0], trial[1], trial[2], trial[3])
         actual = f - f_t
         rho = actual / predicted if predicted != 0.0 else np.nan
         accept = predicted > 0.0 and rho > 0.0 and np.isfinite(f_t + h_max)
@@ -532,7 +587,11 @@ def _solve_point(
         predicted += 0.5 * h2 * (mu * h2 - g2)
         n0, n1, n2 = X0 + h0, X1 + h1, X2 + h2
         h_max = max(max(max(0.0, abs(h0)), abs(h1)), abs(h2)) if not np.isnan(predicted) else np.nan
-        trial = _joint_terms(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2)
+        if h_max <= xtol:  # the last trial (see _solve_problem): its cost alone
+            f_t = _joint_cost(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2)
+            trial = (f_t, g0, g1, g2, d00, d01, d02, d11, d12, d22)
+        else:
+            trial = _joint_terms(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2)
         actual = f - trial[0]
         rho = actual / predicted if predicted != 0.0 else np.nan
         if predicted > 0.0 and rho > 0.0 and np.isfinite(trial[0] + h_max):
