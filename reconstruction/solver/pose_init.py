@@ -102,12 +102,18 @@ def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: n
 
 
 @njit(cache=True)
+def _score(poses2d: np.ndarray, v: int, p: int, j: int) -> float:
+    """The score of joint j of person p in view v of poses2d (V, P, J, 3), 0 where its pixel is not finite."""
+    finite = np.isfinite(poses2d[v, p, j, 0]) and np.isfinite(poses2d[v, p, j, 1])
+    return poses2d[v, p, j, 2] if finite else 0.0
+
+
+@njit(cache=True)
 def _start_kernel(
     points: np.ndarray,
     known: np.ndarray,
-    score: np.ndarray,
+    poses2d: np.ndarray,
     proj: np.ndarray,
-    xy: np.ndarray,
     Minv: np.ndarray,
     centre: np.ndarray,
     template: np.ndarray,
@@ -118,10 +124,10 @@ def _start_kernel(
     m: np.ndarray,
     buf: np.ndarray,
 ) -> None:
-    """_start per person (see there), one compiled function: (P, J, 3), (P, J), (V, P, J), (V, 3, 4), pixels
-    (V, P, J, 2), M^-1 (V, 3, 3), centres (V, 3), (J, 3) -> out (P, J, 3) (enters as points), placed (P,) (enters
-    False); scratch: ok (P, J) (enters as known), body (J + 1, 3), m (12, 3), buf (max(J, 3),). No allocations:
-    numba would compile numpy's allocators for them."""
+    """_start per person (see there), one compiled function: (P, J, 3), (P, J), poses2d (V, P, J, 3) (a joint's
+    score counts as 0 where its pixel is not finite), (V, 3, 4), M^-1 (V, 3, 3), centres (V, 3), (J, 3) -> out
+    (P, J, 3) (enters as points), placed (P,) (enters False); scratch: ok (P, J) (enters as known), body (J + 1, 3),
+    m (12, 3), buf (max(J, 3),). No allocations: numba would compile numpy's allocators for them."""
     P, J = known.shape
     shift = body[J]
     for p in range(P):
@@ -130,7 +136,7 @@ def _start_kernel(
                 depth = 0.0
                 for i in range(3):
                     depth += proj[v, 2, i] * points[p, j, i]
-                ok[p, j] &= not (score[v, p, j] > 0 and not depth + proj[v, 2, 3] > 0)
+                ok[p, j] &= not (_score(poses2d, v, p, j) > 0 and not depth + proj[v, 2, 3] > 0)
         for i in range(3):  # the template shifted by the median of points - template: insertion sorts
             n = 0
             for j in range(J):
@@ -153,17 +159,20 @@ def _start_kernel(
         for j in range(J):  # the rest: the body, moved onto the best-scored view's ray
             if ok[p, j]:
                 continue
-            best = 0  # np.argmax(score[:, p, j]): the first maximum, or the first NaN
-            for v in range(len(score)):
-                if not score[v, p, j] <= score[best, p, j] and not np.isnan(score[best, p, j]):
+            best = 0  # np.argmax of the scores: the first maximum, or the first NaN
+            for v in range(len(poses2d)):
+                top = _score(poses2d, best, p, j)
+                if not _score(poses2d, v, p, j) <= top and not np.isnan(top):
                     best = v
-            if not score[best, p, j] > 0:
+            if not _score(poses2d, best, p, j) > 0:
                 for i in range(3):
                     out[p, j, i] = body[j, i]
                 continue
             num, den = 0.0, 0.0
             for i in range(3):
-                buf[i] = Minv[best, i, 0] * xy[best, p, j, 0] + Minv[best, i, 1] * xy[best, p, j, 1] + Minv[best, i, 2]
+                buf[i] = (
+                    Minv[best, i, 0] * poses2d[best, p, j, 0] + Minv[best, i, 1] * poses2d[best, p, j, 1] + Minv[best, i, 2]
+                )
                 num, den = num + (body[j, i] - centre[best, i]) * buf[i], den + buf[i] * buf[i]
             t = max(num / den, _MIN_RAY_DEPTH_M)  # in front of the camera
             for i in range(3):
@@ -177,13 +186,11 @@ def _writable(a: np.ndarray, dtype: type) -> np.ndarray:
 
 
 def _views(poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Contiguous scores (V, P, J) (0 where not finite), proj (V, 3, 4), pixels (V, P, J, 2), M^-1 (V, 3, 3), centres
-    (V, 3): _start_kernel's arguments after the points."""
-    poses2d = np.asarray(poses2d, dtype=np.float64)
-    score = np.where(np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1]), poses2d[..., 2], 0.0)
+    """Contiguous poses2d (V, P, J, 3), proj (V, 3, 4), M^-1 (V, 3, 3), centres (V, 3): _start_kernel's arguments
+    after the points."""
     Minv = np.linalg.inv(proj[:, :, :3])
     centre = -np.matmul(Minv, proj[:, :, 3:])[..., 0]
-    return np.ascontiguousarray(score), proj, np.ascontiguousarray(poses2d[..., :2]), Minv, centre
+    return _writable(poses2d, np.float64), proj, Minv, centre
 
 
 def fit_mean_body(points: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
