@@ -97,7 +97,7 @@ def joint_sigma(
     seen = (score > 0) & np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
     size = np.sqrt(np.clip(bboxes[..., 2], 0, None) * np.clip(bboxes[..., 3], 0, None))
     missing = ~(size > 0)
-    if np.any(missing):
+    if np.any(missing) and np.any(seen & missing[..., None]):  # (a box of no seen joint: its sigmas are inf)
         pts, ok = poses2d[missing][..., :2], seen[missing][..., None]
         lo = np.where(ok, pts, np.inf).min(axis=-2)
         hi = np.where(ok, pts, -np.inf).max(axis=-2)
