@@ -12,7 +12,7 @@ from data.bone_lengths import BONE_PAIRS
 from data.synthetic.body import mean_body, pose_joints
 from evaluation.identity import IdentityEvaluator
 from reconstruction.solver.map_solver import combine_estimates
-from tracking import Tracker
+from tracking import Tracker, tracker
 from tracking.track_kernels import centres, pair_mean_distances, robust_skeleton
 from tracking.tracker import CORE_JOINTS, _core_mask, mean_distances, near_pairs, robust_lengths
 
@@ -113,7 +113,9 @@ def test_identity_metrics_count_switches_fragments_and_the_kept_share():
     assert s["idf1_like"] == pytest.approx(100 * (3 + 6) / 12)
 
 
-def test_pre_gated_mean_distances_equal_the_brute_force_within_the_gate():
+@pytest.mark.parametrize("compiled_pairs", [0, 10**6])  # the KD-trees' pairs, then one compiled pass over all
+def test_pre_gated_mean_distances_equal_the_brute_force_within_the_gate(compiled_pairs, monkeypatch):
+    monkeypatch.setattr(tracker, "COMPILED_PAIRS", compiled_pairs)
     rng = np.random.default_rng(3)
     guess = rng.uniform(-3, 3, (12, 1, 3)) + rng.normal(0, 0.3, (12, 23, 3))
     seen = rng.random((12, 23)) > 0.2

@@ -73,6 +73,35 @@ def pair_mean_distances(
 
 
 @njit(**_JIT)
+def near_mean_distances(
+    guess: np.ndarray,
+    seen: np.ndarray,
+    poses3d: np.ndarray,
+    valid: np.ndarray,
+    core: np.ndarray,
+    ca: np.ndarray,
+    cb: np.ndarray,
+    radius: float,
+    out: np.ndarray,
+) -> None:
+    """:func:`pair_mean_distances` of every pair whose centres ca (T, 3) and cb (P, 3) (both finite) lie at most radius
+    apart, measured as tracker.near_pairs' dense path does: one pass over the T x P pairs, no pair lists."""
+    for t in range(len(ca)):
+        if not (np.isfinite(ca[t, 0]) and np.isfinite(ca[t, 1]) and np.isfinite(ca[t, 2])):
+            continue
+        for p in range(len(cb)):
+            if not (np.isfinite(cb[p, 0]) and np.isfinite(cb[p, 1]) and np.isfinite(cb[p, 2])):
+                continue
+            dx, dy, dz = ca[t, 0] - cb[p, 0], ca[t, 1] - cb[p, 1], ca[t, 2] - cb[p, 2]
+            if not np.sqrt(dx * dx + dy * dy + dz * dz) <= radius:
+                continue
+            d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, True)
+            if not np.isfinite(d):
+                d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, False)
+            out[t, p] = d
+
+
+@njit(**_JIT)
 def _maximum(a: float, b: float) -> float:
     """np.maximum of two floats (NaN if either is)."""
     return a if a >= b or np.isnan(a) else b

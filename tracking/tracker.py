@@ -47,7 +47,7 @@ from scipy.spatial import cKDTree
 from data.bone_lengths import BONE_PAIRS, bone_lengths
 from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
-from tracking.track_kernels import MAD_TO_SD, centres, correct_tracks, pair_mean_distances
+from tracking.track_kernels import MAD_TO_SD, centres, correct_tracks, near_mean_distances, pair_mean_distances
 
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
 # shoulders, hips) move with the body; arms and legs swing by tens of cm between frames at 5 fps.
@@ -57,6 +57,7 @@ CORE_JOINTS = np.array([0, 1, 2, 3, 4, 5, 6, 11, 12])
 UNSEEN_VAR_M2 = 0.15**2
 SKELETON_REFRESH = 5  # hits between two updates of a track's robust skeleton (it changes slowly)
 DENSE_PAIRS = 4096  # up to this many track x pose pairs, near_pairs measures them all (trees cost ~20 us)
+COMPILED_PAIRS = 65536  # up to this many (400 x 200: even), mean_distances tests every pair in one compiled pass
 BODY_SPAN_M = 1.0  # m: the centres of any two subsets of one body's head and trunk joints lie this close
 
 
@@ -202,8 +203,12 @@ def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max
     poses3d = np.ascontiguousarray(poses3d, dtype=np.float64)
     valid = poses3d[..., 3] > 0
     core = _core_mask(poses3d.shape[1])
-    rows, cols = near_pairs(_centres(guess, seen, core), _centres(poses3d, valid, core), max_m + BODY_SPAN_M)
+    ca, cb, radius = _centres(guess, seen, core), _centres(poses3d, valid, core), max_m + BODY_SPAN_M
     out = np.full((len(guess), len(poses3d)), np.inf)
+    if len(ca) * len(cb) <= COMPILED_PAIRS:  # every pair in one compiled pass
+        near_mean_distances(guess, seen, poses3d, valid, core, ca, cb, float(radius), out)
+        return out
+    rows, cols = near_pairs(ca, cb, radius)
     pair_mean_distances(
         guess, seen, poses3d, valid, core, rows.astype(np.int64, copy=False), cols.astype(np.int64, copy=False), out
     )
@@ -236,7 +241,11 @@ def warm_up() -> None:
     guess (a track's correction on none), so that a first frame is not timed with the compiler."""
     J = len(CORE_JOINTS)
     pose, none = np.ones((1, J, 4)), np.zeros(0, dtype=np.int64)
-    mean_distances(np.ones((1, J, 3)), np.ones((1, J), dtype=bool), pose)
+    mean_distances(np.ones((1, J, 3)), np.ones((1, J), dtype=bool), pose)  # the compiled pass over every pair
+    core, one = _core_mask(J), np.zeros(1, dtype=np.int64)  # ... and the large crowds' pairs from the KD-trees
+    pair_mean_distances(
+        pose[..., :3].copy(), pose[..., 3] > 0, pose, pose[..., 3] > 0, core, one, one, np.empty((1, 1))
+    )
     filters, counts = (UNSEEN_VAR_M2, 1.0, 1.0, 1.0, 1.0, 1.0), (1, SKELETON_REFRESH)
     lengths = np.ones((1, len(BONE_PAIRS)))
     correct_tracks(
