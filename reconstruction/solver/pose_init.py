@@ -171,7 +171,9 @@ def _start_kernel(
             num, den = 0.0, 0.0
             for i in range(3):
                 buf[i] = (
-                    Minv[best, i, 0] * poses2d[best, p, j, 0] + Minv[best, i, 1] * poses2d[best, p, j, 1] + Minv[best, i, 2]
+                    Minv[best, i, 0] * poses2d[best, p, j, 0]
+                    + Minv[best, i, 1] * poses2d[best, p, j, 1]
+                    + Minv[best, i, 2]
                 )
                 num, den = num + (body[j, i] - centre[best, i]) * buf[i], den + buf[i] * buf[i]
             t = max(num / den, _MIN_RAY_DEPTH_M)  # in front of the camera
