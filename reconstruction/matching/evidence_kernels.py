@@ -36,9 +36,10 @@ def _masks(var: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
-    """Epipolar lines F x (or F^T x) of every joint: uv (N, J, 2) -> (N, J, 3)."""
+    """Epipolar lines F x (or F^T x) of every joint and the squares of their normals, l0^2 + l1^2 (the Sampson
+    denominators' terms, once per joint rather than once per pair): uv (N, J, 2) -> (N, J, 4)."""
     N, J = uv.shape[0], uv.shape[1]
-    out = np.empty((N, J, 3))
+    out = np.empty((N, J, 4))
     for i in range(N):
         for k in range(J):
             x, y = uv[i, k, 0], uv[i, k, 1]
@@ -47,6 +48,7 @@ def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
                     out[i, k, r] = F[0, r] * x + F[1, r] * y + F[2, r]
                 else:
                     out[i, k, r] = F[r, 0] * x + F[r, 1] * y + F[r, 2]
+            out[i, k, 3] = out[i, k, 0] * out[i, k, 0] + out[i, k, 1] * out[i, k, 1]
     return out
 
 
@@ -94,10 +96,8 @@ def _view_pair(
                     low = common & -common
                     common ^= low
                     k = 62 * w + _popcount(low - 1)
-                    l0, l1, l2 = la[ai, k, 0], la[ai, k, 1], la[ai, k, 2]
-                    e = uv[j, k, 0] * l0 + uv[j, k, 1] * l1 + l2
-                    m0, m1 = lb[bj, k, 0], lb[bj, k, 1]
-                    denom = var[j, k] * (l0 * l0 + l1 * l1) + var[i, k] * (m0 * m0 + m1 * m1)
+                    e = uv[j, k, 0] * la[ai, k, 0] + uv[j, k, 1] * la[ai, k, 1] + la[ai, k, 2]
+                    denom = var[j, k] * la[ai, k, 3] + var[i, k] * lb[bj, k, 3]
                     if denom > 0.0:
                         d2 += min(e * e / denom, cap) / scale2
                         dof += 1
