@@ -548,3 +548,45 @@ def test_mean_body_fit_is_the_scipy_kabsch_rotation_and_falls_back_to_yaw():
     assert placed[0] and np.allclose(body[0, 15:17, 2] - MEAN_POSE[15:17, 2], body[0, 15, 2] - MEAN_POSE[15, 2])
     _, placed = fit_mean_body(pts[None], np.zeros((1, 23), dtype=bool))
     assert not placed[0]
+
+
+@pytest.mark.parametrize("robust", [0, 1, 2])  # none, huber, cauchy
+def test_the_cost_alone_is_the_linearisations_cost_bit_for_bit(robust):
+    # the solver computes a solve's last trial by _cost (_joint_cost for one joint): it must be the very number
+    # linearize (_joint_terms) gives, or the stopping decisions would differ from the full computation's
+    from numba import njit
+
+    @njit
+    def costs(x, data, tau2, robust, C2, plan, lin, k, p):
+        D, g, K, Kr = lin
+        proj, uv, w, anchor = data[0], data[1], data[2], data[3]
+        j = plan[0][k]
+        point = pose_kernels._joint_cost(0.0, x[k, 0], x[k, 1], x[k, 2], p, j, proj, uv, w, anchor, tau2, robust, C2)
+        terms = pose_kernels._joint_terms(0.0, x[k, 0], x[k, 1], x[k, 2], p, j, proj, uv, w, anchor, tau2, robust, C2)
+        whole = [(pose_kernels._cost(x, c, p, data, tau2, robust, C2, plan), 0.0) for c in range(len(plan[1]) - 1)]
+        for c in range(len(plan[1]) - 1):
+            whole[c] = (whole[c][0], pose_kernels.linearize(x, c, p, data, tau2, robust, C2, plan, D, g, K, Kr))
+        return point, terms[0], whole
+
+    rng = np.random.default_rng(robust)
+    rig = ring_rig(5, 5.0, 2.5)
+    P, J, L = 3, len(MEAN_POSE), len(BONE_PAIRS)
+    X = MEAN_POSE[None] + rng.normal(0, 0.3, (P, 1, 3)) + rng.normal(0, 0.05, (P, J, 3))
+    uv = rig.project(X) + rng.normal(0, 4.0, (5, P, J, 2))
+    w = np.where(rng.random((5, P, J)) < 0.3, 0.0, rng.uniform(0.05, 0.3, (5, P, J)))
+    data = (
+        rig.projection_matrices(),
+        uv,
+        w,
+        X + 0.01,
+        BONE_MEAN + rng.normal(0, 0.02, (P, L)),
+        rng.uniform(1, 30, (P, L)),
+    )
+    plan = plan_arrays(solver_plan(J, tuple(map(tuple, BONE_PAIRS.tolist()))))
+    lin = (np.empty((J, 3, 3)), np.empty((J, 3)), np.empty((L, 3, 3)), np.empty((L, 3, 3)))
+    for p in range(P):
+        x = (X[p] + rng.normal(0, 0.02, (J, 3)))[plan[0]]
+        for k in range(J):
+            point, terms, whole = costs(x, data, 1e-6, robust, 9.0, plan, lin, k, p)
+            assert point == terms
+        assert all(alone == full for alone, full in whole)
