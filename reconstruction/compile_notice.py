@@ -1,5 +1,5 @@
 """One line for the user while numba compiles: the first run after an install (or a change of the kernels'
-code) compiles them for about 20 s of CPU (README; with two cores, in a background process while the run uses
+code) compiles them for about 24 s of CPU (README; with two cores, in a background process while the run uses
 them as Python, reconstruction/compile_ahead.py), silently; later runs load them from numba's cache in ~0.2 s."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from typing import Callable, Iterator
 
 from reconstruction.compile_ahead import kernels_interpreted
 
-# loading the cached kernels takes ~0.2 s, compiling them about 20 s of CPU in all (warm-ups with an empty
-# NUMBA_CACHE_DIR: MAP solver 8.2 s, evidence matcher 7.0 s, tracker 2.4 s): a block still running after 1 s is compiling
+# loading the cached kernels takes ~0.2 s, compiling them about 24 s of CPU in all (warm-ups with an empty
+# NUMBA_CACHE_DIR: MAP solver 9.1 s, evidence matcher 7.4 s, tracker 2.8 s): a block still running after 1 s is compiling
 NOTICE_AFTER_S = 1.0
 
 
