@@ -552,8 +552,8 @@ def test_mean_body_fit_is_the_scipy_kabsch_rotation_and_falls_back_to_yaw():
 
 @pytest.mark.parametrize("robust", [0, 1, 2])  # none, huber, cauchy
 def test_the_cost_alone_is_the_linearisations_cost_bit_for_bit(robust):
-    # the solver computes a solve's last trial by _cost (_joint_cost for one joint): it must be the very number
-    # linearize (_joint_terms) gives, or the stopping decisions would differ from the full computation's
+    # the solver computes a solve's last trial by _cost (_joint_terms without derivatives for one joint): it must be
+    # the very number linearize (_joint_terms with them) gives, or the stopping decisions would differ
     from numba import njit
 
     @njit
@@ -561,12 +561,13 @@ def test_the_cost_alone_is_the_linearisations_cost_bit_for_bit(robust):
         D, g, K, Kr = lin
         proj, uv, w, anchor = data[0], data[1], data[2], data[3]
         j = plan[0][k]
-        point = pose_kernels._joint_cost(0.0, x[k, 0], x[k, 1], x[k, 2], p, j, proj, uv, w, anchor, tau2, robust, C2)
-        terms = pose_kernels._joint_terms(0.0, x[k, 0], x[k, 1], x[k, 2], p, j, proj, uv, w, anchor, tau2, robust, C2)
+        X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
+        point = pose_kernels._joint_terms(0.0, X0, X1, X2, p, j, proj, uv, w, anchor, tau2, robust, C2, False)
+        terms = pose_kernels._joint_terms(0.0, X0, X1, X2, p, j, proj, uv, w, anchor, tau2, robust, C2, True)
         whole = [(pose_kernels._cost(x, c, p, data, tau2, robust, C2, plan), 0.0) for c in range(len(plan[1]) - 1)]
         for c in range(len(plan[1]) - 1):
             whole[c] = (whole[c][0], pose_kernels.linearize(x, c, p, data, tau2, robust, C2, plan, D, g, K, Kr))
-        return point, terms[0], whole
+        return point[0], terms[0], whole
 
     rng = np.random.default_rng(robust)
     rig = ring_rig(5, 5.0, 2.5)

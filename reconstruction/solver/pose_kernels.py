@@ -77,9 +77,11 @@ def _joint_terms(
     tau2: float,
     robust: int,
     C2: float,
+    derivatives: bool,
 ) -> tuple[float, float, float, float, float, float, float, float, float, float]:
     """Joint j of person p at (X0, X1, X2): cost + its likelihood and anchor terms, its gradient (3) and the
-    distinct entries of its block (00, 01, 02, 11, 12, 22)."""
+    distinct entries of its block (00, 01, 02, 11, 12, 22); without ``derivatives`` the same cost, by the same
+    operations, and the gradient and block of the anchor alone (for a trial whose derivatives go unread)."""
     dx0, dx1, dx2 = X0 - anchor[p, j, 0], X1 - anchor[p, j, 1], X2 - anchor[p, j, 2]
     cost += 0.5 * tau2 * (dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
     g0, g1, g2 = tau2 * dx0, tau2 * dx1, tau2 * dx2
@@ -101,6 +103,8 @@ def _joint_terms(
             cy, rsy, jsy = _robust(ry, robust, C2)
             cost += 0.5 * (cx + cy)
             rx, ry, sx, sy = rx * rsx, ry * rsy, sx * jsx, sy * jsy
+        if not derivatives:
+            continue
         # dr_x/dX = -s_x (M0 - px M2), dr_y/dX = -s_y (M1 - py M2)
         a0, a1, a2 = (
             proj[v, 0, 0] - px * proj[v, 2, 0],
@@ -121,40 +125,6 @@ def _joint_terms(
         ex, ey = -sx * rx, -sy * ry
         g0, g1, g2 = g0 + (ex * a0 + ey * b0), g1 + (ex * a1 + ey * b1), g2 + (ex * a2 + ey * b2)
     return cost, g0, g1, g2, d00 + tau2, d01, d02, d11 + tau2, d12, d22 + tau2
-
-
-@njit(**_INNER)
-def _joint_cost(
-    cost: float,
-    X0: float,
-    X1: float,
-    X2: float,
-    p: int,
-    j: int,
-    proj: np.ndarray,
-    uv: np.ndarray,
-    w: np.ndarray,
-    anchor: np.ndarray,
-    tau2: float,
-    robust: int,
-    C2: float,
-) -> float:
-    """The cost of :func:`_joint_terms` alone, by the same operations in the same order (the same number)."""
-    dx0, dx1, dx2 = X0 - anchor[p, j, 0], X1 - anchor[p, j, 1], X2 - anchor[p, j, 2]
-    cost += 0.5 * tau2 * (dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
-    for v in range(proj.shape[0]):
-        wv = w[v, p, j]
-        if wv <= 0.0:
-            continue
-        h0 = proj[v, 0, 0] * X0 + proj[v, 0, 1] * X1 + proj[v, 0, 2] * X2 + proj[v, 0, 3]
-        h1 = proj[v, 1, 0] * X0 + proj[v, 1, 1] * X1 + proj[v, 1, 2] * X2 + proj[v, 1, 3]
-        depth = max(proj[v, 2, 0] * X0 + proj[v, 2, 1] * X1 + proj[v, 2, 2] * X2 + proj[v, 2, 3], _EPS_DEPTH)
-        rx, ry = (uv[v, p, j, 0] - h0 / depth) * wv, (uv[v, p, j, 1] - h1 / depth) * wv
-        if robust == 0:
-            cost += 0.5 * (rx * rx + ry * ry)
-        else:
-            cost += 0.5 * (_robust(rx, robust, C2)[0] + _robust(ry, robust, C2)[0])
-    return cost
 
 
 @njit(**_INNER)
@@ -179,7 +149,7 @@ def _likelihood_terms(
     for k in range(s, e):
         X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
         cost, g0, g1, g2, d00, d01, d02, d11, d12, d22 = _joint_terms(
-            cost, X0, X1, X2, p, pos_joint[k], proj, uv, w, anchor, tau2, robust, C2
+            cost, X0, X1, X2, p, pos_joint[k], proj, uv, w, anchor, tau2, robust, C2, True
         )
         g[k, 0], g[k, 1], g[k, 2] = g0, g1, g2
         D[k, 0, 0], D[k, 0, 1], D[k, 0, 2] = d00, d01, d02
@@ -419,7 +389,8 @@ def _cost(x: np.ndarray, c: int, p: int, data: tuple, tau2: float, robust: int, 
     pos_joint, comp_start, bones_ptr, bones, _, _, bone_pa, bone_pb, _, _, _, _ = plan
     cost = 0.0
     for k in range(comp_start[c], comp_start[c + 1]):
-        cost = _joint_cost(cost, x[k, 0], x[k, 1], x[k, 2], p, pos_joint[k], proj, uv, w, anchor, tau2, robust, C2)
+        X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
+        cost = _joint_terms(cost, X0, X1, X2, p, pos_joint[k], proj, uv, w, anchor, tau2, robust, C2, False)[0]
     prior = 0.0
     for t in range(bones_ptr[c], bones_ptr[c + 1]):
         l = bones[t]
@@ -572,7 +543,7 @@ def _solve_point(
     proj, uv, w, anchor = data[0], data[1], data[2], data[3]
     X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
     f, g0, g1, g2, d00, d01, d02, d11, d12, d22 = _joint_terms(
-        0.0, X0, X1, X2, p, j, proj, uv, w, anchor, tau2, robust, C2
+        0.0, X0, X1, X2, p, j, proj, uv, w, anchor, tau2, robust, C2, True
     )
     scale = max(max(max(0.0, d00), d11), d22)
     scale = scale if scale > 0.0 else 1.0
@@ -587,11 +558,8 @@ def _solve_point(
         predicted += 0.5 * h2 * (mu * h2 - g2)
         n0, n1, n2 = X0 + h0, X1 + h1, X2 + h2
         h_max = max(max(max(0.0, abs(h0)), abs(h1)), abs(h2)) if not np.isnan(predicted) else np.nan
-        if h_max <= xtol:  # the last trial (see _solve_problem): its cost alone
-            f_t = _joint_cost(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2)
-            trial = (f_t, g0, g1, g2, d00, d01, d02, d11, d12, d22)
-        else:
-            trial = _joint_terms(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2)
+        # the last trial (see _solve_problem): its cost alone
+        trial = _joint_terms(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2, not h_max <= xtol)
         actual = f - trial[0]
         rho = actual / predicted if predicted != 0.0 else np.nan
         if predicted > 0.0 and rho > 0.0 and np.isfinite(trial[0] + h_max):
