@@ -1,0 +1,139 @@
+"""Paired speed runs: this tree against a git revision, alternately, so that a machine whose speed drifts over
+minutes still resolves a change of a few percent (a 2-core machine of this project's drifted 20 % in an hour).
+
+    python -m benchmarks.paired_speed --baseline REV [--pairs 8] [--only "100 people"] [--repeats 3] [--cpu 1]
+
+Each pair runs ``python -m benchmarks.speed --quick --skip-process --only TEXT`` first in a temporary git worktree
+of the baseline, then in this tree, each with a numba cache of its own kept over the pairs (the first pair
+compiles, before its timed frames). From each run's first table it reads every setting's stage medians, and
+prints every pair and, per setting and stage, the baseline's and this tree's medians over the pairs and the mean
+of the paired differences (this tree - baseline) with its standard error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+from data.formats.atomic_io import atomic_write_text
+from evaluation.report import format_table
+
+ROOT = Path(__file__).resolve().parents[1]
+COLUMNS = ("matching", "reconstruction", "tracking", "total")
+
+
+def stage_medians(text: str) -> dict[str, dict[str, float]]:
+    """The first table of benchmarks.speed's output -> setting -> {matching, reconstruction, tracking, total} ms."""
+    lines = [line for line in text.splitlines() if line.startswith("|")]
+    if not lines:
+        raise ValueError("no table in the benchmark's output")
+    header = [cell.strip() for cell in lines[0].strip("|").split("|")]
+    where = {name: header.index(name) for name in ("setting", *COLUMNS)}
+    out: dict[str, dict[str, float]] = {}
+    for line in lines[1:]:
+        cells = [cell.strip() for cell in line.strip("|").split("|")]
+        if len(cells) != len(header):  # the table ends where the next one (other columns) begins
+            break
+        if set(cells[0]) <= {"-"}:
+            continue
+        out[cells[where["setting"]]] = {c: float(cells[where[c]]) if cells[where[c]] != "-" else 0.0 for c in COLUMNS}
+    return out
+
+
+def paired_difference(baseline: list[float], ours: list[float]) -> tuple[float, float]:
+    """Mean of ours - baseline over the pairs and its standard error (NaN with fewer than two pairs): (n,) x2."""
+    if len(baseline) != len(ours) or not baseline:
+        raise ValueError(f"need as many runs of each, at least one: {len(baseline)} and {len(ours)}")
+    diff = [b - a for a, b in zip(baseline, ours)]
+    se = statistics.stdev(diff) / len(diff) ** 0.5 if len(diff) > 1 else float("nan")
+    return statistics.fmean(diff), se
+
+
+@contextmanager
+def worktree(rev: str) -> Iterator[Path]:
+    """A temporary detached git worktree of rev (removed after): -> its path."""
+    folder = Path(tempfile.mkdtemp(prefix="paired_speed_"))
+    path = folder / "tree"
+    subprocess.run(["git", "worktree", "add", "--detach", str(path), rev], cwd=ROOT, check=True, capture_output=True)
+    try:
+        yield path
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(path)], cwd=ROOT, capture_output=True)
+
+
+def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
+    """benchmarks.speed's output of one run in tree, numba's cache in cache."""
+    command = [sys.executable, "-m", "benchmarks.speed", "--quick", "--skip-process", "--only", args.only]
+    command += ["--repeats", str(args.repeats), "--data", str(Path(args.data).resolve())]
+    command += ["--cpu", str(args.cpu)] if args.cpu is not None else []
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
+    done = subprocess.run(command, cwd=tree, env=env, capture_output=True, text=True)
+    if done.returncode:
+        raise RuntimeError(f"benchmarks.speed failed in {tree}:\n{done.stderr[-2000:]}")
+    return done.stdout
+
+
+def main(argv: list[str] | None = None) -> str:
+    """Run the pairs; print (and with --out, write) the pairs and the paired differences."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--baseline", required=True, help="git revision to compare this tree with")
+    parser.add_argument("--pairs", type=int, default=8)
+    parser.add_argument("--only", default="100 people", help="the settings whose label contains this text")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--cpu", type=int, default=None, help="pin each run to this CPU (Linux)")
+    parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
+    parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
+    args = parser.parse_args(argv)
+    if args.pairs < 1:
+        parser.error("--pairs must be at least 1")
+    runs: dict[str, list[dict[str, dict[str, float]]]] = {"baseline": [], "this tree": []}
+    with worktree(args.baseline) as base, tempfile.TemporaryDirectory(prefix="paired_speed_cache_") as caches:
+        for k in range(args.pairs):
+            for name, tree in (("baseline", base), ("this tree", ROOT)):
+                runs[name].append(stage_medians(run_speed(tree, Path(caches) / name.replace(" ", "_"), args)))
+            print(f"pair {k + 1}/{args.pairs} done", file=sys.stderr, flush=True)
+    text = report(runs, args.baseline)
+    print(text)
+    if args.out:
+        atomic_write_text(args.out, text + "\n")
+    return text
+
+
+def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str) -> str:
+    """The pairs' totals and, per setting and stage, the medians and the mean paired difference."""
+    settings = [s for s in runs["baseline"][0] if all(s in r for rs in runs.values() for r in rs)]
+    pairs = [
+        [k + 1, setting, a[setting]["total"], b[setting]["total"]]
+        for setting in settings
+        for k, (a, b) in enumerate(zip(runs["baseline"], runs["this tree"]))
+    ]
+    rows = []
+    for setting in settings:
+        for column in COLUMNS:
+            a = [r[setting][column] for r in runs["baseline"]]
+            b = [r[setting][column] for r in runs["this tree"]]
+            mean, se = paired_difference(a, b)
+            rows.append([setting, column, statistics.median(a), statistics.median(b), mean, se])
+    return "\n\n".join(
+        [
+            f"Each pair: benchmarks.speed at {baseline}, then in this tree (ms per frame, median over its frames)",
+            format_table(["pair", "setting", f"{baseline} total", "this tree total"], pairs, floatfmt=".2f"),
+            f"Over the {len(runs['baseline'])} pairs: medians, and this tree - {baseline} (mean of the pairs' differences)",
+            format_table(
+                ["setting", "stage", f"{baseline} median", "this tree median", "difference", "standard error"],
+                rows,
+                floatfmt=".2f",
+            ),
+        ]
+    )
+
+
+if __name__ == "__main__":
+    main()

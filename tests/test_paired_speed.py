@@ -1,0 +1,52 @@
+"""benchmarks/paired_speed.py: reading benchmarks.speed's table, and the paired differences."""
+
+import numpy as np
+import pytest
+
+from benchmarks.paired_speed import paired_difference, report, stage_medians
+
+OUTPUT = """Per frame by stage, ms (median over frames x repeats, one core; ...)
+
+| setting                   | frames | grouping | matching | reconstruction | tracking | total | target | issue's figure | figure / total |
+|---------------------------|--------|----------|----------|----------------|----------|-------|--------|----------------|----------------|
+| Shelf 300-600             | 301    | 0.29     | 0.35     | 0.57           | 0.06     | 1.31  | 2.40   | 4.86           | 3.70           |
+| 100 people x 7 ring views | 4      | -        | 6.99     | 8.99           | 0.63     | 16.61 | 15.00  | 37.00          | 2.23           |
+
+References in the same run, same inputs (ms per frame, median)
+
+| what                         | setting                   | ours | reference | reference / ours |
+|------------------------------|---------------------------|------|-----------|------------------|
+| MAP compiled vs solver=numpy | 100 people x 7 ring views | 8.01 | 149.28    | 18.63            |
+"""
+
+
+def test_the_stage_medians_are_read_from_the_first_table_only():
+    rows = stage_medians(OUTPUT)
+    assert list(rows) == ["Shelf 300-600", "100 people x 7 ring views"]
+    assert rows["100 people x 7 ring views"] == {
+        "matching": 6.99,
+        "reconstruction": 8.99,
+        "tracking": 0.63,
+        "total": 16.61,
+    }
+    with pytest.raises(ValueError, match="no table"):
+        stage_medians("the benchmark printed nothing")
+
+
+def test_the_paired_difference_is_the_mean_and_standard_error_of_the_differences():
+    base, ours = [16.1, 14.9, 17.4, 18.8], [14.0, 14.0, 17.0, 17.0]
+    mean, se = paired_difference(base, ours)
+    diff = np.subtract(ours, base)
+    assert mean == pytest.approx(diff.mean()) and se == pytest.approx(diff.std(ddof=1) / 2)
+    assert np.isnan(paired_difference([1.0], [2.0])[1])
+    with pytest.raises(ValueError):
+        paired_difference([1.0, 2.0], [1.0])
+
+
+def test_the_report_lists_every_pair_and_each_stage_difference():
+    one = stage_medians(OUTPUT)
+    faster = {s: {c: v - 1.0 for c, v in stages.items()} for s, stages in one.items()}
+    text = report({"baseline": [one, one], "this tree": [faster, faster]}, "abc123")
+    assert text.count("| 100 people x 7 ring views |") == 2 + 4  # two pairs, four stages
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines() if "| total " in line]
+    assert ["100 people x 7 ring views", "total", "16.61", "15.61", "-1.00", "0.00"] in rows
