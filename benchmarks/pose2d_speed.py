@@ -8,8 +8,8 @@ thread and with torch's default thread count, and on CUDA with float16 autocast 
 (models/heatmap_inference.predict_heatmaps, exactly what the stage runs; ``--devices`` picks among them). Each
 model, input and device gets one warm-up crop (with and without flip), and each setting one untimed pass of its
 own (a batch of 32 is a new shape: CUDA's first pass of it loads kernels); each setting then runs passes until
-``--min-time`` seconds have gone (at least one); crops/s = crops / mean pass time. The CPU rows are only as steady as the machine is
-idle: other processes on its cores show up most in the multi-thread rows.
+``--min-time`` seconds have gone (at least one); crops/s = crops / mean pass time. The CPU rows are only as
+steady as the machine is idle: other processes on its cores show up most in the multi-thread rows.
 
 Decoding: real-ish heatmaps of one crowded image: ``--persons`` people 12 px apart with COCO-23 joints,
 each crop's multi-modal target (mu 0.5: the own joints plus the neighbours' in the crop) with uniform noise,

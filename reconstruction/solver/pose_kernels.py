@@ -558,7 +558,7 @@ def _solve_point(
         predicted += 0.5 * h2 * (mu * h2 - g2)
         n0, n1, n2 = X0 + h0, X1 + h1, X2 + h2
         h_max = max(max(max(0.0, abs(h0)), abs(h1)), abs(h2)) if not np.isnan(predicted) else np.nan
-        # the last trial (see _solve_problem): its cost alone
+        # a step under xtol ends the solve, accepted or not (see _solve_problem): that trial's cost alone
         trial = _joint_terms(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2, not h_max <= xtol)
         actual = f - trial[0]
         rho = actual / predicted if predicted != 0.0 else np.nan
