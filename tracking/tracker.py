@@ -167,19 +167,27 @@ class TrackState:
     def __len__(self) -> int:
         return len(self.ids)
 
-    def select(self, keep: np.ndarray) -> "TrackState":
-        """The tracks at the given indices or boolean mask (these tracks themselves when the mask keeps all)."""
-        if keep.dtype == bool and keep.all():
+    def select(self, keep: np.ndarray, then: "TrackState | None" = None) -> "TrackState":
+        """The tracks of a boolean mask (T,), followed by then's tracks if given, each field copied once (a
+        track's bone window is most of its bytes); these tracks themselves when the mask keeps all and nothing
+        follows."""
+        if keep.all() and then is None:
             return self
-        return TrackState(*(getattr(self, f)[keep] for f in self.__dataclass_fields__))
+        rows = np.flatnonzero(keep)
+        added = 0 if then is None else len(then)
+        fields = []
+        for f in self.__dataclass_fields__:
+            old = getattr(self, f)
+            out = np.empty((len(rows) + added, *old.shape[1:]), dtype=old.dtype)
+            np.take(old, rows, axis=0, out=out[: len(rows)], mode="clip")  # rows are valid; "raise" buffers
+            if added:
+                out[len(rows) :] = getattr(then, f)
+            fields.append(out)
+        return TrackState(*fields)
 
     def arrays(self) -> tuple[np.ndarray, ...]:
         """The arrays of the compiled correction (track_kernels.correct_tracks): every field but ids, in order."""
         return tuple(getattr(self, f) for f in self.__dataclass_fields__ if f != "ids")
-
-    def extend(self, other: "TrackState") -> "TrackState":
-        """These tracks followed by other's."""
-        return TrackState(*(np.concatenate([getattr(self, f), getattr(other, f)]) for f in self.__dataclass_fields__))
 
 
 def bone_lengths_of(poses3d: np.ndarray) -> np.ndarray:
@@ -370,13 +378,12 @@ class Tracker:
             ids[persons] = st.ids[tracks]
         hit = np.zeros(len(st), dtype=bool)
         hit[tracks] = True
-        st = st.select(hit | self._alive(st, frame))
-        born = np.flatnonzero(ids < 0)
+        born, births = np.flatnonzero(ids < 0), None
         if len(born):
             ids[born] = np.arange(self._next_id, self._next_id + len(born))
             self._next_id += len(born)
-            st = st.extend(self._births(ids[born], frame, poses3d[born], variance[born], bones[born]))
-        self.state = st
+            births = self._births(ids[born], frame, poses3d[born], variance[born], bones[born])
+        self.state = st.select(hit | self._alive(st, frame), births)  # the survivors, then the new tracks
         return Tracked(ids, out)
 
     def skeletons(self, frame: int, poses3d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
