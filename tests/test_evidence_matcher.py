@@ -14,6 +14,7 @@ from reconstruction.matching import EvidenceMatcher
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence import _by_cost, gate_limits, merge_complete
 from reconstruction.matching.evidence_kernels import _linked_now, _masks, calibrated_chi2, pairs_chi2
+from reconstruction.matching.feet_uncertainty import mahalanobis_distances
 from reconstruction.pipeline import MultiViewPipeline
 from reconstruction.solver.map_solver import MLEMAPReconstruction
 
@@ -154,6 +155,53 @@ def test_the_sparse_chi_square_equals_a_dense_reference():
     np.testing.assert_array_equal(np.argwhere(passes), np.c_[i, j])
     np.testing.assert_allclose(chi2, d2[passes], rtol=1e-12)
     np.testing.assert_array_equal(dof, n[passes])
+
+
+def test_the_chi_square_with_feet_equals_a_dense_reference():
+    # feet of some detections only, covariances from near-singular to not positive semi-definite, midpoints near and
+    # far: the kernel's feet test (run for a view at once before the loop) keeps exactly the pairs a dense
+    # computation passes, with the same chi^2
+    rng = np.random.default_rng(7)
+    rig = ring_rig(2, 6.0, 2.5)
+    F = fundamental_matrix(rig[0], rig[1])
+    X = rng.uniform([-1, -1, 0.2], [1, 1, 1.8], (40, 6, 3))
+    n = (30, 37)
+    who = [rng.permutation(40)[: n[v]] for v in (0, 1)]
+    uv = [rig[v].project(X[who[v]]) + rng.normal(0, 3.0, (n[v], 6, 2)) for v in (0, 1)]
+    var = [np.where(rng.random((n[v], 6)) < 0.3, 0.0, 4.0) for v in (0, 1)]
+    uv = [np.where(v[..., None] > 0, u, 0.0) for u, v in zip(uv, var)]
+    stacked = list(_two_views(uv[0], var[0], uv[1], var[1], F))
+    N = sum(n)
+    A = rng.normal(0, 0.4, (N, 2, 2)) * rng.choice([1e-4, 1.0, 30.0], (N, 1, 1))
+    cov = A @ A.transpose(0, 2, 1)
+    cov[::9] = [[1.0, 2.0], [2.0, 1.0]]  # not positive semi-definite: the pair's determinant may be < 0
+    cov[::11, 1] = 0.0  # singular
+    cov[::7, 0, 1] += 0.2  # asymmetric: the test takes the symmetric part
+    floor = 0.3
+    ground = X[np.concatenate(who), 0, :2] + rng.normal(0, 0.5, (N, 2))  # a person's feet midpoint in both views
+    stacked[3], stacked[4], stacked[5], stacked[6] = rng.random(N) < 0.8, ground, cov, floor**2
+    limits, cap = gate_limits(1e-2, 6 + 2), 30.0
+    i, j, chi2, dof = _chi2(tuple(stacked), limits, 2, cap)
+    has, p = stacked[3], stacked[4]
+    feet = mahalanobis_distances(p[: n[0]], p[n[0] :], cov[: n[0]], cov[n[0] :], floor) ** 2
+    both_feet = has[: n[0], None] & has[None, n[0] :]
+    ha = np.concatenate([uv[0], np.ones((n[0], 6, 1))], -1)
+    hb = np.concatenate([uv[1], np.ones((n[1], 6, 1))], -1)
+    la, lb = ha @ F.T, hb @ F
+    both = (var[0][:, None] > 0) & (var[1][None] > 0)
+    e = np.einsum("bjr,ajr->abj", hb, la)
+    denom = var[1][None] * (la[:, None, :, 0] ** 2 + la[:, None, :, 1] ** 2) + var[0][:, None] * (
+        lb[None, :, :, 0] ** 2 + lb[None, :, :, 1] ** 2
+    )
+    terms = np.where(both, np.minimum(e**2 / np.where(both, denom, 1.0), cap), 0.0)
+    d2 = terms.sum(-1) + np.where(both_feet, feet, 0.0)
+    k = both.sum(-1) + 2 * both_feet
+    passes = (k >= 2) & (d2 <= limits[k])
+    assert 0 < passes.sum() < passes.size and passes[both_feet].any() and passes[~both_feet].any()
+    assert np.any(both_feet & (feet > limits[-1])) and np.any(both_feet & (feet > 0.3 * limits[-1]) & passes)
+    np.testing.assert_array_equal(np.argwhere(passes), np.c_[i, j])
+    np.testing.assert_allclose(chi2, d2[passes], rtol=1e-12)
+    np.testing.assert_array_equal(dof, k[passes])
 
 
 def test_complete_linkage_never_joins_persons_whose_cross_pair_disagrees():
