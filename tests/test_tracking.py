@@ -365,3 +365,24 @@ def test_the_skeleton_kernel_equals_robust_lengths_bit_for_bit():
             m, sd, n = robust_lengths(bones)
         assert np.array_equal(median, m, equal_nan=True) and np.array_equal(count, n)
         assert np.array_equal(se, np.where(np.isfinite(sd), sd / np.sqrt(np.maximum(n, 1)), np.inf))
+
+
+def test_selecting_tracks_then_appending_new_ones_equals_a_mask_then_a_concatenation():
+    rng = np.random.default_rng(3)
+    joints, window = 23, 5
+    empty = tracker.TrackState.empty(joints, window)
+
+    def grow(st: tracker.TrackState, n: int) -> tracker.TrackState:
+        """n tracks of random fields, each of the state's shape and dtype."""
+        fields = (getattr(st, f) for f in st.__dataclass_fields__)
+        return tracker.TrackState(*(rng.random((n, *a.shape[1:])).astype(a.dtype) for a in fields))
+
+    old, new = grow(empty, 7), grow(empty, 3)
+    keep = np.array([True, False, True, True, False, False, True])
+    out = old.select(keep, new)
+    for f in old.__dataclass_fields__:
+        expected = np.concatenate([getattr(old, f)[keep], getattr(new, f)])
+        np.testing.assert_array_equal(getattr(out, f), expected)
+        assert getattr(out, f).dtype == expected.dtype
+    assert old.select(np.ones(7, bool)) is old and len(old.select(np.zeros(7, bool))) == 0
+    assert len(old.select(np.ones(7, bool), new)) == 10
