@@ -54,7 +54,7 @@ def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def _feet_columns(p: np.ndarray, cov: np.ndarray, has_p: np.ndarray, s: int, n: int) -> tuple:
-    """Detections s:s + n as contiguous columns for :func:`_feet_rejects`: x, y, cov00, cov11, cov01, cov10 (n,)
+    """Detections s:s + n as contiguous columns for :func:`_feet_terms`: x, y, cov00, cov11, cov01, cov10 (n,)
     float64 and has_p (n,) bool."""
     return (
         p[s : s + n, 0].copy(),
@@ -68,12 +68,21 @@ def _feet_columns(p: np.ndarray, cov: np.ndarray, has_p: np.ndarray, s: int, n: 
 
 
 @njit(cache=True, error_model="numpy")
-def _feet_rejects(
-    p: np.ndarray, cov: np.ndarray, i: int, floor2: float, far: float, cols: tuple, out: np.ndarray
+def _feet_terms(
+    p: np.ndarray,
+    cov: np.ndarray,
+    i: int,
+    floor2: float,
+    far: float,
+    cols: tuple,
+    num: np.ndarray,
+    den: np.ndarray,
+    rejects: np.ndarray,
 ) -> None:
-    """out (n,) = whether the feet of detection i (which has them) and of each detection of cols
-    (:func:`_feet_columns`) fail :func:`_view_pair`'s feet test, by the same operations in the same order; a loop
-    without branches over contiguous columns, which LLVM vectorises (most pairs of a crowd fail here)."""
+    """The feet term num / den (the operations and order of feet_uncertainty.mahalanobis_distances, squared) of
+    detection i (which has feet) with each detection of cols (:func:`_feet_columns`), and rejects (n,): whether
+    both have feet and the pair fails the test (num > far den). A loop without branches over contiguous columns,
+    which LLVM vectorises (most pairs of a crowd fail here)."""
     x, y, c00, c11, c01, c10, has = cols
     p0, p1, a0, d0, b0 = p[i, 0], p[i, 1], cov[i, 0, 0], cov[i, 1, 1], cov[i, 0, 1] + cov[i, 1, 0]
     for t in range(len(x)):
@@ -81,8 +90,8 @@ def _feet_rejects(
         a = a0 + c00[t] + floor2
         c = d0 + c11[t] + floor2
         b = 0.5 * (b0 + c01[t] + c10[t])
-        num, den = c * dx * dx - 2 * b * dx * dy + a * dy * dy, a * c - b * b
-        out[t] = has[t] & (den > 0.0) & (num > far * den)
+        num[t], den[t] = c * dx * dx - 2 * b * dx * dy + a * dy * dy, a * c - b * b
+        rejects[t] = has[t] & (den[t] > 0.0) & (num[t] > far * den[t])
 
 
 @njit(cache=True, error_model="numpy")
@@ -92,16 +101,17 @@ def _view_pair(
     """Append the detection pairs of views a (detections sa:sa + na) and b (sb:sb + nb) that pass to ints
     (view pair q, i, j, dof) and floats (chi^2, feet) from row n (see pairs_chi2): -> the new n. One loop, no
     calls per pair: numba's reference counting of array arguments would cost more than an unrelated pair. The
-    feet test runs first for all of b at once (:func:`_feet_rejects`); the loop visits the others."""
+    feet test runs first for all of b at once (:func:`_feet_terms`); the loop visits the others."""
     J = var.shape[1]
     la, lb = _lines(uv[sa : sa + na], F, False), _lines(uv[sb : sb + nb], F, True)
     far = limits[2 + J] * (1.0 + 1e-9)  # above it, rounding cannot bring the feet term back under the limit
-    cols, rejects, visit = _feet_columns(p, cov, has_p, sb, nb), np.empty(nb, dtype=np.bool_), np.empty(nb, np.int64)
+    cols, num, den = _feet_columns(p, cov, has_p, sb, nb), np.empty(nb), np.empty(nb)
+    rejects, visit = np.empty(nb, dtype=np.bool_), np.empty(nb, np.int64)
     for ai in range(na):
         i = sa + ai
         m = nb
         if has_p[i]:
-            _feet_rejects(p, cov, i, floor2, far, cols, rejects)
+            _feet_terms(p, cov, i, floor2, far, cols, num, den, rejects)
             m = 0
             for bj in range(nb):  # the b detections left, in order, without a branch per detection
                 visit[m] = bj
@@ -111,13 +121,7 @@ def _view_pair(
             j = sb + bj
             f = np.nan
             if has_p[i] and has_p[j]:
-                # the operations and order of feet_uncertainty.mahalanobis_distances, squared
-                dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
-                a = cov[i, 0, 0] + cov[j, 0, 0] + floor2
-                c = cov[i, 1, 1] + cov[j, 1, 1] + floor2
-                b = 0.5 * (cov[i, 0, 1] + cov[i, 1, 0] + cov[j, 0, 1] + cov[j, 1, 0])
-                num, den = c * dx * dx - 2 * b * dx * dy + a * dy * dy, a * c - b * b  # passed _feet_rejects
-                f = np.sqrt(max(num / den, 0.0)) ** 2
+                f = np.sqrt(max(num[bj] / den[bj], 0.0)) ** 2
             dof = 0
             d2 = 0.0
             if not np.isnan(f):
