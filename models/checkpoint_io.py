@@ -22,6 +22,7 @@ from typing import Any
 import torch
 
 from data.formats.atomic_io import atomic_open
+from models.load_errors import CheckpointError
 
 log = logging.getLogger(__name__)
 
@@ -32,10 +33,6 @@ KEYS = {
     "weights": ("model", "epoch", "global_step", "config"),
 }
 ENVELOPE_KEYS = ("format", "version", "kind", "sha256", "payload")
-
-
-class CheckpointError(ValueError):
-    """A checkpoint file that cannot be used; the message names the file."""
 
 
 def atomic_torch_save(obj: Any, path: str | Path) -> None:

@@ -21,13 +21,13 @@ import numpy as np
 import torch
 import torch.distributed as dist
 from hydra.utils import instantiate
-from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf import DictConfig
 from torch import nn
 from torch.utils.data import DataLoader, Sampler
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
-from data.config_checks import ConfigError, check_bool, check_int, check_number, fail, is_int, value_of
+from data.config_checks import ConfigError
 from data.pose2d.coco_eval import evaluate_keypoints
 from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.pose2d.crop_transforms import CropAugmentation
@@ -40,11 +40,10 @@ from models.heatmap_inference import flip_back
 from models.loss import WeightedHeatmapLoss
 from models.pose_decoding import person_scores, single_peaks
 from models.show_targets import GREEN, RED, tile_grid, tint
+from models.train_config import HEATMAP_STRIDE, INPUT_MULTIPLE
 
 log = logging.getLogger(__name__)
 
-HEATMAP_STRIDE = 4  # FastPose's output stride
-INPUT_MULTIPLE = 32  # FastPose's trunk stride: the input width and height must be multiples of it
 AP_SUBSETS = ("all", "body", "foot")
 
 
@@ -93,53 +92,6 @@ def setup_distributed(device_name: str) -> tuple[int, int, torch.device]:
         torch.cuda.set_device(device)
     dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
     return rank, world, device
-
-
-def _plain(value: Any) -> Any:
-    """Containers as plain python."""
-    return OmegaConf.to_container(value) if isinstance(value, (DictConfig, ListConfig)) else value
-
-
-# --- config checks --------------------------------------------------------------------------------
-
-
-def check_device(cfg: DictConfig, key: str) -> None:
-    """cfg[key] names a device this machine has: auto, cpu, cuda, cuda:N (N < the CUDA device count)."""
-    resolve_device(value_of(cfg, key), key)
-
-
-def check_input_size(cfg: DictConfig, key: str = "data.input_size") -> None:
-    """cfg[key] is [w, h], positive multiples of INPUT_MULTIPLE (what FastPose's strides need)."""
-    size = _plain(value_of(cfg, key))
-    if not (isinstance(size, list) and len(size) == 2 and all(is_int(v) and v > 0 for v in size)):
-        fail(key, size, "must be [width, height] in pixels")
-    if any(v % INPUT_MULTIPLE for v in size):
-        fail(key, size, f"width and height must be multiples of {INPUT_MULTIPLE} (FastPose's stride)")
-
-
-def check_train_config(cfg: DictConfig) -> None:
-    """Stop with one ConfigError naming the key when a trainer, data, loss or optimizer value is of the wrong
-    type or range (before any data is read)."""
-    for key, minimum, nullable in (
-        ("trainer.epochs", 1, False),
-        ("trainer.max_steps", 1, True),
-        ("trainer.batch_size", 1, False),
-        ("trainer.val_batch_size", 1, False),
-        ("trainer.num_workers", 0, False),
-        ("trainer.seed", 0, False),
-        ("trainer.threads", 1, True),
-        ("trainer.log_every", 1, False),
-        ("trainer.val_every", 1, False),
-        ("trainer.grid_images", 0, False),
-    ):
-        check_int(cfg, key, minimum, nullable)
-    check_bool(cfg, "trainer.progress")
-    check_device(cfg, "trainer.device")
-    check_input_size(cfg)
-    check_number(cfg, "data.sigma")
-    check_number(cfg, "optimizer.lr")
-    check_number(cfg, "loss.mu", strict=False)
-    check_number(cfg, "loss.foot_weight", strict=False)
 
 
 # --- builders ---------------------------------------------------------------------------------------

@@ -6,17 +6,17 @@ from __future__ import annotations
 
 import pickle
 from pathlib import Path
-from typing import Callable, TypeVar
+from typing import TYPE_CHECKING, Callable, TypeVar
 
 import torch
 from torch import Tensor
-from torchvision.models import WeightsEnum
+
+from models.load_errors import WeightsUnavailable
+
+if TYPE_CHECKING:
+    from torchvision.models import WeightsEnum
 
 T = TypeVar("T")
-
-
-class WeightsUnavailable(ValueError):
-    """Pretrained weights that cannot be had here (no network for the download, an unreadable file)."""
 
 
 def cache_path(weights: WeightsEnum) -> Path:

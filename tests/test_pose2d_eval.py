@@ -15,7 +15,6 @@ from hydra import compose, initialize_config_dir
 from torch.utils.data import DataLoader
 
 import eval as eval_script
-import train
 from data.formats.poses2d_io import read_poses2d
 from data.pose2d.coco_eval import evaluate_keypoints
 from data.pose2d.coco_keypoints import load_coco_wholebody
@@ -23,6 +22,7 @@ from data.pose2d.synthetic_images import ImageOptions, generate_dataset
 from data.pose2d.topdown_dataset import TopDownDataset
 from evaluation.pose2d_eval import associate_crops, decode_candidates
 from models.heatmap_codec import MultiModalHeatmapCodec
+from models.train_loop import run as train_run
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = str(REPO / "configs")
@@ -60,7 +60,7 @@ def checkpoint(tmp_path_factory) -> tuple[Path, Path]:
                 f"data.root={root}",
             ],
         )
-    train.run(cfg, run_dir)
+    train_run(cfg, run_dir)
     torch.set_num_threads(threads)
     return run_dir / "checkpoints" / "last.ckpt", root
 

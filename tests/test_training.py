@@ -14,7 +14,6 @@ import torch
 from hydra import compose, initialize_config_dir
 from torch.utils.data import DataLoader
 
-import train
 from data.keypoints import FOOT_JOINTS, LEFT_FOOT, RIGHT_FOOT
 from data.pose2d.coco_eval import evaluate_keypoints
 from data.pose2d.coco_keypoints import load_coco23, load_coco_wholebody, load_keypoint_dataset
@@ -27,6 +26,7 @@ from models.heatmap_codec import MultiModalHeatmapCodec
 from models.loss import WeightedHeatmapLoss
 from models.show_targets import main as show_targets_main
 from models.show_targets import target_parts
+from models.train_loop import run as train_run
 from models.training import TrainState, decode_predictions, save_checkpoint, save_weights, train_one_epoch
 
 REPO = Path(__file__).resolve().parents[1]
@@ -209,10 +209,10 @@ def test_fastpose18_overfits_four_synthetic_crops(synthetic_root):
 
 
 def run_training(root: Path, run_dir: Path, *overrides: str) -> dict:
-    """train.run with the tiny config and these overrides, into run_dir."""
+    """models.train_loop.run with the tiny config and these overrides, into run_dir."""
     with initialize_config_dir(config_dir=str(REPO / "configs"), version_base="1.3"):
         cfg = compose("train", overrides=[*TINY, f"data.root={root}", *overrides])
-    return train.run(cfg, run_dir)
+    return train_run(cfg, run_dir)
 
 
 def test_resume_reproduces_the_uninterrupted_losses(synthetic_root, tmp_path):
@@ -431,6 +431,23 @@ def test_a_bad_config_value_stops_training_with_one_line_naming_the_key(tmp_path
     )
     assert proc.returncode != 0 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.startswith(f"error: {key}=")
+
+
+def test_a_bad_config_value_stops_before_torch_is_imported(tmp_path):
+    # the check comes first, so that a typo costs a second, not torch's import (several on a slow machine)
+    code = (
+        "import runpy, sys\n"
+        f"sys.argv = ['train.py', 'trainer.epochs=0', 'hydra.run.dir={tmp_path}']\n"
+        "try:\n"
+        "    runpy.run_path('train.py', run_name='__main__')\n"
+        "except SystemExit as stop:\n"
+        "    print(stop.code)\n"
+        "    print(sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'torchvision', 'cv2')))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    message, modules = proc.stdout.splitlines()
+    assert message.startswith("error: trainer.epochs=0") and modules == "[]", proc.stdout
 
 
 def test_tensorboard_logs_losses_lr_ap_and_heatmap_grid(synthetic_root, tmp_path):

@@ -1,0 +1,196 @@
+"""The training loop of train.py: data, model, optimizer, resume, epochs, validation, checkpoints, wired from
+the pieces in models/training.py. ``run(cfg, run_dir)`` is also how tests and scripts train in-process."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from omegaconf import DictConfig, OmegaConf
+from torch import nn
+from torch.nn.parallel import DistributedDataParallel
+from torch.utils.data import DataLoader
+from torch.utils.tensorboard import SummaryWriter
+
+from data.formats.atomic_io import atomic_write_text
+from data.pose2d.coco_eval import write_coco_results
+from data.pose2d.topdown_dataset import EpochSampler
+from models.checkpoint_io import read_checkpoint
+from models.train_config import check_train_config
+from models.training import (
+    TrainState,
+    build_codec,
+    build_dataset,
+    build_loader,
+    build_loss,
+    build_model,
+    build_optimizer,
+    build_scheduler,
+    load_checkpoint,
+    save_checkpoint,
+    save_weights,
+    seed_everything,
+    setup_distributed,
+    train_one_epoch,
+    validate,
+)
+
+log = logging.getLogger(__name__)
+
+
+def _reached(state: TrainState, max_steps: int | None) -> bool:
+    """Whether the step budget is used up."""
+    return max_steps is not None and state.global_step >= max_steps
+
+
+def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None) -> dict:
+    """Train (or resume) per cfg into run_dir -> {"losses": {global step: loss}, "metrics": last validation
+    metrics, "state": final TrainState}. Only rank 0 validates, logs and saves.
+
+    checkpoint: cfg.resume already read (read here when None); choices: the config groups chosen, stored in
+    the checkpoints so that a resume command can tell whether its group overrides change anything.
+    """
+    check_train_config(cfg)
+    if cfg.resume and checkpoint is None:
+        checkpoint = read_checkpoint(cfg.resume, "resume")
+    trainer, run_dir = cfg.trainer, Path(run_dir)
+    rank, world, device = setup_distributed(trainer.device)
+    if trainer.threads:
+        torch.set_num_threads(trainer.threads)
+    seed_everything(trainer.seed)
+    codec = build_codec(cfg)
+    train_set, val_set = build_dataset(cfg, codec, "train"), build_dataset(cfg, codec, "val")
+    if not len(train_set):
+        raise ValueError(f"{cfg.data.train.ann_file}: no training person")
+    sampler = EpochSampler(len(train_set), trainer.seed, shuffle=True, rank=rank, world_size=world)
+    train_loader = build_loader(train_set, trainer.batch_size, trainer.num_workers, sampler, device)
+    val_loader = build_loader(
+        val_set, trainer.val_batch_size, trainer.num_workers, EpochSampler(len(val_set), shuffle=False), device
+    )
+    model = build_model(cfg).to(device)
+    loss_fn, optimizer = build_loss(cfg), build_optimizer(cfg, model)
+    scheduler = build_scheduler(cfg, optimizer)
+    state = load_checkpoint(checkpoint, model, optimizer, scheduler) if checkpoint else TrainState()
+    net = DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None) if world > 1 else model
+    writer = SummaryWriter(str(run_dir)) if rank == 0 else None
+    config = OmegaConf.to_container(cfg, resolve=True)
+    log.info(
+        "%d training crops, %d validation crops, device %s x %d, from epoch %d step %d",
+        len(train_set),
+        len(val_set),
+        device,
+        world,
+        state.epoch,
+        state.global_step,
+    )
+    losses: dict[int, float] = {}
+    metrics: dict[str, float] = {}
+    while state.epoch < trainer.epochs and not _reached(state, trainer.max_steps):
+        train_set.set_epoch(state.epoch)
+        sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
+        remaining, first_step = len(train_loader), state.global_step + 1
+        epoch_losses = train_one_epoch(
+            net,
+            train_loader,
+            loss_fn,
+            optimizer,
+            device,
+            state,
+            trainer.max_steps,
+            writer,
+            trainer.log_every,
+            trainer.progress and rank == 0,
+        )
+        losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
+        finished = len(epoch_losses) == remaining
+        if finished:
+            scheduler.step()
+            state.epoch, state.step_in_epoch = state.epoch + 1, 0
+        log.info(
+            "epoch %d%s: mean loss %.6g over %d steps (global step %d)",
+            state.epoch - finished,
+            "" if finished else " (stopped)",
+            np.mean(epoch_losses) if epoch_losses else np.nan,
+            len(epoch_losses),
+            state.global_step,
+        )
+        last = state.epoch >= trainer.epochs or _reached(state, trainer.max_steps)
+        if rank == 0:
+            if last or (finished and state.epoch % trainer.val_every == 0):
+                metrics = _validate(cfg, model, val_loader, loss_fn, device, writer, state, run_dir)
+            _save(cfg, run_dir, model, optimizer, scheduler, state, config, metrics, choices)
+        if world > 1:
+            dist.barrier()
+    if writer is not None:
+        writer.close()
+    if world > 1:
+        dist.destroy_process_group()
+    return {"losses": losses, "metrics": metrics, "state": state}
+
+
+def _validate(
+    cfg: DictConfig,
+    model: nn.Module,
+    loader: DataLoader,
+    loss_fn: nn.Module,
+    device: torch.device,
+    writer: SummaryWriter,
+    state: TrainState,
+    run_dir: Path,
+) -> dict[str, float]:
+    """Validate, log to TensorBoard, write the predictions JSON -> the metrics."""
+    dataset = loader.dataset
+    result = validate(
+        model,
+        loader,
+        dataset.codec,
+        dataset.records,
+        loss_fn,
+        device,
+        cfg.trainer.grid_images,
+        cfg.trainer.progress,
+        cfg.trainer.get("val_flip_test", False),  # False for a resumed run stored before the key existed
+    )
+    for key, value in result.metrics.items():
+        writer.add_scalar(f"val/{key}", value, state.global_step)
+    if result.grid is not None:
+        writer.add_image("val/heatmaps", result.grid, state.global_step, dataformats="HWC")
+    writer.flush()
+    write_coco_results(run_dir / cfg.predictions_file, result.predictions)
+    atomic_write_text(
+        run_dir / "metrics.json",
+        json.dumps(  # the latest validation, for sweep tables
+            {"metrics": result.metrics, "step": state.global_step, "epoch": state.epoch}, indent=2
+        ),
+    )
+    log.info(
+        "validation at step %d: %s", state.global_step, ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items())
+    )
+    return result.metrics
+
+
+def _save(
+    cfg: DictConfig,
+    run_dir: Path,
+    model: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    scheduler: Any,
+    state: TrainState,
+    config: dict,
+    metrics: dict[str, float],
+    choices: dict[str, str] | None,
+) -> None:
+    """Write checkpoints/last.ckpt, and the weights to best.pth when the latest validation beat the best AP
+    (all joints)."""
+    folder = run_dir / cfg.checkpoint_dir
+    improved = metrics.get("AP_all", -1.0) > state.best_ap
+    if improved:
+        state.best_ap = metrics["AP_all"]
+    save_checkpoint(folder / "last.ckpt", model, optimizer, scheduler, state, config, choices)
+    if improved:
+        save_weights(folder / "best.pth", model, state, metrics, config)
