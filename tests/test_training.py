@@ -199,9 +199,9 @@ def test_fastpose18_overfits_four_synthetic_crops(synthetic_root):
     model = FastPose(18)
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
     loss_fn, state, losses = WeightedHeatmapLoss(1.5), TrainState(), []
-    for _ in range(100):
+    for _ in range(40):  # the loss falls about 15x by step 30, 28x by step 40, 220x by step 100
         losses += train_one_epoch(model, loader, loss_fn, optimizer, torch.device("cpu"), state)
-    assert state.global_step == 100 and len(losses) == 100
+    assert state.global_step == 40 and len(losses) == 40
     assert losses[-1] <= losses[0] / 10, (losses[0], losses[-1])
 
 
