@@ -2,13 +2,16 @@
 minutes still resolves a change of a few percent (a 2-core machine of this project's drifted 20 % in an hour).
 
     python -m benchmarks.paired_speed --baseline REV [--pairs 8] [--only "100 people"] [--repeats 3] [--cpu 1]
+                                      [--driver speed|frames]
 
-Each pair runs ``python -m benchmarks.speed --quick --skip-process --only TEXT`` first in a temporary git worktree
-of the baseline, then in this tree, each with a numba cache of its own kept over the pairs (the first pair
-compiles, before its timed frames). From each run's first table it reads every setting's stage medians, and
-prints every pair and, per setting and stage, the baseline's and this tree's medians over the pairs and the mean
-of the paired differences (this tree - baseline) with its standard error.
-"""
+Each pair runs the driver first in a temporary git worktree of the baseline, then in this tree, each with a numba
+cache of its own kept over the pairs (the first pair compiles, before its timed frames). The drivers:
+``speed`` (default) runs each tree's own ``python -m benchmarks.speed --quick --skip-process --only TEXT``;
+``frames`` runs this tree's benchmarks/frame_times.py in both trees, which times any revision's pipeline, also
+one older than benchmarks/speed.py (``--baseline a9f9a65 --driver frames``: issue 16's reference). From each
+run's first table it reads every setting's stage medians, and prints every pair and, per setting and stage, the
+baseline's and this tree's medians over the pairs, their ratio (baseline / this tree), and the mean of the paired
+differences (this tree - baseline) with its standard error."""
 
 from __future__ import annotations
 
@@ -27,6 +30,7 @@ from evaluation.report import format_table
 
 ROOT = Path(__file__).resolve().parents[1]
 COLUMNS = ("matching", "reconstruction", "tracking", "total")
+DRIVERS = {"speed": "benchmarks.speed", "frames": "benchmarks/frame_times.py"}
 
 
 def stage_medians(text: str) -> dict[str, dict[str, float]]:
@@ -69,14 +73,20 @@ def worktree(rev: str) -> Iterator[Path]:
 
 
 def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
-    """benchmarks.speed's output of one run in tree, numba's cache in cache."""
-    command = [sys.executable, "-m", "benchmarks.speed", "--quick", "--skip-process", "--only", args.only]
+    """The driver's output of one run in tree (benchmarks.speed, or benchmarks/frame_times.py), numba's cache in cache."""
+    if args.driver == "frames":
+        # run_path, not the script's path: that would put benchmarks/ first on sys.path, where benchmarks/reconstruction.py
+        # would hide the tree's reconstruction package
+        driver = f"import runpy; runpy.run_path({str(ROOT / 'benchmarks' / 'frame_times.py')!r}, run_name='__main__')"
+        command = [sys.executable, "-c", driver, "--only", args.only]
+    else:
+        command = [sys.executable, "-m", "benchmarks.speed", "--quick", "--skip-process", "--only", args.only]
     command += ["--repeats", str(args.repeats), "--data", str(Path(args.data).resolve())]
     command += ["--cpu", str(args.cpu)] if args.cpu is not None else []
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     done = subprocess.run(command, cwd=tree, env=env, capture_output=True, text=True)
     if done.returncode:
-        raise RuntimeError(f"benchmarks.speed failed in {tree}:\n{done.stderr[-2000:]}")
+        raise RuntimeError(f"the {args.driver} driver failed in {tree}:\n{done.stderr[-2000:]}")
     return done.stdout
 
 
@@ -90,6 +100,9 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--cpu", type=int, default=None, help="pin each run to this CPU (Linux)")
     parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
     parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
+    parser.add_argument(
+        "--driver", choices=("speed", "frames"), default="speed", help="each tree's benchmarks.speed, or frame_times.py"
+    )
     args = parser.parse_args(argv)
     if args.pairs < 1:
         parser.error("--pairs must be at least 1")
@@ -99,14 +112,14 @@ def main(argv: list[str] | None = None) -> str:
             for name, tree in (("baseline", base), ("this tree", ROOT)):
                 runs[name].append(stage_medians(run_speed(tree, Path(caches) / name.replace(" ", "_"), args)))
             print(f"pair {k + 1}/{args.pairs} done", file=sys.stderr, flush=True)
-    text = report(runs, args.baseline)
+    text = report(runs, args.baseline, args.driver)
     print(text)
     if args.out:
         atomic_write_text(args.out, text + "\n")
     return text
 
 
-def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str) -> str:
+def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, driver: str = "speed") -> str:
     """The pairs' totals and, per setting and stage, the medians and the mean paired difference."""
     settings = [s for s in runs["baseline"][0] if all(s in r for rs in runs.values() for r in rs)]
     pairs = [
@@ -120,14 +133,15 @@ def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str) ->
             a = [r[setting][column] for r in runs["baseline"]]
             b = [r[setting][column] for r in runs["this tree"]]
             mean, se = paired_difference(a, b)
-            rows.append([setting, column, statistics.median(a), statistics.median(b), mean, se])
+            ratio = statistics.median(a) / statistics.median(b) if statistics.median(b) > 0 else float("nan")
+            rows.append([setting, column, statistics.median(a), statistics.median(b), ratio, mean, se])
     return "\n\n".join(
         [
-            f"Each pair: benchmarks.speed at {baseline}, then in this tree (ms per frame, median over its frames)",
+            f"Each pair: {DRIVERS[driver]} at {baseline}, then in this tree (ms per frame, median over its frames)",
             format_table(["pair", "setting", f"{baseline} total", "this tree total"], pairs, floatfmt=".2f"),
             f"Over the {len(runs['baseline'])} pairs: medians, and this tree - {baseline} (mean of the pairs' differences)",
             format_table(
-                ["setting", "stage", f"{baseline} median", "this tree median", "difference", "standard error"],
+                ["setting", "stage", f"{baseline} median", "this tree median", "ratio", "difference", "standard error"],
                 rows,
                 floatfmt=".2f",
             ),

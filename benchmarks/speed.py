@@ -44,16 +44,15 @@ from hydra import compose, initialize_config_dir  # noqa: E402
 from hydra.utils import instantiate  # noqa: E402
 
 from benchmarks import reference_grouping  # noqa: E402
+from benchmarks.frame_times import STAGES, settings, stage_times  # noqa: E402
 from data.formats.atomic_io import atomic_write_text  # noqa: E402
 from data.formats.fourd_detections import load_4dassoc_detections  # noqa: E402
 from eval import FIRST_RUN_COMPILE  # noqa: E402
 from evaluation.report import format_table  # noqa: E402
 from models.paf_grouping import group_people  # noqa: E402
 from reconstruction.compile_ahead import wait_for_background_compile  # noqa: E402
-from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-STAGES = ("grouping", "matching", "reconstruction", "tracking")
 # Issue 16's targets (ms per frame, one core) and the figures it measured at a9f9a65.
 TARGETS = {"Shelf 300-600": 2.4, "100 people x 7 ring views": 15.0, "crowd 400 x 10 views": 120.0}
 ISSUE_FIGURES = {"Shelf 300-600": 4.86, "100 people x 7 ring views": 37.0}
@@ -61,44 +60,6 @@ CPP_PEER_SHELF_MS = 4.73  # 4D Association's C++ (-O3), median ms per Shelf fram
 FIRST_RUN = "python eval.py, empty numba cache (all cores)"
 PROCESS_TARGETS = {"python eval.py dataset=shelf (warm)": 2.0, FIRST_RUN: 5.0}
 PROCESS_FIGURES = {"python eval.py dataset=shelf (warm)": 3.58, FIRST_RUN: 17.7}
-
-
-def settings(data: str, crowd_frames: int, quick: bool) -> dict[str, list[str]]:
-    """Setting label -> eval.yaml overrides."""
-    out = {
-        "Shelf 300-600": ["dataset=shelf", f"dataset.root={data}/shelf"],
-        "100 people x 7 ring views": [
-            "dataset.num_persons=100",
-            "dataset.num_cameras=7",
-            "dataset.density=0.5",
-            "dataset.num_frames=4",
-        ],
-    }
-    people = (10, 100, 400) if quick else (10, 50, 100, 200, 400)
-    for views in (5, 10):
-        for n in people:
-            out[f"crowd {n} x {views} views"] = [
-                "dataset=crowd",
-                f"dataset.num_persons={n}",
-                f"dataset.num_cameras={views}",
-                f"dataset.num_frames={crowd_frames}",
-            ]
-    return out
-
-
-def frame_stage_times(sequence, cfg, repeats: int) -> np.ndarray:
-    """Per-frame seconds of matching, reconstruction, tracking: (repeats * F, 3); a fresh pipeline per repeat
-    (the tracker starts anew), its first frame run once before (kernels loaded)."""
-    rows = []
-    for _ in range(repeats):
-        pipe = MultiViewPipeline.from_config(cfg, sequence.rig)
-        pipe(sequence.frames[0])
-        pipe = MultiViewPipeline.from_config(cfg, sequence.rig)
-        for frame in sequence.frames:
-            before = [pipe.timings.get(s, 0.0) for s in STAGES[1:]]
-            pipe(frame)
-            rows.append([pipe.timings.get(s, 0.0) - b for s, b in zip(STAGES[1:], before)])
-    return np.array(rows)
 
 
 def shelf_candidates(cfg, rig) -> list[list]:
@@ -138,7 +99,7 @@ def stage_rows(
             continue
         cfg = compose("eval", overrides=overrides)
         sequence = instantiate(cfg.dataset, _convert_="all")
-        per_frame = frame_stage_times(sequence, cfg, repeats)
+        per_frame = stage_times(sequence, cfg, repeats)
         grouping = np.full(len(per_frame), np.nan)
         if label.startswith("Shelf"):
             grouping = grouping_times(shelf_candidates(cfg, sequence.rig), shelf_grouper(cfg), repeats)
@@ -173,8 +134,8 @@ def reference_rows(kept: dict, repeats: int) -> list[list]:
         cfg = compose("eval", overrides=overrides)
         numpy_cfg = compose("eval", overrides=[*overrides, "reconstruction.solver=numpy"])
         ours, ref = interleaved(
-            lambda: frame_stage_times(sequence, cfg, 1)[:, 1],
-            lambda: frame_stage_times(sequence, numpy_cfg, 1)[:, 1],
+            lambda: stage_times(sequence, cfg, 1)[:, 1],
+            lambda: stage_times(sequence, numpy_cfg, 1)[:, 1],
             repeats,
         )
         rows.append(["MAP compiled vs solver=numpy", label, 1e3 * ours, 1e3 * ref, ref / ours])

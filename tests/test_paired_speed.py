@@ -1,9 +1,16 @@
-"""benchmarks/paired_speed.py: reading benchmarks.speed's table, and the paired differences."""
+"""benchmarks/paired_speed.py: reading benchmarks.speed's table, and the paired differences; the frames driver
+(benchmarks/frame_times.py)."""
+
+from pathlib import Path
 
 import numpy as np
 import pytest
+from hydra.utils import instantiate
 
+from benchmarks import frame_times
 from benchmarks.paired_speed import paired_difference, report, stage_medians
+
+ROOT = Path(__file__).resolve().parents[1]
 
 OUTPUT = """Per frame by stage, ms (median over frames x repeats, one core; ...)
 
@@ -49,4 +56,26 @@ def test_the_report_lists_every_pair_and_each_stage_difference():
     text = report({"baseline": [one, one], "this tree": [faster, faster]}, "abc123")
     assert text.count("| 100 people x 7 ring views |") == 2 + 4  # two pairs, four stages
     rows = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines() if "| total " in line]
-    assert ["100 people x 7 ring views", "total", "16.61", "15.61", "-1.00", "0.00"] in rows
+    assert ["100 people x 7 ring views", "total", "16.61", "15.61", "1.06", "-1.00", "0.00"] in rows
+
+
+def test_the_frames_driver_prints_a_table_the_pairs_read(capsys):
+    text = frame_times.main(["--only", "crowd 10 x 5", "--repeats", "1"])
+    assert text in capsys.readouterr().out
+    rows = stage_medians(text)
+    assert list(rows) == ["crowd 10 x 5 views"]
+    stages = rows["crowd 10 x 5 views"]
+    assert all(stages[s] > 0 for s in ("matching", "reconstruction", "tracking"))
+    assert stages["total"] == pytest.approx(stages["matching"] + stages["reconstruction"] + stages["tracking"], rel=0.5)
+    with pytest.raises(SystemExit):  # no setting of that name
+        frame_times.main(["--only", "no such setting"])
+
+
+def test_the_frames_driver_builds_the_pipeline_with_and_without_a_tracker():
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(str(ROOT / "configs"), version_base="1.3"):
+        cfg, off = compose("eval"), compose("eval", overrides=["tracking=off"])
+    sequence = instantiate(cfg.dataset, _convert_="all")
+    assert frame_times.build_pipeline(cfg, sequence.rig).tracker is not None
+    assert frame_times.build_pipeline(off, sequence.rig).tracker is None
