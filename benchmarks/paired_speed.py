@@ -133,7 +133,8 @@ def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, dr
             a = [r[setting][column] for r in runs["baseline"]]
             b = [r[setting][column] for r in runs["this tree"]]
             mean, se = paired_difference(a, b)
-            ratio = statistics.median(a) / statistics.median(b) if statistics.median(b) > 0 else float("nan")
+            both = min(statistics.median(a), statistics.median(b)) > 0  # a stage the baseline lacks has no ratio
+            ratio = statistics.median(a) / statistics.median(b) if both else float("nan")
             rows.append([setting, column, statistics.median(a), statistics.median(b), ratio, mean, se])
     return "\n\n".join(
         [

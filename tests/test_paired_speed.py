@@ -57,6 +57,10 @@ def test_the_report_lists_every_pair_and_each_stage_difference():
     assert text.count("| 100 people x 7 ring views |") == 2 + 4  # two pairs, four stages
     rows = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines() if "| total " in line]
     assert ["100 people x 7 ring views", "total", "16.61", "15.61", "1.06", "-1.00", "0.00"] in rows
+    untracked = {s: {**stages, "tracking": 0.0} for s, stages in one.items()}  # a baseline without a tracker
+    text = report({"baseline": [untracked], "this tree": [one]}, "abc123")
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines() if "| tracking " in line]
+    assert rows[-1][:5] == ["100 people x 7 ring views", "tracking", "0.00", "0.63", "nan"]
 
 
 def test_the_frames_driver_prints_a_table_the_pairs_read(capsys):
