@@ -2,8 +2,8 @@
 
 See configs/train.yaml for the commands (experiments, sweeps, resume, torchrun). This file is the command:
 it checks the config and the resume checkpoint, then runs the loop of models/train_loop.py, whose pieces live
-in models/training.py. Torch is imported only once the config has passed its checks, so that a typo stops
-in about a second.
+in models/training.py. Torch is imported only to read a resume checkpoint or once the config has passed its
+checks, so that a typo stops in about a second.
 """
 
 from __future__ import annotations
