@@ -79,7 +79,7 @@ def stage_times(sequence: Any, cfg: Any, repeats: int) -> np.ndarray:
 
 
 def markdown(header: list[str], rows: list[list]) -> str:
-    """A markdown table; floats with 2 decimals."""
+    """A markdown table; floats with 2 decimals (not evaluation.report.format_table: an older tree may lack it)."""
     cells = [[f"{v:.2f}" if isinstance(v, float) else str(v) for v in row] for row in [header, *rows]]
     lines = ["| " + " | ".join(row) + " |" for row in cells]
     return "\n".join([lines[0], "|" + "|".join("---" for _ in header) + "|", *lines[1:]])

@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
     parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
     parser.add_argument(
-        "--driver", choices=("speed", "frames"), default="speed", help="each tree's benchmarks.speed, or frame_times.py"
+        "--driver", choices=tuple(DRIVERS), default="speed", help="each tree's benchmarks.speed, or frame_times.py"
     )
     args = parser.parse_args(argv)
     if args.pairs < 1:
