@@ -192,7 +192,8 @@ def test_start_up_collection_pause_ends_in_main():
         assert gc.isenabled() and gc.get_freeze_count() > 0
         frozen = gc.get_freeze_count()
         eval_script.settle_startup_objects()  # a second job of a sweep: nothing more is frozen
-        assert gc.get_freeze_count() == frozen
+        # at most as many: a frozen object that another thread frees in between leaves the permanent generation
+        assert gc.get_freeze_count() <= frozen
     finally:
         gc.unfreeze()
         gc.enable()
