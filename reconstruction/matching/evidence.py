@@ -197,6 +197,7 @@ def warm_up() -> None:
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
     untested = untested_links((uv, var, one, None, p, cov, 1.0, F), np.zeros((2, 2), bool), (limits, 1, 9.0, 1.0))
     merge_persons(one[:1], one[1:2], one[:2], np.zeros((0, 2), np.int64), np.ones(2, bool), var, untested)
+    joint_sigma(np.ones((1, 2, 3)), np.ones((1, 4)), 0.016, 1.0)  # its pass over the joints
     feet_kernels.warm_up()
     usable_keypoints(np.zeros((2, 2, 3)), 0.2, np.empty((2, 2, 3)), np.empty((2, 2), bool), np.empty(2, bool))
     ints = np.zeros((2, 4), np.int64)  # strided column views of pairs_chi2's output, as __call__ passes them

@@ -28,6 +28,8 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from reconstruction.solver.sigma_kernels import sigmas_of_joints
+
 ROBUST_LOSSES = ("none", "huber", "cauchy")
 EPS_DEPTH = 1e-6  # m; projections of points behind a camera are clamped to this depth
 BLOCK_DIAG = (np.arange(3), np.arange(3))  # diagonal entries of 3x3 blocks stored first: (3, 3, ...) -> (3, ...)
@@ -91,21 +93,24 @@ def joint_sigma(
     (score <= 0) get inf. The defaults of the configs are fitted to Shelf's OpenPose errors
     (benchmarks/fit_sigma_model.py).
     """
-    poses2d = np.asarray(poses2d, dtype=np.float64)
+    poses2d = np.ascontiguousarray(poses2d, dtype=np.float64)
     bboxes = np.asarray(bboxes, dtype=np.float64)
     score = poses2d[..., 2]
-    seen = (score > 0) & np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
     size = np.sqrt(np.clip(bboxes[..., 2], 0, None) * np.clip(bboxes[..., 3], 0, None))
     missing = ~(size > 0)
-    if np.any(missing) and np.any(seen & missing[..., None]):  # (a box of no seen joint: its sigmas are inf)
-        pts, ok = poses2d[missing][..., :2], seen[missing][..., None]
-        lo = np.where(ok, pts, np.inf).min(axis=-2)
-        hi = np.where(ok, pts, -np.inf).max(axis=-2)
-        extent = np.where(np.any(ok, axis=-2), hi - lo, 0.0)
-        size[missing] = np.sqrt(extent[..., 0] * extent[..., 1])
-    spread = np.hypot(sigma_px, c * size)[..., None]
-    sigma = np.maximum(sigma_min, spread / np.where(seen, score, 1.0) ** score_power)
-    return np.where(seen, sigma, np.inf)
+    if np.any(missing):
+        seen = (score > 0) & np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
+        if np.any(seen & missing[..., None]):  # (a box of no seen joint: its sigmas are inf)
+            pts, ok = poses2d[missing][..., :2], seen[missing][..., None]
+            lo = np.where(ok, pts, np.inf).min(axis=-2)
+            hi = np.where(ok, pts, -np.inf).max(axis=-2)
+            extent = np.where(np.any(ok, axis=-2), hi - lo, 0.0)
+            size[missing] = np.sqrt(extent[..., 0] * extent[..., 1])
+    spread = np.hypot(sigma_px, c * size)
+    powed = np.where(score > 0, score, 1.0) ** score_power  # numpy's pow (an unseen joint's is not read)
+    N, J = int(np.prod(poses2d.shape[:-2])), poses2d.shape[-2]
+    sigma = sigmas_of_joints(poses2d.reshape(N, J, 3), spread.reshape(N), powed.reshape(N, J), float(sigma_min))
+    return sigma.reshape(poses2d.shape[:-1])
 
 
 def robust_rho(z: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -77,6 +77,7 @@ from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
 from reconstruction.solver.prior_kernels import mean_variances
 from reconstruction.solver.side_labels import chain_sides, consistent_sides, facing_sides
 from reconstruction.solver.side_swaps import apply_swaps, find_swaps
+from reconstruction.solver.sigma_kernels import observations
 
 SOLVERS = ("compiled", "numpy")
 BONE_PRIORS = ("adaptive", "population")  # each person's own bone lengths (person_prior.py) | the table's means
@@ -358,6 +359,8 @@ def warm_up() -> None:
     poses2d, proj = _tiny_problem()
     X, _ = initial_poses(triangulate_dlt(poses2d, proj), poses2d, proj)
     reinitialise_outliers(X, poses2d, proj)
+    sigma = joint_sigma(poses2d, np.ones((len(poses2d), 1, 4)), 0.016, 1.0)
+    observations(poses2d.reshape(-1, poses2d.shape[2], 3), sigma.reshape(-1, poses2d.shape[2]))
     find_swaps(poses2d, poses2d[..., 2], proj)
     _warm_up_solves()
 
@@ -464,7 +467,9 @@ class MAPReconstruction:
     def _observations(self, poses2d_und: np.ndarray, bboxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (V, P, J, 2) (0 where unseen) and 1 / sigma (V, P, J) (0 where unseen) of undistorted poses."""
         sigma = joint_sigma(poses2d_und, bboxes, self.c, self.sigma_min, self.sigma_px, self.score_power)
-        return np.nan_to_num(poses2d_und[..., :2]), np.where(np.isfinite(sigma), 1.0 / sigma, 0.0)
+        V, P, J = sigma.shape
+        uv, inv_sigma = observations(np.ascontiguousarray(poses2d_und).reshape(V * P, J, 3), sigma.reshape(V * P, J))
+        return uv.reshape(V, P, J, 2), inv_sigma.reshape(V, P, J)
 
     def _problem(
         self, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, anchor: np.ndarray, prior: bool
