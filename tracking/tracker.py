@@ -167,10 +167,15 @@ class TrackState:
     def __len__(self) -> int:
         return len(self.ids)
 
-    def select(self, keep: np.ndarray, then: "TrackState | None" = None) -> "TrackState":
-        """The tracks of a boolean mask (T,), followed by then's tracks if given, each field copied once (a
-        track's bone window is most of its bytes); these tracks themselves when the mask keeps all and nothing
-        follows."""
+    def select(
+        self, keep: np.ndarray, then: "TrackState | None" = None, pool: np.ndarray | None = None
+    ) -> "TrackState":
+        """The tracks of a boolean mask (T,), followed by then's tracks if given, each field copied once; these
+        tracks themselves when the mask keeps all and nothing follows.
+
+        A track's bone window is most of its bytes (100 tracks: 2 MB). With ``pool`` (C, W, L), whose first T rows
+        are this state's bone windows (self.bones is pool[:T]) and C >= the tracks out, the windows stay in it:
+        the kept ones after the first track dropped move up, then's are written after them (self is spent)."""
         if keep.all() and then is None:
             return self
         rows = np.flatnonzero(keep)
@@ -178,6 +183,14 @@ class TrackState:
         fields = []
         for f in self.__dataclass_fields__:
             old = getattr(self, f)
+            if f == "bones" and pool is not None:
+                shifted = np.flatnonzero(rows != np.arange(len(rows)))  # rows before the first drop stay
+                moved = int(shifted[0]) if len(shifted) else len(rows)
+                pool[moved : len(rows)] = old[rows[moved:]]  # (a fancy index reads all before the rows are written)
+                if added:
+                    pool[len(rows) : len(rows) + added] = then.bones
+                fields.append(pool[: len(rows) + added])
+                continue
             out = np.empty((len(rows) + added, *old.shape[1:]), dtype=old.dtype)
             np.take(old, rows, axis=0, out=out[: len(rows)], mode="clip")  # rows are valid; "raise" buffers
             if added:
@@ -314,6 +327,7 @@ class Tracker:
         self.smooth_floor2, self.smooth_q0 = float(smooth_floor_m) ** 2, float(smooth_initial_m) ** 2
         self.state: TrackState | None = None
         self._pairing: tuple | None = None  # (frame, persons, track ids, person indices) of skeletons()
+        self._pool: np.ndarray | None = None  # the tracks' bone windows and room for more (_bone_pool)
         self.last_frame: int | None = None
         self._next_id = 0
         warm_up_kernels("tracker", warm_up)  # one line while numba compiles (first run)
@@ -369,8 +383,10 @@ class Tracker:
         if self.state is None:
             self.state = TrackState.empty(poses3d.shape[1], self.bone_window)
         self.last_frame = frame
-        st = self.state.select(self._alive(self.state, frame - 1))  # gone during a gap
-        tracks, persons = self._reused_pairing(st, frame, len(poses3d)) or self._associate(st, frame, poses3d)
+        # the tracks alive since the last frame (the others are gone during a gap) are matched and corrected in
+        # place, then one select keeps the survivors: each copy of the tracks copies their bone windows (2 MB at 100)
+        st, alive = self.state, self._alive(self.state, frame - 1)
+        tracks, persons = self._reused_pairing(st, frame, len(poses3d)) or self._associate(st, frame, poses3d, alive)
         ids = np.full(len(poses3d), -1, dtype=np.int64)
         out = poses3d.copy()
         if len(tracks):
@@ -383,7 +399,8 @@ class Tracker:
             ids[born] = np.arange(self._next_id, self._next_id + len(born))
             self._next_id += len(born)
             births = self._births(ids[born], frame, poses3d[born], variance[born], bones[born])
-        self.state = st.select(hit | self._alive(st, frame), births)  # the survivors, then the new tracks
+        keep = alive & (hit | self._alive(st, frame))
+        self.state = st.select(keep, births, self._bone_pool(st, int(keep.sum()) + len(born)))  # survivors, then births
         return Tracked(ids, out)
 
     def skeletons(self, frame: int, poses3d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -395,8 +412,8 @@ class Tracker:
         stale = self.last_frame is not None and frame <= self.last_frame
         if self.state is None or not len(self.state) or not self.skeleton_min_frames or stale:
             return median, se
-        st = self.state.select(self._alive(self.state, frame - 1))
-        tracks, persons = self._associate(st, frame, np.asarray(poses3d, dtype=np.float64))
+        st = self.state
+        tracks, persons = self._associate(st, frame, np.asarray(poses3d, dtype=np.float64), self._alive(st, frame - 1))
         self._pairing = (frame, len(poses3d), st.ids[tracks], persons)  # update() reuses it for this frame
         keep = st.confirmed[tracks]
         tracks, persons = tracks[keep], persons[keep]
@@ -437,36 +454,53 @@ class Tracker:
         tracks = np.array([index.get(int(i), -1) for i in pairing[2]], dtype=np.int64)
         return (tracks, pairing[3]) if np.all(tracks >= 0) else None
 
+    def _bone_pool(self, st: TrackState, tracks: int) -> np.ndarray:
+        """The buffer of the tracks' bone windows (C, W, L), C >= tracks, whose first rows are st's (moved into a
+        larger one, twice the tracks, when it is short): TrackState.select keeps the windows in it."""
+        pool = self._pool
+        inside = pool is not None and st.bones.base is pool and st.bones.ctypes.data == pool.ctypes.data
+        if not inside or len(pool) < tracks:
+            pool = np.empty((max(2 * tracks, 16), *st.bones.shape[1:]))
+            pool[: len(st)] = st.bones
+            self._pool = pool
+        return pool
+
     def _alive(self, st: TrackState, frame: int) -> np.ndarray:
         """Which tracks not hit after their last frame survive up to this frame: tentative ones die at once,
         confirmed ones after max_age frames without a hit: (T,) bool."""
         return frame - st.last_frame <= np.where(st.confirmed, self.max_age, 0)
 
-    def _associate(self, st: TrackState, frame: int, poses3d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Gated Hungarian assignment of tracks to persons: -> track indices (K,), person indices (K,)."""
+    def _associate(
+        self, st: TrackState, frame: int, poses3d: np.ndarray, alive: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Gated Hungarian assignment of the alive tracks (a mask (T,)) to persons: -> track indices of st (K,),
+        person indices (K,)."""
         none = np.zeros(0, dtype=np.int64)
-        if not len(st) or not len(poses3d):
+        rows = np.flatnonzero(alive)
+        if not len(rows) or not len(poses3d):
             return none, none
-        dt = (frame - st.last_frame).astype(np.float64)
-        predicted = st.position + dt[:, None, None] * self._body_velocity(st)[:, None, :]
+        position, live, seen = st.position[rows], st.live[rows], st.seen[rows]
+        dt = (frame - st.last_frame[rows]).astype(np.float64)
+        predicted = position + dt[:, None, None] * self._body_velocity(live, st.velocity[rows])[:, None, :]
         gate = self.max_distance_m + self.gate_growth_m * (dt - 1.0)
-        live = np.where(st.live.any(axis=1, keepdims=True), st.live, st.seen)
+        live = np.where(live.any(axis=1, keepdims=True), live, seen)
         both = mean_distances(  # the prediction and the last position in one pass: (2T, P)
-            np.concatenate([predicted, st.position]), np.concatenate([live, live]), poses3d, gate.max()
+            np.concatenate([predicted, position]), np.concatenate([live, live]), poses3d, gate.max()
         )
-        cost = np.minimum(both[: len(st)], both[len(st) :])
+        cost = np.minimum(both[: len(rows)], both[len(rows) :])
         # row-major (rows ascending, as the solver wants them) and contiguous (np.nonzero's are strided views)
-        rows, cols = np.divmod(np.flatnonzero(cost <= gate[:, None]), cost.shape[1])
-        keep = solve_sparse_pairs(np.array([0, len(rows)]), np.array([cost.shape]), rows, cols, cost[rows, cols])
-        return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+        pick, cols = np.divmod(np.flatnonzero(cost <= gate[:, None]), cost.shape[1])
+        keep = solve_sparse_pairs(np.array([0, len(pick)]), np.array([cost.shape]), pick, cols, cost[pick, cols])
+        return rows[pick[keep]].astype(np.int64), cols[keep].astype(np.int64)
 
     @staticmethod
-    def _body_velocity(st: TrackState) -> np.ndarray:
-        """Mean velocity of each track's live head and trunk joints (all live joints without any): (T, 3)."""
-        use = st.live & _core_mask(st.live.shape[1])
-        use = np.where(use.any(axis=1, keepdims=True), use, st.live)
+    def _body_velocity(live: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """Mean velocity of each track's live head and trunk joints (all live joints without any): (T, J) bool,
+        (T, J, 3) -> (T, 3)."""
+        use = live & _core_mask(live.shape[1])
+        use = np.where(use.any(axis=1, keepdims=True), use, live)
         n = np.maximum(use.sum(axis=1), 1)[:, None]
-        return np.where(use[..., None], st.velocity, 0.0).sum(axis=1) / n
+        return np.where(use[..., None], velocity, 0.0).sum(axis=1) / n
 
     def _births(
         self, ids: np.ndarray, frame: int, poses3d: np.ndarray, variance: np.ndarray, lengths: np.ndarray
