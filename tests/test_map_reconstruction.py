@@ -40,6 +40,7 @@ from reconstruction.solver.map_solver import (
     solve_poses,
 )
 from reconstruction.solver.pose_init import initial_poses, reinitialise_outliers
+from reconstruction.solver.sigma_kernels import sigmas_of_joints
 
 STAGES = {
     "vanilla": VanillaTriangulation,
@@ -591,3 +592,34 @@ def test_the_cost_alone_is_the_linearisations_cost_bit_for_bit(robust):
             point, terms, whole = costs(x, data, 1e-6, robust, 9.0, plan, lin, k, p)
             assert point == terms
         assert all(alone == full for alone, full in whole)
+
+
+def _numpy_joint_sigma(poses2d, bboxes, c, sigma_min, sigma_px, score_power):
+    """The sigma model in numpy, as joint_sigma computed it before its compiled pass (boxes with an area)."""
+    score = poses2d[..., 2]
+    seen = (score > 0) & np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
+    size = np.sqrt(np.clip(bboxes[..., 2], 0, None) * np.clip(bboxes[..., 3], 0, None))
+    spread = np.hypot(sigma_px, c * size)[..., None]
+    return np.where(seen, np.maximum(sigma_min, spread / np.where(seen, score, 1.0) ** score_power), np.inf)
+
+
+def test_the_compiled_sigma_and_observation_passes_equal_numpys_formulas():
+    rng = np.random.default_rng(5)
+    poses2d = np.concatenate([rng.uniform(-50, 2000, (4, 9, 23, 2)), rng.uniform(-0.2, 1.0, (4, 9, 23, 1))], axis=-1)
+    odd = rng.random(poses2d.shape[:3]) < 0.15
+    poses2d[odd, rng.integers(0, 3)] = rng.choice([np.nan, np.inf, -np.inf, 0.0], size=odd.sum())
+    poses2d[0, 0, :, 2] = 1e-300  # tiny scores: sigmas overflow to inf
+    bboxes = rng.uniform(1, 400, (4, 9, 4))
+    for model in ((0.016, 1.0, 5.2, 1.27), (0.05, 30.0, 0.0, 1.0)):
+        ours = me.joint_sigma(poses2d, bboxes, *model)
+        with np.errstate(divide="ignore"):
+            np.testing.assert_array_equal(ours, _numpy_joint_sigma(poses2d, bboxes, *model))
+    spread = np.array([np.nan, 3.0])  # a NaN spread gives NaN sigmas, as np.maximum does
+    points = np.ones((2, 1, 3))
+    np.testing.assert_array_equal(sigmas_of_joints(points, spread, np.ones((2, 1)), 1.0), [[np.nan], [3.0]])
+    stage = map_solver.MAPReconstruction()
+    uv, inv_sigma = stage._observations(poses2d, bboxes)
+    sigma = me.joint_sigma(poses2d, bboxes, stage.c, stage.sigma_min, stage.sigma_px, stage.score_power)
+    np.testing.assert_array_equal(uv, np.nan_to_num(poses2d[..., :2]))
+    np.testing.assert_array_equal(inv_sigma, np.where(np.isfinite(sigma), 1.0 / sigma, 0.0))
+    assert np.isinf(sigma).any() and (inv_sigma == 0).any() and not np.isfinite(poses2d).all()

@@ -386,3 +386,28 @@ def test_selecting_tracks_then_appending_new_ones_equals_a_mask_then_a_concatena
         assert getattr(out, f).dtype == expected.dtype
     assert old.select(np.ones(7, bool)) is old and len(old.select(np.zeros(7, bool))) == 0
     assert len(old.select(np.ones(7, bool), new)) == 10
+
+
+def test_a_select_into_the_bone_pool_equals_the_plain_select():
+    """TrackState.select with the tracker's pool of bone windows: the same tracks as the copying select, and the
+    windows of the output are the pool's first rows."""
+    rng = np.random.default_rng(2)
+
+    def state(T: int) -> tracker.TrackState:
+        empty = tracker.TrackState.empty(23, 6)
+        return tracker.TrackState(
+            *(rng.normal(size=(T, *getattr(empty, f).shape[1:])).astype(getattr(empty, f).dtype) for f in FIELDS)
+        )
+
+    FIELDS = tuple(tracker.TrackState.__dataclass_fields__)
+    for keep_rate, births in ((1.0, 3), (0.7, 0), (0.4, 5), (0.0, 2)):
+        st, then = state(12), state(births) if births else None
+        keep = rng.random(12) < keep_rate
+        plain = st.select(keep, then)
+        pool = np.full((40, 6, len(BONE_PAIRS)), np.nan)
+        pool[:12] = st.bones
+        pooled = tracker.TrackState(*(pool[:12] if f == "bones" else getattr(st, f) for f in FIELDS))
+        out = pooled.select(keep, then, pool)
+        for f in FIELDS:
+            np.testing.assert_array_equal(getattr(out, f), getattr(plain, f), err_msg=f)
+        assert out.bones.base is pool and out.bones.ctypes.data == pool.ctypes.data
