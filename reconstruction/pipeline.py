@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections import defaultdict
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Callable, Protocol
 
 import numpy as np
@@ -12,6 +13,8 @@ from hydra.utils import instantiate
 
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
+from reconstruction.compile_notice import warm_up_kernels
+from reconstruction.gather_kernels import gather_detections
 
 Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
 Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
@@ -52,18 +55,18 @@ def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[n
     Views where a person has no detection get score 0 and an all-zero box; a joint with a non-finite
     coordinate or score (a detector's NaN) is missing too (x, y, score 0).
     """
-    P, V = assignment.shape
     J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
-    poses2d = np.zeros((V, P, J, 3))
-    bboxes = np.zeros((V, P, 4))
-    for v, dets in enumerate(views):
-        have = assignment[:, v] >= 0
-        poses2d[v, have] = dets.keypoints[assignment[have, v]]
-        bboxes[v, have] = dets.bboxes[assignment[have, v]]
-    finite = np.isfinite(poses2d)
-    if not finite.all():  # (the where below costs more than this test; detectors' NaN are rare)
-        poses2d = np.where(finite.all(axis=-1, keepdims=True), poses2d, 0.0)
-    return poses2d, (bboxes if np.isfinite(bboxes).all() else np.nan_to_num(bboxes, nan=0.0, posinf=0.0, neginf=0.0))
+    counts = [len(v) for v in views]
+    keypoints = np.concatenate([np.asarray(v.keypoints, dtype=np.float64).reshape(-1, J, 3) for v in views])
+    boxes = np.concatenate([np.asarray(v.bboxes, dtype=np.float64).reshape(-1, 4) for v in views])
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return gather_detections(keypoints, boxes, offsets, np.ascontiguousarray(assignment, dtype=np.int64))
+
+
+@lru_cache(maxsize=1)
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the gather's kernel once per process, before a first frame is timed."""
+    gather_detections(np.ones((1, 2, 3)), np.ones((1, 4)), np.array([0, 1]), np.zeros((1, 1), dtype=np.int64))
 
 
 class MultiViewPipeline:
@@ -78,6 +81,7 @@ class MultiViewPipeline:
         self.reconstructor = reconstructor
         self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
+        warm_up_kernels("gather", warm_up)  # one line while numba compiles (first run)
 
     @classmethod
     def from_config(cls, cfg: Any, rig: Rig) -> "MultiViewPipeline":

@@ -69,3 +69,26 @@ def test_default_pipeline_with_tracking_runs_frames_without_any_person():
     people = pipeline(Frame(1, sequence.frames[1].views))
     assert len(people.poses3d) == 3 and len(people.ids) == 3
     assert len(pipeline(Frame(2, [ViewDetections.empty() for _ in sequence.rig])).poses3d) == 0
+
+
+def test_gather_views_equals_a_per_view_numpy_gather_with_detector_nans():
+    """The compiled gather against numpy's fancy indexing, view by view: non-finite joints and box entries zeroed."""
+    rng = np.random.default_rng(4)
+    views = []
+    for n in (5, 0, 3):
+        kp, boxes = rng.uniform(0, 500, (n, 23, 3)), rng.uniform(0, 90, (n, 4))
+        kp[rng.random(kp.shape) < 0.05] = np.nan
+        kp[rng.random(kp.shape) < 0.02] = np.inf
+        boxes[rng.random(boxes.shape) < 0.2] = -np.inf
+        views.append(ViewDetections(kp, boxes, np.ones(n), -np.ones(n, dtype=np.int64)))
+    assignment = np.array([[0, -1, 2], [4, -1, -1], [-1, -1, 0], [2, -1, 1]])
+    poses2d, bboxes = gather_views(views, assignment)
+    want, want_boxes = np.zeros((3, 4, 23, 3)), np.zeros((3, 4, 4))
+    for v, dets in enumerate(views):
+        have = assignment[:, v] >= 0
+        want[v, have] = dets.keypoints[assignment[have, v]]
+        want_boxes[v, have] = dets.bboxes[assignment[have, v]]
+    want = np.where(np.isfinite(want).all(axis=-1, keepdims=True), want, 0.0)
+    np.testing.assert_array_equal(poses2d, want)
+    np.testing.assert_array_equal(bboxes, np.nan_to_num(want_boxes, nan=0.0, posinf=0.0, neginf=0.0))
+    assert (poses2d[..., 2] > 0).sum() < (want_boxes[..., :1] != 0).sum() * 23  # some joints were zeroed
