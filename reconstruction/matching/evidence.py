@@ -405,13 +405,12 @@ class EvidenceMatcher:
     def _count_reasons(self, assignment: np.ndarray, ev: FrameEvidence) -> None:
         """Unmatched detections by reason: too little evidence (with NaN keypoints, or not) or no counterpart."""
         placed = np.zeros(len(ev.usable), dtype=bool)
-        views = np.broadcast_to(np.arange(assignment.shape[1]), assignment.shape)
-        have = assignment >= 0
-        placed[ev.offsets[views[have]] + assignment[have]] = True
+        placed[(ev.offsets[:-1] + assignment)[assignment >= 0]] = True
+        unusable = ~placed & ~ev.usable
         reasons: Counter[str] = Counter()
-        reasons[NON_FINITE_KEYPOINTS] = int(np.sum(~placed & ~ev.usable & ev.bad))
-        reasons[TOO_LITTLE_EVIDENCE] = int(np.sum(~placed & ~ev.usable & ~ev.bad))
-        reasons[NO_COUNTERPART] = int(np.sum(~placed & ev.usable))
+        reasons[NON_FINITE_KEYPOINTS] = int(np.count_nonzero(unusable & ev.bad))
+        reasons[TOO_LITTLE_EVIDENCE] = int(np.count_nonzero(unusable)) - reasons[NON_FINITE_KEYPOINTS]
+        reasons[NO_COUNTERPART] = int(np.count_nonzero(~placed & ev.usable))
         self.last_unmatched_reasons = +reasons
         self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
 
