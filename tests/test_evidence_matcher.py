@@ -285,6 +285,15 @@ def test_bad_detections_are_reported_as_unmatched_by_reason_not_a_crash():
     assert _counts(assignment, views).precision == 1.0
 
 
+def test_a_view_whose_keypoints_have_another_joint_count_is_named():
+    seq = _scene()
+    views = list(seq.frames[0].views)
+    v = views[1]
+    views[1] = ViewDetections(v.keypoints[:, :17], v.bboxes, v.scores, v.person_ids)  # COCO-17 among COCO-23
+    with pytest.raises(ValueError, match=r"keypoints must have shape \(N, 23, 3\) in every view, got \(6, 17, 3\)"):
+        EvidenceMatcher()(views, seq.rig)
+
+
 def test_a_frame_with_nan_keypoints_is_reconstructed_without_them():
     seq = _scene()
     views = [ViewDetections(v.keypoints.copy(), v.bboxes, v.scores, v.person_ids) for v in seq.frames[0].views]

@@ -291,11 +291,17 @@ class EvidenceMatcher:
         frame's calibrated noise (:meth:`noise_scale2`)."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
-        feet = self.feet.stacked_features([_finite(v) for v in views], rig)
         counts = np.array([len(v) for v in views], dtype=np.int64)
         J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
+        for v in views:
+            if len(v) and np.shape(v.keypoints)[1:] != (J, 3):
+                raise ValueError(f"keypoints must have shape (N, {J}, 3) in every view, got {np.shape(v.keypoints)}")
         model = (self.c, self.sigma_min, self.sigma_px, self.score_power)
         uv, var, bad = joint_variances(views, list(rig), self.min_score, model, J)
+        ends = np.cumsum(counts)  # a view with a non-finite keypoint (bad) gets it zeroed for the feet
+        feet = self.feet.stacked_features(
+            [_finite(v) if bad[e - len(v) : e].any() else v for v, e in zip(views, ends)], rig
+        )
         has_p = np.asarray(feet.has_p, dtype=bool)
         stacked = (
             uv,
@@ -456,8 +462,6 @@ class FrameEvidence:
 def _finite(view: ViewDetections) -> ViewDetections:
     """The view with non-finite keypoints zeroed (missing), for the feet features."""
     kp = np.asarray(view.keypoints, dtype=np.float64)
-    if np.isfinite(kp).all():
-        return view
     finite = np.isfinite(kp).all(axis=-1, keepdims=True)
     return ViewDetections(
         np.where(finite, kp, 0.0), np.nan_to_num(view.bboxes), view.scores, view.person_ids, view.occluded
