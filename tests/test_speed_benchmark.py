@@ -18,7 +18,14 @@ def test_speed_table_of_one_small_crowd(tmp_path: Path) -> None:
     frames, grouping, *stages, total = cells[1:7]
     assert frames == "2" and grouping == "-"  # synthetic detections: no PAF grouping
     assert abs(sum(map(float, stages)) - float(total)) < 0.05 + 0.01 * float(total)  # medians: close, not equal
-    assert cells[7:] == ["-", "-", "-"]  # no target, no figure of the issue for this setting
+    assert cells[7:] == ["-", "-", "-", "-"]  # no target, no figure of the issue for this setting
+
+
+def test_the_counted_stages_are_those_of_each_target() -> None:
+    """Shelf's target counts every stage; the crowds' (issue 16's "default matching + MAP") matching + MAP."""
+    assert speed.TARGET_STAGES["Shelf 300-600"] == ("grouping", "matching", "reconstruction", "tracking")
+    assert speed.TARGET_STAGES["100 people x 7 ring views"] == ("matching", "reconstruction")
+    assert set(speed.TARGET_STAGES) == set(speed.TARGETS)
 
 
 def test_a_filter_that_matches_no_setting_prints_empty_tables() -> None:
