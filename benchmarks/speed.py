@@ -93,6 +93,16 @@ def grouping_times(frames: list[list], grouper, repeats: int) -> np.ndarray:
     return np.array(out)
 
 
+def counted_times(label: str, grouping: np.ndarray, per_frame: np.ndarray) -> np.ndarray:
+    """Per frame, the sum of the stages the setting's target counts (TARGET_STAGES; the row shows its median, not a
+    sum of medians): grouping (F,) (NaN: none), per_frame (F, 3) matching, reconstruction, tracking -> (F,), NaN
+    for a setting without a target."""
+    if label not in TARGET_STAGES:
+        return np.full(len(per_frame), np.nan)
+    times = np.nan_to_num(np.column_stack([grouping, per_frame]))
+    return times[:, [STAGES.index(s) for s in TARGET_STAGES[label]]].sum(axis=1)
+
+
 def stage_rows(
     data: str, crowd_frames: int, repeats: int, quick: bool, only: str | None = None
 ) -> tuple[list[list], dict]:
@@ -111,12 +121,7 @@ def stage_rows(
         if label.startswith("100 people"):
             kept["ring100"] = (sequence, overrides)
         total = np.nan_to_num(grouping) + per_frame.sum(axis=1)
-        counted = np.full(len(total), np.nan)
-        if (
-            label in TARGET_STAGES
-        ):  # the per-frame sum of the stages the target counts (its median, not a sum of medians)
-            times = np.column_stack([grouping, per_frame])
-            counted = np.nan_to_num(times[:, [STAGES.index(s) for s in TARGET_STAGES[label]]]).sum(axis=1)
+        counted = counted_times(label, grouping, per_frame)
         medians = [np.median(grouping), *np.median(per_frame, axis=0), np.median(total), np.median(counted)]
         figure = ISSUE_FIGURES.get(label, np.nan)
         target = TARGETS.get(label, np.nan)

@@ -1,6 +1,7 @@
 """The compiled gather of matched detections (:func:`reconstruction.pipeline.gather_views`): one pass that copies
 each person's detection per view and zeroes a detector's non-finite joints and box entries, where numpy took a
-fancy-indexed copy per view and two passes over the result (a 100-person 7-view frame: 0.2 -> 0.05 ms)."""
+fancy-indexed copy per view and two passes over the result (a 100-person 7-view frame, timed alone: 98 -> 48 us
+with the stacking in gather_views)."""
 
 from __future__ import annotations
 
