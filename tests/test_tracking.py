@@ -13,7 +13,7 @@ from data.synthetic.body import mean_body, pose_joints
 from evaluation.identity import IdentityEvaluator
 from reconstruction.solver.map_solver import combine_estimates
 from tracking import Tracker, tracker
-from tracking.track_kernels import centres, pair_mean_distances, robust_skeleton
+from tracking.track_kernels import centres, pair_mean_distances, predicted_positions, robust_skeleton
 from tracking.tracker import CORE_JOINTS, _core_mask, mean_distances, near_pairs, robust_lengths
 
 FPS = 25.0
@@ -350,6 +350,23 @@ def test_the_association_kernels_equal_the_numpy_formulas():
         np.testing.assert_allclose(got[rows, cols], core_d, rtol=1e-15)  # numpy's sums are pairwise at times
     assert left.any() and np.isinf(core_d).any()
     np.testing.assert_array_equal(mean_distances(guess, seen, poses), got)  # every pair within an infinite gate
+
+
+def test_the_prediction_kernel_equals_the_numpy_formula_bit_for_bit():
+    rng = np.random.default_rng(7)
+    T, J = 30, 23
+    position, velocity, dt = rng.normal(0, 3, (T, J, 3)), rng.normal(0, 1, (T, J, 3)), rng.integers(1, 5, T) * 1.0
+    live = rng.random((T, J)) < 0.6
+    live[:3, CORE_JOINTS] = False  # no head or trunk joint: the mean of all live joints
+    live[3] = False  # nothing live: no motion
+    core = _core_mask(J)
+    use = live & core
+    use = np.where(use.any(axis=1, keepdims=True), use, live)  # the numpy formula the kernel replaced
+    body = np.where(use[..., None], velocity, 0.0).sum(axis=1) / np.maximum(use.sum(axis=1), 1)[:, None]
+    out = np.empty((T, J, 3))
+    predicted_positions(position, velocity, live, core, dt, out)
+    assert np.array_equal(out, position + dt[:, None, None] * body[:, None, :])
+    assert np.array_equal(out[3], position[3]) and not np.array_equal(out[0], position[0])
 
 
 def test_the_skeleton_kernel_equals_robust_lengths_bit_for_bit():

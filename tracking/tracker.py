@@ -47,7 +47,14 @@ from scipy.spatial import cKDTree
 from data.bone_lengths import BONE_PAIRS, bone_lengths
 from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
-from tracking.track_kernels import MAD_TO_SD, centres, correct_tracks, near_mean_distances, pair_mean_distances
+from tracking.track_kernels import (
+    MAD_TO_SD,
+    centres,
+    correct_tracks,
+    near_mean_distances,
+    pair_mean_distances,
+    predicted_positions,
+)
 
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
 # shoulders, hips) move with the body; arms and legs swing by tens of cm between frames at 5 fps.
@@ -267,6 +274,7 @@ def warm_up() -> None:
     pair_mean_distances(
         pose[..., :3].copy(), pose[..., 3] > 0, pose, pose[..., 3] > 0, core, one, one, np.empty((1, 1))
     )
+    predicted_positions(pose[..., :3].copy(), np.zeros((1, J, 3)), pose[..., 3] > 0, core, np.ones(1), np.empty((1, J, 3)))
     filters, counts = (UNSEEN_VAR_M2, 1.0, 1.0, 1.0, 1.0, 1.0), (1, SKELETON_REFRESH)
     lengths = np.ones((1, len(BONE_PAIRS)))
     correct_tracks(
@@ -481,7 +489,8 @@ class Tracker:
             return none, none
         position, live, seen = st.position[rows], st.live[rows], st.seen[rows]
         dt = (frame - st.last_frame[rows]).astype(np.float64)
-        predicted = position + dt[:, None, None] * self._body_velocity(live, st.velocity[rows])[:, None, :]
+        predicted = np.empty(position.shape)
+        predicted_positions(position, st.velocity[rows], live, _core_mask(live.shape[1]), dt, predicted)
         gate = self.max_distance_m + self.gate_growth_m * (dt - 1.0)
         live = np.where(live.any(axis=1, keepdims=True), live, seen)
         both = mean_distances(  # the prediction and the last position in one pass: (2T, P)
@@ -492,15 +501,6 @@ class Tracker:
         pick, cols = np.divmod(np.flatnonzero(cost <= gate[:, None]), cost.shape[1])
         keep = solve_sparse_pairs(np.array([0, len(pick)]), np.array([cost.shape]), pick, cols, cost[pick, cols])
         return rows[pick[keep]].astype(np.int64), cols[keep].astype(np.int64)
-
-    @staticmethod
-    def _body_velocity(live: np.ndarray, velocity: np.ndarray) -> np.ndarray:
-        """Mean velocity of each track's live head and trunk joints (all live joints without any): (T, J) bool,
-        (T, J, 3) -> (T, 3)."""
-        use = live & _core_mask(live.shape[1])
-        use = np.where(use.any(axis=1, keepdims=True), use, live)
-        n = np.maximum(use.sum(axis=1), 1)[:, None]
-        return np.where(use[..., None], velocity, 0.0).sum(axis=1) / n
 
     def _births(
         self, ids: np.ndarray, frame: int, poses3d: np.ndarray, variance: np.ndarray, lengths: np.ndarray
