@@ -55,7 +55,9 @@ def predicted_positions(
         n = max(n, 1)
         v0, v1, v2 = dt[t] * (v0 / n), dt[t] * (v1 / n), dt[t] * (v2 / n)
         for j in range(J):
-            out[t, j, 0], out[t, j, 1], out[t, j, 2] = position[t, j, 0] + v0, position[t, j, 1] + v1, position[t, j, 2] + v2
+            out[t, j, 0] = position[t, j, 0] + v0
+            out[t, j, 1] = position[t, j, 1] + v1
+            out[t, j, 2] = position[t, j, 2] + v2
 
 
 @njit(**_JIT)

@@ -274,7 +274,9 @@ def warm_up() -> None:
     pair_mean_distances(
         pose[..., :3].copy(), pose[..., 3] > 0, pose, pose[..., 3] > 0, core, one, one, np.empty((1, 1))
     )
-    predicted_positions(pose[..., :3].copy(), np.zeros((1, J, 3)), pose[..., 3] > 0, core, np.ones(1), np.empty((1, J, 3)))
+    predicted_positions(
+        pose[..., :3].copy(), np.zeros((1, J, 3)), pose[..., 3] > 0, core, np.ones(1), np.empty((1, J, 3))
+    )
     filters, counts = (UNSEEN_VAR_M2, 1.0, 1.0, 1.0, 1.0, 1.0), (1, SKELETON_REFRESH)
     lengths = np.ones((1, len(BONE_PAIRS)))
     correct_tracks(
