@@ -2,16 +2,18 @@
 minutes still resolves a change of a few percent (a 2-core machine of this project's drifted 20 % in an hour).
 
     python -m benchmarks.paired_speed --baseline REV [--pairs 8] [--only "100 people"] [--repeats 3] [--cpu 1]
-                                      [--driver speed|frames]
+                                      [--driver speed|frames|process]
 
 Each pair runs the driver first in a temporary git worktree of the baseline, then in this tree, each with a numba
 cache of its own kept over the pairs (the first pair compiles, before its timed frames). The drivers:
 ``speed`` (default) runs each tree's own ``python -m benchmarks.speed --quick --skip-process --only TEXT``;
 ``frames`` runs this tree's benchmarks/frame_times.py in both trees, which times any revision's pipeline, also
-one older than benchmarks/speed.py (``--baseline a9f9a65 --driver frames``: issue 16's reference). From each
-run's first table it reads every setting's stage medians, and prints every pair and, per setting and stage, the
-baseline's and this tree's medians over the pairs, their ratio (baseline / this tree), and the mean of the paired
-differences (this tree - baseline) with its standard error."""
+one older than benchmarks/speed.py (``--baseline a9f9a65 --driver frames``: issue 16's reference); ``process``
+times the whole process ``python eval.py dataset=shelf progress=false`` in each tree (warm: each tree's cache is
+filled by an untimed run first; the median of ``--repeats`` runs, in seconds). From each run's first table it
+reads every setting's stage medians, and prints every pair and, per setting and stage, the baseline's and this
+tree's medians over the pairs, their ratio (baseline / this tree), and the mean of the paired differences (this
+tree - baseline) with its standard error."""
 
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -30,7 +33,12 @@ from evaluation.report import format_table
 
 ROOT = Path(__file__).resolve().parents[1]
 COLUMNS = ("matching", "reconstruction", "tracking", "total")
-DRIVERS = {"speed": "benchmarks.speed", "frames": "benchmarks/frame_times.py"}
+DRIVERS = {
+    "speed": "benchmarks.speed",
+    "frames": "benchmarks/frame_times.py",
+    "process": "python eval.py dataset=shelf",
+}
+PROCESS_SETTING = "python eval.py dataset=shelf (warm), s"
 
 
 def stage_medians(text: str) -> dict[str, dict[str, float]]:
@@ -90,6 +98,31 @@ def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
     return done.stdout
 
 
+def run_process(tree: Path, cache: Path, args: argparse.Namespace) -> dict[str, dict[str, float]]:
+    """The process driver: median wall seconds of --repeats runs of Shelf's ``python eval.py`` in tree, as a
+    setting whose total is those seconds (its stages 0: a process has no stage table)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
+    pin = (lambda: os.sched_setaffinity(0, {args.cpu})) if args.cpu is not None else None
+    seconds = []
+    with tempfile.TemporaryDirectory(prefix="paired_speed_runs_") as runs:
+        for k in range(args.repeats):
+            command = [sys.executable, "eval.py", "dataset=shelf", f"dataset.root={Path(args.data).resolve()}/shelf"]
+            command += ["progress=false", f"hydra.run.dir={runs}/{k}"]
+            t0 = time.perf_counter()
+            done = subprocess.run(command, cwd=tree, env=env, capture_output=True, text=True, preexec_fn=pin)
+            seconds.append(time.perf_counter() - t0)
+            if done.returncode:
+                raise RuntimeError(f"python eval.py failed in {tree}:\n{done.stderr[-2000:]}")
+    return {PROCESS_SETTING: {**dict.fromkeys(COLUMNS[:-1], 0.0), "total": statistics.median(seconds)}}
+
+
+def run_once(tree: Path, cache: Path, args: argparse.Namespace) -> dict[str, dict[str, float]]:
+    """One run of the driver in tree: setting -> stage -> ms per frame (seconds for the process driver)."""
+    if args.driver == "process":
+        return run_process(tree, cache, args)
+    return stage_medians(run_speed(tree, cache, args))
+
+
 def main(argv: list[str] | None = None) -> str:
     """Run the pairs; print (and with --out, write) the pairs and the paired differences."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -101,16 +134,25 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
     parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
     parser.add_argument(
-        "--driver", choices=tuple(DRIVERS), default="speed", help="each tree's benchmarks.speed, or frame_times.py"
+        "--driver",
+        choices=tuple(DRIVERS),
+        default="speed",
+        help="each tree's benchmarks.speed, frame_times.py, or the whole Shelf process",
     )
     args = parser.parse_args(argv)
     if args.pairs < 1:
         parser.error("--pairs must be at least 1")
     runs: dict[str, list[dict[str, dict[str, float]]]] = {"baseline": [], "this tree": []}
     with worktree(args.baseline) as base, tempfile.TemporaryDirectory(prefix="paired_speed_cache_") as caches:
+        trees = (("baseline", base), ("this tree", ROOT))
+        if args.driver == "process":  # fill each tree's numba cache: the pairs time warm processes
+            for name, tree in trees:
+                run_process(
+                    tree, Path(caches) / name.replace(" ", "_"), argparse.Namespace(**{**vars(args), "repeats": 1})
+                )
         for k in range(args.pairs):
-            for name, tree in (("baseline", base), ("this tree", ROOT)):
-                runs[name].append(stage_medians(run_speed(tree, Path(caches) / name.replace(" ", "_"), args)))
+            for name, tree in trees:
+                runs[name].append(run_once(tree, Path(caches) / name.replace(" ", "_"), args))
             print(f"pair {k + 1}/{args.pairs} done", file=sys.stderr, flush=True)
     text = report(runs, args.baseline, args.driver)
     print(text)
@@ -122,6 +164,8 @@ def main(argv: list[str] | None = None) -> str:
 def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, driver: str = "speed") -> str:
     """The pairs' totals and, per setting and stage, the medians and the mean paired difference."""
     settings = [s for s in runs["baseline"][0] if all(s in r for rs in runs.values() for r in rs)]
+    columns = ("total",) if driver == "process" else COLUMNS
+    unit = "seconds per run, median of its repeats" if driver == "process" else "ms per frame, median over its frames"
     pairs = [
         [k + 1, setting, a[setting]["total"], b[setting]["total"]]
         for setting in settings
@@ -129,7 +173,7 @@ def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, dr
     ]
     rows = []
     for setting in settings:
-        for column in COLUMNS:
+        for column in columns:
             a = [r[setting][column] for r in runs["baseline"]]
             b = [r[setting][column] for r in runs["this tree"]]
             mean, se = paired_difference(a, b)
@@ -138,7 +182,7 @@ def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, dr
             rows.append([setting, column, statistics.median(a), statistics.median(b), ratio, mean, se])
     return "\n\n".join(
         [
-            f"Each pair: {DRIVERS[driver]} at {baseline}, then in this tree (ms per frame, median over its frames)",
+            f"Each pair: {DRIVERS[driver]} at {baseline}, then in this tree ({unit})",
             format_table(["pair", "setting", f"{baseline} total", "this tree total"], pairs, floatfmt=".2f"),
             f"Over the {len(runs['baseline'])} pairs: medians, and this tree - {baseline} (mean of the pairs' differences)",
             format_table(

@@ -1,6 +1,7 @@
 """benchmarks/paired_speed.py: reading benchmarks.speed's table, and the paired differences; the frames driver
-(benchmarks/frame_times.py)."""
+(benchmarks/frame_times.py) and the process driver."""
 
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,7 @@ import pytest
 from hydra.utils import instantiate
 
 from benchmarks import frame_times
-from benchmarks.paired_speed import paired_difference, report, stage_medians
+from benchmarks.paired_speed import PROCESS_SETTING, paired_difference, report, run_process, stage_medians
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -83,3 +84,25 @@ def test_the_frames_driver_builds_the_pipeline_with_and_without_a_tracker():
     sequence = instantiate(cfg.dataset, _convert_="all")
     assert frame_times.build_pipeline(cfg, sequence.rig).tracker is not None
     assert frame_times.build_pipeline(off, sequence.rig).tracker is None
+
+
+def test_the_process_driver_times_the_shelf_command_of_a_tree(tmp_path):
+    tree, cache = tmp_path / "tree", tmp_path / "cache"
+    tree.mkdir()
+    cache.mkdir()
+    (tree / "eval.py").write_text(  # a stand-in that records its arguments where the driver put numba's cache
+        "import os, sys\nopen(os.path.join(os.environ['NUMBA_CACHE_DIR'], 'argv'), 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
+    )
+    args = argparse.Namespace(repeats=3, cpu=None, data=str(tmp_path / "data"))
+    got = run_process(tree, cache, args)
+    assert list(got) == [PROCESS_SETTING] and got[PROCESS_SETTING]["total"] > 0
+    calls = (cache / "argv").read_text().splitlines()
+    assert len(calls) == 3 and all(
+        c.startswith(f"dataset=shelf dataset.root={tmp_path}/data/shelf progress=false") for c in calls
+    )
+    assert len({c.split("hydra.run.dir=")[1] for c in calls}) == 3  # a run folder each
+    (tree / "eval.py").write_text("raise SystemExit('no such dataset')\n")
+    with pytest.raises(RuntimeError, match="no such dataset"):
+        run_process(tree, cache, args)
+    text = report({"baseline": [got], "this tree": [got]}, "abc123", "process")
+    assert "seconds per run" in text and "| total " in text and "| matching " not in text
