@@ -1,5 +1,7 @@
-"""Paired speed runs: this tree against a git revision, alternately, so that a machine whose speed drifts over
-minutes still resolves a change of a few percent (a 2-core machine of this project's drifted 20 % in an hour).
+"""Paired speed runs: this tree against a git revision, alternately, each run's stage medians compared.
+
+A machine whose speed drifts over minutes still resolves a change of a few percent this way (a 2-core machine of
+this project's drifted 20 % in an hour).
 
     python -m benchmarks.paired_speed --baseline REV [--pairs 8] [--only "100 people"] [--repeats 3] [--cpu 1]
                                       [--driver speed|frames|process]
@@ -10,8 +12,9 @@ cache of its own kept over the pairs (the first pair compiles, before its timed 
 ``frames`` runs this tree's benchmarks/frame_times.py in both trees, which times any revision's pipeline, also
 one older than benchmarks/speed.py (``--baseline a9f9a65 --driver frames``: issue 16's reference); ``process``
 times the whole process ``python eval.py dataset=shelf progress=false`` in each tree (warm: each tree's cache is
-filled by an untimed run first; the median of ``--repeats`` runs, in seconds). From each run's first table it
-reads every setting's stage medians, and prints every pair and, per setting and stage, the baseline's and this
+filled by an untimed run first; BLAS and numba threads 1, as the other drivers; the median of ``--repeats`` runs,
+in seconds; ``--only`` does not apply). From each run it reads every setting's stage medians (the process
+driver: one setting, its total), and prints every pair and, per setting and stage, the baseline's and this
 tree's medians over the pairs, their ratio (baseline / this tree), and the mean of the paired differences (this
 tree - baseline) with its standard error."""
 
@@ -39,6 +42,7 @@ DRIVERS = {
     "process": "python eval.py dataset=shelf",
 }
 PROCESS_SETTING = "python eval.py dataset=shelf (warm), s"
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
 
 def stage_medians(text: str) -> dict[str, dict[str, float]]:
@@ -101,7 +105,7 @@ def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
 def run_process(tree: Path, cache: Path, args: argparse.Namespace) -> dict[str, dict[str, float]]:
     """The process driver: median wall seconds of --repeats runs of Shelf's ``python eval.py`` in tree, as a
     setting whose total is those seconds (its stages 0: a process has no stage table)."""
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
+    env = {**os.environ, **dict.fromkeys(THREAD_VARIABLES, "1"), "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     pin = (lambda: os.sched_setaffinity(0, {args.cpu})) if args.cpu is not None else None
     seconds = []
     with tempfile.TemporaryDirectory(prefix="paired_speed_runs_") as runs:

@@ -91,7 +91,8 @@ def test_the_process_driver_times_the_shelf_command_of_a_tree(tmp_path):
     tree.mkdir()
     cache.mkdir()
     (tree / "eval.py").write_text(  # a stand-in that records its arguments where the driver put numba's cache
-        "import os, sys\nopen(os.path.join(os.environ['NUMBA_CACHE_DIR'], 'argv'), 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
+        "import os, sys\nassert os.environ['OMP_NUM_THREADS'] == os.environ['NUMBA_NUM_THREADS'] == '1'\n"
+        "open(os.path.join(os.environ['NUMBA_CACHE_DIR'], 'argv'), 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
     )
     args = argparse.Namespace(repeats=3, cpu=None, data=str(tmp_path / "data"))
     got = run_process(tree, cache, args)
