@@ -102,14 +102,16 @@ def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
     return done.stdout
 
 
-def run_process(tree: Path, cache: Path, args: argparse.Namespace) -> dict[str, dict[str, float]]:
-    """The process driver: median wall seconds of --repeats runs of Shelf's ``python eval.py`` in tree, as a
-    setting whose total is those seconds (its stages 0: a process has no stage table)."""
+def run_process(
+    tree: Path, cache: Path, args: argparse.Namespace, repeats: int | None = None
+) -> dict[str, dict[str, float]]:
+    """The process driver: median wall seconds of ``repeats`` (default --repeats) runs of Shelf's ``python eval.py``
+    in tree, as a setting whose total is those seconds (its stages 0: a process has no stage table)."""
     env = {**os.environ, **dict.fromkeys(THREAD_VARIABLES, "1"), "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     pin = (lambda: os.sched_setaffinity(0, {args.cpu})) if args.cpu is not None else None
     seconds = []
     with tempfile.TemporaryDirectory(prefix="paired_speed_runs_") as runs:
-        for k in range(args.repeats):
+        for k in range(args.repeats if repeats is None else repeats):
             command = [sys.executable, "eval.py", "dataset=shelf", f"dataset.root={Path(args.data).resolve()}/shelf"]
             command += ["progress=false", f"hydra.run.dir={runs}/{k}"]
             t0 = time.perf_counter()
@@ -151,9 +153,7 @@ def main(argv: list[str] | None = None) -> str:
         trees = (("baseline", base), ("this tree", ROOT))
         if args.driver == "process":  # fill each tree's numba cache: the pairs time warm processes
             for name, tree in trees:
-                run_process(
-                    tree, Path(caches) / name.replace(" ", "_"), argparse.Namespace(**{**vars(args), "repeats": 1})
-                )
+                run_process(tree, Path(caches) / name.replace(" ", "_"), args, repeats=1)
         for k in range(args.pairs):
             for name, tree in trees:
                 runs[name].append(run_once(tree, Path(caches) / name.replace(" ", "_"), args))

@@ -13,8 +13,8 @@ from data.synthetic.body import mean_body, pose_joints
 from evaluation.identity import IdentityEvaluator
 from reconstruction.solver.map_solver import combine_estimates
 from tracking import Tracker, tracker
-from tracking.track_kernels import centres, pair_mean_distances, predicted_positions, robust_skeleton
-from tracking.tracker import CORE_JOINTS, _core_mask, mean_distances, near_pairs, robust_lengths
+from tracking.track_kernels import centres, pair_mean_distances, robust_skeleton
+from tracking.tracker import CORE_JOINTS, _core_mask, mean_distances, near_pairs, predicted_positions, robust_lengths
 
 FPS = 25.0
 
@@ -363,8 +363,7 @@ def test_the_prediction_kernel_equals_the_numpy_formula_bit_for_bit():
     use = live & core
     use = np.where(use.any(axis=1, keepdims=True), use, live)  # the numpy formula the kernel replaced
     body = np.where(use[..., None], velocity, 0.0).sum(axis=1) / np.maximum(use.sum(axis=1), 1)[:, None]
-    out = np.empty((T, J, 3))
-    predicted_positions(position, velocity, live, core, dt, out)
+    out = predicted_positions(position, velocity, live, dt)
     assert np.array_equal(out, position + dt[:, None, None] * body[:, None, :])
     assert np.array_equal(out[3], position[3]) and not np.array_equal(out[0], position[0])
 

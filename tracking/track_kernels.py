@@ -37,30 +37,6 @@ def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray, out: np.ndarra
 
 
 @njit(**_JIT)
-def predicted_positions(
-    position: np.ndarray, velocity: np.ndarray, live: np.ndarray, core: np.ndarray, dt: np.ndarray, out: np.ndarray
-) -> None:
-    """out (T, J, 3) = position + dt (T,) x the mean velocity of each track's live head and trunk joints (core (J,)),
-    of all its live joints (T, J) where it has none: position, velocity (T, J, 3)."""
-    T, J = live.shape
-    for t in range(T):
-        any_core = False
-        for j in range(J):
-            any_core = any_core or (live[t, j] and core[j])
-        n, v0, v1, v2 = 0, 0.0, 0.0, 0.0
-        for j in range(J):  # summed joint after joint, as numpy's sum over this axis
-            if live[t, j] and (core[j] or not any_core):
-                n += 1
-                v0, v1, v2 = v0 + velocity[t, j, 0], v1 + velocity[t, j, 1], v2 + velocity[t, j, 2]
-        n = max(n, 1)
-        v0, v1, v2 = dt[t] * (v0 / n), dt[t] * (v1 / n), dt[t] * (v2 / n)
-        for j in range(J):
-            out[t, j, 0] = position[t, j, 0] + v0
-            out[t, j, 1] = position[t, j, 1] + v1
-            out[t, j, 2] = position[t, j, 2] + v2
-
-
-@njit(**_JIT)
 def _mean_distance(
     a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np.ndarray, core: np.ndarray, core_only: bool
 ) -> float:

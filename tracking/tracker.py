@@ -47,14 +47,7 @@ from scipy.spatial import cKDTree
 from data.bone_lengths import BONE_PAIRS, bone_lengths
 from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
-from tracking.track_kernels import (
-    MAD_TO_SD,
-    centres,
-    correct_tracks,
-    near_mean_distances,
-    pair_mean_distances,
-    predicted_positions,
-)
+from tracking.track_kernels import MAD_TO_SD, centres, correct_tracks, near_mean_distances, pair_mean_distances
 
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
 # shoulders, hips) move with the body; arms and legs swing by tens of cm between frames at 5 fps.
@@ -256,6 +249,13 @@ def near_pairs(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray,
     return ia[pairs["i"]], ib[pairs["j"]]
 
 
+def predicted_positions(position: np.ndarray, velocity: np.ndarray, live: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """Each track moved by dt (T,) times its body velocity, the mean velocity of its live head and trunk joints (of
+    all its live joints without any; 0 without any): position, velocity (T, J, 3), live (T, J) -> (T, J, 3)."""
+    body = _centres(velocity, live, _core_mask(live.shape[1]))  # the compiled mean, summed as numpy's sum would
+    return position + dt[:, None, None] * body[:, None, :]
+
+
 def _centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray) -> np.ndarray:
     """Mean of the valid head and trunk joints (of all valid joints without any): (N, J, >= 3), (N, J) -> (N, 3)."""
     out = np.empty((len(points), 3))
@@ -273,9 +273,6 @@ def warm_up() -> None:
     core, one = _core_mask(J), np.zeros(1, dtype=np.int64)  # ... and the large crowds' pairs from the KD-trees
     pair_mean_distances(
         pose[..., :3].copy(), pose[..., 3] > 0, pose, pose[..., 3] > 0, core, one, one, np.empty((1, 1))
-    )
-    predicted_positions(
-        pose[..., :3].copy(), np.zeros((1, J, 3)), pose[..., 3] > 0, core, np.ones(1), np.empty((1, J, 3))
     )
     filters, counts = (UNSEEN_VAR_M2, 1.0, 1.0, 1.0, 1.0, 1.0), (1, SKELETON_REFRESH)
     lengths = np.ones((1, len(BONE_PAIRS)))
@@ -491,8 +488,7 @@ class Tracker:
             return none, none
         position, live, seen = st.position[rows], st.live[rows], st.seen[rows]
         dt = (frame - st.last_frame[rows]).astype(np.float64)
-        predicted = np.empty(position.shape)
-        predicted_positions(position, st.velocity[rows], live, _core_mask(live.shape[1]), dt, predicted)
+        predicted = predicted_positions(position, st.velocity[rows], live, dt)
         gate = self.max_distance_m + self.gate_growth_m * (dt - 1.0)
         live = np.where(live.any(axis=1, keepdims=True), live, seen)
         both = mean_distances(  # the prediction and the last position in one pass: (2T, P)
