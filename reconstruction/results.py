@@ -1,0 +1,38 @@
+"""The typed results the per-frame stages hand each other: a matcher's :class:`Matches`, a reconstruction's
+:class:`Reconstruction`, and the skeleton prior a tracker offers the MAP (:class:`SkeletonPrior`)."""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Matches(NamedTuple):
+    """A matcher's answer for one frame: assignment (P, V) int, the detection index of person p in view v or -1;
+    unmatched, this frame's detections left out of every person, counted by reason."""
+
+    assignment: np.ndarray
+    unmatched: Counter[str] = Counter()
+
+
+class Reconstruction(NamedTuple):
+    """A reconstruction's answer for one frame: poses (P, J, 4) x, y, z (m) and score; joint_variance (P, J) m^2 of
+    each joint's estimate (None where the stage has none); bone_lengths (P, L) m measured in this frame (NaN where
+    unmeasured; None where the stage measures none); provenance (P, J) int, the number of views that observed each
+    joint (0: placed by the prior or the fitted body)."""
+
+    poses: np.ndarray
+    joint_variance: np.ndarray | None = None
+    bone_lengths: np.ndarray | None = None
+    provenance: np.ndarray | None = None
+
+
+class SkeletonPrior(NamedTuple):
+    """A tracker's bone lengths for the persons of a frame: lengths (P, L) m, the median over each person's track (NaN
+    where it offers none), and their standard errors (P, L) m (inf there); the MAP combines them with the frame's own
+    estimate by precision."""
+
+    lengths: np.ndarray
+    standard_errors: np.ndarray
