@@ -178,22 +178,3 @@ def test_frames_out_of_order_stop_a_tracked_run_with_one_line(tmp_path):
     with pytest.raises(eval_script.ConfigError, match="frame 1 comes after frame 2"):
         run_eval(tmp_path, files)
     run_eval(tmp_path, [*files, "tracking=off"])  # every frame on its own: any order
-
-
-def test_start_up_collection_pause_ends_in_main():
-    """eval.py pauses the garbage collector only when run as a script; main() freezes the start-up objects and
-    turns collection back on (a test that imports eval keeps its collector)."""
-    import gc
-
-    assert gc.isenabled()
-    gc.disable()
-    try:
-        eval_script.settle_startup_objects()
-        assert gc.isenabled() and gc.get_freeze_count() > 0
-        frozen = gc.get_freeze_count()
-        eval_script.settle_startup_objects()  # a second job of a sweep: nothing more is frozen
-        # at most as many: a frozen object that another thread frees in between leaves the permanent generation
-        assert gc.get_freeze_count() <= frozen
-    finally:
-        gc.unfreeze()
-        gc.enable()
