@@ -11,7 +11,6 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
-from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 from omegaconf.errors import MissingMandatoryValue
@@ -29,7 +28,7 @@ from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_r
 from models.front_end import Pose2DFrontEnd
 from reconstruction.pipeline import MultiViewPipeline
 from reconstruction.precompile import precompile
-from run_folders import register_resolvers
+from run_folders import one_line_errors, register_resolvers
 
 PROTOCOL = (
     "absolute MPJPE (mm, no root alignment) over all frames; each GT person matched one-to-one "
@@ -42,9 +41,8 @@ PROTOCOL = (
 
 def check_config(cfg: DictConfig) -> None:
     """Stop with one line naming the key when a top-level or evaluation value has the wrong type or range."""
-    check_number(cfg, "evaluation.max_dist_m")
-    check_number(cfg, "evaluation.alpha")
-    check_number(cfg, "vis_sequence_max_mb")
+    for key in ("evaluation.max_dist_m", "evaluation.alpha", "vis_sequence_max_mb"):
+        check_number(cfg, key)
     check_int(cfg, "vis_frame", 0, nullable=True)
     for key in ("vis", "vis_sequence", "progress", "overwrite"):
         check_bool(cfg, key)
@@ -89,13 +87,8 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
     """Write poses3d.json, metrics.json, the protocols' files and report.txt into out_dir; print the report."""
     frames = ((r.frame, r.poses3d, r.assignment, r.ids) for r in report.results)
     write_poses3d(out_dir / cfg.output, frames, sequence.rig.names)
-    summary = {
-        "metrics": report.metrics,
-        **report.protocols,
-        "skipped": dict(report.skipped),
-        "unmatched": dict(report.unmatched),
-        "timings_s": report.timings,
-    }
+    summary = {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped)}
+    summary.update(unmatched=dict(report.unmatched), timings_s=report.timings)
     atomic_write_text(out_dir / cfg.metrics_file, json.dumps(summary, indent=2))
     for protocol in sequence.protocols:
         if hasattr(protocol, "write"):  # e.g. the Shelf-14 predictions that were scored
@@ -182,10 +175,8 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
         "area\n" + "\n".join(f"  {k:8s} {v:.4f}" + _why_missing(k, v) for k, v in metrics.items())
     )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
-    print(
-        f"{text}\n\nWrote {out_dir / cfg.coco2d.output}, {cfg.coco2d.results_file}, {cfg.metrics_file} and "
-        f"{cfg.report_file}"
-    )
+    outputs = f"{out_dir / cfg.coco2d.output}, {cfg.coco2d.results_file}, {cfg.metrics_file} and {cfg.report_file}"
+    print(f"{text}\n\nWrote {outputs}")
     return metrics
 
 
@@ -208,23 +199,16 @@ def main(cfg: DictConfig) -> dict:
     if cfg.checkpoint:
         return run_pose2d(cfg, out_dir)
     try:
-        return run(cfg, out_dir).metrics
+        with one_line_errors(ConfigError, CalibrationError, Poses2DError):
+            return run(cfg, out_dir).metrics
     except MissingMandatoryValue as err:  # e.g. dataset=files without dataset.cameras=...
         raise SystemExit(
             f"error: {err.full_key} is not set: give it on the command line "
             f"({err.full_key}=...; see configs/{err.full_key.split('.')[0]}/)"
         ) from None
-    except ConfigError as err:
-        raise SystemExit(f"error: {err}") from None
-    except (CalibrationError, Poses2DError, InstantiationException) as err:
-        cause = err.__cause__ if isinstance(err, InstantiationException) else err
-        if isinstance(cause, (ValueError, FileNotFoundError)):  # CalibrationError, Poses2DError are ValueErrors
-            raise SystemExit(f"error: {cause}") from None
-        raise
 
 
 register_resolvers()  # ${run_id:} in the run folder names, before hydra.main composes the config
-
 
 if __name__ == "__main__":
     exit_on_sigterm()

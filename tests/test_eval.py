@@ -122,6 +122,15 @@ def test_every_dataset_gets_the_default_matcher_and_reconstruction_unless_the_co
     assert chosen["matching=feet_paper"][0] == "FeetMatcher"
 
 
+def test_the_real_datasets_lie_under_paths_data_dir():
+    with initialize_config_dir(config_dir=CONFIGS, version_base="1.3"):
+        roots = {
+            d: compose(config_name="eval", overrides=[f"dataset={d}", "paths.data_dir=/elsewhere"]).dataset.root
+            for d in ("shelf", "panoptic", "wildtrack")
+        }
+    assert roots == {d: f"/elsewhere/{d}" for d in roots}
+
+
 @pytest.mark.parametrize(
     "override, key",
     [
