@@ -1,28 +1,17 @@
-"""Run folders of the Hydra entry points (eval.py, train.py): unique names, and no run writing over another.
-
-- ``${run_id:}`` (an OmegaConf resolver, registered by :func:`register_resolvers` before ``hydra.main``)
-  names a run: the start time to the microsecond and the process id, e.g. ``2025-05-01_13-45-07.123456_4242``.
-  Two runs started in the same second, on one host, get two folders. The ranks of a torchrun job share one:
-  ``torchrun_<rendezvous id>``.
-- :class:`RunFolderGuard` (a Hydra callback listed under ``hydra.callbacks`` in the configs) checks the run
-  folder (the sweep folder of a multirun) before Hydra writes anything into it: a folder that already holds
-  files of another run stops the run with one line, unless ``overwrite=true``. Stale temporaries of killed
-  writers (data/formats/atomic_io.py) do not count and are removed.
-- With ``overwrite=true`` over a folder that holds an earlier run's ``.hydra/``, the new run's ``.hydra/`` is
-  written as ``.hydra.incomplete/`` and replaces ``.hydra/`` only when the run completes: a run killed
-  part-way never leaves a ``.hydra/`` that describes it beside the earlier run's outputs.
-"""
+"""Shared by eval.py and train.py: unique run folders (``${run_id:}``, RunFolderGuard) and one-line errors."""
 
 from __future__ import annotations
 
 import os
 import shutil
+from contextlib import contextmanager
 from datetime import datetime
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from hydra.core.utils import JobReturn, JobStatus
+from hydra.errors import InstantiationException
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 
@@ -34,8 +23,7 @@ SHOWN_FILES = 3  # files named in the refusal message
 
 @lru_cache(maxsize=1)
 def run_id() -> str:
-    """This process's run name: start time with microseconds, then the pid (fixed for the process). Under
-    torchrun every rank must find the same folder: the rendezvous id (a uuid with --standalone) or the agent's pid."""
+    """This process's run name, e.g. ``2025-05-01_13-45-07.123456_4242``; torchrun's ranks share ``torchrun_<id>``."""
     elastic = os.environ.get("TORCHELASTIC_RUN_ID")
     if elastic is not None:
         return f"torchrun_{elastic[:8] if elastic != 'none' else f'agent{os.getppid()}'}"
@@ -48,9 +36,21 @@ def register_resolvers() -> None:
         OmegaConf.register_new_resolver("run_id", run_id, use_cache=True)
 
 
+@contextmanager
+def one_line_errors(*errors: type[Exception]) -> Iterator[None]:
+    """Stop with ``error: <message>`` (no traceback) on errors, or on instantiate's ValueError / FileNotFoundError."""
+    try:
+        yield
+    except errors as err:
+        raise SystemExit(f"error: {err}") from None
+    except InstantiationException as err:
+        if isinstance(err.__cause__, (ValueError, FileNotFoundError)):
+            raise SystemExit(f"error: {err.__cause__}") from None
+        raise
+
+
 def other_runs_files(folder: Path, log_name: str, limit: int = SHOWN_FILES) -> list[str]:
-    """Up to limit files under folder (relative paths) that are not temporaries or the job's log (which holds no
-    output, and which the other ranks of a torchrun job may have opened already); stale temporaries are deleted."""
+    """Up to limit files under folder (relative) other than temporaries and the job's log; deletes stale temporaries."""
     found: list[str] = []
     for root, _, names in os.walk(folder):
         for name in sorted(names):
@@ -81,7 +81,7 @@ def check_folder(folder: Path, config: DictConfig, key: str) -> bool:
 
 
 class RunFolderGuard(Callback):
-    """Hydra callback: refuse a run folder that holds another run, stage ``.hydra/`` when overwriting."""
+    """Hydra callback: refuses a folder holding another run; overwrite=true stages .hydra/ until the run completes."""
 
     def __init__(self) -> None:
         self.staged: tuple[Path, Path] | None = None  # (.hydra.incomplete, .hydra) of an overwriting run

@@ -13,7 +13,6 @@ from hydra.utils import instantiate
 
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
-from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.gather_kernels import gather_detections
 
 Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
@@ -81,7 +80,6 @@ class MultiViewPipeline:
         self.reconstructor = reconstructor
         self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
-        warm_up_kernels("gather", warm_up)  # one line while numba compiles (first run)
 
     @classmethod
     def from_config(cls, cfg: Any, rig: Rig) -> "MultiViewPipeline":

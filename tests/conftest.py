@@ -6,8 +6,10 @@ import os
 from pathlib import Path
 
 import pytest
+from omegaconf import OmegaConf
 
-SHARED_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO / OmegaConf.load(REPO / "configs" / "paths" / "default.yaml").data_dir  # ../shared/data
 
 
 def require_data_dir(root: Path) -> Path:

@@ -122,6 +122,15 @@ def test_every_dataset_gets_the_default_matcher_and_reconstruction_unless_the_co
     assert chosen["matching=feet_paper"][0] == "FeetMatcher"
 
 
+def test_the_real_datasets_lie_under_paths_data_dir():
+    with initialize_config_dir(config_dir=CONFIGS, version_base="1.3"):
+        roots = {
+            d: compose(config_name="eval", overrides=[f"dataset={d}", "paths.data_dir=/elsewhere"]).dataset.root
+            for d in ("shelf", "panoptic", "wildtrack")
+        }
+    assert roots == {d: f"/elsewhere/{d}" for d in roots}
+
+
 @pytest.mark.parametrize(
     "override, key",
     [
@@ -178,22 +187,3 @@ def test_frames_out_of_order_stop_a_tracked_run_with_one_line(tmp_path):
     with pytest.raises(eval_script.ConfigError, match="frame 1 comes after frame 2"):
         run_eval(tmp_path, files)
     run_eval(tmp_path, [*files, "tracking=off"])  # every frame on its own: any order
-
-
-def test_start_up_collection_pause_ends_in_main():
-    """eval.py pauses the garbage collector only when run as a script; main() freezes the start-up objects and
-    turns collection back on (a test that imports eval keeps its collector)."""
-    import gc
-
-    assert gc.isenabled()
-    gc.disable()
-    try:
-        eval_script.settle_startup_objects()
-        assert gc.isenabled() and gc.get_freeze_count() > 0
-        frozen = gc.get_freeze_count()
-        eval_script.settle_startup_objects()  # a second job of a sweep: nothing more is frozen
-        # at most as many: a frozen object that another thread frees in between leaves the permanent generation
-        assert gc.get_freeze_count() <= frozen
-    finally:
-        gc.unfreeze()
-        gc.enable()

@@ -45,7 +45,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from data.bone_lengths import BONE_PAIRS, bone_lengths
-from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
 from tracking.track_kernels import MAD_TO_SD, centres, correct_tracks, near_mean_distances, pair_mean_distances
 
@@ -337,7 +336,6 @@ class Tracker:
         self._pool: np.ndarray | None = None  # the tracks' bone windows and room for more (_bone_pool)
         self.last_frame: int | None = None
         self._next_id = 0
-        warm_up_kernels("tracker", warm_up)  # one line while numba compiles (first run)
 
     @property
     def tracks(self) -> list[Track]:

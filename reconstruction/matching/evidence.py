@@ -47,7 +47,6 @@ from scipy.special import gammaincinv
 
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
-from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching import feet_kernels
 from reconstruction.matching.epipolar import fundamental_matrix
 from reconstruction.matching.evidence_kernels import (
@@ -271,7 +270,6 @@ class EvidenceMatcher:
         self.last_noise_scale = 1.0
         self._fundamentals: dict[int, tuple[Rig, np.ndarray]] = {}
         self._rows_hint = 0  # rows of the detection-pair buffers: the last frame's count, with a margin
-        warm_up_kernels("evidence matcher", warm_up)  # one line while numba compiles (first run)
         self.feet = FeetMatcher(min_views=min_views, **{"pixel_sigma": 5.0, **(feet or {})})
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()

@@ -18,9 +18,7 @@ import numpy as np
 from data.geometry.camera import Camera, Rig
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
-from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching.feet_kernels import foot_points
-from reconstruction.matching.feet_kernels import warm_up as warm_up_feet
 from reconstruction.matching.feet_uncertainty import (
     joint_sigmas,
     location_covariance,
@@ -279,7 +277,6 @@ class FeetMatcher:
         self.pixel_sigma, self.ground_sigma_floor = float(pixel_sigma), float(ground_sigma_floor)
         self.ankle_height_m, self.foot_joint_height_m = float(ankle_height_m), float(foot_joint_height_m)
         self.sigma_score_power, self.margin = float(sigma_score_power), float(margin)
-        warm_up_kernels("feet features", warm_up_feet)  # one line while numba compiles (first run)
         self.last_unmatched_reasons: Counter[str] = Counter()
         self.unmatched_reasons: Counter[str] = Counter()
 

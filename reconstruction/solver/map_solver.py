@@ -44,8 +44,6 @@ import numpy as np
 from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from data.geometry.camera import Rig
 from data.geometry.triangulation import triangulate_dlt
-from reconstruction.compile_ahead import kernels_interpreted
-from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.solver.block_solver import (
     EliminationPlan,
     elimination_plan,
@@ -456,7 +454,6 @@ class MAPReconstruction:
         self.single_view_score, self.unseen_score = float(single_view_score), float(unseen_score)
         self.mle_first = bool(mle_first)
         self.solver = solver
-        warm_up_kernels("MAP solver", warm_up)  # one line while numba compiles (first run)
 
     def problem(
         self, poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, anchor: np.ndarray, prior: bool
@@ -526,8 +523,7 @@ class MAPReconstruction:
         und, uv, inv_sigma = poses2d_und[:, idx], uv[:, idx], inv_sigma[:, idx]
         Xp = X[idx]
         self._bone_measurements = self._mle_information = None
-        # while a first run's kernels compile (compile_ahead.interpret_until_compiled): the numpy solver, same optimum
-        solve_fn = solve_poses_compiled if self.solver == "compiled" and not kernels_interpreted() else solve_poses
+        solve_fn = solve_poses_compiled if self.solver == "compiled" else solve_poses
         for k, prior in enumerate(stages):
             if k == 0:
                 problem = self._problem(uv, inv_sigma, proj, Xp, prior)
