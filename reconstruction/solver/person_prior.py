@@ -2,7 +2,7 @@
 
 Two estimates, both from the maximum-likelihood joints X (P, J, 3) of a frame:
 
-- **Noise scale** (:func:`noise_scale`): the 2D sigma model (``joint_sigma``) gives each joint's relative
+- **Noise scale** (:func:`noise_scale`): the 2D sigma model (``NoiseModel``) gives each joint's relative
   uncertainty, but not how good the detector really is on this person. After the MLE, the squared
   reprojection residuals of a joint seen in n >= 2 views (in model sigmas) follow s^2 chi^2(2n - 3), s the
   person's true noise over the model's. s is estimated robustly: the median over joints of
@@ -29,8 +29,8 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from data.bone_lengths import BONE_NAMES
-from reconstruction.solver.map_estimation import EPS_DEPTH
-from reconstruction.solver.prior_kernels import bone_posteriors, bone_sums, information_sums, noise_medians
+from reconstruction.solver.pose_kernels import EPS_DEPTH
+from reconstruction.solver.prior_kernels import BoneModel, bone_posteriors, bone_sums, information_sums
 
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
@@ -44,10 +44,11 @@ def chi2_medians(dof: np.ndarray) -> np.ndarray:
     return _CHI2_MEDIANS[np.clip(dof, 0, len(_CHI2_MEDIANS) - 1)]
 
 
-def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (V, P, J, 2) and clamped depths (V, P, J) of joints (P, J, 3) in views (V, 3, 4)."""
+def project(X: np.ndarray, proj: np.ndarray, hom: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (V, P, J, 2) and clamped depths (V, P, J) of joints (P, J, 3) in views (V, 3, 4); hom: view_matmul."""
     P, J, _ = X.shape
-    hom = (proj[:, :, :3] @ X.reshape(-1, 3).T + proj[:, :, 3:]).reshape(len(proj), 3, P, J)
+    hom = (proj[:, :, :3] @ X.reshape(-1, 3).T if hom is None else hom) + proj[:, :, 3:]
+    hom = hom.reshape(len(proj), 3, P, J)
     z = np.maximum(hom[:, 2], EPS_DEPTH)
     return np.stack([hom[:, 0] / z, hom[:, 1] / z], axis=-1), z
 
@@ -79,14 +80,19 @@ def noise_scale(
     floor: float = 0.01,
     hom: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Each person's 2D noise over the sigma model, robustly from MLE residuals: (P, J, 3), (V, P, J, 2),
-    (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views.
-    hom: :func:`view_matmul` of X, if at hand."""
-    hom = view_matmul(X, proj) if hom is None else hom
-    median, ratio = np.empty(len(X)), np.empty(X.shape[1])
-    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
-    noise_medians(hom, as_float(proj), as_float(uv), as_float(inv_sigma), _CHI2_MEDIANS, ratio, median)
-    return np.maximum(np.sqrt(np.where(median < 0, 1.0, median)), floor)  # median -1: no joint in >= 2 views
+    """Each person's 2D noise over the sigma model from MLE residuals: (P, J, 3), (V, P, J, 2), (V, P, J) 1/sigma
+    (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views. hom: view_matmul of X."""
+    xy = project(X, proj, hom)[0]
+    seen = inv_sigma > 0
+    d = uv - xy
+    r2 = np.where(seen, (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) * (inv_sigma * inv_sigma), 0.0)
+    rss, views = r2.sum(axis=0), seen.sum(axis=0)
+    ok = views >= 2
+    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)
+    n, rows = ok.sum(axis=1), np.arange(len(X))
+    a, b = ratio[rows, np.maximum(n - 1, 0) // 2], ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
+    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
+    return np.maximum(np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0), floor)
 
 
 def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:
@@ -141,18 +147,16 @@ def person_bone_lengths(
     G = int(groups.max()) + 1 if L else 0
     bone_ref = np.array(bone_ref, dtype=np.float64)  # a writable copy: one kernel type for read-only tables too
     mean, sd = np.empty((P, L)), np.empty((P, L))
-    bone_posteriors(
-        np.ascontiguousarray(lengths, dtype=np.float64),
-        np.ascontiguousarray(variances, dtype=np.float64),
-        bone_ref,
-        bone_ref * stature_sd,
-        bone_ref * np.asarray(proportion_sd, dtype=np.float64),
-        np.ascontiguousarray(groups, dtype=np.int64),
-        float(tie_sd) ** 2,
-        OUTLIER_SD,
-        np.empty(L, dtype=bool),
-        np.empty((4, G)),
-        mean,
-        sd,
+    model = BoneModel(
+        bone_ref=bone_ref,
+        stature=bone_ref * stature_sd,
+        proportion=bone_ref * np.asarray(proportion_sd, dtype=np.float64),
+        groups=np.ascontiguousarray(groups, dtype=np.int64),
+        tie2=float(tie_sd) ** 2,
+        outlier_sd=OUTLIER_SD,
+        use=np.empty(L, dtype=bool),
+        scratch=np.empty((4, G)),
     )
+    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    bone_posteriors(as_float(lengths), as_float(variances), model, mean, sd)
     return mean, sd

@@ -22,8 +22,8 @@ import numpy as np
 
 from data.geometry.triangulation import smallest_eigenvectors
 from data.keypoints import FLIP_PAIRS
-from reconstruction.solver.map_estimation import EPS_DEPTH
 from reconstruction.solver.person_prior import project
+from reconstruction.solver.pose_kernels import EPS_DEPTH
 
 # (child pair, parent pair) along the limbs, parents first: a child is judged after its parent is settled
 CHAINS = (((7, 8), (5, 6)), ((9, 10), (7, 8)), ((13, 14), (11, 12)), ((15, 16), (13, 14)))

@@ -15,9 +15,8 @@ import numpy as np
 
 from data.geometry.triangulation import triangulate_dlt
 from data.keypoints import FLIP_PAIRS
-from reconstruction.solver.map_estimation import EPS_DEPTH
-from reconstruction.solver.person_prior import view_matmul
-from reconstruction.solver.prior_kernels import pair_chi2s
+from reconstruction.solver.person_prior import project
+from reconstruction.solver.pose_kernels import EPS_DEPTH
 
 
 def _chi2s(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> tuple[np.ndarray, np.ndarray]:
@@ -56,10 +55,7 @@ def find_swaps(
     full = triangulate_dlt(poses2d, proj, 2) if full is None else full
     seen = inv_sigma > 0
     left, right = np.array([p[0] for p in pairs], dtype=np.int64), np.array([p[1] for p in pairs], dtype=np.int64)
-    given, exchanged = np.empty((V, len(seen[0]), len(pairs))), np.empty((V, len(seen[0]), len(pairs)))
-    hom = view_matmul(full[..., :3], proj)
-    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
-    pair_chi2s(hom, as_float(proj), as_float(poses2d), as_float(w2), left, right, given, exchanged)
+    given, exchanged = _chi2s(poses2d[..., :2], project(full[..., :3], proj)[0], w2, left, right)
     # a swap reprojects worse than its exchange even from the DLT it pulls (only the exchange test below
     # needs the other views alone)
     bad = ((given > min_chi2) & (exchanged < given) & seen[..., left] & seen[..., right]).any(axis=0)
