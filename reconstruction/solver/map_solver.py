@@ -171,11 +171,8 @@ class MAPReconstruction:
         noise_model = NoiseModel() if noise_model is None else noise_model
         _check(locals())
         self.noise_model, self.bone_prior, self.noise_scale = noise_model, bone_prior, noise_scale
-        self.prior_weight, self.bone_tie_sd_m, self.min_noise_scale = (
-            float(prior_weight),
-            float(bone_tie_sd_m),
-            float(min_noise_scale),
-        )
+        self.prior_weight, self.bone_tie_sd_m = float(prior_weight), float(bone_tie_sd_m)
+        self.min_noise_scale = float(min_noise_scale)
         self.robust, self.robust_scale, self.anchor_weight = robust, float(robust_scale), float(anchor_weight)
         self.max_iterations, self.xtol, self.ftol = int(max_iterations), float(xtol), float(ftol)
         self.min_views, self.output_min_views = int(min_views), int(output_min_views)
@@ -209,10 +206,8 @@ class MAPReconstruction:
         """The problem of observations anchored at (P, J, 3): the table's prior, or none, or ``bones`` (ref, weight)."""
         weight = self.prior_weight / self.bone_std if prior else np.zeros(len(BONE_PAIRS))
         table = {"bone_ref": self.bone_mean, "bone_weight": weight, **bones}
-        return PoseProblem(
-            proj, uv, inv_sigma, BONE_PAIRS, anchor=anchor, anchor_weight=self.anchor_weight, robust=self.robust,
-            robust_scale=self.robust_scale, **table,
-        )  # fmt: skip
+        settings = {"anchor_weight": self.anchor_weight, "robust": self.robust, "robust_scale": self.robust_scale}
+        return PoseProblem(proj, uv, inv_sigma, BONE_PAIRS, anchor=anchor, **table, **settings)
 
     def _repaired(self, und: np.ndarray, proj: np.ndarray, bboxes: np.ndarray) -> tuple[np.ndarray, ...]:
         """2D after side / swap repair, its DLT (P, J, 4), pixels and 1 / sigma of undistorted poses (V, P, J, 3)."""
@@ -284,7 +279,9 @@ class MAPReconstruction:
         var = np.trace(inv, axis1=0, axis2=1) / 3
         return np.where((views >= 1 + (tie == 0)) & np.isfinite(var) & (var > 0), var, np.inf)
 
-    def _noise_scales(self, X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, hom=None):
+    def _noise_scales(
+        self, X: np.ndarray, uv: np.ndarray, inv_sigma: np.ndarray, proj: np.ndarray, hom: np.ndarray | None = None
+    ) -> np.ndarray:
         """Each person's noise over the model (P,): estimated from the residuals at X (P, J, 3), or 1."""
         if self.noise_scale == "estimate":
             return noise_scale(X, uv, inv_sigma, proj, self.min_noise_scale, hom)

@@ -1,26 +1,11 @@
-"""What the MAP learns about each person from the MLE before it applies the bone prior.
+"""What the MAP learns about each person from the MLE joints X (P, J, 3) before it applies the bone prior.
 
-Two estimates, both from the maximum-likelihood joints X (P, J, 3) of a frame:
-
-- **Noise scale** (:func:`noise_scale`): the 2D sigma model (``NoiseModel``) gives each joint's relative
-  uncertainty, but not how good the detector really is on this person. After the MLE, the squared
-  reprojection residuals of a joint seen in n >= 2 views (in model sigmas) follow s^2 chi^2(2n - 3), s the
-  person's true noise over the model's. s is estimated robustly: the median over joints of
-  RSS_j / median(chi^2(2 n_j - 3)). It is the a-posteriori variance factor of photogrammetry, made robust
-  to the outlier joints of real detectors. On exact 2D s -> 0, so the likelihood dominates and the MAP
-  returns the triangulated points; on noisy 2D it weighs the prior as much as the data deserve.
-
-- **Person's own bone lengths** (:func:`person_bone_lengths`), the hierarchical prior in closed form:
-  bone l of a person is b_l = b_ref_l (1 + s_h z + s_g d_g(l)), z ~ N(0, 1) the person's stature
-  (``STATURE_SD``), d_g ~ N(0, 1) the proportion of the bone's group g (left and right share one:
-  bodies are nearly symmetric; ``PROPORTION_SD``), and the MLE measures n_l = b_l + e_l with
-  e_l ~ N(0, v_l + tie^2), v_l from the MLE covariance of the bone's two ends and tie the slack of
-  keypoint placement. The posterior of (z, d) is Gaussian (a (1 + G)-dimensional linear solve per person);
-  it gives each bone's posterior mean and variance. The MAP then pulls |Q_a - Q_b| towards that mean
-  with sigma sqrt(var + tie^2). An accurately observed person keeps their own proportions (tiny v_l,
-  posterior = their measurement); a poorly observed one borrows from the population, scaled to their
-  stature as measured by their other bones. This two-stage (empirical Bayes) form replaces bone length
-  unknowns in the solver: the solve keeps its per-bone structure and its speed.
+noise_scale: the person's 2D noise over the sigma model, robustly: the median over joints seen in n >= 2 views of
+RSS_j / median(chi^2(2 n_j - 3)) (photogrammetry's a-posteriori variance factor). person_bone_lengths: the
+hierarchical prior in closed form, b_l = b_ref_l (1 + s_h z + s_g d_g(l)) with z the stature and d_g the proportion
+of bone group g (left = right), measured as n_l = b_l + e_l, e_l ~ N(0, v_l + tie^2); the Gaussian posterior of
+(z, d) gives each bone's mean and SD, so an accurately observed person keeps their own proportions and a poorly
+observed one borrows the population's, scaled to their stature.
 """
 
 from __future__ import annotations
@@ -35,7 +20,7 @@ from reconstruction.solver.prior_kernels import BoneModel, bone_posteriors, bone
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
 OUTLIER_SD = 3.0  # a bone measured this many SD from its posterior is dropped and the posterior redone
-# chi^2 medians by degrees of freedom: scipy.stats.chi2.median's own formula, without importing scipy.stats (~0.5 s)
+# chi^2 medians by degrees of freedom: scipy.stats.chi2.median's own formula (scipy.stats is a slow import)
 _CHI2_MEDIANS = np.concatenate([[np.nan], 2.0 * gammaincinv(np.arange(1, 64) / 2.0, 0.5)])
 
 
@@ -120,12 +105,8 @@ def bone_variances(
 def proportion_sds(
     bone_ref: np.ndarray, bone_std: np.ndarray, placement_sd: float, stature_sd: float = STATURE_SD
 ) -> np.ndarray:
-    """Relative SD of each bone given the stature, from a table's population SDs: (L,), (L,) -> (L,).
-
-    The table's variance is stature + proportion + keypoint placement (``placement_sd``, m); what the
-    stature and the placement leave of it is the proportion's (0 where nothing is left). The default
-    table (data/bone_lengths.py) gives about 2 %.
-    """
+    """Relative SD of each bone given the stature: (L,), (L,) -> (L,), what the table's variance leaves after the
+    stature and the keypoint placement (``placement_sd``, m), 0 where nothing is left."""
     rest = np.asarray(bone_std, dtype=np.float64) ** 2 - placement_sd**2 - (stature_sd * np.asarray(bone_ref)) ** 2
     return np.sqrt(np.maximum(rest, 0.0)) / np.maximum(bone_ref, 1e-9)
 

@@ -4,7 +4,7 @@ DLT joints are kept unless behind a camera that sees them, farther than GROSS_OU
 median of the person's joints, or farther than OUTLIER_M from the body fitted to the rest (a DLT of nearly parallel
 rays can land metres away). MEAN_POSE is aligned to the kept joints (Kabsch with >= FULL_FIT_MIN_JOINTS non-collinear
 joints, else a rotation about z: people stand upright) and supplies the other joints, each moved onto the ray of its
-best-scored view where one sees it. Scalar loops in numba: few compile-time costs, microseconds per frame.
+best-scored view where one sees it. Scalar loops in numba (np.linalg's wrappers compile slowly).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ _BIG = np.finfo(np.float64).max
 @njit(**_JIT)
 def information_sums(hom: np.ndarray, proj: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
     """out (P, J, 3, 3) = sum over k = x, y of sum over views of r r^T, r = (M_k - x_k M_2) w / z: the Gauss-Newton
-    information of each joint from its projections (hom (V, 3, P J), see :func:`pair_chi2s`), views proj (V, 3, 4)
+    information of each joint from its projections (hom (V, 3, P J) = M X, person_prior.view_matmul), views proj (V, 3, 4)
     and 1/sigma w (V, P, J) (0 unseen)."""
     V, P, J = w.shape
     for p in range(P):
