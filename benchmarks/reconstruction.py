@@ -10,7 +10,7 @@ Run from the repository root:  python -m benchmarks.reconstruction [--quick] [--
     the 2D detections and against the noise-free projections of the ground truth, at 5 px.
 (c) ms per frame vs persons (1, 10, 50, 100) in 7 views and vs views (2, 4, 8) for 20 persons: our
     mle_map stage against per-person scipy.optimize.least_squares(method='trf', jac='2-point', default
-    tolerances) on the same residuals (reconstruction.solver.map_estimation.residual_vector) from the same DLT
+    tolerances) on the same residuals (tests/oracles/pose_problem.py's residual_vector) from the same DLT
     start, both MLE then MAP.
 (d) The robust losses (none / huber / cauchy) of mle_map against 2D outliers: 0, 10, 20 % of the
     detections with left and right swapped, ring, 5 px.
@@ -45,7 +45,8 @@ from evaluation.reprojection import frame_reprojection_errors, reprojection_stat
 from reconstruction.matching import OracleMatcher  # noqa: E402
 from reconstruction.pipeline import gather_views  # noqa: E402
 from reconstruction.reconstructors import VanillaTriangulation  # noqa: E402
-from reconstruction.solver.map_estimation import PoseProblem, residual_vector  # noqa: E402
+from reconstruction.results import Reconstruction  # noqa: E402
+from reconstruction.solver.compiled_solver import PoseProblem  # noqa: E402
 from reconstruction.solver.map_solver import (  # noqa: E402
     MAPReconstruction,
     MLEMAPReconstruction,
@@ -53,11 +54,12 @@ from reconstruction.solver.map_solver import (  # noqa: E402
     output_confidence,
 )
 from reconstruction.solver.pose_init import initial_poses  # noqa: E402
+from tests.oracles.pose_problem import residual_vector  # noqa: E402
 
 WILDTRACK_AREA = (-3.0, 9.0, -9.0, 27.0)
 NOISES = (2.0, 5.0, 10.0)
 TARGET_GAIN, TARGET_SPEEDUP, TARGET_MS = 0.15, 50.0, 30.0
-Stage = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
+Stage = Callable[[np.ndarray, np.ndarray, Rig], Reconstruction]
 
 
 def make_stages() -> dict[str, Stage]:
@@ -112,7 +114,7 @@ def evaluate_stages(seq: Sequence, stages: dict[str, Stage]) -> dict[str, dict]:
         outs = {}
         for name, stage in stages.items():
             t0 = time.perf_counter()
-            outs[name] = stage(poses2d, boxes, seq.rig)
+            outs[name] = stage(poses2d, boxes, seq.rig).poses
             times[name] += time.perf_counter() - t0
             evals[name].update(outs[name], frame.gt_poses)
             reproj[name]["detections"].append(
@@ -278,7 +280,7 @@ def time_setting(stage: MAPReconstruction, persons: int, views: int, args: argpa
         gt = gt_for_assignment(frame, assignment)
         P = len(assignment)
         subset = min(P, args.scipy_max)
-        t, out = best_ms(lambda: stage(poses2d, boxes, seq.rig), args.repeats)
+        t, out = best_ms(lambda: stage(poses2d, boxes, seq.rig).poses, args.repeats)
         ours_ms.append(t)
         t_s, out_s = best_ms(lambda: scipy_mle_map(stage, poses2d[:, :subset], boxes[:, :subset], seq.rig), 1)
         scipy_ms.append(t_s * P / subset)
@@ -315,7 +317,7 @@ def timing_section(args: argparse.Namespace) -> tuple[str, list[str]]:
         f"### (c) Time per frame, mle_map (DLT + MLE + MAP), ring cameras, 0.5 persons/m2, 5 px, "
         f"median over {args.timing_frames} frames (ours: median of {args.repeats} repeats; scipy: 1 run)\n\n"
         "scipy: least_squares(method='trf', jac='2-point', default ftol/xtol/gtol 1e-8) per person on "
-        "map_estimation.residual_vector, same DLT start, MLE then MAP; with more than "
+        "tests/oracles/pose_problem.residual_vector, same DLT start, MLE then MAP; with more than "
         f"{args.scipy_max} persons it is timed on the first {args.scipy_max} and scaled by P / "
         f"{args.scipy_max}, and both MPJPEs are over those persons.\n\n"
         + format_table(
@@ -358,7 +360,7 @@ def robust_section(args: argparse.Namespace) -> str:
             poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig))
             poses2d = swap_left_right(poses2d, share, rng)
             for name, stage in stages.items():
-                evals[name].update(stage(poses2d, boxes, seq.rig), frame.gt_poses)
+                evals[name].update(stage(poses2d, boxes, seq.rig).poses, frame.gt_poses)
         for name, ev in evals.items():
             m = ev.summary()
             rows.append([f"{100 * share:.0f}", name, m["mpjpe_mm"], m["pcp_average"]])

@@ -15,8 +15,7 @@ Tables:
    stages issue 16's target counts ("counted": Shelf's every stage, the crowds' matching + MAP), the target and
    the figure the issue measured (at a9f9a65, which had no tracker; the C++ peer's 4.73 ms on Shelf).
 2. References measured in the same run, same inputs: the PAF grouping against the frozen pure-Python
-   grouping (``benchmarks/reference_grouping.py``), the MAP's compiled solver against its batched numpy
-   reference (``reconstruction.solver=numpy``).
+   grouping (``benchmarks/reference_grouping.py``).
 3. Whole process, in fresh subprocesses: README command 1's ``python eval.py`` and the Shelf evaluation,
    warm (numba cache filled; median of ``--repeats``; on ``--cpu``), and the first run of a fresh clone (empty
    numba cache, ``NUMBA_CACHE_DIR`` set to a new folder; on every core, as a user runs it: every kernel compiles
@@ -138,18 +137,6 @@ def reference_rows(kept: dict, repeats: int) -> list[list]:
             repeats,
         )
         rows.append(["PAF grouping vs frozen pure Python", "Shelf 300-600", 1e3 * ours, 1e3 * ref, ref / ours])
-    for key, label in (("shelf", "Shelf 300-600"), ("ring100", "100 people x 7 ring views")):
-        if key not in kept:
-            continue
-        sequence, overrides = kept[key]
-        cfg = compose("eval", overrides=overrides)
-        numpy_cfg = compose("eval", overrides=[*overrides, "reconstruction.solver=numpy"])
-        ours, ref = interleaved(
-            lambda: stage_times(sequence, cfg, 1)[:, 1],
-            lambda: stage_times(sequence, numpy_cfg, 1)[:, 1],
-            repeats,
-        )
-        rows.append(["MAP compiled vs solver=numpy", label, 1e3 * ours, 1e3 * ref, ref / ours])
     return rows
 
 

@@ -14,9 +14,10 @@ from hydra.utils import instantiate
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
 from reconstruction.gather_kernels import gather_detections
+from reconstruction.results import Reconstruction, SkeletonPrior
 
 Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
-Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
+Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], Reconstruction]
 
 
 class Tracker(Protocol):
@@ -30,11 +31,6 @@ class Tracker(Protocol):
         variance: np.ndarray | None = None,
         bone_lengths: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]: ...
-
-
-def _of_frame(values: np.ndarray | None, persons: int) -> np.ndarray | None:
-    """A reconstruction's per-person output of the last frame (P, ...), or None when it has none for P persons."""
-    return values if values is not None and len(values) == persons else None
 
 
 @dataclass
@@ -88,12 +84,13 @@ class MultiViewPipeline:
         tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
         return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
 
-    def _reconstruct(self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray) -> np.ndarray:
-        """The reconstruction of a frame: (V, P, J, 3), (V, P, 4) -> (P, J, 4); a reconstruction that takes
-        ``skeletons`` (the MAP) gets the tracker's bone lengths of the tracks its persons would join."""
-        skeletons = getattr(self.tracker, "skeletons", None)
-        if skeletons is not None and getattr(self.reconstructor, "takes_skeletons", False):
-            return self.reconstructor(poses2d, bboxes, self.rig, skeletons=lambda poses: skeletons(frame, poses))
+    def _reconstruct(self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray) -> Reconstruction:
+        """The reconstruction of a frame: (V, P, J, 3), (V, P, 4) -> Reconstruction; one that takes a skeleton prior
+        (the adaptive MAP) gets the tracker's bone lengths of the tracks its persons would join."""
+        if self.tracker is not None and getattr(self.reconstructor, "takes_skeleton_prior", False):
+            first = self.reconstructor.first_pass(poses2d, bboxes, self.rig)
+            prior = SkeletonPrior(*self.tracker.skeletons(frame, first.poses)) if len(first.poses) else None
+            return self.reconstructor.finish(first, prior)
         return self.reconstructor(poses2d, bboxes, self.rig)
 
     def __call__(self, frame: Frame) -> FrameResult:
@@ -104,17 +101,15 @@ class MultiViewPipeline:
         assignment = self.matcher(frame.views, self.rig)
         t1 = time.perf_counter()
         poses2d, bboxes = gather_views(frame.views, assignment)
-        poses3d = (
-            self._reconstruct(frame.index, poses2d, bboxes) if len(assignment) else np.zeros((0, poses2d.shape[2], 4))
-        )
+        if len(assignment):
+            result = self._reconstruct(frame.index, poses2d, bboxes)
+        else:
+            result = Reconstruction(np.zeros((0, poses2d.shape[2], 4)))
+        poses3d = result.poses
         t2 = time.perf_counter()
         ids = None
-        if self.tracker is not None:  # the reconstruction's joint variances and bones of this frame, where it has them
-            variance, bones = None, None
-            if len(assignment):  # else the reconstruction did not run: what it holds is another frame's
-                variance = _of_frame(getattr(self.reconstructor, "last_joint_variance", None), len(poses3d))
-                bones = _of_frame(getattr(self.reconstructor, "last_bone_lengths", None), len(poses3d))
-            ids, poses3d = self.tracker.update(frame.index, poses3d, variance, bones)
+        if self.tracker is not None:
+            ids, poses3d = self.tracker.update(frame.index, poses3d, result.joint_variance, result.bone_lengths)
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
         if self.tracker is not None:

@@ -1,7 +1,7 @@
-"""3D reconstruction stages behind one interface: ``stage(poses2d, bboxes, rig) -> (P, J, 4)``.
+"""3D reconstruction stages behind one interface: ``stage(poses2d, bboxes, rig) -> Reconstruction``.
 
-poses2d (V, P, J, 3) are distorted pixels + score as detected (0 = missing); bboxes (V, P, 4) x, y,
-w, h. Each stage is configured from ``configs/reconstruction/*.yaml``.
+poses2d (V, P, J, 3) are distorted pixels + score as detected (0 = missing); bboxes (V, P, 4) x, y, w, h. Each stage
+is configured from ``configs/reconstruction/*.yaml``; the MLE / MAP stages are in ``reconstruction.solver``.
 """
 
 from __future__ import annotations
@@ -10,14 +10,20 @@ import numpy as np
 
 from data.geometry.camera import Rig
 from data.geometry.triangulation import triangulate_dlt
+from reconstruction.results import Reconstruction
+from reconstruction.solver.map_solver import seen_views
 
 
 class VanillaTriangulation:
     """Score-weighted DLT on undistorted pixels (the paper's "vanilla triangulation")."""
 
+    takes_skeleton_prior = False
+
     def __init__(self, min_views: int = 2) -> None:
         self.min_views = min_views
 
-    def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig) -> np.ndarray:
-        """Triangulate matched persons: (V, P, J, 3), (V, P, 4) -> (P, J, 4)."""
-        return triangulate_dlt(rig.undistort(poses2d), rig.projection_matrices(), self.min_views)
+    def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig) -> Reconstruction:
+        """Triangulate matched persons: (V, P, J, 3), (V, P, 4) -> Reconstruction (poses (P, J, 4))."""
+        und = rig.undistort(poses2d)
+        poses = triangulate_dlt(und, rig.projection_matrices(), self.min_views)
+        return Reconstruction(poses, provenance=seen_views(und)[0])

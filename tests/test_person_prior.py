@@ -12,6 +12,7 @@ from data.synthetic.observe import bbox_from_keypoints
 from data.synthetic.rigs import ring_rig
 from evaluation.pcp import pcp_by_part
 from evaluation.pose3d import Pose3DEvaluator
+from reconstruction.noise_model import NoiseModel
 from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstruction
 from reconstruction.solver.person_prior import (
     OUTLIER_SD,
@@ -26,8 +27,7 @@ from reconstruction.solver.person_prior import (
     project,
     proportion_sds,
 )
-from reconstruction.solver.prior_kernels import pair_chi2s
-from reconstruction.solver.side_swaps import _chi2s, apply_swaps, find_swaps
+from reconstruction.solver.side_swaps import apply_swaps, find_swaps
 
 
 def _scaled_body(scale: float, x: float = 0.0, y: float = 0.0) -> np.ndarray:
@@ -110,48 +110,6 @@ def test_bone_variances_are_the_numpy_formula():
     assert np.isinf(var).any() and np.isfinite(var).any()
 
 
-def test_compiled_pair_chi2s_are_the_numpy_formula():
-    rig = ring_rig(4, 7.0, 2.5)
-    X = np.stack([_scaled_body(1.0, 0.4 * p, 0.1 * p) for p in range(3)])
-    proj = rig.projection_matrices()
-    poses2d, _ = _observe(rig, X, 3.0)
-    w2 = np.random.default_rng(2).uniform(0.0, 0.2, poses2d.shape[:3])
-    left, right = np.array([5, 7, 9]), np.array([6, 8, 10])
-    given, exchanged = np.empty((4, 3, 3)), np.empty((4, 3, 3))
-    hom = np.ascontiguousarray(proj[:, :, :3] @ X.reshape(-1, 3).T)
-    pair_chi2s(hom, proj, np.ascontiguousarray(poses2d), w2, left, right, given, exchanged)
-    ref = _chi2s(poses2d[..., :2], project(X, proj)[0], w2, left, right)
-    np.testing.assert_array_equal(given, ref[0])
-    np.testing.assert_array_equal(exchanged, ref[1])
-
-
-def _noise_scale_numpy(X, uv, inv_sigma, proj, floor: float = 0.01) -> np.ndarray:
-    """The numpy formula the compiled noise_scale replaced: (P, J, 3), (V, P, J, 2), (V, P, J), (V, 3, 4) -> (P,)."""
-    xy, _ = project(X, proj)
-    seen = inv_sigma > 0
-    r2 = np.where(seen, np.sum((uv - xy) ** 2, axis=-1) * inv_sigma**2, 0.0)
-    rss, views = r2.sum(axis=0), seen.sum(axis=0)
-    ok = views >= 2
-    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)
-    n, rows = ok.sum(axis=1), np.arange(len(X))
-    a, b = ratio[rows, np.maximum(n - 1, 0) // 2], ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
-    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
-    return np.maximum(np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0), floor)
-
-
-def test_compiled_noise_scale_is_the_numpy_formula():
-    rig = ring_rig(6, 7.0, 2.5)
-    X = np.stack([_scaled_body(1.0, 0.3 * p, -0.3 * p) for p in range(5)])
-    poses2d, _ = _observe(rig, X, 4.0, seed=3)
-    seen = np.random.default_rng(5).uniform(size=poses2d.shape[:3]) > np.array([0.2, 0.5, 0.8, 0.95, 1.0])[:, None]
-    inv_sigma = np.where(seen, 0.3, 0.0)  # the last person seen nowhere, the one before in one view at most
-    proj = rig.projection_matrices()
-    args = (X + 0.01, poses2d[..., :2], inv_sigma, proj)
-    scale = noise_scale(*args)
-    np.testing.assert_array_equal(scale, _noise_scale_numpy(*args))
-    assert scale[-1] == 1.0 and np.all(scale[:2] > 0.01)
-
-
 def _unit_moves(X: np.ndarray, p: int, j: int) -> list[np.ndarray]:
     """The three unit moves of joint j of person p, as arrays shaped like X."""
     moves = []
@@ -182,11 +140,11 @@ def test_the_hierarchical_prior_recovers_a_body_15_percent_larger_than_the_table
     X = _scaled_body(1.15)[None]
     poses2d, boxes = _observe(rig, X, 0.0)
     own = bone_lengths(X)[0]
-    adaptive = MAPReconstruction()(poses2d, boxes, rig)
+    adaptive = MAPReconstruction()(poses2d, boxes, rig).poses
     assert np.max(np.abs(bone_lengths(adaptive[..., :3])[0] - own)) < 0.005
     # 3 px of noise, the person's lengths estimated from the MLE: closer to their own than the table is
     noisy, boxes = _observe(rig, X, 3.0, seed=1)
-    mle = MLEReconstruction()(noisy, boxes, rig)[..., :3]
+    mle = MLEReconstruction()(noisy, boxes, rig).poses[..., :3]
     lengths = bone_lengths(mle)
     mean, sd = person_bone_lengths(
         lengths,
@@ -198,8 +156,8 @@ def test_the_hierarchical_prior_recovers_a_body_15_percent_larger_than_the_table
     )
     assert np.mean(np.abs(mean[0] - own)) < 0.005 < np.mean(np.abs(BONE_MEAN - own))
     assert np.all(sd[0] < BONE_STD)
-    paper = MAPReconstruction(bone_prior="population", noise_scale="model")(noisy, boxes, rig)
-    ours = MAPReconstruction()(noisy, boxes, rig)
+    paper = MAPReconstruction(bone_prior="population", noise_scale="model")(noisy, boxes, rig).poses
+    ours = MAPReconstruction()(noisy, boxes, rig).poses
     err = lambda out: np.mean(np.abs(bone_lengths(out[..., :3])[0] - own))  # noqa: E731
     assert err(ours) < err(paper)
 
@@ -258,7 +216,8 @@ def test_noise_scale_recovers_the_true_noise_over_the_model():
     for true in (0.5, 2.0):
         uv = rig.project(X) + rng.normal(0.0, 3.0 * true, (5, 2, 23, 2))
         poses2d = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
-        mle = MLEReconstruction(c=0.0, sigma_px=3.0, score_power=0.0)(poses2d, np.zeros((5, 2, 4)), rig)[..., :3]
+        stage = MLEReconstruction(noise_model=NoiseModel(c=0.0, sigma_px=3.0, score_power=0.0))
+        mle = stage(poses2d, np.zeros((5, 2, 4)), rig).poses[..., :3]
         s = noise_scale(mle, uv, np.full((5, 2, 23), 1 / 3.0), proj)
         np.testing.assert_allclose(s, true, rtol=0.25)
     assert chi2.median(1) < 1
@@ -270,8 +229,8 @@ def test_a_left_right_swap_in_one_view_is_found_and_undone():
     poses2d, boxes = _observe(rig, X, 1.0)
     swapped = apply_swaps(poses2d, [(2, 0, 9, 10)])  # wrists exchanged in view 2
     assert not np.shares_memory(swapped, poses2d)
-    fixed = MAPReconstruction()(swapped, boxes, rig)
-    broken = MAPReconstruction(fix_swaps=False)(swapped, boxes, rig)
+    fixed = MAPReconstruction()(swapped, boxes, rig).poses
+    broken = MAPReconstruction(fix_swaps=False)(swapped, boxes, rig).poses
     err = lambda out: np.linalg.norm(out[0, [9, 10], :3] - X[0, [9, 10]], axis=-1).max()  # noqa: E731
     assert err(fixed) < 0.01 < err(broken)
     proj = rig.projection_matrices()
@@ -295,13 +254,17 @@ def test_pcp_counts_only_parts_whose_ground_truth_is_annotated():
 
 
 def test_rejects_bad_settings():
+    for bad in ({"sigma_px": -1.0}, {"c": 0.0, "sigma_px": 0.0, "sigma_min": 0.0}):
+        with pytest.raises(ValueError, match="noise_model"):
+            NoiseModel(**bad)
     for bad in (
         {"bone_prior": "x"},
         {"noise_scale": "x"},
         {"bone_tie_sd_m": 0.0},
         {"min_noise_scale": 0.0},
-        {"sigma_px": -1.0},
-        {"c": 0.0, "sigma_px": 0.0, "sigma_min": 0.0},
+        {"robust_scale": 0.0},
+        {"prior_weight": -1.0},
+        {"noise_model": {"c": 0.02}},
     ):
         with pytest.raises(ValueError):
             MAPReconstruction(**bad)

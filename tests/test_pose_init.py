@@ -1,4 +1,4 @@
-"""The compiled initial poses (pose_init) against the plain-numpy reference in tests/reference_pose_init.py."""
+"""The compiled initial poses (pose_init) against the plain-numpy oracle in tests/oracles/pose_init.py."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from data.bone_lengths import MEAN_POSE
 from data.geometry.triangulation import triangulate_dlt
 from reconstruction.solver.pose_init import fit_mean_body, initial_poses, reinitialise_outliers
-from tests import reference_pose_init as ref
+from tests.oracles import pose_init as ref
 from tests.test_map_reconstruction import _observe, _persons, _rig
 
 

@@ -29,7 +29,7 @@ def test_frame_errors_are_zero_on_noise_free_input_against_detections_and_ground
     frame = seq.frames[0]
     assignment = OracleMatcher()(frame.views, seq.rig)
     poses2d, boxes = gather_views(frame.views, assignment)
-    out = VanillaTriangulation()(poses2d, boxes, seq.rig)
+    out = VanillaTriangulation()(poses2d, boxes, seq.rig).poses
     ids = [frame.views[0].person_ids[assignment[p, 0]] for p in range(len(assignment))]
     gt = frame.gt_poses[[list(frame.gt_ids).index(i) for i in ids]]
     for ref in (None, gt):

@@ -204,8 +204,9 @@ def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
         if f >= 20:
             poses2d[:, 0, hidden, 2] = 0.0
         boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
-        alone = rec(poses2d, boxes, rig)
-        out = tracker.update(f, alone, rec.last_joint_variance).poses3d
+        result = rec(poses2d, boxes, rig)
+        alone = result.poses
+        out = tracker.update(f, alone, result.joint_variance).poses3d
     tracked, by_prior = (np.linalg.norm(p[0, hidden, :3] - truth[hidden, :3]) for p in (out, alone))
     assert tracked < 0.05 and tracked < by_prior
     assert out[0, hidden, 3] == alone[0, hidden, 3] < 0.5  # the reconstruction's low score is kept
@@ -226,9 +227,7 @@ def test_the_map_reports_each_joints_variance_for_the_tracker():
         poses2d[1:, 0, 9, 2] = 0.0  # the left wrist seen in one view only
         poses2d[:, 0, 10, 2] = 0.0  # the right wrist in none
         boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
-        rec = MLEMAPReconstruction()
-        rec(poses2d, boxes, rig)
-        out[noise] = rec.last_joint_variance
+        out[noise] = MLEMAPReconstruction()(poses2d, boxes, rig).joint_variance
     var = out[1.0][0]
     assert var.shape == (23,) and np.isinf(var[10])
     many = np.ones(23, bool)
@@ -280,10 +279,11 @@ def test_a_tracked_persons_own_skeleton_sharpens_the_maps_bones():
             uv = rig.project(truth[None]) + rng.normal(0, 4.0, (3, 1, 23, 2))
             poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
             boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
-            out = pipe._reconstruct(f, poses2d, boxes)
+            result = pipe._reconstruct(f, poses2d, boxes)
+            out = result.poses
             if tracked:
-                tracker.update(f, out, rec.last_joint_variance, rec.last_bone_lengths)
-                measured.append(np.abs(rec.last_bone_lengths[0] - true_bones).mean())
+                tracker.update(f, out, result.joint_variance, result.bone_lengths)
+                measured.append(np.abs(result.bone_lengths[0] - true_bones).mean())
             if f >= 20:
                 err.append(np.abs(np.linalg.norm(out[0, a, :3] - out[0, b, :3], axis=-1) - true_bones).mean())
         errors[tracked] = np.mean(err)

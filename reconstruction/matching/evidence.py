@@ -59,7 +59,7 @@ from reconstruction.matching.evidence_kernels import (
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import _as_edges
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
-from reconstruction.solver.map_estimation import joint_sigma
+from reconstruction.noise_model import NoiseModel
 from reconstruction.solver.person_prior import chi2_medians
 
 TOO_LITTLE_EVIDENCE = "too_little_evidence"  # no usable foot and fewer than min_dof usable joints
@@ -80,12 +80,15 @@ def joint_variances(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Undistorted pixels (N, J, 2), pixel variances (N, J) (0 = unusable) and any-non-finite (N,) of the
     detections of V views stacked in view order (N in all); sigma_model = (c, sigma_min, sigma_px,
-    score_power) of :func:`joint_sigma`. Only the undistortion is done per view (camera)."""
+    score_power) of :class:`NoiseModel`. Only the undistortion is done per view (camera)."""
     kp = np.concatenate([np.asarray(v.keypoints, dtype=np.float64).reshape(-1, J, 3) for v in views])
     boxes = np.concatenate([np.asarray(v.bboxes, dtype=np.float64).reshape(-1, 4) for v in views])
     clean, ok, bad = np.empty(kp.shape), np.empty(kp.shape[:2], dtype=bool), np.empty(len(kp), dtype=bool)
     usable_keypoints(kp, float(min_score), clean, ok, bad)
-    sigma = joint_sigma(clean, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0), *sigma_model)
+    c, sigma_min, sigma_px, score_power = sigma_model
+    sigma = NoiseModel(c, sigma_px, score_power, sigma_min).sigma(
+        clean, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0)
+    )
     var = np.where(ok & np.isfinite(sigma), sigma**2, 0.0)
     if not any(cam.has_distortion for cam in cameras):  # the joints not ok are zero already
         return np.ascontiguousarray(clean[..., :2]), var, bad
@@ -196,7 +199,6 @@ def warm_up() -> None:
     solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
     untested = untested_links((uv, var, one, None, p, cov, 1.0, F), np.zeros((2, 2), bool), (limits, 1, 9.0, 1.0))
     merge_persons(one[:1], one[1:2], one[:2], np.zeros((0, 2), np.int64), np.ones(2, bool), var, untested)
-    joint_sigma(np.ones((1, 2, 3)), np.ones((1, 4)), 0.016, 1.0)  # its pass over the joints
     feet_kernels.warm_up()
     usable_keypoints(np.zeros((2, 2, 3)), 0.2, np.empty((2, 2, 3)), np.empty((2, 2), bool), np.empty(2, bool))
     ints = np.zeros((2, 4), np.int64)  # strided column views of pairs_chi2's output, as __call__ passes them

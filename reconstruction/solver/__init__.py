@@ -1,14 +1,12 @@
-"""The MLE / MAP pose solver (paper section 3.3): the public entry is re-exported here.
+"""The MLE / MAP pose solver (paper Sec. 3.3): the stages of ``configs/reconstruction/*.yaml`` and the solve.
 
-Entry: :class:`MAPReconstruction`, :class:`MLEReconstruction`, :class:`MLEMAPReconstruction` (the
-``configs/reconstruction/*.yaml`` stages) and :func:`solve_poses` (in ``map_solver``). Internals:
-``map_estimation`` (the pose problem: residuals, priors), ``lm_solver`` (Levenberg-Marquardt),
-``block_solver`` (block-sparse normal equations), ``compiled_solver`` and ``pose_kernels`` (the numba
-path), ``pose_init`` (the starting poses), ``person_prior`` (bone-length prior), ``side_swaps``
-(left/right swap repair). Layer 3: may import ``data`` (layers 1-2) and the other stages' lower helpers,
-never ``evaluation`` or the entry points.
+``map_solver`` (the stages), ``compiled_solver`` and ``pose_kernels`` (the problem and its compiled
+Levenberg-Marquardt), ``pose_init`` (start poses), ``person_prior`` and ``prior_kernels`` (each person's noise scale
+and bone prior), ``side_swaps`` and ``side_labels`` (left / right repair). Layer 3: may import ``data`` and the other
+stages' lower helpers, never ``evaluation`` or the entry points.
 """
 
-from reconstruction.solver.map_solver import MAPReconstruction, MLEMAPReconstruction, MLEReconstruction, solve_poses
+from reconstruction.solver.compiled_solver import solve_poses
+from reconstruction.solver.map_solver import MAPReconstruction, MLEMAPReconstruction, MLEReconstruction
 
 __all__ = ["MAPReconstruction", "MLEMAPReconstruction", "MLEReconstruction", "solve_poses"]

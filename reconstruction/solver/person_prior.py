@@ -1,26 +1,11 @@
-"""What the MAP learns about each person from the MLE before it applies the bone prior.
+"""What the MAP learns about each person from the MLE joints X (P, J, 3) before it applies the bone prior.
 
-Two estimates, both from the maximum-likelihood joints X (P, J, 3) of a frame:
-
-- **Noise scale** (:func:`noise_scale`): the 2D sigma model (``joint_sigma``) gives each joint's relative
-  uncertainty, but not how good the detector really is on this person. After the MLE, the squared
-  reprojection residuals of a joint seen in n >= 2 views (in model sigmas) follow s^2 chi^2(2n - 3), s the
-  person's true noise over the model's. s is estimated robustly: the median over joints of
-  RSS_j / median(chi^2(2 n_j - 3)). It is the a-posteriori variance factor of photogrammetry, made robust
-  to the outlier joints of real detectors. On exact 2D s -> 0, so the likelihood dominates and the MAP
-  returns the triangulated points; on noisy 2D it weighs the prior as much as the data deserve.
-
-- **Person's own bone lengths** (:func:`person_bone_lengths`), the hierarchical prior in closed form:
-  bone l of a person is b_l = b_ref_l (1 + s_h z + s_g d_g(l)), z ~ N(0, 1) the person's stature
-  (``STATURE_SD``), d_g ~ N(0, 1) the proportion of the bone's group g (left and right share one:
-  bodies are nearly symmetric; ``PROPORTION_SD``), and the MLE measures n_l = b_l + e_l with
-  e_l ~ N(0, v_l + tie^2), v_l from the MLE covariance of the bone's two ends and tie the slack of
-  keypoint placement. The posterior of (z, d) is Gaussian (a (1 + G)-dimensional linear solve per person);
-  it gives each bone's posterior mean and variance. The MAP then pulls |Q_a - Q_b| towards that mean
-  with sigma sqrt(var + tie^2). An accurately observed person keeps their own proportions (tiny v_l,
-  posterior = their measurement); a poorly observed one borrows from the population, scaled to their
-  stature as measured by their other bones. This two-stage (empirical Bayes) form replaces bone length
-  unknowns in the solver: the solve keeps its per-bone structure and its speed.
+noise_scale: the person's 2D noise over the sigma model, robustly: the median over joints seen in n >= 2 views of
+RSS_j / median(chi^2(2 n_j - 3)) (photogrammetry's a-posteriori variance factor). person_bone_lengths: the
+hierarchical prior in closed form, b_l = b_ref_l (1 + s_h z + s_g d_g(l)) with z the stature and d_g the proportion
+of bone group g (left = right), measured as n_l = b_l + e_l, e_l ~ N(0, v_l + tie^2); the Gaussian posterior of
+(z, d) gives each bone's mean and SD, so an accurately observed person keeps their own proportions and a poorly
+observed one borrows the population's, scaled to their stature.
 """
 
 from __future__ import annotations
@@ -29,13 +14,13 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from data.bone_lengths import BONE_NAMES
-from reconstruction.solver.map_estimation import EPS_DEPTH
-from reconstruction.solver.prior_kernels import bone_posteriors, bone_sums, information_sums, noise_medians
+from reconstruction.solver.pose_kernels import EPS_DEPTH
+from reconstruction.solver.prior_kernels import BoneModel, bone_posteriors, bone_sums, information_sums
 
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
 OUTLIER_SD = 3.0  # a bone measured this many SD from its posterior is dropped and the posterior redone
-# chi^2 medians by degrees of freedom: scipy.stats.chi2.median's own formula, without importing scipy.stats (~0.5 s)
+# chi^2 medians by degrees of freedom: scipy.stats.chi2.median's own formula (scipy.stats is a slow import)
 _CHI2_MEDIANS = np.concatenate([[np.nan], 2.0 * gammaincinv(np.arange(1, 64) / 2.0, 0.5)])
 
 
@@ -44,10 +29,11 @@ def chi2_medians(dof: np.ndarray) -> np.ndarray:
     return _CHI2_MEDIANS[np.clip(dof, 0, len(_CHI2_MEDIANS) - 1)]
 
 
-def project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (V, P, J, 2) and clamped depths (V, P, J) of joints (P, J, 3) in views (V, 3, 4)."""
+def project(X: np.ndarray, proj: np.ndarray, hom: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (V, P, J, 2) and clamped depths (V, P, J) of joints (P, J, 3) in views (V, 3, 4); hom: view_matmul."""
     P, J, _ = X.shape
-    hom = (proj[:, :, :3] @ X.reshape(-1, 3).T + proj[:, :, 3:]).reshape(len(proj), 3, P, J)
+    hom = (proj[:, :, :3] @ X.reshape(-1, 3).T if hom is None else hom) + proj[:, :, 3:]
+    hom = hom.reshape(len(proj), 3, P, J)
     z = np.maximum(hom[:, 2], EPS_DEPTH)
     return np.stack([hom[:, 0] / z, hom[:, 1] / z], axis=-1), z
 
@@ -79,14 +65,19 @@ def noise_scale(
     floor: float = 0.01,
     hom: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Each person's 2D noise over the sigma model, robustly from MLE residuals: (P, J, 3), (V, P, J, 2),
-    (V, P, J) 1/sigma (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views.
-    hom: :func:`view_matmul` of X, if at hand."""
-    hom = view_matmul(X, proj) if hom is None else hom
-    median, ratio = np.empty(len(X)), np.empty(X.shape[1])
-    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
-    noise_medians(hom, as_float(proj), as_float(uv), as_float(inv_sigma), _CHI2_MEDIANS, ratio, median)
-    return np.maximum(np.sqrt(np.where(median < 0, 1.0, median)), floor)  # median -1: no joint in >= 2 views
+    """Each person's 2D noise over the sigma model from MLE residuals: (P, J, 3), (V, P, J, 2), (V, P, J) 1/sigma
+    (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views. hom: view_matmul of X."""
+    xy = project(X, proj, hom)[0]
+    seen = inv_sigma > 0
+    d = uv - xy
+    r2 = np.where(seen, (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) * (inv_sigma * inv_sigma), 0.0)
+    rss, views = r2.sum(axis=0), seen.sum(axis=0)
+    ok = views >= 2
+    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)
+    n, rows = ok.sum(axis=1), np.arange(len(X))
+    a, b = ratio[rows, np.maximum(n - 1, 0) // 2], ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
+    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
+    return np.maximum(np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0), floor)
 
 
 def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:
@@ -114,12 +105,8 @@ def bone_variances(
 def proportion_sds(
     bone_ref: np.ndarray, bone_std: np.ndarray, placement_sd: float, stature_sd: float = STATURE_SD
 ) -> np.ndarray:
-    """Relative SD of each bone given the stature, from a table's population SDs: (L,), (L,) -> (L,).
-
-    The table's variance is stature + proportion + keypoint placement (``placement_sd``, m); what the
-    stature and the placement leave of it is the proportion's (0 where nothing is left). The default
-    table (data/bone_lengths.py) gives about 2 %.
-    """
+    """Relative SD of each bone given the stature: (L,), (L,) -> (L,), what the table's variance leaves after the
+    stature and the keypoint placement (``placement_sd``, m), 0 where nothing is left."""
     rest = np.asarray(bone_std, dtype=np.float64) ** 2 - placement_sd**2 - (stature_sd * np.asarray(bone_ref)) ** 2
     return np.sqrt(np.maximum(rest, 0.0)) / np.maximum(bone_ref, 1e-9)
 
@@ -141,18 +128,16 @@ def person_bone_lengths(
     G = int(groups.max()) + 1 if L else 0
     bone_ref = np.array(bone_ref, dtype=np.float64)  # a writable copy: one kernel type for read-only tables too
     mean, sd = np.empty((P, L)), np.empty((P, L))
-    bone_posteriors(
-        np.ascontiguousarray(lengths, dtype=np.float64),
-        np.ascontiguousarray(variances, dtype=np.float64),
-        bone_ref,
-        bone_ref * stature_sd,
-        bone_ref * np.asarray(proportion_sd, dtype=np.float64),
-        np.ascontiguousarray(groups, dtype=np.int64),
-        float(tie_sd) ** 2,
-        OUTLIER_SD,
-        np.empty(L, dtype=bool),
-        np.empty((4, G)),
-        mean,
-        sd,
+    model = BoneModel(
+        bone_ref=bone_ref,
+        stature=bone_ref * stature_sd,
+        proportion=bone_ref * np.asarray(proportion_sd, dtype=np.float64),
+        groups=np.ascontiguousarray(groups, dtype=np.int64),
+        tie2=float(tie_sd) ** 2,
+        outlier_sd=OUTLIER_SD,
+        use=np.empty(L, dtype=bool),
+        scratch=np.empty((4, G)),
     )
+    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    bone_posteriors(as_float(lengths), as_float(variances), model, mean, sd)
     return mean, sd

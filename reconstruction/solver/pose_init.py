@@ -1,24 +1,15 @@
-"""Initial 3D poses for the MLE / MAP solvers: the DLT where a joint is triangulated, a fitted mean body elsewhere.
+"""Start poses for the MLE / MAP: the DLT where a joint is triangulated, a fitted mean body elsewhere.
 
-Joints the DLT reconstructed (seen in >= min_views views) are kept unless they are gross outliers:
-behind a camera that sees them, farther than ``GROSS_OUTLIER_M`` from the mean body placed at the
-median of the person's joints, or farther than ``OUTLIER_M`` from the body fitted to the remaining
-joints (a DLT of two nearly parallel rays can land metres away and would start the solver far outside
-the basin of the optimum). An outlier is re-initialised like an untriangulated joint; it keeps all its
-observations in the solve. The mean standing body of
-``data.bone_lengths.MEAN_POSE`` is aligned to them per person (a rotation + translation, no scale)
-and supplies every other joint; a joint seen in exactly one view (or whose DLT failed) is then moved
-to the point of that view's ray (the best-scored view's) closest to the body guess, so it starts
-consistent with its observation. The rotation is a full 3D Kabsch fit when at least
-``FULL_FIT_MIN_JOINTS`` non-collinear joints are known, else a rotation about the vertical z axis only
-(DESIGN.md: world z up; people in a crowd stand upright), else none.
-
-The per-person work runs in two compiled (numba) kernels of plain scalar loops: a frame of a few persons costs
-microseconds. Written so to compile fast on an empty cache (~1.7 s CPU; with np.linalg, np.median, array expressions
-and allocations ~8 s). tests/reference_pose_init.py is the plain-numpy reference they are tested against.
+DLT joints are kept unless behind a camera that sees them, farther than GROSS_OUTLIER_M from the mean body at the
+median of the person's joints, or farther than OUTLIER_M from the body fitted to the rest (a DLT of nearly parallel
+rays can land metres away). MEAN_POSE is aligned to the kept joints (Kabsch with >= FULL_FIT_MIN_JOINTS non-collinear
+joints, else a rotation about z: people stand upright) and supplies the other joints, each moved onto the ray of its
+best-scored view where one sees it. Scalar loops in numba (np.linalg's wrappers compile slowly).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -33,13 +24,33 @@ _JACOBI_SWEEPS = 30  # a 3x3 converges in 3-5 (quadratically; the last sweep fin
 
 
 @njit(cache=True)
-def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray, m: np.ndarray) -> bool:
-    """The template aligned to the known joints of one person (rotation + translation) into out (J, 3): placed.
-    m: (12, 3) scratch (allocations would compile numpy's allocators too).
+def _jacobi_svd(m: np.ndarray, sweeps: int) -> None:
+    """One-sided Jacobi SVD of the 3x3 in m[0:3] (-> U S) with m[3:6] = I (-> V): plane rotations until none."""
+    for r in range(3):
+        m[3 + r, r] = 1.0
+    for _ in range(sweeps):
+        rotated = False
+        for a in range(2):
+            for b in range(a + 1, 3):
+                alpha, beta, gamma = 0.0, 0.0, 0.0
+                for r in range(3):
+                    alpha, beta, gamma = alpha + m[r, a] ** 2, beta + m[r, b] ** 2, gamma + m[r, a] * m[r, b]
+                if abs(gamma) > 1e-15 * np.sqrt(alpha * beta):  # a plane rotation orthogonalises columns a, b
+                    rotated = True
+                    zeta = (beta - alpha) / (2.0 * gamma)
+                    t = (1.0 if zeta >= 0.0 else -1.0) / (abs(zeta) + np.sqrt(1.0 + zeta * zeta))
+                    c = 1.0 / np.sqrt(1.0 + t * t)
+                    for r in range(6):
+                        x = m[r, a]
+                        m[r, a], m[r, b] = c * x - c * t * m[r, b], c * t * x + c * m[r, b]
+        if not rotated:
+            break
 
-    Kabsch by a one-sided Jacobi SVD of the 3x3 covariance, in a few compact loops: numba's compile time
-    grows with every loop and array access written out (np.linalg's wrappers take seconds to compile).
-    """
+
+@njit(cache=True)
+def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray, m: np.ndarray) -> bool:
+    """The template (J, 3) aligned to the known (J,) of points (J, 3) by rotation + translation into out (J, 3) ->
+    placed; m (12, 3) scratch. Compact loops: numba's compile time grows with every loop written out."""
     for r in range(12):  # rows 0-2: cov -> U S; 3-5: I -> V; 6, 7: template, point centroids; 8: S; 9-11: R
         for k in range(3):
             m[r, k] = 0.0
@@ -59,25 +70,7 @@ def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: n
                 for b in range(3):
                     m[a, b] += (template[j, a] - m[6, a]) * (points[j, b] - m[7, b])
     angle = np.arctan2(m[0, 1] - m[1, 0], m[0, 0] + m[1, 1])  # the yaw fallback
-    for r in range(3):
-        m[3 + r, r] = 1.0
-    for _ in range(_JACOBI_SWEEPS if count >= FULL_FIT_MIN_JOINTS else 0):
-        rotated = False
-        for a in range(2):
-            for b in range(a + 1, 3):
-                alpha, beta, gamma = 0.0, 0.0, 0.0
-                for r in range(3):
-                    alpha, beta, gamma = alpha + m[r, a] ** 2, beta + m[r, b] ** 2, gamma + m[r, a] * m[r, b]
-                if abs(gamma) > 1e-15 * np.sqrt(alpha * beta):  # a plane rotation orthogonalises columns a, b
-                    rotated = True
-                    zeta = (beta - alpha) / (2.0 * gamma)
-                    t = (1.0 if zeta >= 0.0 else -1.0) / (abs(zeta) + np.sqrt(1.0 + zeta * zeta))
-                    c = 1.0 / np.sqrt(1.0 + t * t)
-                    for r in range(6):
-                        x = m[r, a]
-                        m[r, a], m[r, b] = c * x - c * t * m[r, b], c * t * x + c * m[r, b]
-        if not rotated:
-            break
+    _jacobi_svd(m, _JACOBI_SWEEPS if count >= FULL_FIT_MIN_JOINTS else 0)
     for k in range(3):
         m[8, k] = np.sqrt(m[0, k] ** 2 + m[1, k] ** 2 + m[2, k] ** 2)
     k2 = 0 if m[8, 0] <= m[8, 1] and m[8, 0] <= m[8, 2] else (1 if m[8, 1] <= m[8, 2] else 2)  # the smallest
@@ -108,56 +101,72 @@ def _score(poses2d: np.ndarray, v: int, p: int, j: int) -> float:
     return poses2d[v, p, j, 2] if finite else 0.0
 
 
+class StartInputs(NamedTuple):
+    """_start_kernel's inputs: points (P, J, 3), known (P, J), poses2d (V, P, J, 3) undistorted px + score, proj
+    (V, 3, 4), Minv (V, 3, 3) = M^-1, centre (V, 3) camera centres, template (J, 3)."""
+
+    points: np.ndarray
+    known: np.ndarray
+    poses2d: np.ndarray
+    proj: np.ndarray
+    Minv: np.ndarray
+    centre: np.ndarray
+    template: np.ndarray
+
+
+class StartScratch(NamedTuple):
+    """_start_kernel's work arrays (no allocations in the kernel): ok (P, J), body (J + 1, 3), m (12, 3), buf (J,)."""
+
+    ok: np.ndarray
+    body: np.ndarray
+    m: np.ndarray
+    buf: np.ndarray
+
+
 @njit(cache=True)
-def _start_kernel(
-    points: np.ndarray,
-    known: np.ndarray,
-    poses2d: np.ndarray,
-    proj: np.ndarray,
-    Minv: np.ndarray,
-    centre: np.ndarray,
-    template: np.ndarray,
-    out: np.ndarray,
-    placed: np.ndarray,
-    ok: np.ndarray,
-    body: np.ndarray,
-    m: np.ndarray,
-    buf: np.ndarray,
-) -> None:
-    """_start per person (see there), one compiled function: (P, J, 3), (P, J), poses2d (V, P, J, 3) (a joint's
-    score counts as 0 where its pixel is not finite), (V, 3, 4), M^-1 (V, 3, 3), centres (V, 3), (J, 3) -> out
-    (P, J, 3) (enters as points), placed (P,) (enters False); scratch: ok (P, J) (enters as known), body (J + 1, 3),
-    m (12, 3), buf (max(J, 3),). No allocations: numba would compile numpy's allocators for them."""
-    P, J = known.shape
+def _inliers(inp: StartInputs, p: int, work: StartScratch) -> bool:
+    """Person p's known joints in front of the cameras that see them and near the body (work.ok), the body fitted to
+    them into work.body -> placed."""
+    points, template, proj, ok, body, buf = inp.points, inp.template, inp.proj, work.ok, work.body, work.buf
+    J = len(template)
     shift = body[J]
-    for p in range(P):
-        for j in range(J):  # behind a camera that sees it
-            for v in range(len(proj)):
-                depth = 0.0
-                for i in range(3):
-                    depth += proj[v, 2, i] * points[p, j, i]
-                ok[p, j] &= not (_score(poses2d, v, p, j) > 0 and not depth + proj[v, 2, 3] > 0)
-        for i in range(3):  # the template shifted by the median of points - template: insertion sorts
-            n = 0
-            for j in range(J):
-                body[j, i] = template[j, i]
-                if ok[p, j]:
-                    x = points[p, j, i] - template[j, i]
-                    k = n
-                    while k > 0 and buf[k - 1] > x:
-                        buf[k], k = buf[k - 1], k - 1
-                    buf[k], n = x, n + 1
-            shift[i] = (buf[(n - 1) // 2] + buf[n // 2]) / 2 if n else 0.0
-        for limit in (GROSS_OUTLIER_M, OUTLIER_M):  # far from the body shifted, then from the body fitted
-            for j in range(J):
-                d = 0.0
-                for i in range(3):
-                    d += (points[p, j, i] - body[j, i] - shift[i]) ** 2
-                ok[p, j] &= not np.sqrt(d) > limit
-            placed[p] = _fit_one(points[p], ok[p], template, body, m)
-            shift[0], shift[1], shift[2] = 0.0, 0.0, 0.0
-        for j in range(J):  # the rest: the body, moved onto the best-scored view's ray
+    for j in range(J):  # behind a camera that sees it
+        for v in range(len(proj)):
+            depth = 0.0
+            for i in range(3):
+                depth += proj[v, 2, i] * points[p, j, i]
+            ok[p, j] &= not (_score(inp.poses2d, v, p, j) > 0 and not depth + proj[v, 2, 3] > 0)
+    for i in range(3):  # the template shifted by the median of points - template: insertion sorts
+        n = 0
+        for j in range(J):
+            body[j, i] = template[j, i]
             if ok[p, j]:
+                x = points[p, j, i] - template[j, i]
+                k = n
+                while k > 0 and buf[k - 1] > x:
+                    buf[k], k = buf[k - 1], k - 1
+                buf[k], n = x, n + 1
+        shift[i] = (buf[(n - 1) // 2] + buf[n // 2]) / 2 if n else 0.0
+    placed = False
+    for limit in (GROSS_OUTLIER_M, OUTLIER_M):  # far from the body shifted, then from the body fitted
+        for j in range(J):
+            d = 0.0
+            for i in range(3):
+                d += (points[p, j, i] - body[j, i] - shift[i]) ** 2
+            ok[p, j] &= not np.sqrt(d) > limit
+        placed = _fit_one(points[p], ok[p], template, body, work.m)
+        shift[0], shift[1], shift[2] = 0.0, 0.0, 0.0
+    return placed
+
+
+@njit(cache=True)
+def _start_kernel(inp: StartInputs, out: np.ndarray, placed: np.ndarray, work: StartScratch) -> None:
+    """_start per person: out (P, J, 3) (enters as points), placed (P,); work.ok enters as known."""
+    poses2d, Minv, centre, body, buf = inp.poses2d, inp.Minv, inp.centre, work.body, work.buf
+    for p in range(len(out)):
+        placed[p] = _inliers(inp, p, work)
+        for j in range(out.shape[1]):  # the rest: the body, moved onto the best-scored view's ray
+            if work.ok[p, j]:
                 continue
             best = 0  # np.argmax of the scores: the first maximum, or the first NaN
             for v in range(len(poses2d)):
@@ -170,11 +179,8 @@ def _start_kernel(
                 continue
             num, den = 0.0, 0.0
             for i in range(3):
-                buf[i] = (
-                    Minv[best, i, 0] * poses2d[best, p, j, 0]
-                    + Minv[best, i, 1] * poses2d[best, p, j, 1]
-                    + Minv[best, i, 2]
-                )
+                buf[i] = Minv[best, i, 0] * poses2d[best, p, j, 0] + Minv[best, i, 1] * poses2d[best, p, j, 1]
+                buf[i] += Minv[best, i, 2]
                 num, den = num + (body[j, i] - centre[best, i]) * buf[i], den + buf[i] * buf[i]
             t = max(num / den, _MIN_RAY_DEPTH_M)  # in front of the camera
             for i in range(3):
@@ -185,14 +191,6 @@ def _writable(a: np.ndarray, dtype: type) -> np.ndarray:
     """a as a writable C-contiguous array of dtype (a copy if needed): one compiled specialisation per kernel."""
     a = np.ascontiguousarray(a, dtype=dtype)
     return a if a.flags.writeable else a.copy()
-
-
-def _views(poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Contiguous poses2d (V, P, J, 3), proj (V, 3, 4), M^-1 (V, 3, 3), centres (V, 3): _start_kernel's arguments
-    after the points."""
-    Minv = np.linalg.inv(proj[:, :, :3])
-    centre = -np.matmul(Minv, proj[:, :, 3:])[..., 0]
-    return _writable(poses2d, np.float64), proj, Minv, centre
 
 
 def fit_mean_body(points: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -210,27 +208,30 @@ def _start(
     """Inliers of points kept, every other joint from the fitted body moved onto its ray -> (P, J, 3), placed (P,)."""
     points, known, proj = _writable(points, np.float64), _writable(known, np.bool_), _writable(proj, np.float64)
     P, J = known.shape
+    Minv = np.linalg.inv(proj[:, :, :3])
+    inputs = StartInputs(
+        points=points,
+        known=known,
+        poses2d=_writable(poses2d, np.float64),
+        proj=proj,
+        Minv=Minv,
+        centre=-np.matmul(Minv, proj[:, :, 3:])[..., 0],
+        template=MEAN_POSE[:J],
+    )
+    work = StartScratch(ok=known.copy(), body=np.empty((J + 1, 3)), m=np.empty((12, 3)), buf=np.empty(max(J, 3)))
     out, placed = points.copy(), np.zeros(P, dtype=bool)
-    scratch = known.copy(), np.empty((J + 1, 3)), np.empty((12, 3)), np.empty(max(J, 3))
-    _start_kernel(points, known, *_views(poses2d, proj), MEAN_POSE[:J], out, placed, *scratch)
+    _start_kernel(inputs, out, placed, work)
     return out, placed
 
 
 def initial_poses(dlt: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Start poses from the DLT and the fitted mean body: (P, J, 4), (V, P, J, 3), (V, 3, 4) -> (P, J, 3), placed (P,).
-
-    poses2d are undistorted pixels + score. placed is False for a person without any usable
-    triangulated joint (nothing to anchor the body to).
-    """
+    """Start poses from the DLT and the fitted body: (P, J, 4), (V, P, J, 3) undistorted px + score, (V, 3, 4) ->
+    (P, J, 3), placed (P,) (False: no usable triangulated joint to anchor the body to)."""
     dlt = np.asarray(dlt, dtype=np.float64)
     return _start(dlt[..., :3], dlt[..., 3] > 0, poses2d, proj)
 
 
 def reinitialise_outliers(X: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """Reset the gross outliers of a solved pose to the fitted body (as initial_poses does for the DLT):
-    (P, J, 3), (V, P, J, 3) undistorted px + score, (V, 3, 4) -> (P, J, 3).
-
-    Used between the MLE and MAP stages: the MLE keeps a joint seen along nearly parallel rays where
-    its likelihood alone puts it, possibly metres away, and the MAP would start far outside its basin.
-    """
+    """The gross outliers of a solved pose reset as initial_poses does (an MLE joint seen along nearly parallel rays
+    can sit metres away): (P, J, 3), (V, P, J, 3) undistorted px + score, (V, 3, 4) -> (P, J, 3)."""
     return _start(X, np.any(np.asarray(poses2d)[..., 2] > 0, axis=0), poses2d, proj)[0]

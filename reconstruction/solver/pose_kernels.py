@@ -1,49 +1,97 @@
-"""Compiled (numba) kernels of the MLE / MAP pose problems: linearisation, block Cholesky, Levenberg-Marquardt.
+"""Compiled (numba) Levenberg-Marquardt of the MLE / MAP pose problems, one (person, bone-graph component) at a time.
 
-The same problem, damping rule, step acceptance and stopping tests as the batched numpy solver
-(:mod:`reconstruction.solver.lm_solver` with :mod:`reconstruction.solver.map_estimation`), one (person, bone-graph
-component) problem at a time in compiled loops: a crowd of small problems costs arithmetic, not
-numpy call overhead. The normal equations are 3x3 blocks per joint coupled along the bones, factorised
-by a block Cholesky in the elimination order of a :class:`reconstruction.solver.compiled_solver.SolverPlan`
-(joints at solver *positions*, components contiguous; ``slot[i, j]`` (i >= j) is the storage of block
-(i, j) including the fill-in; ``later[k]`` the positions i > k with a block (i, k)). A component of one
-joint (every problem of the MLE, which has no bones) is solved in scalars by :func:`_solve_point`, with the
-same arithmetic: its iterations would otherwise be mostly call overhead.
-
-Status codes are those of :mod:`reconstruction.solver.lm_solver`.
+Per person: reprojection residuals (q - pi_v(Q_j)) / sigma (optionally robust, scipy's rho), bone residuals
+w_l (b_ref_l - |Q_a - Q_b|) and a Tikhonov anchor tau (Q_j - A_j). The normal equations are 3x3 blocks per joint
+coupled along the bones, factorised by a block Cholesky in the elimination order of a :class:`Plan` (joints at
+solver *positions*, components contiguous; ``slot[i, j]`` (i >= j) stores block (i, j) with the fill-in;
+``later[k]`` the positions i > k with a block (i, k)). Damping after Nielsen (IMM-REP-1999-05); a component steps
+with the safe (PSD) curvature until a step gains rho >= SWITCH_RHO, then with the exact Hessian of the bone prior.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from reconstruction.solver.lm_solver import (
-    CONVERGED_COST,
-    CONVERGED_GRADIENT,
-    CONVERGED_STEP,
-    MAX_DAMPING,
-    MAX_ITERATIONS,
-    MIN_DAMPING_FACTOR,
-    RUNNING,
-    STALLED,
-    SWITCH_RHO,
-)
-
+# status codes per problem
+RUNNING, CONVERGED_STEP, CONVERGED_COST, CONVERGED_GRADIENT, STALLED, MAX_ITERATIONS = 0, 1, 2, 3, 4, 5
+MAX_DAMPING = 1e16  # relative to max diag(H): no step can reduce the cost any more
+SWITCH_RHO = 0.25  # gain ratio of an accepted safe step after which the exact model is used
+MIN_DAMPING_FACTOR = 1.0 / 3.0  # Nielsen: an accepted step shrinks mu by at most this factor
 ROBUST_CODES = {"none": 0, "huber": 1, "cauchy": 2}
-_EPS_DEPTH = 1e-6  # m, as reconstruction.solver.map_estimation
+EPS_DEPTH = 1e-6  # m; projections of points behind a camera are clamped to this depth
 _EPS = np.finfo(np.float64).eps
 
-
-# error_model numpy: x / 0 = inf or NaN, no ZeroDivisionError branches (they cost run and compile time).
-# _nrt False: no reference counting; the kernels allocate nothing (the caller passes every array, see
-# compiled_solver.scratch), and the counts numba kept on every array view and tuple of arrays passed
-# between the kernels were most of the time of a small (one-joint) problem: 2x faster, half the compile time.
+# error_model numpy: x / 0 = inf or NaN, no ZeroDivisionError branches. _nrt False: no reference counting (the
+# kernels allocate nothing; the caller passes every array), which dominated the time of one-joint problems.
 # Element-wise copies instead of array assignments for the same reason: those compile numba's shape-error messages.
 _JIT = {"cache": True, "error_model": "numpy", "_nrt": False}
-# helpers called only from the kernels: without the CPython and C wrappers numba compiles for every function
-_INNER = {**_JIT, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
-_INLINE = {**_INNER, "inline": "always"}  # _step alone: 0.3 s less compile, no slower (inlining more is slower)
+_INNER = {**_JIT, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}  # helpers called only from the kernels
+_INLINE = {**_INNER, "inline": "always"}
+
+
+class Problem(NamedTuple):
+    """The kernels' problem: proj (V, 3, 4), uv (V, P, J, 2) px, w (V, P, J) 1/sigma (0 unseen), anchor (P, J, 3)
+    in joint order, ref and bw (P, L) bone lengths (m) and weights (1/m), tau2 anchor weight^2, robust code, C2."""
+
+    proj: np.ndarray
+    uv: np.ndarray
+    w: np.ndarray
+    anchor: np.ndarray
+    ref: np.ndarray
+    bw: np.ndarray
+    tau2: float
+    robust: int
+    C2: float
+
+
+class Settings(NamedTuple):
+    """Stopping tests and the initial damping mu_0 = tau max diag(H)."""
+
+    max_iterations: int
+    xtol: float
+    ftol: float
+    gtol: float
+    tau: float
+
+
+class Plan(NamedTuple):
+    """Block layout of one bone graph (J joints, L bones, C components); CSR lists as (ptr, idx) pairs."""
+
+    pos_joint: np.ndarray  # (J,) joint at each position
+    comp_start: np.ndarray  # (C + 1,) first position of each component, then J
+    comp_bones_ptr: np.ndarray  # (C + 1,) CSR of the bones of each component
+    comp_bones: np.ndarray
+    comp_slots_ptr: np.ndarray  # (C + 1,) CSR of the block storage indices of each component
+    comp_slots: np.ndarray
+    bone_pa: np.ndarray  # (L,) positions of each bone's ends
+    bone_pb: np.ndarray
+    bone_slot: np.ndarray  # (L,) storage index of each bone's off-diagonal block
+    slot: np.ndarray  # (J, J) storage index of block (i, j), i >= j, -1 where structurally zero
+    later_ptr: np.ndarray  # (J + 1,) CSR of the positions i > k with a block (i, k)
+    later_idx: np.ndarray
+
+
+class Linearisation(NamedTuple):
+    """Safe diagonal blocks D (J, 3, 3), gradient g (J, 3), safe bone blocks K and exact - safe Kr (L, 3, 3)."""
+
+    D: np.ndarray
+    g: np.ndarray
+    K: np.ndarray
+    Kr: np.ndarray
+
+
+class Work(NamedTuple):
+    """Scratch: x, x_new, h (J, 3) at solver positions, B (n_blocks, 3, 3), the current and the trial linearisation."""
+
+    x: np.ndarray
+    x_new: np.ndarray
+    h: np.ndarray
+    B: np.ndarray
+    lin: Linearisation
+    trial: Linearisation
 
 
 @njit(**_INNER)
@@ -64,43 +112,30 @@ def _robust(r: float, kind: int, C2: float) -> tuple[float, float, float]:
 
 @njit(**_INNER)
 def _joint_terms(
-    cost: float,
-    X0: float,
-    X1: float,
-    X2: float,
-    p: int,
-    j: int,
-    proj: np.ndarray,
-    uv: np.ndarray,
-    w: np.ndarray,
-    anchor: np.ndarray,
-    tau2: float,
-    robust: int,
-    C2: float,
-    derivatives: bool,
+    cost: float, X0: float, X1: float, X2: float, p: int, j: int, prob: Problem, derivatives: bool
 ) -> tuple[float, float, float, float, float, float, float, float, float, float]:
-    """Joint j of person p at (X0, X1, X2): cost + its likelihood and anchor terms, its gradient (3) and the
-    distinct entries of its block (00, 01, 02, 11, 12, 22); without ``derivatives`` the same cost, by the same
-    operations, and the gradient and block of the anchor alone (for a trial whose derivatives go unread)."""
-    dx0, dx1, dx2 = X0 - anchor[p, j, 0], X1 - anchor[p, j, 1], X2 - anchor[p, j, 2]
+    """Joint j of person p at (X0, X1, X2) -> cost + its terms, gradient (3), block entries (00 01 02 11 12 22);
+    without ``derivatives`` the same cost by the same operations, and the anchor's gradient and block alone."""
+    proj, tau2 = prob.proj, prob.tau2
+    dx0, dx1, dx2 = X0 - prob.anchor[p, j, 0], X1 - prob.anchor[p, j, 1], X2 - prob.anchor[p, j, 2]
     cost += 0.5 * tau2 * (dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
     g0, g1, g2 = tau2 * dx0, tau2 * dx1, tau2 * dx2
     d00 = d01 = d02 = d11 = d12 = d22 = 0.0
     for v in range(proj.shape[0]):
-        wv = w[v, p, j]
+        wv = prob.w[v, p, j]
         if wv <= 0.0:
             continue
         h0 = proj[v, 0, 0] * X0 + proj[v, 0, 1] * X1 + proj[v, 0, 2] * X2 + proj[v, 0, 3]
         h1 = proj[v, 1, 0] * X0 + proj[v, 1, 1] * X1 + proj[v, 1, 2] * X2 + proj[v, 1, 3]
-        depth = max(proj[v, 2, 0] * X0 + proj[v, 2, 1] * X1 + proj[v, 2, 2] * X2 + proj[v, 2, 3], _EPS_DEPTH)
+        depth = max(proj[v, 2, 0] * X0 + proj[v, 2, 1] * X1 + proj[v, 2, 2] * X2 + proj[v, 2, 3], EPS_DEPTH)
         px, py = h0 / depth, h1 / depth
-        rx, ry = (uv[v, p, j, 0] - px) * wv, (uv[v, p, j, 1] - py) * wv
+        rx, ry = (prob.uv[v, p, j, 0] - px) * wv, (prob.uv[v, p, j, 1] - py) * wv
         sx = sy = wv / depth
-        if robust == 0:
+        if prob.robust == 0:
             cost += 0.5 * (rx * rx + ry * ry)
         else:
-            cx, rsx, jsx = _robust(rx, robust, C2)
-            cy, rsy, jsy = _robust(ry, robust, C2)
+            cx, rsx, jsx = _robust(rx, prob.robust, prob.C2)
+            cy, rsy, jsy = _robust(ry, prob.robust, prob.C2)
             cost += 0.5 * (cx + cy)
             rx, ry, sx, sy = rx * rsx, ry * rsy, sx * jsx, sy * jsy
         if not derivatives:
@@ -128,37 +163,6 @@ def _joint_terms(
 
 
 @njit(**_INNER)
-def _likelihood_terms(
-    x: np.ndarray,
-    s: int,
-    e: int,
-    p: int,
-    pos_joint: np.ndarray,
-    proj: np.ndarray,
-    uv: np.ndarray,
-    w: np.ndarray,
-    anchor: np.ndarray,
-    tau2: float,
-    robust: int,
-    C2: float,
-    D: np.ndarray,
-    g: np.ndarray,
-) -> float:
-    """Likelihood + anchor cost of positions s:e; writes their blocks D (J, 3, 3) and gradients g (J, 3)."""
-    cost = 0.0
-    for k in range(s, e):
-        X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
-        cost, g0, g1, g2, d00, d01, d02, d11, d12, d22 = _joint_terms(
-            cost, X0, X1, X2, p, pos_joint[k], proj, uv, w, anchor, tau2, robust, C2, True
-        )
-        g[k, 0], g[k, 1], g[k, 2] = g0, g1, g2
-        D[k, 0, 0], D[k, 0, 1], D[k, 0, 2] = d00, d01, d02
-        D[k, 1, 0], D[k, 1, 1], D[k, 1, 2] = d01, d11, d12
-        D[k, 2, 0], D[k, 2, 1], D[k, 2, 2] = d02, d12, d22
-    return cost
-
-
-@njit(**_INNER)
 def _outer_plus_identity(A: np.ndarray, l: int, c: float, d: float, u0: float, u1: float, u2: float) -> None:
     """A[l] (3, 3) = c u u^T + d I."""
     A[l, 0, 0], A[l, 0, 1], A[l, 0, 2] = c * u0 * u0 + d, c * u0 * u1, c * u0 * u2
@@ -167,41 +171,27 @@ def _outer_plus_identity(A: np.ndarray, l: int, c: float, d: float, u0: float, u
 
 
 @njit(**_INNER)
-def _bone_terms(
-    x: np.ndarray,
-    bones: np.ndarray,
-    b0: int,
-    b1: int,
-    bone_pa: np.ndarray,
-    bone_pb: np.ndarray,
-    ref: np.ndarray,
-    bw: np.ndarray,
-    p: int,
-    D: np.ndarray,
-    g: np.ndarray,
-    K: np.ndarray,
-    Kr: np.ndarray,
-) -> float:
-    """Prior cost of the bones bones[b0:b1] of person p (ref, bw (P, L)); adds their gradients to g and safe
-    blocks K to D, writes K and Kr (L, 3, 3)."""
+def _bone_terms(x: np.ndarray, c: int, p: int, prob: Problem, plan: Plan, lin: Linearisation) -> float:
+    """Prior cost of component c's bones of person p; adds their gradients to lin.g and safe blocks K to lin.D,
+    writes lin.K and lin.Kr: K = w^2 u u^T + max(curv, 0) (I - u u^T), Kr = min(curv, 0) (I - u u^T)."""
     cost = 0.0
-    for t in range(b0, b1):
-        l = bones[t]
-        a, b = bone_pa[l], bone_pb[l]
+    D, g, K, Kr = lin
+    for t in range(plan.comp_bones_ptr[c], plan.comp_bones_ptr[c + 1]):
+        l = plan.comp_bones[t]
+        a, b = plan.bone_pa[l], plan.bone_pb[l]
         d0, d1, d2 = x[a, 0] - x[b, 0], x[a, 1] - x[b, 1], x[a, 2] - x[b, 2]
         n = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         if n > 1e-12:
             u0, u1, u2 = d0 / n, d1 / n, d2 / n
         else:
             u0, u1, u2 = 0.0, 0.0, 1.0
-        wl = bw[p, l]
-        r = wl * (ref[p, l] - n)
+        wl = prob.bw[p, l]
+        r = wl * (prob.ref[p, l] - n)
         cost += 0.5 * r * r
         gr = -wl * r
         g[a, 0], g[a, 1], g[a, 2] = g[a, 0] + gr * u0, g[a, 1] + gr * u1, g[a, 2] + gr * u2
         g[b, 0], g[b, 1], g[b, 2] = g[b, 0] - gr * u0, g[b, 1] - gr * u1, g[b, 2] - gr * u2
-        # K = w^2 u u^T + max(curv, 0) (I - u u^T), Kr = min(curv, 0) (I - u u^T), curv = w^2 (1 - ref / n)
-        curv = wl * wl * (1.0 - ref[p, l] / max(n, 1e-12))
+        curv = wl * wl * (1.0 - prob.ref[p, l] / max(n, 1e-12))
         pos, neg = max(curv, 0.0), min(curv, 0.0)
         _outer_plus_identity(K, l, wl * wl - pos, pos, u0, u1, u2)
         _outer_plus_identity(Kr, l, -neg, neg, u0, u1, u2)
@@ -214,7 +204,7 @@ def _bone_terms(
 
 @njit(**_INNER)
 def _cholesky3(B: np.ndarray, q: int) -> bool:
-    """In-place lower Cholesky factor of the symmetric 3x3 block B[q] (upper part zeroed); False if not positive definite."""
+    """In-place lower Cholesky factor of the symmetric 3x3 block B[q] (upper part zeroed); False if not PD."""
     a00 = B[q, 0, 0]
     if not a00 > 0.0:
         return False
@@ -251,22 +241,21 @@ def _upper_solve(B: np.ndarray, q: int, y0: float, y1: float, y2: float) -> tupl
 
 
 @njit(**_INNER)
-def _assemble(
-    c: int, D: np.ndarray, K: np.ndarray, Kr: np.ndarray, mu: float, exact: bool, plan: tuple, B: np.ndarray
-) -> None:
+def _assemble(c: int, lin: Linearisation, mu: float, exact: bool, plan: Plan, B: np.ndarray) -> None:
     """Blocks of M + mu I of component c into B (n_blocks, 3, 3): M safe, or exact (+ Kr on the bones)."""
-    _, comp_start, bones_ptr, bones, slots_ptr, slots, bone_pa, bone_pb, bone_slot, slot, _, _ = plan
-    for t in range(slots_ptr[c], slots_ptr[c + 1]):
-        B[slots[t]] = 0.0
-    for k in range(comp_start[c], comp_start[c + 1]):
+    D, _, K, Kr = lin
+    slot = plan.slot
+    for t in range(plan.comp_slots_ptr[c], plan.comp_slots_ptr[c + 1]):
+        B[plan.comp_slots[t]] = 0.0
+    for k in range(plan.comp_start[c], plan.comp_start[c + 1]):
         q = slot[k, k]
         for i in range(3):
             for m in range(3):
                 B[q, i, m] = D[k, i, m]
             B[q, i, i] += mu
-    for t in range(bones_ptr[c], bones_ptr[c + 1]):
-        l = bones[t]
-        ql, qa, qb = bone_slot[l], slot[bone_pa[l], bone_pa[l]], slot[bone_pb[l], bone_pb[l]]
+    for t in range(plan.comp_bones_ptr[c], plan.comp_bones_ptr[c + 1]):
+        l = plan.comp_bones[t]
+        ql, qa, qb = plan.bone_slot[l], slot[plan.bone_pa[l], plan.bone_pa[l]], slot[plan.bone_pb[l], plan.bone_pb[l]]
         for i in range(3):
             for m in range(3):
                 B[ql, i, m] -= K[l, i, m]
@@ -277,8 +266,9 @@ def _assemble(
 
 
 @njit(**_INNER)
-def _factorize(s: int, e: int, slot: np.ndarray, later_ptr: np.ndarray, later_idx: np.ndarray, B: np.ndarray) -> bool:
+def _factorize(s: int, e: int, plan: Plan, B: np.ndarray) -> bool:
     """Right-looking block Cholesky of positions s:e in place (B holds L); False if not positive definite."""
+    slot, later_ptr, later_idx = plan.slot, plan.later_ptr, plan.later_idx
     for k in range(s, e):
         qk = slot[k, k]
         if not _cholesky3(B, qk):
@@ -300,17 +290,9 @@ def _factorize(s: int, e: int, slot: np.ndarray, later_ptr: np.ndarray, later_id
 
 
 @njit(**_INNER)
-def _substitute(
-    s: int,
-    e: int,
-    g: np.ndarray,
-    slot: np.ndarray,
-    later_ptr: np.ndarray,
-    later_idx: np.ndarray,
-    B: np.ndarray,
-    h: np.ndarray,
-) -> None:
+def _substitute(s: int, e: int, g: np.ndarray, plan: Plan, B: np.ndarray, h: np.ndarray) -> None:
     """h (J, 3) = -(L L^T)^-1 g on positions s:e, L the factor in B."""
+    slot, later_ptr, later_idx = plan.slot, plan.later_ptr, plan.later_idx
     for k in range(s, e):
         h[k, 0], h[k, 1], h[k, 2] = -g[k, 0], -g[k, 1], -g[k, 2]
     for k in range(s, e):  # L y = -g
@@ -329,74 +311,45 @@ def _substitute(
 
 @njit(**_JIT)
 def solve_component(
-    c: int,
-    D: np.ndarray,
-    K: np.ndarray,
-    Kr: np.ndarray,
-    g: np.ndarray,
-    mu: float,
-    exact: bool,
-    plan: tuple,
-    B: np.ndarray,
-    h: np.ndarray,
+    c: int, lin: Linearisation, mu: float, exact: bool, plan: Plan, B: np.ndarray, h: np.ndarray
 ) -> bool:
-    """(M + mu I) h = -g on component c by block Cholesky (M exact or safe) -> h (J, 3); False if not PD.
-
-    D (J, 3, 3), g (J, 3), K and Kr (L, 3, 3) from :func:`linearize`; plan: the SolverPlan's arrays
-    (:func:`reconstruction.solver.compiled_solver.plan_arrays`); B (n_blocks, 3, 3) scratch.
-    """
-    s, e, slot, later_ptr, later_idx = plan[1][c], plan[1][c + 1], plan[9], plan[10], plan[11]
-    _assemble(c, D, K, Kr, mu, exact, plan, B)
-    if not _factorize(s, e, slot, later_ptr, later_idx, B):
+    """(M + mu I) h = -g on component c by block Cholesky (M exact or safe) -> h (J, 3); False if not PD."""
+    s, e = plan.comp_start[c], plan.comp_start[c + 1]
+    _assemble(c, lin, mu, exact, plan, B)
+    if not _factorize(s, e, plan, B):
         return False
-    _substitute(s, e, g, slot, later_ptr, later_idx, B, h)
+    _substitute(s, e, lin.g, plan, B, h)
     return True
 
 
 @njit(**_INNER)
-def linearize(
-    x: np.ndarray,
-    c: int,
-    p: int,
-    data: tuple,
-    tau2: float,
-    robust: int,
-    C2: float,
-    plan: tuple,
-    D: np.ndarray,
-    g: np.ndarray,
-    K: np.ndarray,
-    Kr: np.ndarray,
-) -> float:
-    """Cost, gradient g (J, 3), safe diagonal blocks D (J, 3, 3) and bone blocks K, Kr (L, 3, 3) of component c.
-
-    x (J, 3) holds the joints at solver positions; data = (proj (V, 3, 4), uv (V, P, J, 2), w (V, P, J)
-    1/sigma (0 unseen), anchor (P, J, 3) in original joint order, ref and bw (P, L) bone lengths and
-    weights); person p. K is the safe (positive semi-definite) bone block, Kr = exact - safe (see
-    map_estimation.linear_blocks).
-    """
-    proj, uv, w, anchor, ref, bw = data
-    pos_joint, comp_start, bones_ptr, bones, _, _, bone_pa, bone_pb, _, _, _, _ = plan
-    s, e = comp_start[c], comp_start[c + 1]
-    cost = _likelihood_terms(x, s, e, p, pos_joint, proj, uv, w, anchor, tau2, robust, C2, D, g)
-    return cost + _bone_terms(x, bones, bones_ptr[c], bones_ptr[c + 1], bone_pa, bone_pb, ref, bw, p, D, g, K, Kr)
+def linearize(x: np.ndarray, c: int, p: int, prob: Problem, plan: Plan, lin: Linearisation) -> float:
+    """Cost of component c of person p at x (J, 3) (solver positions); writes lin (see :class:`Linearisation`)."""
+    cost = 0.0
+    D, g = lin.D, lin.g
+    for k in range(plan.comp_start[c], plan.comp_start[c + 1]):
+        cost, g0, g1, g2, d00, d01, d02, d11, d12, d22 = _joint_terms(
+            cost, x[k, 0], x[k, 1], x[k, 2], p, plan.pos_joint[k], prob, True
+        )
+        g[k, 0], g[k, 1], g[k, 2] = g0, g1, g2
+        D[k, 0, 0], D[k, 0, 1], D[k, 0, 2] = d00, d01, d02
+        D[k, 1, 0], D[k, 1, 1], D[k, 1, 2] = d01, d11, d12
+        D[k, 2, 0], D[k, 2, 1], D[k, 2, 2] = d02, d12, d22
+    return cost + _bone_terms(x, c, p, prob, plan, lin)
 
 
 @njit(**_INNER)
-def _cost(x: np.ndarray, c: int, p: int, data: tuple, tau2: float, robust: int, C2: float, plan: tuple) -> float:
+def cost_only(x: np.ndarray, c: int, p: int, prob: Problem, plan: Plan) -> float:
     """The cost of :func:`linearize` alone (the same number): for a trial whose derivatives nobody reads."""
-    proj, uv, w, anchor, ref, bw = data
-    pos_joint, comp_start, bones_ptr, bones, _, _, bone_pa, bone_pb, _, _, _, _ = plan
     cost = 0.0
-    for k in range(comp_start[c], comp_start[c + 1]):
-        X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
-        cost = _joint_terms(cost, X0, X1, X2, p, pos_joint[k], proj, uv, w, anchor, tau2, robust, C2, False)[0]
+    for k in range(plan.comp_start[c], plan.comp_start[c + 1]):
+        cost = _joint_terms(cost, x[k, 0], x[k, 1], x[k, 2], p, plan.pos_joint[k], prob, False)[0]
     prior = 0.0
-    for t in range(bones_ptr[c], bones_ptr[c + 1]):
-        l = bones[t]
-        a, b = bone_pa[l], bone_pb[l]
+    for t in range(plan.comp_bones_ptr[c], plan.comp_bones_ptr[c + 1]):
+        l = plan.comp_bones[t]
+        a, b = plan.bone_pa[l], plan.bone_pb[l]
         d0, d1, d2 = x[a, 0] - x[b, 0], x[a, 1] - x[b, 1], x[a, 2] - x[b, 2]
-        r = bw[p, l] * (ref[p, l] - np.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
+        r = prob.bw[p, l] * (prob.ref[p, l] - np.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
         prior += 0.5 * r * r
     return cost + prior
 
@@ -422,87 +375,84 @@ def _max_diagonal(D: np.ndarray, s: int, e: int) -> float:
 
 
 @njit(**_INLINE)
-def _step(c: int, lin: tuple, mu: float, exact: bool, plan: tuple, B: np.ndarray, h: np.ndarray) -> bool:
-    """The damped step h of component c (the exact model where asked and positive definite, else the safe
-    one; NaN where neither is) -> whether the exact model was used."""
-    D, g, K, Kr = lin
-    ok = solve_component(c, D, K, Kr, g, mu, exact, plan, B, h)
+def _step(c: int, lin: Linearisation, mu: float, exact: bool, plan: Plan, B: np.ndarray, h: np.ndarray) -> bool:
+    """The damped step h of component c (exact model where asked and PD, else safe; NaN where neither) -> exact used."""
+    ok = solve_component(c, lin, mu, exact, plan, B, h)
     used = ok and exact
     if not ok and exact:  # exact model not positive definite: the safe one (not exact = False, typed bool)
-        ok = solve_component(c, D, K, Kr, g, mu, not exact, plan, B, h)
+        ok = solve_component(c, lin, mu, not exact, plan, B, h)
     if not ok:
-        for k in range(plan[1][c], plan[1][c + 1]):
+        for k in range(plan.comp_start[c], plan.comp_start[c + 1]):
             h[k, 0] = h[k, 1] = h[k, 2] = np.nan
     return used
 
 
 @njit(**_INNER)
-def _solve_problem(
-    x: np.ndarray,
-    c: int,
-    p: int,
-    data: tuple,
-    tau2: float,
-    robust: int,
-    C2: float,
-    plan: tuple,
-    settings: tuple,
-    work: tuple,
-) -> tuple[float, int, int]:
-    """Levenberg-Marquardt of person p's component c from x (J, 3) (updated in place) -> cost, iterations, status.
+def _accepted(mu: float, rho: float, h_max: float, actual: float, f_old: float, g_max: float, st: Settings):
+    """Damping and status after an accepted step (Nielsen's rule; step, cost and gradient tests in this order)."""
+    mu *= max(MIN_DAMPING_FACTOR, 1.0 - (2.0 * rho - 1.0) ** 3)
+    if h_max <= st.xtol:
+        return mu, CONVERGED_STEP
+    if actual <= st.ftol * max(f_old, 0.0):
+        return mu, CONVERGED_COST
+    return mu, CONVERGED_GRADIENT if g_max <= st.gtol else RUNNING
 
-    settings = (max_iterations, xtol, ftol, gtol, tau); work: scratch (x_new, h, B, lin, trial), lin and trial
-    each (D, g, K, Kr) (see :func:`linearize`).
-    """
-    max_iterations, xtol, ftol, gtol, tau = settings
-    x_new, h, B, lin, trial = work
-    s, e = plan[1][c], plan[1][c + 1]
-    f = linearize(x, c, p, data, tau2, robust, C2, plan, lin[0], lin[1], lin[2], lin[3])
-    scale = _max_diagonal(lin[0], s, e)
+
+@njit(**_INNER)
+def _rejected(mu: float, nu: float, h_max: float, scale: float, st: Settings) -> tuple[float, float, int]:
+    """Damping mu, its growth nu and status after a rejected step."""
+    status = CONVERGED_STEP if h_max <= st.xtol else RUNNING
+    mu *= nu
+    if mu > MAX_DAMPING * scale and status == RUNNING:
+        status = STALLED
+    return mu, nu * 2.0, status
+
+
+@njit(**_INNER)
+def _predicted(x: np.ndarray, h: np.ndarray, g: np.ndarray, mu: float, s: int, e: int, x_new: np.ndarray) -> float:
+    """Predicted decrease 0.5 h^T (mu h - g) of the step h on positions s:e; writes x_new = x + h."""
+    predicted = 0.0
+    for k in range(s, e):
+        for i in range(3):
+            predicted += 0.5 * h[k, i] * (mu * h[k, i] - g[k, i])
+            x_new[k, i] = x[k, i] + h[k, i]
+    return predicted
+
+
+@njit(**_INNER)
+def _solve_problem(c: int, p: int, prob: Problem, plan: Plan, st: Settings, work: Work) -> tuple[float, int, int]:
+    """Levenberg-Marquardt of person p's component c from work.x (J, 3) (updated) -> cost, iterations, status."""
+    x, x_new, h, B, lin, trial = work
+    s, e = plan.comp_start[c], plan.comp_start[c + 1]
+    f = linearize(x, c, p, prob, plan, lin)
+    scale = _max_diagonal(lin.D, s, e)
     scale = scale if scale > 0.0 else 1.0
-    status = CONVERGED_GRADIENT if _abs_max(lin[1], s, e) <= gtol else RUNNING
+    status = CONVERGED_GRADIENT if _abs_max(lin.g, s, e) <= st.gtol else RUNNING
     # exact starts False, typed bool: a literal False would compile a second specialisation of _step
-    mu, nu, exact, it = tau * scale, 2.0, scale < 0.0, 0
-    has_exact = plan[2][c + 1] > plan[2][c]
-    while status == RUNNING and it < max_iterations:
+    mu, nu, exact, it = st.tau * scale, 2.0, scale < 0.0, 0
+    has_exact = plan.comp_bones_ptr[c + 1] > plan.comp_bones_ptr[c]
+    while status == RUNNING and it < st.max_iterations:
         it += 1
         used = _step(c, lin, mu, exact, plan, B, h)
-        predicted = 0.0
-        for k in range(s, e):
-            for i in range(3):
-                predicted += 0.5 * h[k, i] * (mu * h[k, i] - lin[1][k, i])
-                x_new[k, i] = x[k, i] + h[k, i]
+        predicted = _predicted(x, h, lin.g, mu, s, e, x_new)
         h_max = _abs_max(h, s, e) if not np.isnan(predicted) else np.nan  # NaN step: never accepted
-        if h_max <= xtol:  # the last trial, accepted or not (see the tests below): its derivatives go unread
-            f_t = _cost(x_new, c, p, data, tau2, robust, C2, plan)
+        if h_max <= st.xtol:  # the last trial, accepted or not: its derivatives go unread
+            f_t = cost_only(x_new, c, p, prob, plan)
         else:
-            f_t = linearize(x_new, c, p, data, tau2, robust, C2, plan, trial[0], trial[1], trial[2], trial[3])
+            f_t = linearize(x_new, c, p, prob, plan, trial)
         actual = f - f_t
         rho = actual / predicted if predicted != 0.0 else np.nan
-        accept = predicted > 0.0 and rho > 0.0 and np.isfinite(f_t + h_max)
         if used:
             exact = False  # a failed exact step is retried with the safe model
-        if accept:
-            mu *= max(MIN_DAMPING_FACTOR, 1.0 - (2.0 * rho - 1.0) ** 3)
-            nu = 2.0
+        if predicted > 0.0 and rho > 0.0 and np.isfinite(f_t + h_max):
             exact = rho >= SWITCH_RHO and has_exact
-            for k in range(s, e):  # element-wise: an array assignment compiles numba's shape-error formatting
+            for k in range(s, e):
                 x[k, 0], x[k, 1], x[k, 2] = x_new[k, 0], x_new[k, 1], x_new[k, 2]
             lin, trial = trial, lin
-            if h_max <= xtol:
-                status = CONVERGED_STEP
-            elif actual <= ftol * max(f, 0.0):
-                status = CONVERGED_COST
-            elif _abs_max(lin[1], s, e) <= gtol:
-                status = CONVERGED_GRADIENT
-            f = f_t
+            mu, status = _accepted(mu, rho, h_max, actual, f, _abs_max(lin.g, s, e), st)
+            nu, f = 2.0, f_t
         elif not used:
-            if h_max <= xtol:
-                status = CONVERGED_STEP
-            mu *= nu
-            nu *= 2.0
-            if mu > MAX_DAMPING * scale and status == RUNNING:
-                status = STALLED
+            mu, nu, status = _rejected(mu, nu, h_max, scale, st)
     return f, it, MAX_ITERATIONS if status == RUNNING else status
 
 
@@ -510,8 +460,7 @@ def _solve_problem(
 def _point_step(
     g0: float, g1: float, g2: float, b00: float, b01: float, b02: float, b11: float, b12: float, b22: float
 ) -> tuple[float, float, float]:
-    """-B^-1 g of one symmetric 3x3 block B (distinct entries) by the arithmetic of _cholesky3 and the two
-    triangular solves; NaN if B is not positive definite."""
+    """-B^-1 g of one symmetric 3x3 block B (distinct entries) by _cholesky3's arithmetic; NaN if B is not PD."""
     if not b00 > 0.0:
         return np.nan, np.nan, np.nan
     l00 = np.sqrt(b00)
@@ -534,53 +483,41 @@ def _point_step(
 
 
 @njit(**_INNER)
-def _solve_point(
-    x: np.ndarray, k: int, p: int, j: int, data: tuple, tau2: float, robust: int, C2: float, settings: tuple
-) -> tuple[float, int, int]:
-    """:func:`_solve_problem` of a component of one joint (no bone: every MLE problem), the joint at position k
-    of x, in scalars: the same arithmetic and decisions without the block machinery's call overhead."""
-    max_iterations, xtol, ftol, gtol, tau = settings
-    proj, uv, w, anchor = data[0], data[1], data[2], data[3]
+def _abs_max3(a: float, b: float, c: float) -> float:
+    """max(0, |a|, |b|, |c|) in _abs_max's order."""
+    return max(max(max(0.0, abs(a)), abs(b)), abs(c))
+
+
+@njit(**_INNER)
+def _solve_point(x: np.ndarray, k: int, p: int, j: int, prob: Problem, st: Settings) -> tuple[float, int, int]:
+    """:func:`_solve_problem` of a one-joint component (every MLE problem) at position k of x, in scalars."""
     X0, X1, X2 = x[k, 0], x[k, 1], x[k, 2]
-    f, g0, g1, g2, d00, d01, d02, d11, d12, d22 = _joint_terms(
-        0.0, X0, X1, X2, p, j, proj, uv, w, anchor, tau2, robust, C2, True
-    )
+    f, g0, g1, g2, d00, d01, d02, d11, d12, d22 = _joint_terms(0.0, X0, X1, X2, p, j, prob, True)
     scale = max(max(max(0.0, d00), d11), d22)
     scale = scale if scale > 0.0 else 1.0
-    status = CONVERGED_GRADIENT if max(max(max(0.0, abs(g0)), abs(g1)), abs(g2)) <= gtol else RUNNING
-    mu, nu, it = tau * scale, 2.0, 0
-    while status == RUNNING and it < max_iterations:
+    status = CONVERGED_GRADIENT if _abs_max3(g0, g1, g2) <= st.gtol else RUNNING
+    mu, nu, it = st.tau * scale, 2.0, 0
+    while status == RUNNING and it < st.max_iterations:
         it += 1
         h0, h1, h2 = _point_step(g0, g1, g2, d00 + mu, d01, d02, d11 + mu, d12, d22 + mu)
-        predicted = 0.0  # summed in _solve_problem's order
+        predicted = 0.0  # summed in _predicted's order
         predicted += 0.5 * h0 * (mu * h0 - g0)
         predicted += 0.5 * h1 * (mu * h1 - g1)
         predicted += 0.5 * h2 * (mu * h2 - g2)
         n0, n1, n2 = X0 + h0, X1 + h1, X2 + h2
-        h_max = max(max(max(0.0, abs(h0)), abs(h1)), abs(h2)) if not np.isnan(predicted) else np.nan
-        # a step under xtol ends the solve, accepted or not (see _solve_problem): that trial's cost alone
-        trial = _joint_terms(0.0, n0, n1, n2, p, j, proj, uv, w, anchor, tau2, robust, C2, not h_max <= xtol)
+        h_max = _abs_max3(h0, h1, h2) if not np.isnan(predicted) else np.nan
+        # a step under xtol ends the solve, accepted or not: that trial's cost alone
+        trial = _joint_terms(0.0, n0, n1, n2, p, j, prob, not h_max <= st.xtol)
         actual = f - trial[0]
         rho = actual / predicted if predicted != 0.0 else np.nan
         if predicted > 0.0 and rho > 0.0 and np.isfinite(trial[0] + h_max):
-            mu *= max(MIN_DAMPING_FACTOR, 1.0 - (2.0 * rho - 1.0) ** 3)
-            nu = 2.0
             X0, X1, X2 = n0, n1, n2
             f_old = f
             f, g0, g1, g2, d00, d01, d02, d11, d12, d22 = trial
-            if h_max <= xtol:
-                status = CONVERGED_STEP
-            elif actual <= ftol * max(f_old, 0.0):
-                status = CONVERGED_COST
-            elif max(max(max(0.0, abs(g0)), abs(g1)), abs(g2)) <= gtol:
-                status = CONVERGED_GRADIENT
+            mu, status = _accepted(mu, rho, h_max, actual, f_old, _abs_max3(g0, g1, g2), st)
+            nu = 2.0
         else:
-            if h_max <= xtol:
-                status = CONVERGED_STEP
-            mu *= nu
-            nu *= 2.0
-            if mu > MAX_DAMPING * scale and status == RUNNING:
-                status = STALLED
+            mu, nu, status = _rejected(mu, nu, h_max, scale, st)
     x[k, 0], x[k, 1], x[k, 2] = X0, X1, X2
     return f, it, MAX_ITERATIONS if status == RUNNING else status
 
@@ -588,25 +525,17 @@ def _solve_point(
 @njit(**_JIT)
 def solve_all(
     X: np.ndarray,
-    data: tuple,
-    tau2: float,
-    robust: int,
-    C2: float,
-    plan: tuple,
-    settings: tuple,
-    work: tuple,
-    cost_out: np.ndarray,
-    it_out: np.ndarray,
-    status_out: np.ndarray,
+    prob: Problem,
+    plan: Plan,
+    st: Settings,
+    work: Work,
+    cost: np.ndarray,
+    it: np.ndarray,
+    status: np.ndarray,
 ) -> None:
-    """Levenberg-Marquardt of every (person, component) problem; X (P, J, 3) is updated in place (original order).
-
-    data: see :func:`linearize`; plan: the SolverPlan's arrays; settings and work (scratch): see
-    :func:`_solve_problem`. cost_out, it_out, status_out (P, C) receive the final cost, iterations and
-    status of each problem.
-    """
-    pos_joint, comp_start = plan[0], plan[1]
-    x = work[0]
+    """Levenberg-Marquardt of every (person, component) problem: X (P, J, 3) updated in place (joint order);
+    cost, it, status (P, C) receive each problem's final cost, iterations and status."""
+    pos_joint, comp_start, x = plan.pos_joint, plan.comp_start, work.x
     for p in range(X.shape[0]):
         for k in range(X.shape[1]):
             for i in range(3):
@@ -614,10 +543,10 @@ def solve_all(
         for c in range(len(comp_start) - 1):
             s = comp_start[c]
             if comp_start[c + 1] - s == 1:  # one joint, no bone
-                result = _solve_point(x, s, p, pos_joint[s], data, tau2, robust, C2, settings)
+                result = _solve_point(x, s, p, pos_joint[s], prob, st)
             else:
-                result = _solve_problem(x, c, p, data, tau2, robust, C2, plan, settings, work[1:])
-            cost_out[p, c], it_out[p, c], status_out[p, c] = result
+                result = _solve_problem(c, p, prob, plan, st, work)
+            cost[p, c], it[p, c], status[p, c] = result
         for k in range(X.shape[1]):
             for i in range(3):
                 X[p, pos_joint[k], i] = x[k, i]

@@ -1,16 +1,15 @@
-"""Compiled (numba) loops of the person prior's statistics (person_prior.py) and of the swap test (side_swaps.py).
-
-Same arithmetic in the same order as the numpy formulas they replace (bit-identical results), without
-their (V, P, J, 3, 3) temporaries. Compiled like pose_kernels: numpy's error model, no reference counting
-(the caller allocates every array).
-"""
+"""Compiled (numba) loops of the person prior (person_prior.py): each joint's information, the bones' variances and
+the bones' posterior; numpy's arithmetic in numpy's order, without its (V, P, J, 3, 3) temporaries. Compiled like
+pose_kernels: numpy's error model, no reference counting (the caller allocates every array)."""
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-from reconstruction.solver.map_estimation import EPS_DEPTH
+from reconstruction.solver.pose_kernels import EPS_DEPTH
 
 _JIT = {"cache": True, "error_model": "numpy", "_nrt": False}
 _INNER = {**_JIT, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}  # helpers of the kernels alone
@@ -20,7 +19,7 @@ _BIG = np.finfo(np.float64).max
 @njit(**_JIT)
 def information_sums(hom: np.ndarray, proj: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
     """out (P, J, 3, 3) = sum over k = x, y of sum over views of r r^T, r = (M_k - x_k M_2) w / z: the Gauss-Newton
-    information of each joint from its projections (hom (V, 3, P J), see :func:`pair_chi2s`), views proj (V, 3, 4)
+    information of each joint from its projections (hom (V, 3, P J) = M X, person_prior.view_matmul), views proj (V, 3, 4)
     and 1/sigma w (V, P, J) (0 unseen)."""
     V, P, J = w.shape
     for p in range(P):
@@ -125,122 +124,29 @@ def bone_sums(
             n_out[p, l], var_out[p, l] = n, var if good[p, a] and good[p, b] else np.inf
 
 
-@njit(**_INNER)
-def _pixel(hom: np.ndarray, proj: np.ndarray, v: int, i: int) -> tuple[float, float, float]:
-    """Pixel and clamped depth of point i in view v from hom (V, 3, N) = M X (the matmul, translation not added),
-    as person_prior.project."""
-    z = hom[v, 2, i] + proj[v, 2, 3]
-    z = z if z >= EPS_DEPTH or np.isnan(z) else EPS_DEPTH  # np.maximum
-    return (hom[v, 0, i] + proj[v, 0, 3]) / z, (hom[v, 1, i] + proj[v, 1, 3]) / z, z
+class BoneModel(NamedTuple):
+    """The hierarchical bone model of person_prior: bone_ref (L,) m, stature = bone_ref stature_sd and proportion =
+    bone_ref proportion_sd (L,) m, groups (L,) in 0..G - 1, tie2 = tie_sd^2, outlier_sd; use (L,) bool and scratch
+    (4, G) work space."""
 
-
-@njit(**_JIT)
-def pair_chi2s(
-    hom: np.ndarray,
-    proj: np.ndarray,
-    uv: np.ndarray,
-    w2: np.ndarray,
-    left: np.ndarray,
-    right: np.ndarray,
-    given: np.ndarray,
-    exchanged: np.ndarray,
-) -> None:
-    """Chi-square given (V, P, K) and exchanged (V, P, K) of the joint pairs (left, right (K,)) of pixels uv
-    (V, P, J, 2+) against the projections of 3D joints (P, J): hom (V, 3, P J) their matmul with the views'
-    M (V, 3, 4); w2 (V, P, J) 1 / sigma^2. side_swaps' formula, same order."""
-    J = uv.shape[2]
-    for v in range(uv.shape[0]):
-        for p in range(uv.shape[1]):
-            for k in range(len(left)):
-                a, b = left[k], right[k]
-                xa, ya, _ = _pixel(hom, proj, v, p * J + a)
-                xb, yb, _ = _pixel(hom, proj, v, p * J + b)
-                d_aa = _sq(uv[v, p, a, 0] - xa, uv[v, p, a, 1] - ya)
-                d_bb = _sq(uv[v, p, b, 0] - xb, uv[v, p, b, 1] - yb)
-                d_ba = _sq(uv[v, p, b, 0] - xa, uv[v, p, b, 1] - ya)
-                d_ab = _sq(uv[v, p, a, 0] - xb, uv[v, p, a, 1] - yb)
-                given[v, p, k] = w2[v, p, a] * d_aa + w2[v, p, b] * d_bb
-                exchanged[v, p, k] = w2[v, p, b] * d_ba + w2[v, p, a] * d_ab
-
-
-@njit(**_INNER)
-def _sq(dx: float, dy: float) -> float:
-    """dx^2 + dy^2."""
-    return dx * dx + dy * dy
-
-
-@njit(**_JIT)
-def noise_medians(
-    hom: np.ndarray,
-    proj: np.ndarray,
-    uv: np.ndarray,
-    w: np.ndarray,
-    medians: np.ndarray,
-    ratio: np.ndarray,
-    out: np.ndarray,
-) -> None:
-    """out (P,): each person's median over joints seen in n >= 2 views of RSS / median(chi^2(2n - 3)), -1 without
-    any; RSS the squared residuals of pixels uv (V, P, J, 2+) in units of 1/w (V, P, J) against hom (see
-    :func:`pair_chi2s`); medians: chi^2 medians by degrees of freedom; ratio (J,) scratch. noise_scale's formula."""
-    V, P, J = w.shape
-    for p in range(P):
-        n = 0
-        for j in range(J):
-            rss, views = 0.0, 0
-            for v in range(V):
-                if w[v, p, j] > 0:
-                    x, y, _ = _pixel(hom, proj, v, p * J + j)
-                    rss += _sq(uv[v, p, j, 0] - x, uv[v, p, j, 1] - y) * (w[v, p, j] * w[v, p, j])
-                    views += 1
-            value = rss / medians[min(2 * views - 3, len(medians) - 1)] if views >= 2 else np.inf
-            n += views >= 2
-            i = j  # insertion sort, NaN last as np.sort
-            while i > 0 and (value < ratio[i - 1] or (np.isnan(ratio[i - 1]) and not np.isnan(value))):
-                ratio[i] = ratio[i - 1]
-                i -= 1
-            ratio[i] = value
-        a, b = ratio[max(n - 1, 0) // 2], ratio[min(n // 2, J - 1)]
-        out[p] = (a if n % 2 == 1 else 0.5 * (a + b)) if n > 0 else -1.0
-
-
-@njit(**_JIT)
-def mean_variances(info: np.ndarray, tie: np.ndarray, out: np.ndarray) -> None:
-    """out (P, J): a third of the trace of (info + tie I)^-1 per joint, info (P, J, 3, 3), tie (P, J); the
-    inverse by cofactors over the determinant as data.geometry.linalg.inverse_3x3 (inf / NaN where singular)."""
-    for p in range(info.shape[0]):
-        for j in range(info.shape[1]):
-            t = tie[p, j]
-            a00, a01, a02 = info[p, j, 0, 0] + t, info[p, j, 0, 1] + 0.0, info[p, j, 0, 2] + 0.0
-            a10, a11, a12 = info[p, j, 1, 0] + 0.0, info[p, j, 1, 1] + t, info[p, j, 1, 2] + 0.0
-            a20, a21, a22 = info[p, j, 2, 0] + 0.0, info[p, j, 2, 1] + 0.0, info[p, j, 2, 2] + t
-            c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
-            c11, c22 = a22 * a00 - a20 * a02, a00 * a11 - a01 * a10
-            det = a00 * c00 + a01 * c01 + a02 * c02
-            out[p, j] = (c00 / det + c11 / det + c22 / det) / 3
+    bone_ref: np.ndarray
+    stature: np.ndarray
+    proportion: np.ndarray
+    groups: np.ndarray
+    tie2: float
+    outlier_sd: float
+    use: np.ndarray
+    scratch: np.ndarray
 
 
 @njit(**_JIT)
 def bone_posteriors(
-    lengths: np.ndarray,
-    variances: np.ndarray,
-    bone_ref: np.ndarray,
-    stature: np.ndarray,
-    proportion: np.ndarray,
-    groups: np.ndarray,
-    tie2: float,
-    outlier_sd: float,
-    use: np.ndarray,
-    scratch: np.ndarray,
-    mean: np.ndarray,
-    sd: np.ndarray,
+    lengths: np.ndarray, variances: np.ndarray, model: BoneModel, mean: np.ndarray, sd: np.ndarray
 ) -> None:
-    """mean, sd (P, L): person_bone_lengths' posterior of each person's bones from lengths, variances (P, L),
-    bone_ref, stature = bone_ref stature_sd and proportion = bone_ref proportion_sd (L,), groups (L,) in 0..G - 1,
-    tie2 = tie_sd^2; use (L,) bool and scratch (4, G) are work space.
-
-    The precision I + sum_l w_l a_l a_l^T has non-zeros only in row and column 0 (stature) and on the diagonal
-    (a bone loads on the stature and on its group's proportion): an arrowhead matrix, inverted in O(L) by the
-    Schur complement s = d0 - sum_g b_g^2 / D_g of its diagonal block."""
+    """mean, sd (P, L): the posterior of each person's bones from lengths, variances (P, L). The precision
+    I + sum_l w_l a_l a_l^T is an arrowhead (stature row / column + diagonal): inverted in O(L) by the Schur
+    complement s = d0 - sum_g b_g^2 / D_g of its diagonal block."""
+    bone_ref, stature, proportion, groups, tie2, outlier_sd, use, scratch = model
     P, L = lengths.shape
     b, D, r, theta = scratch[0], scratch[1], scratch[2], scratch[3]
     for p in range(P):

@@ -1,19 +1,9 @@
 """Left / right labels of a person's joint pairs made consistent across views, then with the body, before the DLT.
 
-A 2D network that cannot tell a person's left arm from the right (a symmetric body seen from behind; the
-synthetic capsule bodies for all arms) labels each view's pair at random. Three steps, each leaving alone
-what an accurate detector gives (labels that agree across views and with the body):
-
-1. :func:`consistent_sides`: per person and joint pair, the labelling of the views whose triangulated pair
-   reprojects best (:func:`best_labellings`: seeded by every two views, so a minority of wrong views cannot
-   pull the points), kept where it fits clearly better than the labels as given. Of the two labellings that
-   differ by exchanging every view, the one changing fewer views is kept: the pair is now consistent, but
-   may be the wrong way round.
-2. :func:`facing_sides`: the central pairs (eyes, ears, shoulders, hips) turned to the way the body faces,
-   which the label-free joints tell (nose in front of the ears, toes in front of the heels).
-3. :func:`chain_sides`: a limb pair (elbows, wrists, knees, ankles, feet) exchanged where its triangulated
-   joints sit farther from their parent pair (shoulders, elbows, hips, knees, ankles) as labelled than
-   exchanged.
+For 2D models that cannot tell a symmetric body's sides apart. consistent_sides: per pair, the labelling whose
+triangulation (seeded by every two views) reprojects best, where clearly better than as given; facing_sides: the
+central pairs turned to the way the body faces (nose before ears, toes before heels); chain_sides: limb pairs
+exchanged where they sit farther from their parent pair as labelled than exchanged.
 """
 
 from __future__ import annotations
@@ -22,8 +12,8 @@ import numpy as np
 
 from data.geometry.triangulation import smallest_eigenvectors
 from data.keypoints import FLIP_PAIRS
-from reconstruction.solver.map_estimation import EPS_DEPTH
 from reconstruction.solver.person_prior import project
+from reconstruction.solver.pose_kernels import EPS_DEPTH
 
 # (child pair, parent pair) along the limbs, parents first: a child is judged after its parent is settled
 CHAINS = (((7, 8), (5, 6)), ((9, 10), (7, 8)), ((13, 14), (11, 12)), ((15, 16), (13, 14)))
@@ -74,15 +64,9 @@ def best_labellings(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Q joint pairs: points (Q, V, 2) as labelled left and right, the views that see both (Q, V), cameras
     (V, 3, 4) -> (views to exchange (Q, V) bool, cost of that labelling (Q,), cost as given (Q,)), costs in px
-    summed over the views and both joints (reprojection distances capped at cap_px).
-
-    Every two views and their two relative labellings seed a pair of 3D points; every other view takes the
-    labelling its points reproject nearer to; the best seed is refined by triangulating from all its views.
-    Reprojection, unlike the epipolar distance of view pairs, tells the two joints apart also when they sit
-    at one height in front of a ring of cameras at one height (each view pair's epipolar lines then run
-    through both joints). Of the two labellings that differ by exchanging every view, the one changing fewer
-    views is returned.
-    """
+    summed over the views and both joints (reprojection distances capped at cap_px). Seeded by every two views
+    and their two relative labellings, refined from all views; by reprojection, which unlike epipolar distances
+    tells the joints apart at the cameras' height; of two labellings that differ in every view, the fewer changes."""
     Q, V = seen.shape
     Ml, Mr = _normals(xl, proj), _normals(xr, proj)  # (Q, V, 4, 4)
     i, j = np.triu_indices(V, 1)

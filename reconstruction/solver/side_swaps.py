@@ -1,12 +1,8 @@
-"""Left / right swaps of 2D detectors, found and undone before the MAP.
+"""Left / right swaps of 2D detectors (a wrist labelled as the other in one view), found and undone before the MAP.
 
-Bottom-up detectors such as OpenPose often give a person's left wrist as their right one in one view
-(the arm behind the body, a person seen from behind). For every view v, the person's joints are
-triangulated from the other views alone (a swap in v cannot pull them); for every symmetric joint
-pair (left, right) seen in v and triangulated from at least two other views, the reprojection chi-square in v of the
-two detections as given is compared with that of the two exchanged. The view whose exchange lowers
-it most is swapped when the exchange leaves at most ``ratio`` of the chi-square and the chi-square as
-given exceeds ``min_chi2`` (in units of the 2D noise).
+Per view and symmetric pair, the reprojection chi-square of the two detections as given is compared with that of the
+two exchanged, against the pair triangulated from the other views; the view whose exchange gains most is swapped
+when the exchange leaves at most ``ratio`` of a chi-square above ``min_chi2``.
 """
 
 from __future__ import annotations
@@ -15,9 +11,8 @@ import numpy as np
 
 from data.geometry.triangulation import triangulate_dlt
 from data.keypoints import FLIP_PAIRS
-from reconstruction.solver.map_estimation import EPS_DEPTH
-from reconstruction.solver.person_prior import view_matmul
-from reconstruction.solver.prior_kernels import pair_chi2s
+from reconstruction.solver.person_prior import project
+from reconstruction.solver.pose_kernels import EPS_DEPTH
 
 
 def _chi2s(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> tuple[np.ndarray, np.ndarray]:
@@ -43,12 +38,8 @@ def find_swaps(
     min_chi2: float = 18.0,
 ) -> list[tuple[int, int, int, int]]:
     """(view, person, left, right) to exchange: poses2d (V, P, J, 3) undistorted px + score, inv_sigma (V, P, J)
-    1 / sigma (0 unseen), proj (V, 3, 4); full (P, J, 4): the DLT from all views, if already computed.
-
-    Only the (person, pair) that reproject badly somewhere after a triangulation from all views, and
-    better exchanged there (a swap shows both), are triangulated again without each view, so the test
-    costs little per frame.
-    """
+    1 / sigma (0 unseen), proj (V, 3, 4); full (P, J, 4): the DLT from all views, if at hand. Only the pairs that
+    reproject badly and better exchanged from it (a swap shows both) are triangulated again without each view."""
     V = len(proj)
     if V < 3 or poses2d.shape[1] == 0:
         return []
@@ -56,10 +47,7 @@ def find_swaps(
     full = triangulate_dlt(poses2d, proj, 2) if full is None else full
     seen = inv_sigma > 0
     left, right = np.array([p[0] for p in pairs], dtype=np.int64), np.array([p[1] for p in pairs], dtype=np.int64)
-    given, exchanged = np.empty((V, len(seen[0]), len(pairs))), np.empty((V, len(seen[0]), len(pairs)))
-    hom = view_matmul(full[..., :3], proj)
-    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
-    pair_chi2s(hom, as_float(proj), as_float(poses2d), as_float(w2), left, right, given, exchanged)
+    given, exchanged = _chi2s(poses2d[..., :2], project(full[..., :3], proj)[0], w2, left, right)
     # a swap reprojects worse than its exchange even from the DLT it pulls (only the exchange test below
     # needs the other views alone)
     bad = ((given > min_chi2) & (exchanged < given) & seen[..., left] & seen[..., right]).any(axis=0)

@@ -1,0 +1,1 @@
+"""Independent implementations the tests compare the package against (not package code)."""
