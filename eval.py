@@ -146,7 +146,6 @@ def compile_kernels() -> None:
     from models.paf_grouping import BODY25_PAF_LIMBS, group_people
     from reconstruction import pipeline
     from reconstruction.matching import evidence
-    from reconstruction.matching.sparse_assignment import linear_sum_assignment
     from reconstruction.solver import map_solver
     from tracking import tracker
 
@@ -154,7 +153,6 @@ def compile_kernels() -> None:
     pipeline.warm_up()
     map_solver.warm_up()
     tracker.warm_up()
-    linear_sum_assignment(np.ones((2, 3)))
     one = np.array([[10.0, 10.0, 0.9]])
     group_people([one] * 25, [np.ones((1, 1))] * len(BODY25_PAF_LIMBS), min_joints=1)
 

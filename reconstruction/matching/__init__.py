@@ -4,7 +4,7 @@ in view v or -1. Each matcher is a small callable class configured from ``config
 May import ``data`` (layers 1-2) and the other stages; never ``evaluation`` or the entry points.
 """
 
-from reconstruction.matching.assignment import assignment_from_labels
+from data.assignment import assignment_from_labels
 from reconstruction.matching.epipolar import EpipolarMatcher
 from reconstruction.matching.evidence import EvidenceMatcher
 from reconstruction.matching.feet import FeetMatcher

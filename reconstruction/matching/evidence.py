@@ -45,6 +45,7 @@ from itertools import combinations
 import numpy as np
 from scipy.special import gammaincinv
 
+from data.assignment import solve_sparse_pairs
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
 from reconstruction.compile_notice import warm_up_kernels
@@ -59,7 +60,6 @@ from reconstruction.matching.evidence_kernels import (
 )
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import _as_edges
-from reconstruction.matching.sparse_assignment import solve_sparse_pairs
 from reconstruction.solver.map_estimation import joint_sigma
 from reconstruction.solver.person_prior import chi2_medians
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from data.assignment import find_root
+
 
 @njit(cache=True, error_model="numpy")
 def _popcount(x: np.int64) -> int:
@@ -249,15 +251,6 @@ def _mutual_best_ratios(ints, floats, first, n, sa, sb, na, nb, scale2, medians,
 
 
 @njit(cache=True, error_model="numpy")
-def _find(parent: np.ndarray, i: int) -> int:
-    """Root of i, with path halving."""
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
-@njit(cache=True, error_model="numpy")
 def _adjacency(links: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Symmetric adjacency of n nodes from (L, 2) links, by counting sort: indptr (n + 1,), partners (2 L,)."""
     indptr = np.zeros(n + 1, dtype=np.int64)
@@ -306,7 +299,7 @@ def merge_linked(
         parent[i], tail[i], nxt[i], size[i] = i, i, -1, 1
         views[i] = np.int64(1) << view_of[i]
     for k in range(len(ga)):
-        a, b = _find(parent, ga[k]), _find(parent, gb[k])
+        a, b = find_root(parent, ga[k]), find_root(parent, gb[k])
         if a == b or (views[a] & views[b]) != 0:
             continue
         ok = True
@@ -337,7 +330,7 @@ def merge_linked(
         tail[a] = tail[b]
         size[a] += size[b]
     for i in range(n):
-        parent[i] = _find(parent, i)
+        parent[i] = find_root(parent, i)
     return parent
 
 

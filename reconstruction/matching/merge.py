@@ -12,8 +12,7 @@ from itertools import combinations
 from typing import Callable
 
 import numpy as np
-
-from reconstruction.matching.sparse_assignment import linear_sum_assignment
+from scipy.optimize import linear_sum_assignment
 
 PairCost = Callable[[int, int], np.ndarray]  # (view a, view b) -> (N_a, N_b) edge costs
 

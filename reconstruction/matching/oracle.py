@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from data.assignment import assignment_from_labels
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
-from reconstruction.matching.assignment import assignment_from_labels
 
 
 class OracleMatcher:
