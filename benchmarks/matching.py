@@ -103,7 +103,7 @@ def run_matcher(matcher: Callable, frames: Frames, rig: Rig) -> tuple[Correspond
     counts, times = CorrespondenceCounts(), []
     for views in frames:
         t0 = time.perf_counter()
-        assignment = matcher(views, rig)
+        assignment = matcher(views, rig).assignment
         times.append(1e3 * (time.perf_counter() - t0))
         counts = counts + correspondence_counts(assignment, [v.person_ids for v in views])
     return counts, times

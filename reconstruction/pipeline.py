@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Callable, Protocol
@@ -15,8 +15,9 @@ from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
 from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.gather_kernels import gather_detections
+from reconstruction.results import Matches
 
-Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
+Matcher = Callable[[list[ViewDetections], Rig], Matches]
 Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
 
 
@@ -81,6 +82,7 @@ class MultiViewPipeline:
         self.reconstructor = reconstructor
         self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
+        self.unmatched: Counter[str] = Counter()  # detections the matcher left out of every person, by reason
         warm_up_kernels("gather", warm_up)  # one line while numba compiles (first run)
 
     @classmethod
@@ -103,7 +105,9 @@ class MultiViewPipeline:
         if len(frame.views) != len(self.rig):
             raise ValueError(f"frame {frame.index} has {len(frame.views)} views, the rig {len(self.rig)}")
         t0 = time.perf_counter()
-        assignment = self.matcher(frame.views, self.rig)
+        matches = self.matcher(frame.views, self.rig)
+        self.unmatched += matches.unmatched
+        assignment = matches.assignment
         t1 = time.perf_counter()
         poses2d, bboxes = gather_views(frame.views, assignment)
         poses3d = (

@@ -291,7 +291,7 @@ def test_compiled_and_numpy_solvers_agree_on_a_noisy_crowd():
         SyntheticConfig(seed=3, num_frames=1, num_persons=25, density=0.5, num_cameras=6, noise_px=5.0)
     )
     frame = seq.frames[0]
-    poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig))
+    poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig).assignment)
     outs = [MLEMAPReconstruction(solver=s, robust="huber")(poses2d, boxes, seq.rig) for s in ("compiled", "numpy")]
     np.testing.assert_allclose(outs[0], outs[1], atol=1e-6)
     with pytest.raises(ValueError, match="solver"):
@@ -494,7 +494,7 @@ def test_mle_map_beats_vanilla_on_a_noisy_synthetic_crowd():
     errors = {"vanilla": [], "mle_map": []}
     stages = {"vanilla": VanillaTriangulation(), "mle_map": MLEMAPReconstruction()}
     for frame in seq.frames:
-        assignment = OracleMatcher()(frame.views, seq.rig)
+        assignment = OracleMatcher()(frame.views, seq.rig).assignment
         poses2d, boxes = gather_views(frame.views, assignment)
         ids = [
             frame.views[v].person_ids[assignment[p, v]]

@@ -20,6 +20,7 @@ import numpy as np
 from data.geometry.camera import Camera, Rig
 from data.multiview import ViewDetections
 from reconstruction.matching.merge import match_pairs
+from reconstruction.results import Matches
 
 TOO_FEW_JOINTS = "too_few_joints"  # fewer than min_common_joints joints with score >= min_score
 NO_COUNTERPART = "no_counterpart"  # enough joints, but ended in no person of >= min_views views
@@ -116,8 +117,6 @@ class EpipolarMatcher:
             raise ValueError("min_common_joints and min_views must be >= 1 and gate > 0")
         self.min_score, self.min_common_joints = float(min_score), int(min_common_joints)
         self.gate, self.min_views = float(gate), int(min_views)
-        self.last_unmatched_reasons: Counter[str] = Counter()
-        self.unmatched_reasons: Counter[str] = Counter()
 
     def joints(self, views: list[ViewDetections], rig: Rig) -> list[tuple[np.ndarray, np.ndarray]]:
         """Undistorted confident joints of every view: V views -> V (uv (N, J, 2), ok (N, J))."""
@@ -125,8 +124,8 @@ class EpipolarMatcher:
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         return [undistorted_joints(v, cam, self.min_score) for v, cam in zip(views, rig)]
 
-    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
-        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> Matches:
+        """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         joints = self.joints(views, rig)
 
         def cost(a: int, b: int) -> np.ndarray:
@@ -135,6 +134,4 @@ class EpipolarMatcher:
 
         assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views)
         usable = [ok.sum(axis=1) >= self.min_common_joints for _, ok in joints]
-        self.last_unmatched_reasons = unmatched_counts(usable, assignment)
-        self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
-        return assignment
+        return Matches(assignment, unmatched_counts(usable, assignment))

@@ -18,9 +18,7 @@ import numpy as np
 from data.geometry.camera import Camera, Rig
 from data.keypoints import LEFT_ANKLE, LEFT_FOOT, NUM_JOINTS, RIGHT_ANKLE, RIGHT_FOOT
 from data.multiview import ViewDetections
-from reconstruction.compile_notice import warm_up_kernels
 from reconstruction.matching.feet_kernels import foot_points
-from reconstruction.matching.feet_kernels import warm_up as warm_up_feet
 from reconstruction.matching.feet_uncertainty import (
     joint_sigmas,
     location_covariance,
@@ -28,6 +26,7 @@ from reconstruction.matching.feet_uncertainty import (
     views_joints_on_planes,
 )
 from reconstruction.matching.merge import match_pairs
+from reconstruction.results import Matches
 
 FOOT_RULES = ("lowest", "mean")
 SPACES = ("ground", "image")
@@ -279,9 +278,6 @@ class FeetMatcher:
         self.pixel_sigma, self.ground_sigma_floor = float(pixel_sigma), float(ground_sigma_floor)
         self.ankle_height_m, self.foot_joint_height_m = float(ankle_height_m), float(foot_joint_height_m)
         self.sigma_score_power, self.margin = float(sigma_score_power), float(margin)
-        warm_up_kernels("feet features", warm_up_feet)  # one line while numba compiles (first run)
-        self.last_unmatched_reasons: Counter[str] = Counter()
-        self.unmatched_reasons: Counter[str] = Counter()
 
     def features(self, views: list[ViewDetections], rig: Rig) -> list[FeetFeatures]:
         """Ground-plane feet of every view: V views -> V FeetFeatures."""
@@ -312,8 +308,8 @@ class FeetMatcher:
             fa, fb, self.k1, self.k2, self.k3, self.unknown_stride_cost, self.location_metric, self.ground_sigma_floor
         )
 
-    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
-        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> Matches:
+        """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         feats = self.features(views, rig)
         assignment = match_pairs(
             lambda a, b: self.pair_cost(feats[a], feats[b], rig[a]),
@@ -326,6 +322,4 @@ class FeetMatcher:
         unplaced = sum(int(f.has_p.sum()) for f in feats) - int(np.sum(assignment >= 0))
         if unplaced:
             reasons[NO_COUNTERPART] = unplaced
-        self.last_unmatched_reasons = reasons
-        self.unmatched_reasons = self.unmatched_reasons + reasons
-        return assignment
+        return Matches(assignment, reasons)

@@ -30,6 +30,7 @@ from data.multiview import ViewDetections
 from reconstruction.matching.epipolar import TOO_FEW_JOINTS, epipolar_affinity, fundamental_matrix, undistorted_joints
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import match_pairs
+from reconstruction.results import Matches
 
 
 def combined_cost(
@@ -89,8 +90,6 @@ class FeetEpipolarMatcher:
             int(min_common_joints),
             int(min_views),
         )
-        self.last_unmatched_reasons: Counter[str] = Counter()
-        self.unmatched_reasons: Counter[str] = Counter()
 
     def pair_costs(self, views: list[ViewDetections], rig: Rig):
         """The pair cost function of one frame: V views -> ((a, b) -> (N_a, N_b) combined cost), feet, joints."""
@@ -105,8 +104,8 @@ class FeetEpipolarMatcher:
 
         return cost, feats, joints
 
-    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
-        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> Matches:
+        """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         cost, feats, joints = self.pair_costs(views, rig)
         assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views, self.margin)
         reasons: Counter[str] = Counter()
@@ -118,6 +117,4 @@ class FeetEpipolarMatcher:
             reasons[TOO_FEW_JOINTS] += int(np.sum(~no_feet & ~enough))
             usable += int(np.sum(~no_feet & enough))
         reasons[NO_COUNTERPART] = usable - int(np.sum(assignment >= 0))
-        self.last_unmatched_reasons = +reasons
-        self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
-        return assignment
+        return Matches(assignment, +reasons)

@@ -113,7 +113,7 @@ class _Components:
         return True
 
 
-def _as_edges(edges: np.ndarray) -> np.ndarray:
+def as_edges(edges: np.ndarray) -> np.ndarray:
     """Validate an edge table: (E, 5) -> (E, 5) float64 (a copy)."""
     edges = np.array(edges, dtype=np.float64).reshape(-1, 5) if np.size(edges) else np.zeros((0, 5))
     if not np.all(np.isfinite(edges)):
@@ -129,7 +129,7 @@ def merge_edges(edges: np.ndarray, num_detections: list[int], min_views: int = 2
     two detections of one view into a person. Persons seen in >= ``min_views`` views are returned,
     ordered by their smallest (view, detection); -1 marks a view without a detection.
     """
-    edges = _as_edges(edges)
+    edges = as_edges(edges)
     counts = np.asarray(num_detections, dtype=np.int64)
     V = len(counts)
     offsets = np.concatenate([[0], np.cumsum(counts)])

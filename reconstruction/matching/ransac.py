@@ -38,8 +38,6 @@ and 0.5-0.8 s for 50 people in 5 views with the defaults, on one CPU core.
 
 from __future__ import annotations
 
-from collections import Counter
-
 import numpy as np
 
 from data.geometry.camera import Camera, Rig
@@ -47,6 +45,7 @@ from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from reconstruction.matching.epipolar import undistorted_joints, unmatched_counts
 from reconstruction.matching.merge import match_pairs
+from reconstruction.results import Matches
 
 
 def depth_axis(camera: Camera) -> np.ndarray:
@@ -156,8 +155,6 @@ class RansacMatcher:
         self.sample_size, self.iterations = int(sample_size), int(iterations)
         self.inlier_px, self.gate = float(inlier_px), float(gate)
         self.seed, self.min_views = int(seed), int(min_views)
-        self.last_unmatched_reasons: Counter[str] = Counter()
-        self.unmatched_reasons: Counter[str] = Counter()
 
     def sample_keys(self, num_joints: int) -> np.ndarray:
         """The random joint orders of one call, as sort keys: -> (iterations, J)."""
@@ -190,8 +187,8 @@ class RansacMatcher:
         best = loss.min(axis=-1, initial=1.0).astype(np.float64)
         return np.where(count >= self.min_common_joints, best, np.inf)
 
-    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
-        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> Matches:
+        """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         joints = [undistorted_joints(v, cam, self.min_score) for v, cam in zip(views, rig)]
@@ -202,6 +199,4 @@ class RansacMatcher:
 
         assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views)
         usable = [ok.sum(axis=1) >= self.min_common_joints for _, ok in joints]
-        self.last_unmatched_reasons = unmatched_counts(usable, assignment)
-        self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
-        return assignment
+        return Matches(assignment, unmatched_counts(usable, assignment))
