@@ -117,6 +117,9 @@ def test_the_features_of_all_views_at_once_are_those_of_each_view():
     views[2] = ViewDetections(views[2].keypoints[:0], views[2].bboxes[:0], views[2].scores[:0], views[2].person_ids[:0])
     m = FeetMatcher(pixel_sigma=4.0, sigma_score_power=0.5)
     for got, v, cam in zip(m.features(views, seq.rig), views, seq.rig):
-        ref = feet_features(v.keypoints, cam, m.foot_rule, m.min_score, True, 4.0, m.ankle_height_m, 0.0, 0.5)
+        ref = feet_features(
+            v.keypoints, cam, m.foot_rule, min_score=m.min_score, pixel_sigma=4.0, ankle_height_m=m.ankle_height_m,
+            sigma_score_power=0.5,
+        )  # fmt: skip
         for name in ("left", "right", "p", "v", "cov", "has_p", "has_stride", "reason"):
             np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)

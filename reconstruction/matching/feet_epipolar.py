@@ -1,22 +1,10 @@
 """Feet assignment with epipolar evidence from the other joints (``matching=feet_epipolar``).
 
-The feet cost (:mod:`.feet`, Mahalanobis distance of the feet midpoints on the ground plane, in
-standard deviations) places two detections at the same spot of the floor; the epipolar cost
-(:mod:`.epipolar`, mean symmetric distance of the common joints to each other's epipolar lines, in
-pixels) checks that the rest of the body agrees. In a crowd each alone leaves ambiguities: feet are
-often hidden and their ground position is uncertain by metres along a far camera's line of sight;
-the epipolar line of a joint passes through many people. The edge cost of a detection pair is
-
-    c = sqrt(d_feet^2 + (e / epipolar_sigma_px)^2)
-
-(both terms in standard-deviation units, added in quadrature as independent evidence), solved per view
-pair as a gated Jonker-Volgenant assignment and merged over all pairs cheapest first, exactly like the
-feet matcher. A pair needs at least ``min_common_joints`` joints confident in both detections. When
-either detection has no usable foot, ``missing_feet_cost`` (SD) stands in for d_feet, so people whose
-feet are hidden are still matched by the rest of their body, at the price of an average feet term;
-``missing_feet_cost=None`` (the default) never matches them: in a crowd, bodies matched without their
-feet were wrong often enough to lower precision by 10-35 points in benchmarks/matching.py, while on
-Shelf (4 people) missing_feet_cost=2 gains 0.4 PCP (configs/experiment/shelf.yaml).
+The feet cost (:mod:`.feet`, Mahalanobis, SD) places two detections at one spot of the floor, the epipolar cost
+(:mod:`.epipolar`, px) checks that the rest of the body agrees: c = sqrt(d_feet^2 + (e / epipolar_sigma_px)^2),
+solved and merged as the feet matcher. A pair needs min_common_joints joints confident in both. Without a usable
+foot, missing_feet_cost (SD) stands in for d_feet; None (the default) never matches such a detection, since bodies
+matched without their feet were wrong often enough in crowds (benchmarks/matching.py).
 """
 
 from __future__ import annotations
@@ -40,10 +28,8 @@ def combined_cost(
     missing_feet: np.ndarray | None = None,
     missing_feet_cost: float | None = None,
 ) -> np.ndarray:
-    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), +inf where either is.
-
-    Where ``missing_feet`` (Na, Nb) is True and ``missing_feet_cost`` is given, that cost replaces feet.
-    """
+    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), inf where either is; where
+    missing_feet (Na, Nb) and missing_feet_cost is given, that cost replaces feet."""
     if missing_feet is not None and missing_feet_cost is not None:
         feet_cost = np.where(missing_feet, missing_feet_cost, feet_cost)
     with np.errstate(invalid="ignore"):
@@ -52,13 +38,8 @@ def combined_cost(
 
 
 class FeetEpipolarMatcher:
-    """Feet + epipolar matching: ``matcher(views, rig) -> (P, V)`` detection index per view or -1.
-
-    ``feet`` holds the FeetMatcher keyword arguments (Mahalanobis location metric; its own gate is
-    not used); ``gate`` applies to the combined cost in standard deviations and ``margin`` (SD, 0 =
-    off) keeps only distinct pairs, as in :class:`FeetMatcher`. Counts of detections left
-    out of every person, by reason, are kept in ``last_unmatched_reasons`` and ``unmatched_reasons``.
-    """
+    """Feet + epipolar matching: ``matcher(views, rig) -> Matches``; feet: FeetMatcher keys (Mahalanobis; its gate
+    unused); gate and margin (0: off) on the combined cost in SD, as :class:`FeetMatcher`'s."""
 
     def __init__(
         self,
