@@ -133,17 +133,8 @@ def all_tested(V: int, has_feet: np.ndarray, var: np.ndarray) -> LinkTests:
 @lru_cache(maxsize=1)
 def warm_up() -> None:
     """Compile (or load from numba's cache) the matcher's kernels once per process, on two detections."""
-    var, one = np.ones((2, 2)), np.array([0, 1, 2])
-    det = Detections(
-        np.zeros((2, 2, 2)),
-        var,
-        one,
-        np.ones(2, bool),
-        np.zeros((2, 2)),
-        np.zeros((2, 2, 2)),
-        1.0,
-        np.zeros((2, 2, 3, 3)),
-    )
+    one, det = np.array([0, 1, 2]), all_tested(2, np.ones(2, bool), np.ones((2, 2))).det
+    det = det._replace(uv=np.zeros((2, 2, 2)), offsets=np.array([0, 1, 2]), p=np.zeros((2, 2)), cov=np.zeros((2, 2, 2)))
     test = ChiTest(np.full(5, np.inf), 1, 9.0, 1.0)
     out = (np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty(1), 0, 0)
     pairs_chi2(det, np.array([[0, 1]]), 0, test, Sample(np.ones(5), 2.0, 1), *out)

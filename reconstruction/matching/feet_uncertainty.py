@@ -50,15 +50,6 @@ def cached_image_to_plane(camera: Camera, height: float) -> np.ndarray | None:
     return H
 
 
-def homography_jacobian(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Jacobian d(H uv)/d(uv) of a homography at points: (3, 3), (..., 2) -> (..., 2, 2)."""
-    uv = np.asarray(uv, dtype=np.float64)
-    w = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1) @ np.asarray(H).T
-    x = w[..., :2] / w[..., 2:3]
-    J = H[:2, :2] - x[..., :, None] * H[2, :2]  # (..., 2, 2): (H_top - x h3^T) / w
-    return J / w[..., 2, None, None]
-
-
 def undistortion_jacobian(camera: Camera, uv: np.ndarray) -> np.ndarray:
     """Jacobian of distorted -> undistorted pixels by central differences: (..., 2) -> (..., 2, 2)."""
     uv = np.asarray(uv, dtype=np.float64)

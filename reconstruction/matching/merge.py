@@ -11,8 +11,6 @@ from scipy.optimize import linear_sum_assignment
 
 PairCost = Callable[[int, int], np.ndarray]  # (view a, view b) -> (N_a, N_b) edge costs
 
-EDGE_COLUMNS = ("view_a", "det_a", "view_b", "det_b", "cost")
-
 
 def solve_pair(cost: np.ndarray, gate: float = np.inf, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Gated rectangular assignment: cost (Na, Nb) -> rows (K,), cols (K,) of the accepted pairs.
@@ -61,7 +59,7 @@ def swap_regret(cost: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndar
 
 
 def pair_edges(view_a: int, view_b: int, rows: np.ndarray, cols: np.ndarray, cost: np.ndarray) -> np.ndarray:
-    """Edges of one solved view pair: rows (K,), cols (K,), cost (Na, Nb) -> (K, 5) see EDGE_COLUMNS."""
+    """Edges of one solved view pair: rows (K,), cols (K,), cost (Na, Nb) -> (K, 5) (view_a, det_a, view_b, det_b, cost)."""
     rows = np.asarray(rows, dtype=np.int64)
     cols = np.asarray(cols, dtype=np.int64)
     k = len(rows)
