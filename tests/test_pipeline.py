@@ -3,9 +3,10 @@ import json
 import numpy as np
 import pytest
 
+from data.assignment import assignment_from_labels
 from data.formats.poses_io import read_poses3d, write_poses3d
 from data.multiview import Frame, ViewDetections
-from reconstruction.matching import OracleMatcher, assignment_from_labels
+from reconstruction.matching import OracleMatcher
 from reconstruction.pipeline import MultiViewPipeline, gather_views
 from reconstruction.reconstructors import VanillaTriangulation
 from tests.test_triangulation import ring

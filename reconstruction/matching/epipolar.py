@@ -80,14 +80,9 @@ def epipolar_affinity(
 
 def unmatched_counts(usable: list[np.ndarray], assignment: np.ndarray) -> Counter[str]:
     """Detections left out of every person, by reason: V arrays (N_v,) bool, (P, V) -> Counter."""
-    reasons: Counter[str] = Counter()
     too_few = sum(int(np.sum(~u)) for u in usable)
     unplaced = sum(int(np.sum(u)) for u in usable) - int(np.sum(np.asarray(assignment) >= 0))
-    if too_few:
-        reasons[TOO_FEW_JOINTS] = too_few
-    if unplaced:
-        reasons[NO_COUNTERPART] = unplaced
-    return reasons
+    return +Counter({TOO_FEW_JOINTS: too_few, NO_COUNTERPART: unplaced})  # +: the zero counts dropped
 
 
 class EpipolarMatcher:

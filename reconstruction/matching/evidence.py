@@ -71,6 +71,15 @@ def joint_variances(
     return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), var, bad
 
 
+@lru_cache(maxsize=8)
+def fundamentals(rig: Rig) -> np.ndarray:
+    """F of every view pair (a < b) of a rig, x_b^T F[a, b] x_a = 0, once per rig (not to be written): (V, V, 3, 3)."""
+    F = np.zeros((len(rig), len(rig), 3, 3))
+    for a, b in combinations(range(len(rig)), 2):
+        F[a, b] = fundamental_matrix(rig[a], rig[b])
+    return F
+
+
 def calibrated_chi2(floats: np.ndarray, first: int, loosest: float, scale2: float) -> np.ndarray:
     """D^2 = feet + body / scale2 of pairs_chi2's rows: floats (E, 2) (chi^2 computed at loosest for rows < first,
     at scale2 after; feet term or NaN) -> (E,). The feet term keeps its own model (its floor is not pixel noise)."""
@@ -196,8 +205,7 @@ class EvidenceMatcher:
             )
         if not max_noise_scale >= 1 or int(min_calibration_pairs) < 1:
             raise ValueError(
-                f"need max_noise_scale >= 1 and min_calibration_pairs >= 1, got {max_noise_scale}, "
-                f"{min_calibration_pairs}"
+                f"need max_noise_scale, min_calibration_pairs >= 1; got {max_noise_scale}, {min_calibration_pairs}"
             )
         if not outlier_sd > 0:
             raise ValueError(f"outlier_sd must be > 0, got {outlier_sd}")
@@ -210,19 +218,8 @@ class EvidenceMatcher:
         self.min_calibration_pairs = int(min_calibration_pairs)
         self.outlier_sd, self.link_scale = float(outlier_sd), float(link_scale)
         self.last_noise_scale = 1.0
-        self._fundamentals: dict[int, tuple[Rig, np.ndarray]] = {}
         self._rows_hint = 0  # rows of the detection-pair buffers: the last frame's count, with a margin
         self.feet = FeetMatcher(min_views=min_views, **{"pixel_sigma": 5.0, **(feet or {})})
-
-    def _fundamentals_of(self, rig: Rig) -> np.ndarray:
-        """F of every view pair (a, b) of the rig, x_b^T F[a, b] x_a = 0, computed once per rig: (V, V, 3, 3)."""
-        key = id(rig)
-        if key not in self._fundamentals:
-            F = np.zeros((len(rig), len(rig), 3, 3))
-            for a, b in combinations(range(len(rig)), 2):
-                F[a, b] = fundamental_matrix(rig[a], rig[b])
-            self._fundamentals[key] = (rig, F)  # keeps rig alive: its id stays unique
-        return self._fundamentals[key][1]
 
     def detections(self, views: list[ViewDetections], rig: Rig) -> tuple[Detections, np.ndarray]:
         """The frame's detections stacked over views and which have non-finite keypoints (N,)."""
@@ -241,7 +238,7 @@ class EvidenceMatcher:
         offsets = np.concatenate([[0], ends]).astype(np.int64)
         p, cov = (np.ascontiguousarray(a, dtype=np.float64) for a in (feet.p, feet.cov))
         has_p, floor2 = np.asarray(feet.has_p, dtype=bool), self.feet.ground_sigma_floor**2
-        return Detections(uv, var, offsets, has_p, p, cov, floor2, self._fundamentals_of(rig)), bad
+        return Detections(uv, var, offsets, has_p, p, cov, floor2, fundamentals(rig)), bad
 
     def frame_evidence(self, views: list[ViewDetections], rig: Rig) -> FrameEvidence:
         """The frame's detections and its detection pairs that pass the test at its calibrated noise."""

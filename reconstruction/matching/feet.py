@@ -77,9 +77,9 @@ def features_from_feet(
     has_p = has_left | has_right
     if reason is None:
         reason = np.where(has_p, "", NO_FOOT_JOINTS)
-    cov = (
-        None if cov_left is None or cov_right is None else location_covariance(cov_left, cov_right, has_left, has_right)
-    )
+    cov = None
+    if cov_left is not None and cov_right is not None:
+        cov = location_covariance(cov_left, cov_right, has_left, has_right)
     return FeetFeatures(left, right, has_left, has_right, p, v, has_p, both, np.asarray(reason, dtype=str), cov)
 
 

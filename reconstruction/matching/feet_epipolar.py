@@ -66,11 +66,8 @@ class FeetEpipolarMatcher:
         self.missing_feet_cost = None if missing_feet_cost is None else float(missing_feet_cost)
         self.feet = FeetMatcher(min_views=min_views, **feet)
         self.epipolar_sigma_px, self.gate, self.margin = float(epipolar_sigma_px), float(gate), float(margin)
-        self.min_score, self.min_common_joints, self.min_views = (
-            float(min_score),
-            int(min_common_joints),
-            int(min_views),
-        )
+        self.min_score, self.min_common_joints = float(min_score), int(min_common_joints)
+        self.min_views = int(min_views)
 
     def pair_costs(self, views: list[ViewDetections], rig: Rig):
         """The pair cost function of one frame: V views -> ((a, b) -> (N_a, N_b) combined cost), feet, joints."""
