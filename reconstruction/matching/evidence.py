@@ -58,7 +58,7 @@ def joint_variances(
     detections of V views stacked in view order."""
     kp = np.concatenate([np.asarray(v.keypoints, dtype=np.float64).reshape(-1, J, 3) for v in views])
     boxes = np.concatenate([np.asarray(v.bboxes, dtype=np.float64).reshape(-1, 4) for v in views])
-    finite = np.isfinite(kp).all(axis=-1)
+    finite = np.isfinite(kp[..., 0]) & np.isfinite(kp[..., 1]) & np.isfinite(kp[..., 2])  # not .all(-1): slow on 3
     ok = finite & (kp[..., 2] >= min_score)
     clean = np.where(ok[..., None], kp, 0.0)
     sigma = noise_model.sigma(clean, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0))
