@@ -26,6 +26,7 @@ from itertools import combinations
 import numpy as np
 from scipy.special import gammaincinv
 
+from data import assignment
 from data.assignment import solve_sparse_pairs
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
@@ -47,7 +48,7 @@ CALIBRATION_SAMPLE = 400  # mutual best pairs enough for the median of the noise
 def gate_limits(reject_rate: float, max_dof: int) -> np.ndarray:
     """chi^2 quantile 1 - reject_rate for 0..max_dof degrees of freedom: (max_dof + 1,); inf at dof 0."""
     dof = np.arange(max_dof + 1)
-    # scipy.stats.chi2.ppf's own formula, without importing scipy.stats (~0.5 s)
+    # scipy.stats.chi2.ppf's own formula, without importing scipy.stats (a slow import)
     return np.where(dof > 0, 2.0 * gammaincinv(np.maximum(dof, 1) / 2.0, 1.0 - reject_rate), np.inf)
 
 
@@ -147,7 +148,7 @@ def warm_up() -> None:
     test = ChiTest(np.full(5, np.inf), 1, 9.0, 1.0)
     out = (np.empty((1, 4), np.int64), np.empty((1, 2)), np.empty(1), 0, 0)
     pairs_chi2(det, np.array([[0, 1]]), 0, test, Sample(np.ones(5), 2.0, 1), *out)
-    solve_sparse_pairs(one[:2], np.ones((1, 2), np.int64), one[:2] * 0, one[:2] * 0, np.array([0.0, 1.0]))
+    assignment.warm_up()
     merge_linked(one[:1], one[1:2], one[:2], np.zeros((0, 2), np.int64), LinkTests(det, np.zeros((2, 2), bool), test))
     feet_kernels.warm_up()
 
