@@ -108,7 +108,7 @@ def evaluate_stages(seq: Sequence, stages: dict[str, Stage]) -> dict[str, dict]:
     reproj = {k: {"detections": [], "ground truth": []} for k in stages}
     times = {k: 0.0 for k in stages}
     for frame in seq.frames:
-        assignment = OracleMatcher()(frame.views, seq.rig)
+        assignment = OracleMatcher()(frame.views, seq.rig).assignment
         poses2d, boxes = gather_views(frame.views, assignment)
         gt = gt_for_assignment(frame, assignment)
         outs = {}
@@ -275,7 +275,7 @@ def time_setting(stage: MAPReconstruction, persons: int, views: int, args: argpa
     )
     ours_ms, scipy_ms, e_ours, e_scipy, subset = [], [], [], [], persons
     for frame in seq.frames:
-        assignment = OracleMatcher()(frame.views, seq.rig)
+        assignment = OracleMatcher()(frame.views, seq.rig).assignment
         poses2d, boxes = gather_views(frame.views, assignment)
         gt = gt_for_assignment(frame, assignment)
         P = len(assignment)
@@ -357,7 +357,7 @@ def robust_section(args: argparse.Namespace) -> str:
         rng = np.random.default_rng(args.seed)
         evals = {k: Pose3DEvaluator() for k in stages}
         for frame in seq.frames:
-            poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig))
+            poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig).assignment)
             poses2d = swap_left_right(poses2d, share, rng)
             for name, stage in stages.items():
                 evals[name].update(stage(poses2d, boxes, seq.rig).poses, frame.gt_poses)

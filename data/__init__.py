@@ -1,6 +1,7 @@
 """Data, bottom of the layout (layers 1 and 2: everything else may import it, it imports nothing above).
 
-Layer 1, plain data and files: ``keypoints`` (COCO-23 metadata, skeleton and part tables),
+Layer 1, plain data and files: ``keypoints`` (COCO-23 metadata, skeleton and part tables), ``assignment`` (the
+assignment solvers shared by the stages),
 ``bone_lengths`` (bone tables), ``multiview`` (Frame / Sequence / ViewDetections containers),
 ``config_checks`` (one-line config errors); ``formats/`` (readers and writers); ``geometry/``
 (cameras, rigs, calibration files, the rig check, DLT triangulation).

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-
-from reconstruction.matching.sparse_assignment import linear_sum_assignment
+from scipy.optimize import linear_sum_assignment
 
 
 def mean_joint_distance(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
 from data.keypoints import OKS_SIGMAS
@@ -19,7 +20,6 @@ from data.pose2d.coco_eval import evaluate_keypoints
 from data.pose2d.view_coco import ground_truth_document, results
 from models.front_end import Pose2DFrontEnd
 from models.pose_nms import joint_similarity
-from reconstruction.matching.sparse_assignment import linear_sum_assignment
 
 MIN_OKS = 0.5
 

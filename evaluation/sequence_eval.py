@@ -77,7 +77,7 @@ def evaluate_sequence(
     stats = reprojection_stats(np.concatenate(reprojection) if reprojection else np.zeros(0))
     metrics.update({f"reprojection_{k}_px": stats[k] for k in ("mean", "min", "max")})
     metrics["reprojection_var_px2"] = stats["var"]
-    unmatched = Counter(getattr(pipeline.matcher, "unmatched_reasons", {}))
+    unmatched = Counter(pipeline.unmatched)
     timings = dict(pipeline.timings, evaluation=t_eval)
     protocols = {p.name: p.summary() for p in sequence.protocols}
     reports = [p.report() for p in sequence.protocols]

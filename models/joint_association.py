@@ -30,11 +30,11 @@ reference).
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from data.keypoints import NUM_JOINTS, OKS_SIGMAS
-from reconstruction.matching.sparse_assignment import linear_sum_assignment
 
 
 def associate_joints(

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Callable, Protocol
@@ -14,9 +14,9 @@ from hydra.utils import instantiate
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
 from reconstruction.gather_kernels import gather_detections
-from reconstruction.results import Reconstruction, SkeletonPrior
+from reconstruction.results import Matches, Reconstruction, SkeletonPrior
 
-Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
+Matcher = Callable[[list[ViewDetections], Rig], Matches]
 Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], Reconstruction]
 
 
@@ -76,6 +76,7 @@ class MultiViewPipeline:
         self.reconstructor = reconstructor
         self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
+        self.unmatched: Counter[str] = Counter()  # detections the matcher left out of every person, by reason
 
     @classmethod
     def from_config(cls, cfg: Any, rig: Rig) -> "MultiViewPipeline":
@@ -98,7 +99,9 @@ class MultiViewPipeline:
         if len(frame.views) != len(self.rig):
             raise ValueError(f"frame {frame.index} has {len(frame.views)} views, the rig {len(self.rig)}")
         t0 = time.perf_counter()
-        assignment = self.matcher(frame.views, self.rig)
+        matches = self.matcher(frame.views, self.rig)
+        self.unmatched += matches.unmatched
+        assignment = matches.assignment
         t1 = time.perf_counter()
         poses2d, bboxes = gather_views(frame.views, assignment)
         if len(assignment):

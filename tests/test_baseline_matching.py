@@ -82,10 +82,11 @@ def test_noise_free_scene_is_matched_perfectly(name, dist):
     rig = ring_rig(5, dist=dist)
     views = scene(rig, crowd())
     matcher = MATCHERS[name]()
-    m = correspondence_metrics(matcher(views, rig), ids_of(views))
+    assignment, reasons = matcher(views, rig)
+    m = correspondence_metrics(assignment, ids_of(views))
     assert m["precision"] == 1.0 and m["recall"] == 1.0
     assert m["persons"] == 7 and m["recovered_share"] == 1.0
-    assert not matcher.last_unmatched_reasons
+    assert not reasons
 
 
 @pytest.mark.parametrize("name", MATCHERS)
@@ -96,8 +97,8 @@ def test_shuffling_detections_keeps_the_matched_identities(name):
     shuffled = scene(rig, people, rng=np.random.default_rng(1))
     assert any(not np.array_equal(a.person_ids, b.person_ids) for a, b in zip(ordered, shuffled))
     matcher = MATCHERS[name]()
-    found = matched_id_sets(matcher(ordered, rig), ordered)
-    assert found == matched_id_sets(matcher(shuffled, rig), shuffled)
+    found = matched_id_sets(matcher(ordered, rig).assignment, ordered)
+    assert found == matched_id_sets(matcher(shuffled, rig).assignment, shuffled)
     assert len(found) == 8
 
 
@@ -109,12 +110,10 @@ def test_person_seen_in_one_view_stays_unmatched_and_is_counted(name):
     people[11] = skeleton((-2.0, -2.4), 1.0)  # only in view 1
     views = scene(rig, people, visible={10: [0], 11: [1]})
     matcher = MATCHERS[name]()
-    a = matcher(views, rig)
-    matcher(views, rig)
+    a, reasons = matcher(views, rig)
     assert matched_id_sets(a, views) == {frozenset((v, i) for v in range(4)) for i in range(3)}
-    assert matcher.last_unmatched_reasons == {NO_COUNTERPART: 2}
-    assert matcher.unmatched_reasons == {NO_COUNTERPART: 4}
-    ungated = MATCHERS[name](gate=np.inf)(views, rig)  # the gate is what keeps them apart
+    assert reasons == {NO_COUNTERPART: 2}
+    ungated = MATCHERS[name](gate=np.inf)(views, rig).assignment  # the gate is what keeps them apart
     assert frozenset({(0, 10), (1, 11)}) in matched_id_sets(ungated, views)
 
 
@@ -123,9 +122,9 @@ def test_two_people_far_apart_are_never_merged(name):
     rig = ring_rig(5)
     people = {0: skeleton((2.0, 1.5), 0.5), 1: skeleton((-1.5, -2.0), 2.0)}
     views = scene(rig, people, visible={0: [0, 1], 1: [2, 3]})  # only person-0/person-1 pairs across
-    a = MATCHERS[name]()(views, rig)
+    a = MATCHERS[name]()(views, rig).assignment
     assert matched_id_sets(a, views) == {frozenset({(0, 0), (1, 0)}), frozenset({(2, 1), (3, 1)})}
-    merged = MATCHERS[name](gate=np.inf)(views, rig)
+    merged = MATCHERS[name](gate=np.inf)(views, rig).assignment
     assert len(merged) == 1 and np.sum(merged >= 0) == 4
 
 
@@ -136,13 +135,13 @@ def test_detection_with_too_few_joints_is_left_out_and_counted(name):
     views[2].keypoints[1, 2:, 2] = 0.0  # two joints left
     views[3].keypoints[0, :, 2] = 0.15  # all below min_score
     matcher = MATCHERS[name]()
-    a = matcher(views, rig)
+    a, reasons = matcher(views, rig)
     found = matched_id_sets(a, views)
     hidden = {(2, int(views[2].person_ids[1])), (3, int(views[3].person_ids[0]))}
     assert not any(hidden & s for s in found)
     assert frozenset((v, 1) for v in (0, 1, 3)) in found and frozenset((v, 0) for v in (0, 1, 2)) in found
     # feet_epipolar needs feet first by default: neither detection has a usable foot left
-    assert matcher.last_unmatched_reasons == ({NO_FOOT_JOINTS: 2} if name == "feet_epipolar" else {TOO_FEW_JOINTS: 2})
+    assert reasons == ({NO_FOOT_JOINTS: 2} if name == "feet_epipolar" else {TOO_FEW_JOINTS: 2})
 
 
 @pytest.mark.parametrize("name", MATCHERS)

@@ -1,6 +1,7 @@
 """The default matcher: calibrated chi-square gate on feet + body evidence, complete-linkage merging."""
 
 import hashlib
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -12,9 +13,10 @@ from data.synthetic.rigs import ring_rig
 from evaluation.correspondence import CorrespondenceCounts, correspondence_counts
 from reconstruction.matching import EvidenceMatcher
 from reconstruction.matching.epipolar import fundamental_matrix
-from reconstruction.matching.evidence import _by_cost, gate_limits, merge_complete
-from reconstruction.matching.evidence_kernels import _linked_now, _masks, calibrated_chi2, pairs_chi2
+from reconstruction.matching.evidence import calibrated_chi2, gate_limits, merge_complete
+from reconstruction.matching.evidence_kernels import ChiTest, Detections, Sample, _linked_now, _masks, pairs_chi2
 from reconstruction.matching.feet_uncertainty import mahalanobis_distances
+from reconstruction.noise_model import NoiseModel
 from reconstruction.pipeline import MultiViewPipeline
 from reconstruction.solver.map_solver import MLEMAPReconstruction
 
@@ -48,7 +50,7 @@ def test_a_pair_with_only_body_joints_is_matched():
     seq = _scene()
     body = np.setdiff1d(np.arange(23), FEET_AND_ANKLES)
     views = _keep(seq.frames[0].views, body)
-    c = _counts(EvidenceMatcher()(views, seq.rig), views)
+    c = _counts(EvidenceMatcher()(views, seq.rig).assignment, views)
     assert c.precision == 1.0 and c.recall > 0.95
 
 
@@ -67,12 +69,12 @@ def test_a_pair_with_only_feet_is_matched():
         )
     )
     views = _keep(seq.frames[0].views, FEET_AND_ANKLES)
-    c = _counts(EvidenceMatcher(min_dof=2)(views, seq.rig), views)
+    c = _counts(EvidenceMatcher(min_dof=2)(views, seq.rig).assignment, views)
     assert c.precision == 1.0 and c.recall == 1.0
 
 
-def _two_views(uv_a, var_a, uv_b, var_b, F, feet_dx=None):
-    """pairs_chi2's stacked inputs for two views (no feet, or feet midpoints feet_dx apart, unit covariance)."""
+def _two_views(uv_a, var_a, uv_b, var_b, F, feet_dx=None) -> Detections:
+    """pairs_chi2's detections of two views (no feet, or feet midpoints feet_dx apart, unit covariance)."""
     na, nb = len(uv_a), len(uv_b)
     Fs = np.zeros((2, 2, 3, 3))
     Fs[0, 1] = F
@@ -81,19 +83,19 @@ def _two_views(uv_a, var_a, uv_b, var_b, F, feet_dx=None):
         p[:na, 0] = feet_dx
     has_p = np.full(na + nb, feet_dx is not None)
     uv, var = np.concatenate([uv_a, uv_b]), np.concatenate([var_a, var_b])
-    return uv, var, np.array([0, na, na + nb]), has_p, p, np.zeros((na + nb, 2, 2)), 1.0, Fs, np.array([[0, 1]])
+    return Detections(uv, var, np.array([0, na, na + nb]), has_p, p, np.zeros((na + nb, 2, 2)), 1.0, Fs)
 
 
-def _chi2(stacked, limits, min_dof=1, cap=1e9):
+def _chi2(det: Detections, limits, min_dof=1, cap=1e9):
     """Detection pairs (i, j local) that pass, their chi^2 and dof, for two views."""
-    assert len(limits) >= stacked[1].shape[1] + 3  # the kernel's contract: a limit for every dof up to feet + J
-    room = int(np.prod(np.diff(stacked[2])))
+    assert len(limits) >= det.var.shape[1] + 3  # the kernel's contract: a limit for every dof up to feet + J
+    room = int(np.prod(np.diff(det.offsets)))
     out = (np.empty((room, 4), np.int64), np.empty((room, 2)), np.empty(0), 0, 0)
-    fixed = (limits, min_dof, cap, 1.0, np.ones(len(limits)), 2.0, 0)
-    n, _, done = pairs_chi2(*stacked[:-1], stacked[-1], 0, *fixed, *out)
+    test, sample = ChiTest(limits, min_dof, float(cap), 1.0), Sample(np.ones(len(limits)), 2.0, 0)
+    n, _, done = pairs_chi2(det, np.array([[0, 1]]), 0, test, sample, *out)
     ints, floats = out[0][:n], out[1][:n]
     assert done == 1 and np.all(ints[:, 0] == 0)
-    return ints[:, 1], ints[:, 2] - stacked[2][1], floats[:, 0], ints[:, 3]
+    return ints[:, 1], ints[:, 2] - det.offsets[1], floats[:, 0], ints[:, 3]
 
 
 def test_the_gate_rejects_true_pairs_at_its_nominal_rate_whatever_the_degrees_of_freedom():
@@ -170,7 +172,7 @@ def test_the_chi_square_with_feet_equals_a_dense_reference():
     uv = [rig[v].project(X[who[v]]) + rng.normal(0, 3.0, (n[v], 6, 2)) for v in (0, 1)]
     var = [np.where(rng.random((n[v], 6)) < 0.3, 0.0, 4.0) for v in (0, 1)]
     uv = [np.where(v[..., None] > 0, u, 0.0) for u, v in zip(uv, var)]
-    stacked = list(_two_views(uv[0], var[0], uv[1], var[1], F))
+    det = _two_views(uv[0], var[0], uv[1], var[1], F)
     N = sum(n)
     A = rng.normal(0, 0.4, (N, 2, 2)) * rng.choice([1e-4, 1.0, 30.0], (N, 1, 1))
     cov = A @ A.transpose(0, 2, 1)
@@ -179,10 +181,10 @@ def test_the_chi_square_with_feet_equals_a_dense_reference():
     cov[::7, 0, 1] += 0.2  # asymmetric: the test takes the symmetric part
     floor = 0.3
     ground = X[np.concatenate(who), 0, :2] + rng.normal(0, 0.5, (N, 2))  # a person's feet midpoint in both views
-    stacked[3], stacked[4], stacked[5], stacked[6] = rng.random(N) < 0.8, ground, cov, floor**2
+    det = det._replace(has_p=rng.random(N) < 0.8, p=ground, cov=cov, floor2=floor**2)
     limits, cap = gate_limits(1e-2, 6 + 2), 30.0
-    i, j, chi2, dof = _chi2(tuple(stacked), limits, 2, cap)
-    has, p = stacked[3], stacked[4]
+    i, j, chi2, dof = _chi2(det, limits, 2, cap)
+    has, p = det.has_p, det.p
     feet = mahalanobis_distances(p[: n[0]], p[n[0] :], cov[: n[0]], cov[n[0] :], floor) ** 2
     both_feet = has[: n[0], None] & has[None, n[0] :]
     ha = np.concatenate([uv[0], np.ones((n[0], 6, 1))], -1)
@@ -224,24 +226,23 @@ def test_a_link_test_the_merge_computes_is_the_one_computed_with_every_pair():
     seq = generate_sequence(SyntheticConfig(seed=2, num_frames=1, num_persons=60, num_cameras=6, noise_px=2.0))
     matcher, views = EvidenceMatcher(), seq.frames[0].views
     ev = matcher.frame_evidence(views, seq.rig)
-    uv, p, cov, floor2, fundamentals, tested, limits, min_dof, cap, scale2 = ev.untested
+    det, tested, test = ev.lazy
     untested = ~tested[ev.view_pairs[:, 0], ev.view_pairs[:, 1]]
     assert 0 < untested.sum() < len(ev.view_pairs)
-    stacked = (uv, ev.var, ev.offsets, ev.has_feet, p, cov, floor2, fundamentals, ev.view_pairs)
     room = int(np.prod(ev.counts[ev.view_pairs], axis=1).sum())
     out = (np.empty((room, 4), np.int64), np.empty((room, 2)), np.empty(0), 0, 0)
-    n, _, _ = pairs_chi2(*stacked, 0, limits, min_dof, cap, scale2, np.ones(len(limits)), 2.0, 0, *out)
-    ints, d2 = out[0][:n], calibrated_chi2(out[1][:n], 0, 1.0, scale2)
-    passes = d2 <= limits[ints[:, 3]]
+    n, _, _ = pairs_chi2(det, ev.view_pairs, 0, test, Sample(np.ones(len(test.limits)), 2.0, 0), *out)
+    ints, d2 = out[0][:n], calibrated_chi2(out[1][:n], 0, 1.0, test.scale2)
+    passes = d2 <= test.limits[ints[:, 3]]
     expected = {(int(i), int(j)) for q, i, j, _ in ints[passes] if untested[q]}
-    view_of, masks = np.repeat(np.arange(len(views)), ev.counts), _masks(ev.var)
+    view_of, masks = np.repeat(np.arange(len(views)), ev.counts), _masks(det.var)
     row = (np.empty((1, 4), np.int64), np.empty((1, 2)))
     computed = set()
     for q in np.flatnonzero(untested):
         a, b = ev.view_pairs[q]
-        for i in range(ev.offsets[a], ev.offsets[a + 1]):
-            for j in range(ev.offsets[b], ev.offsets[b + 1]):
-                if _linked_now(j, i, view_of, masks, ev.var, ev.has_feet, ev.untested, row):  # either order
+        for i in range(det.offsets[a], det.offsets[a + 1]):
+            for j in range(det.offsets[b], det.offsets[b + 1]):
+                if _linked_now(j, i, view_of, masks, ev.lazy, row):  # either order
                     computed.add((i, j))
     assert len(expected) > 100 and computed == expected
 
@@ -253,7 +254,7 @@ def test_precise_in_a_dense_crowd_where_the_paper_matcher_merges_wrongly():
     total = CorrespondenceCounts()
     matcher = EvidenceMatcher()
     for frame in seq.frames:
-        total = total + _counts(matcher(frame.views, seq.rig), frame.views)
+        total = total + _counts(matcher(frame.views, seq.rig).assignment, frame.views)
     assert total.precision > 0.98 and total.recall > 0.7
 
 
@@ -263,11 +264,13 @@ def test_the_assignments_are_those_of_the_dense_implementation():
     seq = generate_sequence(
         SyntheticConfig(seed=1, num_frames=2, num_persons=80, area=(-4.5, 4.5, -4.5, 4.5), num_cameras=5, noise_px=2.0)
     )
-    matcher, digest = EvidenceMatcher(), hashlib.sha256()
+    matcher, digest, unmatched = EvidenceMatcher(), hashlib.sha256(), Counter()
     for frame in seq.frames:
-        digest.update(np.ascontiguousarray(matcher(frame.views, seq.rig), dtype=np.int64).tobytes())
+        matches = matcher(frame.views, seq.rig)
+        digest.update(np.ascontiguousarray(matches.assignment, dtype=np.int64).tobytes())
+        unmatched += matches.unmatched
     assert digest.hexdigest()[:16] == "1136323799c2132a"
-    assert matcher.unmatched_reasons == {"no_counterpart": 8, "too_little_evidence": 1}
+    assert unmatched == {"no_counterpart": 8, "too_little_evidence": 1}
     assert matcher.last_noise_scale == pytest.approx(0.45891882886317503, rel=1e-12)
 
 
@@ -278,8 +281,7 @@ def test_bad_detections_are_reported_as_unmatched_by_reason_not_a_crash():
     views[1].keypoints[0, 1:] = 0.0  # one with a single joint
     views[2].keypoints[0, :5] = np.nan  # some NaN joints: still usable
     matcher = EvidenceMatcher()
-    assignment = matcher(views, seq.rig)
-    reasons = matcher.last_unmatched_reasons
+    assignment, reasons = matcher(views, seq.rig)
     assert reasons["non_finite_keypoints"] == 1 and reasons["too_little_evidence"] == 1
     assert 0 not in assignment[:, 0] and 0 not in assignment[:, 1] and 0 in assignment[:, 2]
     assert _counts(assignment, views).precision == 1.0
@@ -291,7 +293,7 @@ def test_a_view_whose_keypoints_have_another_joint_count_is_named():
     v = views[1]
     views[1] = ViewDetections(v.keypoints[:, :17], v.bboxes, v.scores, v.person_ids)  # COCO-17 among COCO-23
     with pytest.raises(ValueError, match=r"keypoints must have shape \(N, 23, 3\) in every view, got \(6, 17, 3\)"):
-        EvidenceMatcher()(views, seq.rig)
+        EvidenceMatcher()(views, seq.rig).assignment
 
 
 def test_a_frame_with_nan_keypoints_is_reconstructed_without_them():
@@ -311,7 +313,6 @@ def test_rejects_bad_settings():
         {"max_noise_scale": 0.5},
         {"link_scale": 10.0},
         {"outlier_sd": 0.0},
-        {"c": 0.0, "sigma_px": 0.0, "sigma_min": 0.0},
     ):
         with pytest.raises(ValueError):
             EvidenceMatcher(**bad)
@@ -332,8 +333,8 @@ def test_the_noise_calibration_follows_the_detector():
                 occlusion=False,
             )
         )
-        m = EvidenceMatcher(sigma_px=1.0, c=0.0, score_power=0.0)
-        m(seq.frames[0].views, seq.rig)
+        m = EvidenceMatcher(noise_model=NoiseModel(sigma_px=1.0, c=0.0, score_power=0.0))
+        m(seq.frames[0].views, seq.rig).assignment
         scales.append(m.last_noise_scale)
     assert 0.6 < scales[0] < 1.5 and 2.5 < scales[1] / scales[0] < 5.5
 
@@ -345,15 +346,3 @@ def test_gate_limits_are_scipy_chi2_quantiles(reject_rate: float) -> None:
     limits = gate_limits(reject_rate, 60)
     assert limits[0] == np.inf
     np.testing.assert_array_equal(limits[1:], chi2.ppf(1 - reject_rate, np.arange(1, 61)))
-
-
-def test_the_merge_order_is_the_lexsort_by_cost_then_detections():
-    # ties (integer costs), NaN and infinities included: the one-argsort path must fall back where they occur
-    rng = np.random.default_rng(1)
-    for trial in range(600):
-        n = int(rng.integers(0, 30))
-        cost = rng.integers(-3, 3, n).astype(float) if trial % 2 else rng.normal(size=n)
-        if trial % 5 == 0 and n:
-            cost[rng.integers(0, n)] = [np.nan, np.inf, -np.inf][trial % 3]
-        ga, gb = rng.integers(0, 10, n), rng.integers(0, 10, n)
-        np.testing.assert_array_equal(_by_cost(cost, ga, gb), np.lexsort((gb, ga, cost)))

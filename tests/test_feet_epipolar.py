@@ -41,7 +41,7 @@ def counts(matcher, frames, rig) -> CorrespondenceCounts:
     """Summed correspondence counts of a matcher over frames."""
     total = CorrespondenceCounts()
     for frame in frames:
-        total = total + correspondence_counts(matcher(frame.views, rig), [v.person_ids for v in frame.views])
+        total = total + correspondence_counts(matcher(frame.views, rig).assignment, [v.person_ids for v in frame.views])
     return total
 
 
@@ -70,11 +70,13 @@ def test_people_without_feet_are_matched_by_their_body_unless_feet_are_required(
     pid = int(views[0].person_ids[0])
     for v in views:  # one person's feet and ankles hidden in every view
         v.keypoints[v.person_ids == pid, 15:, 2] = 0.0
-    found = FeetEpipolarMatcher(missing_feet_cost=2.0)(views, seq.rig)
+    found = FeetEpipolarMatcher(missing_feet_cost=2.0)(views, seq.rig).assignment
     rows = [r for r in found if any(r[v] >= 0 and views[v].person_ids[r[v]] == pid for v in range(len(views)))]
     assert len(rows) == 1 and np.sum(rows[0] >= 0) >= 2
     strict = FeetEpipolarMatcher()
     assert not any(
-        r[v] >= 0 and views[v].person_ids[r[v]] == pid for r in strict(views, seq.rig) for v in range(len(views))
+        r[v] >= 0 and views[v].person_ids[r[v]] == pid
+        for r in strict(views, seq.rig).assignment
+        for v in range(len(views))
     )
-    assert strict.last_unmatched_reasons["no_foot_joints"] == sum(int(np.sum(v.person_ids == pid)) for v in views)
+    assert strict(views, seq.rig).unmatched["no_foot_joints"] == sum(int(np.sum(v.person_ids == pid)) for v in views)

@@ -93,10 +93,11 @@ def test_noise_free_scene_is_matched_perfectly(dist):
     rig = ring_rig(4, dist=dist)
     views = scene(rig, crowd())
     matcher = FeetMatcher()
-    counts = correspondence_counts(matcher(views, rig), [v.person_ids for v in views])
+    assignment, reasons = matcher(views, rig)
+    counts = correspondence_counts(assignment, [v.person_ids for v in views])
     assert counts.precision == 1.0 and counts.recall == 1.0
     assert counts.persons == 6 and counts.recovered_share == 1.0
-    assert not matcher.last_unmatched_reasons
+    assert not reasons
 
 
 def test_shuffling_detections_keeps_the_matched_identities():
@@ -106,7 +107,9 @@ def test_shuffling_detections_keeps_the_matched_identities():
     shuffled = scene(rig, people, rng=np.random.default_rng(1))
     assert any(not np.array_equal(a.person_ids, b.person_ids) for a, b in zip(ordered, shuffled))
     matcher = FeetMatcher()
-    assert matched_id_sets(matcher(ordered, rig), ordered) == matched_id_sets(matcher(shuffled, rig), shuffled)
+    assert matched_id_sets(matcher(ordered, rig).assignment, ordered) == matched_id_sets(
+        matcher(shuffled, rig).assignment, shuffled
+    )
 
 
 def test_person_seen_in_one_view_stays_unmatched_and_the_gate_is_what_keeps_it():
@@ -116,12 +119,11 @@ def test_person_seen_in_one_view_stays_unmatched_and_the_gate_is_what_keeps_it()
     people[11] = person(np.array([-2.6, -2.4]), 1.0, 0.3)  # only in view 1
     views = scene(rig, people, visible={10: [0], 11: [1]})
     matcher = FeetMatcher()
-    a = matcher(views, rig)
+    a, reasons = matcher(views, rig)
     lonely = {(0, list(views[0].person_ids).index(10)), (1, list(views[1].person_ids).index(11))}
     assert not any((v, d) in lonely for row in a for v, d in enumerate(row))
-    assert matcher.last_unmatched_reasons == {NO_COUNTERPART: 2}
-    assert matcher.unmatched_reasons == {NO_COUNTERPART: 2}
-    ungated = FeetMatcher(gate=np.inf)(views, rig)
+    assert reasons == {NO_COUNTERPART: 2}
+    ungated = FeetMatcher(gate=np.inf)(views, rig).assignment
     assert any((0, 10) in s and (1, 11) in s for s in matched_id_sets(ungated, views))
 
 
@@ -222,17 +224,14 @@ def test_matcher_reports_detections_without_feet():
     views = scene(rig, crowd(3))
     views[1].keypoints[0, 15:, 2] = 0.0  # no ankle, no foot joint
     matcher = FeetMatcher()
-    matcher(views, rig)
-    matcher(views, rig)
-    assert matcher.last_unmatched_reasons == {NO_FOOT_JOINTS: 1}
-    assert matcher.unmatched_reasons == {NO_FOOT_JOINTS: 2}
+    assert matcher(views, rig).unmatched == {NO_FOOT_JOINTS: 1}
 
 
 def test_image_space_matches_like_ground_space_and_uses_the_pair_homography():
     rig = ring_rig(4)
     views = scene(rig, crowd(6, seed=5))
-    ground = FeetMatcher()(views, rig)
-    image = FeetMatcher(space="image", k3=25.0, gate=60.0, unknown_stride_cost=10.0)(views, rig)
+    ground = FeetMatcher()(views, rig).assignment
+    image = FeetMatcher(space="image", k3=25.0, gate=60.0, unknown_stride_cost=10.0)(views, rig).assignment
     assert matched_id_sets(ground, views) == matched_id_sets(image, views)
     f1 = feet_features(views[1].keypoints, rig[1], "lowest")  # one foot pixel per foot, to map by H
     in0 = to_image(f1, rig[0])

@@ -42,10 +42,11 @@ def test_three_view_conflict_is_resolved_in_favour_of_the_cheaper_edges():
     np.testing.assert_allclose(matcher.pair_cost(feats[1], feats[2], rig[1]), [[0.15]], atol=1e-9)
     # Cheapest first: A0-D1 (0.05), D1-D2 (0.15), then B0-D2 (0.18) is refused. Solving pair by pair
     # in view order would instead have kept B0-D2 and refused D1-D2.
-    np.testing.assert_array_equal(matcher(views, rig), [[0, 0, 0]])
-    assert matcher.last_unmatched_reasons == {NO_COUNTERPART: 1}
+    assignment, reasons = matcher(views, rig)
+    np.testing.assert_array_equal(assignment, [[0, 0, 0]])
+    assert reasons == {NO_COUNTERPART: 1}
     swapped = [feet_only(rig[0], [(0.38, 0.0), (0.0, 0.0)], [1, 0])] + views[1:]
-    np.testing.assert_array_equal(matcher(swapped, rig), [[1, 0, 0]])
+    np.testing.assert_array_equal(matcher(swapped, rig).assignment, [[1, 0, 0]])
 
 
 def normalised(H: np.ndarray) -> np.ndarray:
@@ -83,15 +84,15 @@ def test_two_people_far_apart_in_every_view_are_never_merged():
     rig = ring_rig(4)
     people = {0: person(np.array([2.5, -2.0]), 0.4, 0.3), 1: person(np.array([-2.0, 2.5]), 2.0, 0.2)}
     everywhere = scene(rig, people)
-    assert matched_id_sets(FeetMatcher()(everywhere, rig), everywhere) == {
+    assert matched_id_sets(FeetMatcher()(everywhere, rig).assignment, everywhere) == {
         frozenset((v, i) for v in range(4)) for i in (0, 1)
     }
     apart = scene(rig, people, visible={0: [0, 1], 1: [2, 3]})  # the only cross pairs are 0 with 1
-    assert matched_id_sets(FeetMatcher()(apart, rig), apart) == {
+    assert matched_id_sets(FeetMatcher()(apart, rig).assignment, apart) == {
         frozenset({(0, 0), (1, 0)}),
         frozenset({(2, 1), (3, 1)}),
     }
-    assert len(FeetMatcher(gate=np.inf)(apart, rig)) == 1  # what the gate prevents
+    assert len(FeetMatcher(gate=np.inf)(apart, rig).assignment) == 1  # what the gate prevents
 
 
 def test_person_with_hidden_feet_in_one_view_is_matched_through_the_other_views():
@@ -100,10 +101,11 @@ def test_person_with_hidden_feet_in_one_view_is_matched_through_the_other_views(
     hidden = int(np.flatnonzero(views[2].person_ids == 0)[0])
     views[2].keypoints[hidden, [LEFT_ANKLE, RIGHT_ANKLE, *LEFT_FOOT, *RIGHT_FOOT], 2] = 0.0
     matcher = FeetMatcher()
-    found = matched_id_sets(matcher(views, rig), views)
+    assignment, reasons = matcher(views, rig)
+    found = matched_id_sets(assignment, views)
     assert frozenset((v, 0) for v in (0, 1, 3)) in found
     assert found == {frozenset((v, 0) for v in (0, 1, 3))} | {frozenset((v, i) for v in range(4)) for i in (1, 2, 3)}
-    assert matcher.last_unmatched_reasons == {NO_FOOT_JOINTS: 1}
+    assert reasons == {NO_FOOT_JOINTS: 1}
 
 
 def test_the_features_of_all_views_at_once_are_those_of_each_view():
@@ -115,6 +117,9 @@ def test_the_features_of_all_views_at_once_are_those_of_each_view():
     views[2] = ViewDetections(views[2].keypoints[:0], views[2].bboxes[:0], views[2].scores[:0], views[2].person_ids[:0])
     m = FeetMatcher(pixel_sigma=4.0, sigma_score_power=0.5)
     for got, v, cam in zip(m.features(views, seq.rig), views, seq.rig):
-        ref = feet_features(v.keypoints, cam, m.foot_rule, m.min_score, True, 4.0, m.ankle_height_m, 0.0, 0.5)
+        ref = feet_features(
+            v.keypoints, cam, m.foot_rule, min_score=m.min_score, pixel_sigma=4.0, ankle_height_m=m.ankle_height_m,
+            sigma_score_power=0.5,
+        )  # fmt: skip
         for name in ("left", "right", "p", "v", "cov", "has_p", "has_stride", "reason"):
             np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)

@@ -114,9 +114,9 @@ def test_default_matcher_is_mahalanobis_and_both_metrics_match_a_clean_scene():
     truth = {frozenset((v, i) for v in range(4)) for i in range(6)}
     default = FeetMatcher()
     assert default.location_metric == "mahalanobis" and default.foot_rule == "mean"
-    assert matched_id_sets(default(views, rig), views) == truth
+    assert matched_id_sets(default(views, rig).assignment, views) == truth
     paper = FeetMatcher(location_metric="euclidean", foot_rule="lowest", ankle_height_m=0.0)
-    assert matched_id_sets(paper(views, rig), views) == truth
+    assert matched_id_sets(paper(views, rig).assignment, views) == truth
     with pytest.raises(ValueError):
         FeetMatcher(space="image", location_metric="mahalanobis", gate=60.0, unknown_stride_cost=10.0)
 

@@ -57,9 +57,9 @@ def test_feet_matcher_margin_end_to_end():
         feet_only(rig[1], [(0.1, 0.0), (0.25, 0.0), (3.0, 0.0)], [0, 1, 2]),
     ]
     plain = FeetMatcher(location_metric="euclidean", k2=0.0, k3=0.0, gate=0.6)
-    assert matched_id_sets(plain(views, rig), views) == {frozenset({(0, i), (1, i)}) for i in range(3)}
+    assert matched_id_sets(plain(views, rig).assignment, views) == {frozenset({(0, i), (1, i)}) for i in range(3)}
     strict = FeetMatcher(location_metric="euclidean", k2=0.0, k3=0.0, gate=0.6, margin=0.5)
-    assert matched_id_sets(strict(views, rig), views) == {frozenset({(0, 2), (1, 2)})}
+    assert matched_id_sets(strict(views, rig).assignment, views) == {frozenset({(0, 2), (1, 2)})}
 
 
 def test_negative_margins_are_refused():

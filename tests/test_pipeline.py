@@ -3,9 +3,10 @@ import json
 import numpy as np
 import pytest
 
+from data.assignment import assignment_from_labels
 from data.formats.poses_io import read_poses3d, write_poses3d
 from data.multiview import Frame, ViewDetections
-from reconstruction.matching import OracleMatcher, assignment_from_labels
+from reconstruction.matching import OracleMatcher
 from reconstruction.pipeline import MultiViewPipeline, gather_views
 from reconstruction.reconstructors import VanillaTriangulation
 from tests.test_triangulation import ring
@@ -40,7 +41,7 @@ def test_oracle_pipeline_reconstructs_shuffled_noise_free_detections():
     result = MultiViewPipeline(rig, OracleMatcher(), VanillaTriangulation())(Frame(0, views))
     np.testing.assert_allclose(result.poses3d[..., :3], X, atol=1e-6)
     with pytest.raises(ValueError, match="ground-truth identities"):
-        OracleMatcher()([ViewDetections(v.keypoints, v.bboxes, v.scores, -np.ones(3)) for v in views], rig)
+        OracleMatcher()([ViewDetections(v.keypoints, v.bboxes, v.scores, -np.ones(3)) for v in views], rig).assignment
 
 
 def test_poses3d_json_round_trip(tmp_path):

@@ -27,7 +27,7 @@ def test_reprojection_stats_known_answer_ignores_nan():
 def test_frame_errors_are_zero_on_noise_free_input_against_detections_and_ground_truth():
     seq = generate_sequence(SyntheticConfig(num_frames=1, num_persons=3, noise_px=0.0, occlusion=False))
     frame = seq.frames[0]
-    assignment = OracleMatcher()(frame.views, seq.rig)
+    assignment = OracleMatcher()(frame.views, seq.rig).assignment
     poses2d, boxes = gather_views(frame.views, assignment)
     out = VanillaTriangulation()(poses2d, boxes, seq.rig).poses
     ids = [frame.views[0].person_ids[assignment[p, 0]] for p in range(len(assignment))]

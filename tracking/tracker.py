@@ -44,8 +44,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
+from data.assignment import solve_sparse_pairs
 from data.bone_lengths import BONE_PAIRS, bone_lengths
-from reconstruction.matching.sparse_assignment import solve_sparse_pairs
 from tracking.track_kernels import MAD_TO_SD, centres, correct_tracks, near_mean_distances, pair_mean_distances
 
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,

@@ -1,10 +1,9 @@
-"""Cross-view person matching (layer 3; paper section 3.2). A matcher maps the detections of one frame to
-persons: ``matcher(views, rig) -> assignment`` with assignment (P, V) int, the detection index of person p
-in view v or -1. Each matcher is a small callable class configured from ``configs/matching/*.yaml``.
-May import ``data`` (layers 1-2) and the other stages; never ``evaluation`` or the entry points.
+"""Cross-view person matching (layer 3; paper section 3.2): ``matcher(views, rig) -> Matches(assignment,
+unmatched)``, assignment (P, V) the detection index of person p in view v or -1, unmatched the frame's left-out
+detections by reason. Each matcher is a callable class configured from ``configs/matching/*.yaml``; may import
+``data`` and the other stages, never ``evaluation`` or the entry points.
 """
 
-from reconstruction.matching.assignment import assignment_from_labels
 from reconstruction.matching.epipolar import EpipolarMatcher
 from reconstruction.matching.evidence import EvidenceMatcher
 from reconstruction.matching.feet import FeetMatcher
@@ -19,5 +18,4 @@ __all__ = [
     "FeetMatcher",
     "OracleMatcher",
     "RansacMatcher",
-    "assignment_from_labels",
 ]

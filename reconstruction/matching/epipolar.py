@@ -1,14 +1,9 @@
-"""The epipolar-constraint baseline of the paper's Table 6 ("EC"): persons matched across views by
-the distance of their joints to the epipolar lines of their counterparts.
+"""The epipolar-constraint baseline of the paper's Table 6 ("EC", ``matching=epipolar``).
 
-For every view pair (a < b), the fundamental matrix F of the two calibrated cameras maps an
-undistorted pixel x_a to its epipolar line F x_a in view b (and x_b to F^T x_b in view a). The
-affinity of detection i (view a) and j (view b) is the symmetric point-to-epipolar-line distance in
-pixels, (d(x_b, F x_a) + d(x_a, F^T x_b)) / 2, averaged over the joints confident in both
-(score >= min_score, all 23 COCO-23 joints); +inf with fewer than ``min_common_joints`` such joints.
-Each pair is solved as a gated linear assignment and all pairs' edges are merged into persons,
-cheaper edges first, exactly like the feet matcher. The shared pieces of the joint-based baselines
-(undistorted confident joints, the pairwise solve-and-merge loop, the unmatched counters) live here.
+The affinity of detections i (view a) and j (view b) is the symmetric distance (px) of their joints to each other's
+epipolar lines, (d(x_b, F x_a) + d(x_a, F^T x_b)) / 2, averaged over the joints confident in both (inf with fewer
+than ``min_common_joints``); each view pair is a gated assignment, merged cheapest edge first as the feet matcher.
+The pieces shared by the joint-based baselines (confident undistorted joints, unmatched counts) live here.
 """
 
 from __future__ import annotations
@@ -20,17 +15,15 @@ import numpy as np
 from data.geometry.camera import Camera, Rig
 from data.multiview import ViewDetections
 from reconstruction.matching.merge import match_pairs
+from reconstruction.results import Matches
 
 TOO_FEW_JOINTS = "too_few_joints"  # fewer than min_common_joints joints with score >= min_score
 NO_COUNTERPART = "no_counterpart"  # enough joints, but ended in no person of >= min_views views
 
 
 def undistorted_joints(view: ViewDetections, camera: Camera, min_score: float) -> tuple[np.ndarray, np.ndarray]:
-    """Undistorted joint pixels and confidence: keypoints (N, J, 3) -> uv (N, J, 2), ok (N, J) bool.
-
-    A joint is confident when its score is >= min_score and its coordinates are finite; the pixels
-    of the other joints are 0 (never NaN).
-    """
+    """Undistorted joint pixels and confidence (finite, score >= min_score): keypoints (N, J, 3) -> uv (N, J, 2) (0
+    where not confident), ok (N, J) bool."""
     kp = np.asarray(view.keypoints, dtype=np.float64)
     ok = np.isfinite(kp).all(axis=-1) & (np.nan_to_num(kp[..., 2], nan=-np.inf) >= min_score)
     uv = camera.undistort_points(np.where(ok[..., None], kp[..., :2], 0.0))
@@ -55,7 +48,7 @@ def _line_distance(lines: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
     norm = np.hypot(lines[..., 0], lines[..., 1])
     defined = norm > 1e-12  # a point at the epipole has no epipolar line
     unit = lines / np.where(defined, norm, 1.0)[..., None]
-    # broadcasting, not einsum: einsum's per-joint batched dot is ~10x slower at crowd sizes
+    # broadcasting, not einsum: einsum's per-joint batched dot is the slower at crowd sizes
     dist = np.abs(
         unit[:, None, :, 0] * points[None, :, :, 0] + unit[:, None, :, 1] * points[None, :, :, 1] + unit[:, None, :, 2]
     )
@@ -63,10 +56,8 @@ def _line_distance(lines: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
 
 
 def epipolar_distances(uv_a: np.ndarray, uv_b: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric joint-to-epipolar-line distances (px): (Na, J, 2), (Nb, J, 2), F (3, 3) -> (Na, Nb, J), defined.
-
-    ``defined`` (Na, Nb, J) is False where a joint sits on an epipole (no line); its distance is 0.
-    """
+    """Symmetric joint-to-epipolar-line distances (px): (Na, J, 2), (Nb, J, 2), F (3, 3) -> (Na, Nb, J), defined
+    (Na, Nb, J) (False, distance 0, where a joint sits on an epipole)."""
     ha = np.concatenate([uv_a, np.ones(uv_a.shape[:-1] + (1,))], axis=-1)
     hb = np.concatenate([uv_b, np.ones(uv_b.shape[:-1] + (1,))], axis=-1)
     in_b, ok_b = _line_distance(ha @ F.T, uv_b)  # lines of a's joints in view b
@@ -78,10 +69,8 @@ def epipolar_distances(uv_a: np.ndarray, uv_b: np.ndarray, F: np.ndarray) -> tup
 def epipolar_affinity(
     uv_a: np.ndarray, ok_a: np.ndarray, uv_b: np.ndarray, ok_b: np.ndarray, F: np.ndarray, min_common_joints: int = 3
 ) -> np.ndarray:
-    """Mean symmetric epipolar distance over common joints: (Na, J, 2), (Na, J), (Nb, J, 2), (Nb, J) -> (Na, Nb).
-
-    +inf where fewer than ``min_common_joints`` joints are confident in both detections.
-    """
+    """Mean symmetric epipolar distance over common joints: (Na, J, 2), (Na, J), (Nb, J, 2), (Nb, J) -> (Na, Nb);
+    inf with fewer than min_common_joints joints confident in both."""
     dist, defined = epipolar_distances(uv_a, uv_b, F)
     common = ok_a[:, None, :] & ok_b[None, :, :] & defined
     count = common.sum(axis=-1)
@@ -91,23 +80,13 @@ def epipolar_affinity(
 
 def unmatched_counts(usable: list[np.ndarray], assignment: np.ndarray) -> Counter[str]:
     """Detections left out of every person, by reason: V arrays (N_v,) bool, (P, V) -> Counter."""
-    reasons: Counter[str] = Counter()
     too_few = sum(int(np.sum(~u)) for u in usable)
     unplaced = sum(int(np.sum(u)) for u in usable) - int(np.sum(np.asarray(assignment) >= 0))
-    if too_few:
-        reasons[TOO_FEW_JOINTS] = too_few
-    if unplaced:
-        reasons[NO_COUNTERPART] = unplaced
-    return reasons
+    return +Counter({TOO_FEW_JOINTS: too_few, NO_COUNTERPART: unplaced})  # +: the zero counts dropped
 
 
 class EpipolarMatcher:
-    """Epipolar-constraint matching: ``matcher(views, rig) -> (P, V)`` detection index per view or -1.
-
-    ``gate`` is in pixels (mean symmetric epipolar distance). Counts of detections left out of every
-    person, by reason, are kept in ``last_unmatched_reasons`` (last frame) and ``unmatched_reasons``
-    (all frames since construction).
-    """
+    """Epipolar-constraint matching: ``matcher(views, rig) -> Matches``; gate in pixels (mean epipolar distance)."""
 
     def __init__(
         self, min_score: float = 0.2, min_common_joints: int = 3, gate: float = 30.0, min_views: int = 2
@@ -116,8 +95,6 @@ class EpipolarMatcher:
             raise ValueError("min_common_joints and min_views must be >= 1 and gate > 0")
         self.min_score, self.min_common_joints = float(min_score), int(min_common_joints)
         self.gate, self.min_views = float(gate), int(min_views)
-        self.last_unmatched_reasons: Counter[str] = Counter()
-        self.unmatched_reasons: Counter[str] = Counter()
 
     def joints(self, views: list[ViewDetections], rig: Rig) -> list[tuple[np.ndarray, np.ndarray]]:
         """Undistorted confident joints of every view: V views -> V (uv (N, J, 2), ok (N, J))."""
@@ -125,8 +102,8 @@ class EpipolarMatcher:
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         return [undistorted_joints(v, cam, self.min_score) for v, cam in zip(views, rig)]
 
-    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
-        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> Matches:
+        """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         joints = self.joints(views, rig)
 
         def cost(a: int, b: int) -> np.ndarray:
@@ -135,6 +112,4 @@ class EpipolarMatcher:
 
         assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views)
         usable = [ok.sum(axis=1) >= self.min_common_joints for _, ok in joints]
-        self.last_unmatched_reasons = unmatched_counts(usable, assignment)
-        self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
-        return assignment
+        return Matches(assignment, unmatched_counts(usable, assignment))

@@ -1,11 +1,9 @@
-"""The paper's feet-assignment matcher (Sec. 3.2): persons matched across views by their feet.
+"""The paper's feet-assignment matcher (Sec. 3.2): persons matched across views by their feet on the ground.
 
-Each detection becomes a pair of feet on the ground plane z = 0: location p = midpoint of the two
-feet and stride v = right - left. Every view pair is scored with the edge cost of Eq. 4, solved as a
-gated linear assignment (Jonker-Volgenant, via scipy) and the accepted edges of all pairs are merged
-into persons, cheaper edges first, never two detections of one view in a person. The location term
-is either the paper's Euclidean distance (metres) or, by default, a Mahalanobis distance (standard
-deviations) under each point's propagated pixel noise (see :mod:`.feet_uncertainty`).
+Each detection's feet give a location p (their midpoint) and a stride v = right - left; every view pair is scored
+by Eq. 4, solved as a gated assignment and merged cheapest edge first (:func:`.merge.match_pairs`). The location term
+is the paper's Euclidean distance (m) or, by default, the Mahalanobis distance under each point's propagated pixel
+noise (:mod:`.feet_uncertainty`).
 """
 
 from __future__ import annotations
@@ -26,6 +24,7 @@ from reconstruction.matching.feet_uncertainty import (
     views_joints_on_planes,
 )
 from reconstruction.matching.merge import match_pairs
+from reconstruction.results import Matches
 
 FOOT_RULES = ("lowest", "mean")
 SPACES = ("ground", "image")
@@ -66,9 +65,8 @@ def features_from_feet(
     cov_left: np.ndarray | None = None,
     cov_right: np.ndarray | None = None,
 ) -> FeetFeatures:
-    """Location and stride from two feet: (N, 2), (N, 2), (N,), (N,) [, reason (N,), covariances
-    (N, 2, 2) x2] -> FeetFeatures. With one foot only, p is that foot and the stride is unknown.
-    """
+    """Location and stride from two feet: (N, 2) x2, (N,) x2 [, reason (N,), covariances (N, 2, 2) x2] ->
+    FeetFeatures; with one foot only, p is that foot and the stride is unknown."""
     has_left = np.asarray(has_left, dtype=bool)
     has_right = np.asarray(has_right, dtype=bool)
     left = np.where(has_left[:, None], np.asarray(left, dtype=np.float64), 0.0)
@@ -79,34 +77,16 @@ def features_from_feet(
     has_p = has_left | has_right
     if reason is None:
         reason = np.where(has_p, "", NO_FOOT_JOINTS)
-    cov = (
-        None if cov_left is None or cov_right is None else location_covariance(cov_left, cov_right, has_left, has_right)
-    )
+    cov = None
+    if cov_left is not None and cov_right is not None:
+        cov = location_covariance(cov_left, cov_right, has_left, has_right)
     return FeetFeatures(left, right, has_left, has_right, p, v, has_p, both, np.asarray(reason, dtype=str), cov)
 
 
-def feet_features(
-    keypoints: np.ndarray,
-    camera: Camera,
-    rule: str = "mean",
-    min_score: float = 0.2,
-    ankle_fallback: bool = True,
-    pixel_sigma: float | None = None,
-    ankle_height_m: float = 0.07,
-    foot_joint_height_m: float = 0.0,
-    sigma_score_power: float = 0.0,
-) -> FeetFeatures:
-    """Ground-plane feet (m) of N detections: keypoints (N, 23, 3) distorted pixels + score -> FeetFeatures.
-
-    A foot is its joints (big toe, small toe, heel) with score > min_score: the one lowest in the
-    image (largest y of the detected pixels) for rule "lowest", the mean of their ground points for
-    "mean"; without any, the ankle if ``ankle_fallback``. A joint's ray is cut with the horizontal
-    plane at its height (``foot_joint_height_m``, ``ankle_height_m``), and the (X, Y) kept. Joints
-    whose point lies behind the camera (above the horizon) are unusable. With ``pixel_sigma`` (px),
-    the covariance of p under that isotropic pixel noise (times score^-sigma_score_power) is propagated too.
-    """
-    settings = (rule, min_score, ankle_fallback, pixel_sigma, ankle_height_m, foot_joint_height_m, sigma_score_power)
-    return views_feet_features([keypoints], [camera], *settings)
+def feet_features(keypoints: np.ndarray, camera: Camera, rule: str = "mean", **settings) -> FeetFeatures:
+    """Ground-plane feet (m) of N detections: keypoints (N, 23, 3) distorted pixels + score -> FeetFeatures; settings:
+    :func:`views_feet_features`'s."""
+    return views_feet_features([keypoints], [camera], rule, **settings)
 
 
 def views_feet_features(
@@ -120,9 +100,12 @@ def views_feet_features(
     foot_joint_height_m: float = 0.0,
     sigma_score_power: float = 0.0,
 ) -> FeetFeatures:
-    """:func:`feet_features` of V views at once: V keypoint arrays (N_v, 23, 3), V cameras -> FeetFeatures of
-    the sum(N_v) detections, view after view. Only the ground points are computed per view (camera); the
-    rest, one row per detection, once for all."""
+    """Ground-plane feet (m) of the detections of V views, view after view: V (N_v, 23, 3), V cameras -> FeetFeatures.
+
+    A foot is its joints (big toe, small toe, heel) scored > min_score, each cut with the horizontal plane at its
+    height (foot_joint_height_m, ankle_height_m; behind the camera: unusable): the lowest in the image (rule
+    "lowest") or the mean of their ground points ("mean"); without any, the ankle if ankle_fallback. With
+    pixel_sigma (px, times score^-sigma_score_power), the covariance of p is propagated too."""
     if rule not in FOOT_RULES:
         raise ValueError(f"foot rule must be one of {FOOT_RULES}, got {rule!r}")
     kps = [np.asarray(k, dtype=np.float64) for k in keypoints]
@@ -165,11 +148,8 @@ def pair_homography(camera_l: Camera, camera_m: Camera) -> np.ndarray:
 
 
 def to_image(features: FeetFeatures, camera: Camera) -> FeetFeatures:
-    """Ground feet (m) into undistorted pixels of ``camera``: FeetFeatures -> FeetFeatures (pixels).
-
-    Mapping view m's ground feet this way equals applying :func:`pair_homography` to its undistorted
-    foot pixels. Feet behind the camera would land on mirrored pixels, so they become missing.
-    """
+    """Ground feet (m) into undistorted pixels of ``camera`` (as :func:`pair_homography` maps them): FeetFeatures ->
+    FeetFeatures; feet behind the camera (mirrored pixels) become missing."""
     feet = np.stack([features.left, features.right], axis=1)
     front = camera.depth(np.concatenate([feet, np.zeros_like(feet[..., :1])], axis=-1)) > 0
     uv = camera.ground_to_image(feet, distort=False)
@@ -188,13 +168,9 @@ def edge_costs(
     metric: str = "euclidean",
     floor_m: float = 0.05,
 ) -> np.ndarray:
-    """Eq. 4 between two views' feet in one space: (Na,), (Nb,) -> cost (Na, Nb), +inf without a location.
-
-    c = k1 |p_a - p_b| + k2 | |v_a| - |v_b| | + k3 |v_a x v_b| / (|v_a| |v_b|). Where either stride is
-    unknown (one foot only) the two stride terms are replaced by ``unknown_stride_cost``; a zero-length
-    stride has no direction, so its direction term is 0. With metric "mahalanobis" |p_a - p_b| is
-    measured in standard deviations of (S_a + S_b + floor_m^2 I), S the features' ``cov``.
-    """
+    """Eq. 4, k1 |p_a - p_b| + k2 | |v_a| - |v_b| | + k3 |v_a x v_b| / (|v_a| |v_b|): (Na,), (Nb,) feet -> (Na, Nb),
+    inf without a location; unknown_stride_cost replaces the stride terms where a stride is unknown. With metric
+    "mahalanobis" |p_a - p_b| is in standard deviations of S_a + S_b + floor_m^2 I."""
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
     if metric == "euclidean":
@@ -222,20 +198,12 @@ def metric_defaults(metric: str) -> tuple[float, float, float, float]:
 
 
 class FeetMatcher:
-    """Feet assignment across views: ``matcher(views, rig) -> (P, V)`` detection index per view or -1.
+    """Feet assignment across views: ``matcher(views, rig) -> Matches``.
 
-    Defaults are for space="ground": location_metric "mahalanobis" compares feet midpoints in standard
-    deviations of their propagated pixel noise (``pixel_sigma`` px, floor ``ground_sigma_floor`` m),
-    so ``gate`` is in standard deviations; "euclidean" is the paper's distance in metres. k2, k3, gate
-    and unknown_stride_cost left None take the metric's defaults (:func:`metric_defaults`).
-    space="image" is the paper's literal variant (Euclidean only): for each pair l < m, both views'
-    feet are compared in undistorted pixels of view l, so ``gate`` and ``unknown_stride_cost`` must
-    then be given in pixels (and k3 scaled to pixels). Counts of detections left out of every person,
-    by reason, are kept in ``last_unmatched_reasons`` (last frame) and ``unmatched_reasons`` (all frames).
-    ``margin`` > 0 (in the cost's units) keeps only the distinct pairs of each view pair: every
-    swap of partners or free partner (:func:`~reconstruction.matching.merge.swap_regret`) must cost
-    at least that much more; 0 keeps every gated pair, as the paper does.
-    """
+    location_metric "mahalanobis" (space="ground"'s default) measures in SDs of the propagated pixel noise
+    (pixel_sigma px, floor ground_sigma_floor m), "euclidean" in metres; k2, k3, gate and unknown_stride_cost left
+    None take the metric's defaults. space="image" (the paper's literal variant) compares both views' feet in pixels
+    of view l (gate, unknown_stride_cost in pixels). margin > 0 keeps only distinct pairs (:func:`.merge.solve_pair`)."""
 
     def __init__(
         self,
@@ -277,8 +245,6 @@ class FeetMatcher:
         self.pixel_sigma, self.ground_sigma_floor = float(pixel_sigma), float(ground_sigma_floor)
         self.ankle_height_m, self.foot_joint_height_m = float(ankle_height_m), float(foot_joint_height_m)
         self.sigma_score_power, self.margin = float(sigma_score_power), float(margin)
-        self.last_unmatched_reasons: Counter[str] = Counter()
-        self.unmatched_reasons: Counter[str] = Counter()
 
     def features(self, views: list[ViewDetections], rig: Rig) -> list[FeetFeatures]:
         """Ground-plane feet of every view: V views -> V FeetFeatures."""
@@ -289,17 +255,9 @@ class FeetMatcher:
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         sigma = self.pixel_sigma if self.location_metric == "mahalanobis" else None
-        return views_feet_features(
-            [v.keypoints for v in views],
-            list(rig),
-            self.foot_rule,
-            self.min_score,
-            self.ankle_fallback,
-            sigma,
-            self.ankle_height_m,
-            self.foot_joint_height_m,
-            self.sigma_score_power,
-        )
+        settings = (self.min_score, self.ankle_fallback, sigma, self.ankle_height_m, self.foot_joint_height_m)
+        keypoints = [v.keypoints for v in views]
+        return views_feet_features(keypoints, list(rig), self.foot_rule, *settings, self.sigma_score_power)
 
     def pair_cost(self, fa: FeetFeatures, fb: FeetFeatures, camera_a: Camera) -> np.ndarray:
         """Edge costs of a view pair (a < b) in the configured space: (Na,), (Nb,) -> (Na, Nb)."""
@@ -309,20 +267,13 @@ class FeetMatcher:
             fa, fb, self.k1, self.k2, self.k3, self.unknown_stride_cost, self.location_metric, self.ground_sigma_floor
         )
 
-    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
-        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> Matches:
+        """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         feats = self.features(views, rig)
-        assignment = match_pairs(
-            lambda a, b: self.pair_cost(feats[a], feats[b], rig[a]),
-            [len(v) for v in views],
-            self.gate,
-            self.min_views,
-            self.margin,
-        )
+        cost = lambda a, b: self.pair_cost(feats[a], feats[b], rig[a])  # noqa: E731
+        assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views, self.margin)
         reasons = Counter(str(r) for f in feats for r in f.reason if r)
         unplaced = sum(int(f.has_p.sum()) for f in feats) - int(np.sum(assignment >= 0))
         if unplaced:
             reasons[NO_COUNTERPART] = unplaced
-        self.last_unmatched_reasons = reasons
-        self.unmatched_reasons = self.unmatched_reasons + reasons
-        return assignment
+        return Matches(assignment, reasons)

@@ -1,22 +1,10 @@
 """Feet assignment with epipolar evidence from the other joints (``matching=feet_epipolar``).
 
-The feet cost (:mod:`.feet`, Mahalanobis distance of the feet midpoints on the ground plane, in
-standard deviations) places two detections at the same spot of the floor; the epipolar cost
-(:mod:`.epipolar`, mean symmetric distance of the common joints to each other's epipolar lines, in
-pixels) checks that the rest of the body agrees. In a crowd each alone leaves ambiguities: feet are
-often hidden and their ground position is uncertain by metres along a far camera's line of sight;
-the epipolar line of a joint passes through many people. The edge cost of a detection pair is
-
-    c = sqrt(d_feet^2 + (e / epipolar_sigma_px)^2)
-
-(both terms in standard-deviation units, added in quadrature as independent evidence), solved per view
-pair as a gated Jonker-Volgenant assignment and merged over all pairs cheapest first, exactly like the
-feet matcher. A pair needs at least ``min_common_joints`` joints confident in both detections. When
-either detection has no usable foot, ``missing_feet_cost`` (SD) stands in for d_feet, so people whose
-feet are hidden are still matched by the rest of their body, at the price of an average feet term;
-``missing_feet_cost=None`` (the default) never matches them: in a crowd, bodies matched without their
-feet were wrong often enough to lower precision by 10-35 points in benchmarks/matching.py, while on
-Shelf (4 people) missing_feet_cost=2 gains 0.4 PCP (configs/experiment/shelf.yaml).
+The feet cost (:mod:`.feet`, Mahalanobis, SD) places two detections at one spot of the floor, the epipolar cost
+(:mod:`.epipolar`, px) checks that the rest of the body agrees: c = sqrt(d_feet^2 + (e / epipolar_sigma_px)^2),
+solved and merged as the feet matcher. A pair needs min_common_joints joints confident in both. Without a usable
+foot, missing_feet_cost (SD) stands in for d_feet; None (the default) never matches such a detection, since bodies
+matched without their feet were wrong often enough in crowds (benchmarks/matching.py).
 """
 
 from __future__ import annotations
@@ -30,6 +18,7 @@ from data.multiview import ViewDetections
 from reconstruction.matching.epipolar import TOO_FEW_JOINTS, epipolar_affinity, fundamental_matrix, undistorted_joints
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import match_pairs
+from reconstruction.results import Matches
 
 
 def combined_cost(
@@ -39,10 +28,8 @@ def combined_cost(
     missing_feet: np.ndarray | None = None,
     missing_feet_cost: float | None = None,
 ) -> np.ndarray:
-    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), +inf where either is.
-
-    Where ``missing_feet`` (Na, Nb) is True and ``missing_feet_cost`` is given, that cost replaces feet.
-    """
+    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), inf where either is; where
+    missing_feet (Na, Nb) and missing_feet_cost is given, that cost replaces feet."""
     if missing_feet is not None and missing_feet_cost is not None:
         feet_cost = np.where(missing_feet, missing_feet_cost, feet_cost)
     with np.errstate(invalid="ignore"):
@@ -51,13 +38,8 @@ def combined_cost(
 
 
 class FeetEpipolarMatcher:
-    """Feet + epipolar matching: ``matcher(views, rig) -> (P, V)`` detection index per view or -1.
-
-    ``feet`` holds the FeetMatcher keyword arguments (Mahalanobis location metric; its own gate is
-    not used); ``gate`` applies to the combined cost in standard deviations and ``margin`` (SD, 0 =
-    off) keeps only distinct pairs, as in :class:`FeetMatcher`. Counts of detections left
-    out of every person, by reason, are kept in ``last_unmatched_reasons`` and ``unmatched_reasons``.
-    """
+    """Feet + epipolar matching: ``matcher(views, rig) -> Matches``; feet: FeetMatcher keys (Mahalanobis; its gate
+    unused); gate and margin (0: off) on the combined cost in SD, as :class:`FeetMatcher`'s."""
 
     def __init__(
         self,
@@ -84,13 +66,8 @@ class FeetEpipolarMatcher:
         self.missing_feet_cost = None if missing_feet_cost is None else float(missing_feet_cost)
         self.feet = FeetMatcher(min_views=min_views, **feet)
         self.epipolar_sigma_px, self.gate, self.margin = float(epipolar_sigma_px), float(gate), float(margin)
-        self.min_score, self.min_common_joints, self.min_views = (
-            float(min_score),
-            int(min_common_joints),
-            int(min_views),
-        )
-        self.last_unmatched_reasons: Counter[str] = Counter()
-        self.unmatched_reasons: Counter[str] = Counter()
+        self.min_score, self.min_common_joints = float(min_score), int(min_common_joints)
+        self.min_views = int(min_views)
 
     def pair_costs(self, views: list[ViewDetections], rig: Rig):
         """The pair cost function of one frame: V views -> ((a, b) -> (N_a, N_b) combined cost), feet, joints."""
@@ -105,8 +82,8 @@ class FeetEpipolarMatcher:
 
         return cost, feats, joints
 
-    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
-        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> Matches:
+        """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         cost, feats, joints = self.pair_costs(views, rig)
         assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views, self.margin)
         reasons: Counter[str] = Counter()
@@ -118,6 +95,4 @@ class FeetEpipolarMatcher:
             reasons[TOO_FEW_JOINTS] += int(np.sum(~no_feet & ~enough))
             usable += int(np.sum(~no_feet & enough))
         reasons[NO_COUNTERPART] = usable - int(np.sum(assignment >= 0))
-        self.last_unmatched_reasons = +reasons
-        self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
-        return assignment
+        return Matches(assignment, +reasons)

@@ -1,7 +1,5 @@
 """Compiled loops of the feet features (feet.py, feet_uncertainty.py): every foot joint of a frame's detections cut
-with its horizontal plane, its ground covariance, and each foot's point. Same operations in the same order as the
-numpy formulas they replace, without their (N, K, 3, 3) temporaries: bit-identical results, but for distorted
-cameras' covariances, where numpy's 2x2 matmul with the undistortion's Jacobian rounds differently (1e-15 relative)."""
+with its horizontal plane, its ground covariance, and each foot's point, without (N, K, 3, 3) temporaries."""
 
 from __future__ import annotations
 
@@ -66,7 +64,7 @@ def foot_points(ground, cov, depth, y, scored, lowest, ankle_fallback, point, po
             else:
                 lowest_pick = lowest
             ok[s, n] = count > 0
-            if count == 0:  # element-wise: array assignments compile numba's broadcasting (seconds)
+            if count == 0:  # element-wise: array assignments would compile numba's broadcasting
                 point[s, n, 0], point[s, n, 1] = 0.0, 0.0
                 point_cov[s, n, 0, 0], point_cov[s, n, 0, 1], point_cov[s, n, 1, 0], point_cov[s, n, 1, 1] = 0, 0, 0, 0
             elif lowest_pick:

@@ -1,14 +1,9 @@
 """Uncertainty of the feet matcher's ground points, and its Mahalanobis location cost.
 
-A foot joint seen at pixel uv meets the horizontal plane z = h at the point the homography of that
-plane gives (``K [r1 r2 h r3 + t]`` maps plane (X, Y) to undistorted pixels). An isotropic image
-noise ``sigma_px^2 I`` becomes the 2x2 ground covariance ``sigma_px^2 J J^T``, J the Jacobian of
-the pixel -> plane mapping at that point: tiny for a near camera, growing with the square of the
-distance for a far, low one. ``sigma_px`` should describe the 2D detector's keypoint error (in
-pixels of the original, distorted image); the Jacobian of the undistortion is included by central
-differences, so the covariance holds in distorted pixels. The location cost between two views is
-the distance in standard deviations ``sqrt(dp^T (S_a + S_b + s0^2 I)^-1 dp)``, s0 a floor in metres
-for what the model leaves out (foot size, joints above the ground, calibration).
+A foot joint's pixel meets the plane z = h at the point of that plane's homography (``K [r1 r2 h r3 + t]``); an
+isotropic pixel noise sigma_px^2 I (distorted pixels: the undistortion's Jacobian by central differences) becomes the
+ground covariance sigma_px^2 J J^T, J the Jacobian of pixel -> plane. The location cost is sqrt(dp^T (S_a + S_b +
+s0^2 I)^-1 dp), s0 a floor (m) for what the model leaves out (foot size, joints above the ground, calibration).
 """
 
 from __future__ import annotations
@@ -25,8 +20,7 @@ _TINY = 1e-12  # relative size under which a homography's H[2, 2] counts as 0
 
 
 def normalized(H: np.ndarray) -> np.ndarray:
-    """A homography scaled to H[2, 2] = 1, or to unit norm where H[2, 2] is 0 (the plane's origin on the
-    camera's principal plane): (3, 3) -> (3, 3)."""
+    """A homography scaled to H[2, 2] = 1, or to unit norm where H[2, 2] is 0: (3, 3) -> (3, 3)."""
     scale = H[2, 2] if abs(H[2, 2]) > _TINY * np.abs(H).max() else np.linalg.norm(H)
     return H / scale
 
@@ -38,8 +32,8 @@ def plane_to_image_homography(camera: Camera, height: float = 0.0) -> np.ndarray
 
 
 def image_to_plane_homography(camera: Camera, height: float = 0.0) -> np.ndarray | None:
-    """Homography from undistorted pixels to (X, Y) on the plane z = height: (3, 3); None when the camera's
-    centre lies on that plane (every ray meets it at infinity or everywhere: no mapping)."""
+    """Homography from undistorted pixels to (X, Y) on the plane z = height: (3, 3); None when the camera's centre
+    lies on that plane (no mapping)."""
     try:
         H = np.linalg.inv(plane_to_image_homography(camera, height))
     except np.linalg.LinAlgError:
@@ -54,15 +48,6 @@ def cached_image_to_plane(camera: Camera, height: float) -> np.ndarray | None:
     if H is not None:
         H.flags.writeable = False
     return H
-
-
-def homography_jacobian(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Jacobian d(H uv)/d(uv) of a homography at points: (3, 3), (..., 2) -> (..., 2, 2)."""
-    uv = np.asarray(uv, dtype=np.float64)
-    w = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1) @ np.asarray(H).T
-    x = w[..., :2] / w[..., 2:3]
-    J = H[:2, :2] - x[..., :, None] * H[2, :2]  # (..., 2, 2): (H_top - x h3^T) / w
-    return J / w[..., 2, None, None]
 
 
 def undistortion_jacobian(camera: Camera, uv: np.ndarray) -> np.ndarray:
@@ -82,10 +67,8 @@ def undistortion_jacobian(camera: Camera, uv: np.ndarray) -> np.ndarray:
 def joints_on_planes(
     camera: Camera, uv: np.ndarray, heights: np.ndarray, sigma_px: float | np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Distorted pixels (N, K, 2) of joints at heights (K,) m -> plane (X, Y) (N, K, 2), depth (N, K)
-    of that 3D point in the camera, and the (X, Y) covariance (N, K, 2, 2) if sigma_px (scalar or
-    (N, K) px) is given. Joints at the height of the camera's centre get NaN (no point on that plane);
-    callers treat non-finite points as unusable."""
+    """Distorted pixels (N, K, 2) of joints at heights (K,) m -> plane (X, Y) (N, K, 2) (NaN: none), depth (N, K) in
+    the camera, and with sigma_px (scalar or (N, K) px) the (X, Y) covariance (N, K, 2, 2)."""
     uv = np.asarray(uv, dtype=np.float64)
     return views_joints_on_planes([camera], [len(uv)], uv, heights, sigma_px)
 
@@ -98,8 +81,7 @@ def views_joints_on_planes(
     sigma_px: float | np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """:func:`joints_on_planes` of the detections of V views stacked in view order (counts[v] rows of view v):
-    uv (N, K, 2) -> (N, K, 2), (N, K), (N, K, 2, 2) or None. One pass over all views: only the undistortion
-    and its Jacobian are per view (distorted cameras)."""
+    uv (N, K, 2) -> (N, K, 2), (N, K), (N, K, 2, 2) or None."""
     uv = np.asarray(uv, dtype=np.float64)
     heights = np.broadcast_to(np.asarray(heights, dtype=np.float64), uv.shape[1:2])
     levels, level = np.unique(heights, return_inverse=True)
@@ -110,13 +92,16 @@ def views_joints_on_planes(
             Hk = cached_image_to_plane(camera, float(h))
             if Hk is not None:
                 H[v, k] = Hk
-    und = _undistorted(cameras, view, uv)
+    und = _per_view(cameras, view, uv, lambda camera, rows: camera.undistort_points(uv[rows]), uv.copy())
     axis = np.array([c.R[2] for c in cameras], dtype=np.float64).reshape(-1, 3)  # optical axes: (V, 3)
     offset = np.array([c.t[2] for c in cameras], dtype=np.float64)
     xy, depth = np.empty(uv.shape), np.empty(uv.shape[:2])
     var = np.zeros((0, 0)) if sigma_px is None else np.broadcast_to(np.asarray(sigma_px, np.float64) ** 2, uv.shape[:2])
     cov = np.empty(uv.shape + (2,)) if sigma_px is not None else np.zeros((0, 0, 2, 2))
-    und_jac = _undistortion_jacobians(cameras, view, uv) if sigma_px is not None else np.zeros((0, 0, 2, 2))
+    und_jac = np.zeros((0, 0, 2, 2))  # empty: no distortion, the identity
+    if sigma_px is not None and any(c.has_distortion for c in cameras):
+        eye = np.broadcast_to(np.eye(2), uv.shape[:2] + (2, 2)).copy()
+        und_jac = _per_view(cameras, view, uv, lambda camera, rows: undistortion_jacobian(camera, uv[rows]), eye)
     plane_points(
         und, H, view, level.astype(np.int64), heights.astype(np.float64), axis, offset,
         np.ascontiguousarray(var), und_jac, xy, depth, cov,
@@ -124,26 +109,12 @@ def views_joints_on_planes(
     return xy, depth, (None if sigma_px is None else cov)
 
 
-def _undistorted(cameras: list[Camera], view: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Undistorted pixels of the stacked detections, view by view where a camera has distortion: (N, K, 2)."""
-    und = uv.copy()
+def _per_view(cameras: list[Camera], view: np.ndarray, uv: np.ndarray, of, out: np.ndarray) -> np.ndarray:
+    """out with the rows of each distorted camera's view replaced by of(camera, rows) (the stacked detections)."""
     for v, camera in enumerate(cameras):
         if camera.has_distortion:
             rows = view == v
-            und[rows] = camera.undistort_points(uv[rows])
-    return und
-
-
-def _undistortion_jacobians(cameras: list[Camera], view: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """d(undistorted)/d(distorted) of the stacked detections (N, K, 2, 2) where a view has distortion; an empty
-    (0, 0, 2, 2) array when none has (the identity: nothing to multiply)."""
-    if not any(c.has_distortion for c in cameras):
-        return np.zeros((0, 0, 2, 2))
-    out = np.broadcast_to(np.eye(2), uv.shape[:2] + (2, 2)).copy()
-    for v, camera in enumerate(cameras):
-        if camera.has_distortion:
-            rows = view == v
-            out[rows] = undistortion_jacobian(camera, uv[rows])
+            out[rows] = of(camera, rows)
     return out
 
 

@@ -1,44 +1,17 @@
-"""The RANSAC baseline of the paper's Table 6: persons matched across views by geometric consensus.
+"""The RANSAC baseline of the paper's Table 6 (``matching=ransac``): persons matched across views by geometric consensus.
 
-What it does, for every view pair (a < b) and every candidate pair of detections (i in view a,
-j in view b), all candidate pairs at once; C = the joints confident in both (score >= min_score);
-with fewer than ``min_common_joints`` of them the pair costs +inf:
-
-1. Triangulation. Every common joint k is triangulated from its two viewing rays (closed-form
-   two-view midpoint method on undistorted pixels), which gives its depth lam_a[k] from camera a and
-   lam_b[k] from camera b. Depths are measured along each camera's optical axis made horizontal
-   (:func:`depth_axis`): an upright body has one such depth, while its depth along a tilted axis
-   varies from head to feet.
-2. Hypotheses. ``iterations`` minimal samples of ``sample_size`` joints of C are drawn: sample t is
-   the first ``sample_size`` joints of C in the t-th of ``iterations`` random orders of the 23 joints
-   from ``np.random.default_rng(seed)``. The same orders serve every candidate pair and view pair and
-   are redrawn identically on every call, so the result is deterministic for a seed and does not
-   depend on the detection order nor on earlier frames. A hypothesis says "i and j are one person at
-   depth D_a = mean lam_a(sample) from camera a and D_b = mean lam_b(sample) from camera b": the body
-   is approximated by a vertical plane at that depth facing each camera (a plane-induced homography,
-   with one degree of freedom once the cameras are calibrated). A depth <= 0 or undefined (parallel
-   rays) makes the hypothesis void.
-3. Consensus. Every common joint is transferred a -> b (back-projected from view a at depth D_a and
-   projected into view b) and b -> a (at D_b); its error e_k is the mean of the two pixel distances
-   to the joint detected there (+inf when the transfer lands behind the camera). A joint is an inlier
-   when e_k < ``inlier_px``. A transfer error is zero only for a joint both on its epipolar line and
-   at the hypothesised depth, so the consensus tests epipolar geometry and one body depth together.
-4. Score. Hypotheses are scored MSAC-style (Torr and Zisserman 2000, the truncated-loss RANSAC):
-   loss = mean over C of min(e_k / inlier_px, 1), i.e. an outlier costs 1 and an inlier its normalised
-   error; the cost of (i, j) is the loss of the best hypothesis, in [0, 1] and never below
-   1 - (its inlier fraction). A void hypothesis costs 1. There is no refit on the inliers.
-5. Assignment. Each view pair is solved as a gated linear assignment (``gate`` on the cost; a cost
-   <= 0.5 needs at least half of the common joints to be inliers) and all pairs' edges are merged
-   into persons, cheaper edges first, never two detections of one view in a person, as in the feet
-   matcher.
-
-Cost: (Na, Nb, iterations, 23) float32 arrays per view pair; about 0.15 s per frame for 20 people
-and 0.5-0.8 s for 50 people in 5 views with the defaults, on one CPU core.
+For every candidate pair (i in view a, j in view b) with >= ``min_common_joints`` joints confident in both (the
+common joints C): each common joint is triangulated (two-view midpoint), giving its depths lam_a, lam_b along each
+camera's horizontal optical axis (:func:`depth_axis`: an upright body has one such depth). ``iterations`` minimal
+samples of ``sample_size`` joints of C (the same random joint orders from ``seed`` for every pair and call, so the
+result is deterministic) each hypothesise the body as a vertical plane at depth mean lam_a(sample) from camera a and
+mean lam_b(sample) from b. Every common joint is transferred a -> b and b -> a through that plane; its error is the
+mean pixel distance to the detected joint (inf behind the camera). The pair's cost is the best hypothesis' MSAC loss
+(Torr and Zisserman 2000), mean over C of min(error / inlier_px, 1), in [0, 1] (1 for a void hypothesis); each view
+pair is a gated assignment and the edges are merged cheapest first (:func:`~reconstruction.matching.merge.match_pairs`).
 """
 
 from __future__ import annotations
-
-from collections import Counter
 
 import numpy as np
 
@@ -47,15 +20,12 @@ from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from reconstruction.matching.epipolar import undistorted_joints, unmatched_counts
 from reconstruction.matching.merge import match_pairs
+from reconstruction.results import Matches
 
 
 def depth_axis(camera: Camera) -> np.ndarray:
-    """The direction along which the camera's hypothesised depths are measured: world (3,).
-
-    The optical axis made horizontal (people stand upright, so their joints share a horizontal
-    distance to an oblique camera, not a depth along its tilted axis); the optical axis itself for a
-    camera looking within about 6 degrees of straight down or up.
-    """
+    """The optical axis made horizontal (an upright body has one depth along it), or itself for a camera looking
+    within ~6 degrees of straight down or up: world (3,)."""
     axis = camera.R[2]
     flat = np.array([axis[0], axis[1], 0.0])
     norm = np.linalg.norm(flat)
@@ -63,10 +33,8 @@ def depth_axis(camera: Camera) -> np.ndarray:
 
 
 def world_rays(uv: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """Rays of undistorted pixels, unit depth along :func:`depth_axis`: (..., 2) -> world (..., 3), ok (...,).
-
-    ``ok`` is False for a ray that does not advance along the depth axis (its ray is then 0).
-    """
+    """Rays of undistorted pixels, unit depth along :func:`depth_axis`: (..., 2) -> world (..., 3), ok (...,) (False,
+    ray 0, where a ray does not advance along the axis)."""
     homog = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
     rays = homog @ (camera.R.T @ np.linalg.inv(camera.K)).T
     along = rays @ depth_axis(camera)
@@ -77,10 +45,8 @@ def world_rays(uv: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 def midpoint_depths(
     rays_a: np.ndarray, rays_b: np.ndarray, center_a: np.ndarray, center_b: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Depths of the closest points of two rays: (Na, J, 3), (Nb, J, 3), (3,), (3,) -> lam_a, lam_b (Na, Nb, J).
-
-    NaN where the rays are (nearly) parallel.
-    """
+    """Depths of the closest points of two rays: (Na, J, 3), (Nb, J, 3), (3,), (3,) -> lam_a, lam_b (Na, Nb, J), NaN
+    where the rays are (nearly) parallel."""
     w = center_a - center_b
     aa = np.sum(rays_a**2, axis=-1)[:, None]  # (Na, 1, J)
     cc = np.sum(rays_b**2, axis=-1)[None]  # (1, Nb, J)
@@ -107,13 +73,8 @@ def sample_masks(common: np.ndarray, keys: np.ndarray, sample_size: int) -> np.n
 def transfer_errors(
     depth: np.ndarray, rays_from: np.ndarray, center_from: np.ndarray, camera_to: Camera, uv_to: np.ndarray
 ) -> np.ndarray:
-    """Pixel error of joints moved along their rays to a depth and projected into another camera.
-
-    depth (Na, Nb, T); rays_from (world, unit depth) broadcastable to (Na, Nb, 1, J, 3) and uv_to (the
-    joints detected there) to (Na, Nb, 1, J, 2) -> (Na, Nb, T, J), +inf where the moved point is
-    behind ``camera_to``. Projection is linear in the depth, so it runs on (Na, Nb, T, J) planes, in
-    float32 (pixel errors good to about 1e-3 px) because this is the matcher's inner loop.
-    """
+    """Pixel error of joints moved along rays_from (..., 1, J, 3) to depth (Na, Nb, T) and projected into camera_to
+    against uv_to (..., 1, J, 2) -> (Na, Nb, T, J), inf behind it; float32 (errors good to ~1e-3 px)."""
     P = camera_to.P
     origin = (P @ np.append(center_from, 1.0)).astype(np.float32)  # image of the ray origin (3,)
     q = (rays_from @ P[:, :3].T).astype(np.float32)  # image of the ray direction
@@ -128,12 +89,8 @@ def transfer_errors(
 
 
 class RansacMatcher:
-    """Geometric-consensus (RANSAC / MSAC) matching: ``matcher(views, rig) -> (P, V)``, -1 where absent.
-
-    See the module docstring for the exact procedure. ``inlier_px`` is in pixels, ``gate`` is on the
-    MSAC cost in [0, 1]. Counts of detections left out of every person, by reason, are kept in
-    ``last_unmatched_reasons`` (last frame) and ``unmatched_reasons`` (all frames since construction).
-    """
+    """Geometric-consensus (RANSAC / MSAC) matching: ``matcher(views, rig) -> Matches``; inlier_px in pixels, gate
+    on the MSAC cost in [0, 1]."""
 
     def __init__(
         self,
@@ -156,8 +113,6 @@ class RansacMatcher:
         self.sample_size, self.iterations = int(sample_size), int(iterations)
         self.inlier_px, self.gate = float(inlier_px), float(gate)
         self.seed, self.min_views = int(seed), int(min_views)
-        self.last_unmatched_reasons: Counter[str] = Counter()
-        self.unmatched_reasons: Counter[str] = Counter()
 
     def sample_keys(self, num_joints: int) -> np.ndarray:
         """The random joint orders of one call, as sort keys: -> (iterations, J)."""
@@ -190,8 +145,8 @@ class RansacMatcher:
         best = loss.min(axis=-1, initial=1.0).astype(np.float64)
         return np.where(count >= self.min_common_joints, best, np.inf)
 
-    def __call__(self, views: list[ViewDetections], rig: Rig) -> np.ndarray:
-        """Assignment of one frame: V views -> (P, V) detection indices, -1 where absent."""
+    def __call__(self, views: list[ViewDetections], rig: Rig) -> Matches:
+        """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         if len(views) != len(rig):
             raise ValueError(f"{len(views)} views of detections for a rig of {len(rig)} cameras")
         joints = [undistorted_joints(v, cam, self.min_score) for v, cam in zip(views, rig)]
@@ -202,6 +157,4 @@ class RansacMatcher:
 
         assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views)
         usable = [ok.sum(axis=1) >= self.min_common_joints for _, ok in joints]
-        self.last_unmatched_reasons = unmatched_counts(usable, assignment)
-        self.unmatched_reasons = self.unmatched_reasons + self.last_unmatched_reasons
-        return assignment
+        return Matches(assignment, unmatched_counts(usable, assignment))

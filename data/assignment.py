@@ -1,0 +1,200 @@
+"""Assignment solvers shared by the matchers, the tracker and the evaluation (dense problems: scipy's
+``linear_sum_assignment``): a person-label grouping and the gated sparse assignment of view pairs.
+
+:func:`solve_sparse_pairs` solves a gated problem (the pairs not allowed at a big finite cost M, as
+``reconstruction.matching.merge.solve_pair``) one connected component of allowed pairs at a time: the objective
+sum(cost - M) splits over the components, and a crowd's view pair has hundreds of small ones, so this is much
+cheaper than one dense (Na, Nb) problem. Each component is solved over its allowed entries alone by the shortest
+augmenting paths of scipy's solver; where the optimum is unique (ties of float costs aside) the result is scipy's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+def assignment_from_labels(labels: list[np.ndarray], min_views: int = 2) -> np.ndarray:
+    """Group detections by person label: V arrays (N_v,) int (-1 = none) -> (P, V) detection index or -1.
+
+    Persons are ordered by label; one seen in fewer than ``min_views`` views is dropped; a label twice in a view
+    is an error."""
+    V = len(labels)
+    people: dict[int, np.ndarray] = {}
+    for v, lab in enumerate(labels):
+        for det, person in enumerate(np.asarray(lab, dtype=np.int64).tolist()):
+            if person < 0:
+                continue
+            row = people.get(person)
+            if row is None:  # not setdefault: that would build a row for every detection
+                row = people[person] = np.full(V, -1, dtype=np.int64)
+            if row[v] >= 0:
+                raise ValueError(f"label {person} occurs twice in view {v} (detections {row[v]} and {det})")
+            row[v] = det
+    rows = [people[k] for k in sorted(people) if np.sum(people[k] >= 0) >= min_views]
+    return np.stack(rows) if rows else np.zeros((0, V), dtype=np.int64)
+
+
+@njit(cache=True, error_model="numpy")
+def find_root(parent: np.ndarray, i: int) -> int:
+    """Root of node i in a union-find forest parent (N,), with path halving."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True, error_model="numpy")
+def _flip_path(cur, sink, path, col4row, row4col) -> None:
+    """Augment along the shortest path from free row cur to free column sink (path[j]: the row before column j)."""
+    j = sink
+    while True:
+        i = path[j]
+        row4col[j] = i
+        col4row[i], j = j, col4row[i]
+        if i == cur:
+            break
+
+
+@njit(cache=True, error_model="numpy")
+def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
+    """Assign one component, entries ks (rows ascending) -> keep[ks]; row_at (na,), col_at (nb,): -1 scratch.
+
+    Each row has its allowed entries and a column of its own at cost big (matched to nothing): the dense
+    problem's optimum. Solved by a row reduction, then shortest augmenting paths (:func:`_sparse_augment`)."""
+    E, R, C = len(ks), 0, 0
+    cols = np.empty(E, dtype=np.int64)
+    ptr = np.zeros(E + 1, dtype=np.int64)  # row r's entries: ks[ptr[r]:ptr[r + 1]]
+    for t in range(E):
+        k = ks[t]
+        if row_at[li[k]] < 0:
+            row_at[li[k]] = R
+            R += 1
+        if col_at[lj[k]] < 0:
+            col_at[lj[k]] = C
+            C += 1
+        cols[t] = col_at[lj[k]]
+        ptr[row_at[li[k]] + 1] = t + 1
+    n = C + R  # the real columns, then each row's own
+    u, v = np.empty(R), np.zeros(n)
+    col4row, row4col = np.full(R, -1), np.full(n, -1)
+    for r in range(R):  # row reduction: u_r = its cheapest entry, v = 0 (feasible; free columns keep v = 0)
+        best, arg = big, C + r
+        for t in range(ptr[r], ptr[r + 1]):
+            if cost[ks[t]] < best:
+                best, arg = cost[ks[t]], cols[t]
+        u[r] = best
+        if row4col[arg] == -1:  # the row's cheapest column, unless an earlier row has it: a tight pair
+            col4row[r], row4col[arg] = arg, r
+    work = (np.full(n, np.inf), np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.bool_), np.empty(n, dtype=np.int64))
+    work = (*work, np.empty(R, dtype=np.int64))
+    for r in range(R):
+        if col4row[r] == -1:
+            _sparse_augment(r, ptr, cols, ks, cost, big, C, u, v, col4row, row4col, work)
+    for r in range(R):
+        for t in range(ptr[r], ptr[r + 1]):
+            if cols[t] == col4row[r]:
+                keep[ks[t]] = True
+    for k in ks:
+        row_at[li[k]], col_at[lj[k]] = -1, -1
+
+
+@njit(cache=True, error_model="numpy")
+def _sparse_augment(cur, ptr, cols, ks, cost, big, C, u, v, col4row, row4col, work) -> None:
+    """Assign free row cur along the shortest augmenting path (scipy's augmenting_path), relaxing only the columns
+    reached through the entries (row r's and its own column C + r at big); duals u (R,), v (n,) updated in place.
+    work: spc (n,) of inf, path (n,), scanned (n,) of False (both left as found), seen (n,), rows (R,) scratch."""
+    spc, path, scanned, seen, rows = work
+    n_rows, n_seen, n_scanned = 0, 0, 0  # seen[:n_seen]: reached, not scanned; then scanned from the end
+    min_val, i, sink = 0.0, cur, -1
+    while sink == -1:
+        rows[n_rows] = i
+        n_rows += 1
+        for t in range(ptr[i], ptr[i + 1] + 1):
+            j, c = (cols[t], cost[ks[t]]) if t < ptr[i + 1] else (C + i, big)
+            if scanned[j]:
+                continue
+            r = min_val + c - u[i] - v[j]
+            if r < spc[j]:
+                if spc[j] == np.inf:
+                    seen[n_seen] = j
+                    n_seen += 1
+                path[j], spc[j] = i, r
+        index, lowest = -1, np.inf
+        for s in range(n_seen):  # the lowest reached column, a free one among equals (as scipy)
+            j = seen[s]
+            if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
+                lowest, index = spc[j], s
+        min_val, j = lowest, seen[index]  # the row's own column is always reached: index >= 0
+        n_seen -= 1
+        seen[index] = seen[n_seen]
+        n_scanned += 1
+        seen[len(seen) - n_scanned] = j
+        scanned[j] = True
+        if row4col[j] == -1:
+            sink = j
+        else:
+            i = row4col[j]
+    u[cur] += min_val  # the dual variables, then the augmentation
+    for s in range(1, n_rows):
+        u[rows[s]] += min_val - spc[col4row[rows[s]]]
+    for s in range(len(seen) - n_scanned, len(seen)):
+        v[seen[s]] -= min_val - spc[seen[s]]
+    _flip_path(cur, sink, path, col4row, row4col)
+    for s in range(n_seen):
+        spc[seen[s]] = np.inf
+    for s in range(len(seen) - n_scanned, len(seen)):
+        spc[seen[s]], scanned[seen[s]] = np.inf, False
+
+
+@njit(cache=True, error_model="numpy")
+def _components(s: int, e: int, na: int, nb: int, li, lj) -> tuple:
+    """The entries s:e of one view pair grouped by connected component: -> start (na + nb + 1,), order (e - s,)
+    (component r's entries order[start[r]:start[r + 1]], rows ascending)."""
+    parent = np.arange(na + nb)
+    for k in range(s, e):
+        a, b = find_root(parent, li[k]), find_root(parent, na + lj[k])
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    start = np.zeros(na + nb + 1, dtype=np.int64)  # counting sort on the root, stable: rows stay ascending
+    for k in range(s, e):
+        start[find_root(parent, li[k]) + 1] += 1
+    for r in range(na + nb):
+        start[r + 1] += start[r]
+    fill, order = start[:-1].copy(), np.empty(e - s, dtype=np.int64)
+    for k in range(s, e):
+        r = find_root(parent, li[k])
+        order[fill[r]] = k
+        fill[r] += 1
+    return start, order
+
+
+@njit(cache=True, error_model="numpy")
+def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj: np.ndarray, cost: np.ndarray):
+    """Gated assignment of view pairs given by their allowed entries -> accepted (E,) bool.
+
+    Pair p has sizes[p] = (na, nb) detections and the entries starts[p]:starts[p + 1] of li, lj (local row,
+    column; sorted by row) and cost (finite); entries not listed are not allowed (solve_pair's big cost)."""
+    keep = np.zeros(len(cost), dtype=np.bool_)
+    for p in range(len(starts) - 1):
+        s, e = starts[p], starts[p + 1]
+        na, nb = sizes[p, 0], sizes[p, 1]
+        largest = 0.0
+        for k in range(s, e):
+            largest = max(largest, abs(cost[k]))
+        big = (min(na, nb) + 1) * largest + 1.0
+        start, order = _components(s, e, na, nb, li, lj)
+        row_at, col_at = np.full(na, -1), np.full(nb, -1)
+        for r in range(na + nb):
+            m = start[r + 1] - start[r]
+            if m == 1:  # one allowed pair alone: always taken (its cost - big < 0)
+                keep[order[start[r]]] = True
+            elif m > 1:
+                _solve_component(order[start[r] : start[r + 1]], li, lj, cost, big, row_at, col_at, keep)
+    return keep
+
+
+def warm_up() -> None:
+    """Compile (or load) the sparse solver on a tiny problem."""
+    one = np.zeros(2, dtype=np.int64)
+    solve_sparse_pairs(np.array([0, 2]), np.ones((1, 2), np.int64), one, one, np.array([0.0, 1.0]))
