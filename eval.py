@@ -144,14 +144,12 @@ def stage_modules(cfg: DictConfig) -> list[str]:
 def compile_kernels() -> None:
     """Compile (or load) every numba kernel a run uses, on tiny inputs: the background process of a first run."""
     from models.paf_grouping import BODY25_PAF_LIMBS, group_people
-    from reconstruction import pipeline
     from reconstruction.matching import evidence
     from reconstruction.matching.sparse_assignment import linear_sum_assignment
     from reconstruction.solver import map_solver
     from tracking import tracker
 
     evidence.warm_up()
-    pipeline.warm_up()
     map_solver.warm_up()
     tracker.warm_up()
     linear_sum_assignment(np.ones((2, 3)))

@@ -23,9 +23,8 @@ from reconstruction.pipeline import FrameResult, MultiViewPipeline
 
 @dataclass
 class SequenceReport:
-    """Per-frame results, metrics (empty without ground truth), skipped frames by reason, seconds by stage,
-    detections the matcher left out of every person, by reason (matchers that count them), and the
-    summaries and console reports of the sequence's benchmark protocols."""
+    """Per-frame results, metrics (empty without ground truth), skipped frames by reason, seconds by stage, detections
+    left out of every person by reason, and the summaries and console reports of the sequence's benchmark protocols."""
 
     results: list[FrameResult]
     metrics: dict[str, float]
@@ -39,11 +38,8 @@ class SequenceReport:
 def evaluate_sequence(
     sequence: Sequence, pipeline: MultiViewPipeline, evaluator: Pose3DEvaluator, progress: bool = True
 ) -> SequenceReport:
-    """Reconstruct every frame, score it against ground truth where there is some.
-
-    Every sequence also gets the statistics of the reprojection error of the reconstructed joints
-    against the 2D detections they were fitted to (the paper's Table 3; ``reprojection_*`` metrics).
-    """
+    """Reconstruct every frame, score it against ground truth where there is some, and against the 2D detections the
+    joints were fitted to (the reprojection error of the paper's Table 3: ``reprojection_*`` metrics)."""
     attach_protocols(sequence)  # the dataset's own protocols (meta["protocol_inputs"]), unless attached already
     results, skipped, pairs, reprojection = [], Counter(), CorrespondenceCounts(), []
     has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
@@ -77,17 +73,16 @@ def evaluate_sequence(
     stats = reprojection_stats(np.concatenate(reprojection) if reprojection else np.zeros(0))
     metrics.update({f"reprojection_{k}_px": stats[k] for k in ("mean", "min", "max")})
     metrics["reprojection_var_px2"] = stats["var"]
-    unmatched = Counter(getattr(pipeline.matcher, "unmatched_reasons", {}))
     timings = dict(pipeline.timings, evaluation=t_eval)
     protocols = {p.name: p.summary() for p in sequence.protocols}
     reports = [p.report() for p in sequence.protocols]
-    return SequenceReport(results, metrics, skipped, timings, unmatched, protocols, reports)
+    return SequenceReport(results, metrics, skipped, timings, Counter(pipeline.unmatched), protocols, reports)
 
 
 def _tracks_identities(sequence: Sequence, pipeline: MultiViewPipeline) -> bool:
     """Whether identity metrics apply: a tracker runs and the sequence's GT ids persist across frames."""
     return (
-        getattr(pipeline, "tracker", None) is not None
+        pipeline.tracker is not None
         and bool(sequence.meta.get("persistent_ids"))
         and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None)
     )

@@ -3,39 +3,20 @@
 from __future__ import annotations
 
 import time
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass
-from functools import lru_cache
-from typing import Any, Callable, Protocol
+from typing import Any, Callable
 
 import numpy as np
 from hydra.utils import instantiate
 
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
-from reconstruction.compile_notice import warm_up_kernels
-from reconstruction.gather_kernels import gather_detections
+from reconstruction.results import Matches, Reconstruction, SkeletonPrior
+from tracking.tracker import Association, Tracker
 
-Matcher = Callable[[list[ViewDetections], Rig], np.ndarray]
-Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
-
-
-class Tracker(Protocol):
-    """What the pipeline needs of a tracker (tracking.Tracker): frame number, poses (P, J, 4), per-joint
-    variances (P, J) or None -> (ids (P,), poses (P, J, 4))."""
-
-    def update(
-        self,
-        frame: int,
-        poses3d: np.ndarray,
-        variance: np.ndarray | None = None,
-        bone_lengths: np.ndarray | None = None,
-    ) -> tuple[np.ndarray, np.ndarray]: ...
-
-
-def _of_frame(values: np.ndarray | None, persons: int) -> np.ndarray | None:
-    """A reconstruction's per-person output of the last frame (P, ...), or None when it has none for P persons."""
-    return values if values is not None and len(values) == persons else None
+Matcher = Callable[[list[ViewDetections], Rig], Matches]
+Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], Reconstruction]
 
 
 @dataclass
@@ -50,28 +31,22 @@ class FrameResult:
 
 
 def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Stack the matched detections: V views, (P, V) -> poses2d (V, P, J, 3), bboxes (V, P, 4).
-
-    Views where a person has no detection get score 0 and an all-zero box; a joint with a non-finite
-    coordinate or score (a detector's NaN) is missing too (x, y, score 0).
-    """
-    J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
-    counts = [len(v) for v in views]
-    keypoints = np.concatenate([np.asarray(v.keypoints, dtype=np.float64).reshape(-1, J, 3) for v in views])
-    boxes = np.concatenate([np.asarray(v.bboxes, dtype=np.float64).reshape(-1, 4) for v in views])
-    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return gather_detections(keypoints, boxes, offsets, np.ascontiguousarray(assignment, dtype=np.int64))
-
-
-@lru_cache(maxsize=1)
-def warm_up() -> None:
-    """Compile (or load from numba's cache) the gather's kernel once per process, before a first frame is timed."""
-    gather_detections(np.ones((1, 2, 3)), np.ones((1, 4)), np.array([0, 1]), np.zeros((1, 1), dtype=np.int64))
+    """Stack the matched detections of V views, (P, V) -> poses2d (V, P, J, 3), bboxes (V, P, 4): zeros where a person
+    has no detection, and for a joint with a non-finite entry or a non-finite box entry (a detector's NaN)."""
+    (P, V), J = assignment.shape, next((v.keypoints.shape[1] for v in views if len(v)), 23)
+    poses2d, bboxes = np.zeros((V, P, J, 3)), np.zeros((V, P, 4))
+    for v, dets in enumerate(views):
+        have = assignment[:, v] >= 0
+        if have.any():
+            poses2d[v, have] = dets.keypoints[assignment[have, v]]
+            bboxes[v, have] = dets.bboxes[assignment[have, v]]
+    poses2d[~np.isfinite(poses2d).all(axis=-1)] = 0.0
+    return poses2d, np.where(np.isfinite(bboxes), bboxes, 0.0)
 
 
 class MultiViewPipeline:
-    """Match persons across views, reconstruct them, then (with a tracker) give them track ids; accumulates
-    seconds per stage. One pipeline serves one sequence: a tracker expects increasing frame numbers."""
+    """Match persons across views, reconstruct them, then (with a tracker) give them track ids; accumulates seconds
+    per stage and the detections left unmatched by reason. One pipeline serves one sequence (frames increasing)."""
 
     def __init__(
         self, rig: Rig, matcher: Matcher, reconstructor: Reconstructor, tracker: Tracker | None = None
@@ -81,44 +56,63 @@ class MultiViewPipeline:
         self.reconstructor = reconstructor
         self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
-        warm_up_kernels("gather", warm_up)  # one line while numba compiles (first run)
+        self.unmatched: Counter[str] = Counter()
 
     @classmethod
-    def from_config(cls, cfg: Any, rig: Rig) -> "MultiViewPipeline":
+    def from_config(cls, cfg: Any, rig: Rig) -> MultiViewPipeline:
         """The pipeline of an eval.yaml config: cfg.matching, cfg.reconstruction and, unless tracking=off (a
         group entry without ``_target_``), cfg.tracking, each built by Hydra's instantiate."""
         tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
         return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
-
-    def _reconstruct(self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray) -> np.ndarray:
-        """The reconstruction of a frame: (V, P, J, 3), (V, P, 4) -> (P, J, 4); a reconstruction that takes
-        ``skeletons`` (the MAP) gets the tracker's bone lengths of the tracks its persons would join."""
-        skeletons = getattr(self.tracker, "skeletons", None)
-        if skeletons is not None and getattr(self.reconstructor, "takes_skeletons", False):
-            return self.reconstructor(poses2d, bboxes, self.rig, skeletons=lambda poses: skeletons(frame, poses))
-        return self.reconstructor(poses2d, bboxes, self.rig)
 
     def __call__(self, frame: Frame) -> FrameResult:
         """Reconstruct one frame: Frame with V views -> FrameResult."""
         if len(frame.views) != len(self.rig):
             raise ValueError(f"frame {frame.index} has {len(frame.views)} views, the rig {len(self.rig)}")
         t0 = time.perf_counter()
-        assignment = self.matcher(frame.views, self.rig)
+        matches = self._match(frame.views)
+        self.unmatched += matches.unmatched
         t1 = time.perf_counter()
-        poses2d, bboxes = gather_views(frame.views, assignment)
-        poses3d = (
-            self._reconstruct(frame.index, poses2d, bboxes) if len(assignment) else np.zeros((0, poses2d.shape[2], 4))
-        )
+        poses2d, bboxes = gather_views(frame.views, matches.assignment)
+        result, association = Reconstruction(np.zeros((0, poses2d.shape[2], 4))), None
+        if len(matches.assignment):
+            result, association = self._reconstruct(frame.index, poses2d, bboxes)
         t2 = time.perf_counter()
-        ids = None
-        if self.tracker is not None:  # the reconstruction's joint variances and bones of this frame, where it has them
-            variance, bones = None, None
-            if len(assignment):  # else the reconstruction did not run: what it holds is another frame's
-                variance = _of_frame(getattr(self.reconstructor, "last_joint_variance", None), len(poses3d))
-                bones = _of_frame(getattr(self.reconstructor, "last_bone_lengths", None), len(poses3d))
-            ids, poses3d = self.tracker.update(frame.index, poses3d, variance, bones)
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
-        if self.tracker is not None:
-            self.timings["tracking"] += time.perf_counter() - t2
-        return FrameResult(frame.index, poses3d, assignment, ids)
+        if self.tracker is None:
+            return FrameResult(frame.index, result.poses, matches.assignment)
+        # the pairing the skeleton prior came from (on the first pass's poses) is kept, else the final poses decide
+        if association is None or not self.tracker.skeleton_min_frames or association.count != len(result.poses):
+            association = self.tracker.associate(frame.index, result.poses)
+        ids, poses3d = self.tracker.update(association, result)
+        self.timings["tracking"] += time.perf_counter() - t2
+        return FrameResult(frame.index, poses3d, matches.assignment, ids)
+
+    # ---- BRIDGE to the matchers' and reconstructions' old interfaces (an array, *unmatched_reasons, last_* attributes,
+    # a skeletons= callback): replaced at the merge of issue 33 by the new ones (see the report of h/track). ----
+    def _match(self, views: list[ViewDetections]) -> Matches:
+        """The matcher's Matches of a frame's V views (old interface: its assignment (P, V) and counters)."""
+        assignment = self.matcher(views, self.rig)
+        return Matches(assignment, Counter(getattr(self.matcher, "unmatched_reasons", {})) - self.unmatched)
+
+    def _reconstruct(
+        self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray
+    ) -> tuple[Reconstruction, Association | None]:
+        """(V, P, J, 3), (V, P, 4) -> the frame's Reconstruction and the association its tracker's skeleton prior came
+        from (None where none was asked)."""
+        early: list[Association] = []
+
+        def prior(first_poses: np.ndarray) -> SkeletonPrior:
+            early.append(self.tracker.associate(frame, first_poses))
+            return self.tracker.skeleton_prior(early[-1])
+
+        rec, tracked = self.reconstructor, self.tracker is not None
+        if tracked and getattr(rec, "takes_skeletons", False):
+            poses = rec(poses2d, bboxes, self.rig, skeletons=prior)
+        else:
+            poses = rec(poses2d, bboxes, self.rig)
+        variance = getattr(rec, "last_joint_variance", None) if tracked else None  # computed when asked
+        bones = getattr(rec, "last_bone_lengths", None) if tracked else None
+        of_frame = lambda v: v if v is not None and len(v) == len(poses) else None  # noqa: E731
+        return Reconstruction(poses, of_frame(variance), of_frame(bones)), (early[0] if early else None)
