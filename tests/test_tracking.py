@@ -14,7 +14,7 @@ from evaluation.identity import IdentityEvaluator
 from reconstruction.results import Reconstruction
 from reconstruction.solver.map_solver import combine_estimates
 from tracking import Tracker, tracker
-from tracking.track_kernels import centres, pair_mean_distances, robust_skeleton
+from tracking.track_kernels import Bodies, centres, pair_mean_distances, robust_skeleton
 from tracking.tracker import (
     CORE_JOINTS,
     Tracked,
@@ -357,7 +357,7 @@ def test_the_association_kernels_equal_the_numpy_formulas():
         rows, cols = np.divmod(np.arange(T * P), P)
         rows, cols = rows[::-1][:K].copy(), cols[::-1][:K].copy()  # the last: core joints in both
         got = np.full((T, P), np.inf)
-        pair_mean_distances(guess, seen, poses, valid, core, rows, cols, got)
+        pair_mean_distances(Bodies(guess=guess, seen=seen, poses3d=poses, valid=valid, core=core), rows, cols, got)
         core_d = _numpy_pair_mean_distance(
             guess[rows][:, core], seen[rows][:, core], poses[cols][:, core, :3], valid[cols][:, core]
         )

@@ -27,6 +27,17 @@ class Filters(NamedTuple):
     refresh: int
 
 
+class Bodies(NamedTuple):
+    """The association's two sides: guesses (T, J, 3) with their seen joints (T, J), poses (P, J, 4) with their valid
+    joints (P, J), and core (J,) the head and trunk joints."""
+
+    guess: np.ndarray
+    seen: np.ndarray
+    poses3d: np.ndarray
+    valid: np.ndarray
+    core: np.ndarray
+
+
 class Hits(NamedTuple):
     """One frame's hits: frame, tracks (K,) of the state hit by persons (K,) of poses (P, J, 4) with variances (P, J)
     m^2 and bone lengths (P, L) m; out (P, J, 4) takes the smoothed joints of confirmed tracks where smooth."""
@@ -63,14 +74,12 @@ def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray, out: np.ndarra
 
 
 @njit(**_JIT)
-def _mean_distance(
-    a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np.ndarray, core: np.ndarray, core_only: bool
-) -> float:
-    """Mean |a - b| over the joints ok in both (the head and trunk ones, core (J,), if core_only): (J, >= 3),
-    (J,) x2 -> m, inf if none."""
+def _mean_distance(bodies: Bodies, t: int, p: int, core_only: bool) -> float:
+    """Mean distance (m) of guess t and pose p over the joints both have (the head and trunk ones if core_only)."""
+    a, a_ok, b, b_ok = bodies.guess[t], bodies.seen[t], bodies.poses3d[p], bodies.valid[p]
     total, n = 0.0, 0
     for j in range(len(a_ok)):
-        if (core[j] or not core_only) and a_ok[j] and b_ok[j]:
+        if (bodies.core[j] or not core_only) and a_ok[j] and b_ok[j]:
             dx, dy, dz = a[j, 0] - b[j, 0], a[j, 1] - b[j, 1], a[j, 2] - b[j, 2]
             total += np.sqrt(dx * dx + dy * dy + dz * dz)
             n += 1
@@ -78,40 +87,23 @@ def _mean_distance(
 
 
 @njit(**_JIT)
-def pair_mean_distances(
-    guess: np.ndarray,
-    seen: np.ndarray,
-    poses3d: np.ndarray,
-    valid: np.ndarray,
-    core: np.ndarray,
-    rows: np.ndarray,
-    cols: np.ndarray,
-    out: np.ndarray,
-) -> None:
-    """out[rows, cols] (T, P) = mean distance over the head and trunk joints both have (all shared joints where that
-    is not finite) of guesses (T, J, 3), seen (T, J) and poses (P, J, 4), valid (P, J); pairs (K,) x2."""
-    for k in range(len(rows)):
-        t, p = rows[k], cols[k]
-        d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, True)
-        if not np.isfinite(d):
-            d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, False)
-        out[t, p] = d
+def _pair_distance(bodies: Bodies, t: int, p: int) -> float:
+    """Mean distance (m) of guess t and pose p over the head and trunk joints both have (all where they share none)."""
+    d = _mean_distance(bodies, t, p, True)
+    return d if np.isfinite(d) else _mean_distance(bodies, t, p, False)
 
 
 @njit(**_JIT)
-def near_mean_distances(
-    guess: np.ndarray,
-    seen: np.ndarray,
-    poses3d: np.ndarray,
-    valid: np.ndarray,
-    core: np.ndarray,
-    ca: np.ndarray,
-    cb: np.ndarray,
-    radius: float,
-    out: np.ndarray,
-) -> None:
-    """:func:`pair_mean_distances` of every pair whose centres ca (T, 3) and cb (P, 3) (both finite) lie at most radius
-    apart, measured as tracker.near_pairs' dense path does: one pass over the T x P pairs, no pair lists."""
+def pair_mean_distances(bodies: Bodies, rows: np.ndarray, cols: np.ndarray, out: np.ndarray) -> None:
+    """out[rows, cols] (T, P) = the pair distances of the pairs (K,) x2 of guesses and poses."""
+    for k in range(len(rows)):
+        out[rows[k], cols[k]] = _pair_distance(bodies, rows[k], cols[k])
+
+
+@njit(**_JIT)
+def near_mean_distances(bodies: Bodies, ca: np.ndarray, cb: np.ndarray, radius: float, out: np.ndarray) -> None:
+    """out (T, P) = the pair distances of every pair whose centres ca (T, 3) and cb (P, 3) (both finite) lie at most
+    radius apart, as tracker.near_pairs' dense path measures them: one pass over the T x P pairs, no pair lists."""
     for t in range(len(ca)):
         if not (np.isfinite(ca[t, 0]) and np.isfinite(ca[t, 1]) and np.isfinite(ca[t, 2])):
             continue
@@ -119,12 +111,8 @@ def near_mean_distances(
             if not (np.isfinite(cb[p, 0]) and np.isfinite(cb[p, 1]) and np.isfinite(cb[p, 2])):
                 continue
             dx, dy, dz = ca[t, 0] - cb[p, 0], ca[t, 1] - cb[p, 1], ca[t, 2] - cb[p, 2]
-            if not np.sqrt(dx * dx + dy * dy + dz * dz) <= radius:
-                continue
-            d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, True)
-            if not np.isfinite(d):
-                d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, False)
-            out[t, p] = d
+            if np.sqrt(dx * dx + dy * dy + dz * dz) <= radius:
+                out[t, p] = _pair_distance(bodies, t, p)
 
 
 @njit(**_JIT)

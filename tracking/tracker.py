@@ -26,6 +26,7 @@ from data.bone_lengths import BONE_PAIRS, bone_lengths
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
 from reconstruction.results import Reconstruction, SkeletonPrior
 from tracking.track_kernels import (
+    Bodies,
     Filters,
     Hits,
     centres,
@@ -161,16 +162,15 @@ def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max
     (T, J, 3), seen (T, J), poses (P, J, 4) -> (T, P) m, inf where nothing is shared or the centres are farther apart
     than max_m + BODY_SPAN_M."""
     guess, seen = np.ascontiguousarray(guess, dtype=np.float64), np.ascontiguousarray(seen, dtype=bool)
-    poses3d = np.ascontiguousarray(poses3d, dtype=np.float64)
-    valid = poses3d[..., 3] > 0
-    core = _core_mask(poses3d.shape[1])
-    ca, cb, radius = _centres(guess, seen, core), _centres(poses3d, valid, core), max_m + BODY_SPAN_M
-    out = np.full((len(guess), len(poses3d)), np.inf)
+    poses3d, J = np.ascontiguousarray(poses3d, dtype=np.float64), poses3d.shape[1]
+    bodies = Bodies(guess=guess, seen=seen, poses3d=poses3d, valid=poses3d[..., 3] > 0, core=_core_mask(J))
+    ca, cb = _centres(guess, seen, bodies.core), _centres(poses3d, bodies.valid, bodies.core)
+    out, radius = np.full((len(guess), len(poses3d)), np.inf), max_m + BODY_SPAN_M
     if len(ca) * len(cb) <= COMPILED_PAIRS:
-        near_mean_distances(guess, seen, poses3d, valid, core, ca, cb, float(radius), out)
+        near_mean_distances(bodies, ca, cb, float(radius), out)
         return out
     rows, cols = near_pairs(ca, cb, radius)
-    pair_mean_distances(guess, seen, poses3d, valid, core, rows.astype(np.int64), cols.astype(np.int64), out)
+    pair_mean_distances(bodies, rows.astype(np.int64), cols.astype(np.int64), out)
     return out
 
 
@@ -200,9 +200,9 @@ def warm_up() -> None:
     tracker, pose = Tracker(min_hits=1), np.ones((1, 23, 4))
     for frame in (0, 1):
         tracker.update(tracker.associate(frame, pose), Reconstruction(pose, np.ones(pose.shape[:2])))
-    one, valid = np.zeros(1, dtype=np.int64), pose[..., 3] > 0
-    core = _core_mask(pose.shape[1])
-    pair_mean_distances(pose[..., :3].copy(), valid, pose, valid, core, one, one, np.empty((1, 1)))
+    ok, one = pose[..., 3] > 0, np.zeros(1, dtype=np.int64)
+    bodies = Bodies(guess=pose[..., :3].copy(), seen=ok, poses3d=pose, valid=ok, core=_core_mask(pose.shape[1]))
+    pair_mean_distances(bodies, one, one, np.empty((1, 1)))
 
 
 class Tracker:
@@ -224,21 +224,13 @@ class Tracker:
         smooth_initial_m: float = 0.01,
         skeleton_min_frames: int = 5,
     ) -> None:
-        if not min(max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m) > 0 or not gate_growth_m >= 0:
+        sizes = (max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m, smooth_floor_m, smooth_initial_m)
+        counts = int(min_hits) >= 1 and int(max_age) >= 0 and int(bone_window) >= 1
+        if not (min(sizes) > 0 and gate_growth_m >= 0 and counts and 0 < smooth_rate <= 1):
             raise ValueError(
-                "tracking: max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m must be > 0 and "
-                f"gate_growth_m >= 0; got {max_distance_m}, {accel_sd_m}, {measurement_sd_m}, "
-                f"{velocity_sd_m}, {gate_growth_m}"
-            )
-        if int(min_hits) < 1 or int(max_age) < 0 or int(bone_window) < 1:
-            raise ValueError(
-                f"tracking: need min_hits >= 1, max_age >= 0, bone_window >= 1; got {min_hits}, "
-                f"{max_age}, {bone_window}"
-            )
-        if not (0 < smooth_rate <= 1 and smooth_floor_m > 0 and smooth_initial_m > 0):
-            raise ValueError(
-                f"tracking: need 0 < smooth_rate <= 1, smooth_floor_m > 0, smooth_initial_m > 0; got "
-                f"{smooth_rate}, {smooth_floor_m}, {smooth_initial_m}"
+                "tracking: need max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m, smooth_floor_m, "
+                "smooth_initial_m > 0, gate_growth_m >= 0, min_hits >= 1, max_age >= 0, bone_window >= 1, "
+                f"0 < smooth_rate <= 1; got {sizes}, {gate_growth_m}, {min_hits}, {max_age}, {bone_window}, {smooth_rate}"
             )
         self.max_distance_m, self.gate_growth_m = float(max_distance_m), float(gate_growth_m)
         self.min_hits, self.max_age, self.bone_window = int(min_hits), int(max_age), int(bone_window)
