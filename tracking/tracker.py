@@ -1,21 +1,17 @@
-"""Online 3D pose tracker, frame by frame: ``associate(frame, poses)`` pairs the frame's persons with the tracks
-without changing them, ``skeleton_prior(association)`` offers the MAP the tracks' bone lengths, ``update(association,
-reconstruction)`` corrects the tracks and gives ids (and smoothed poses).
+"""Online 3D pose tracker, frame by frame: ``associate`` pairs a frame's persons with the tracks without changing
+them, ``skeleton_prior`` offers the MAP the tracks' bone lengths, ``update`` corrects the tracks and gives ids.
 
-Every joint of a track moves with constant velocity (a Kalman filter with white-acceleration noise; the three axes
-share one 2x2 covariance per joint); time counts in frames, so a gap is a longer prediction, never a jump. A person
-joins the track whose prediction (the body moved with its head and trunk's mean velocity: limbs swing) or last
-position is nearer in mean head-and-trunk distance, by gated Hungarian assignment (the most pairs under the gate,
-then the least cost). Tracks are born tentative, confirmed after ``min_hits`` hits in a row, and die after
-``max_age`` frames unseen (tentative ones at once); ids are never reused. With ``smooth``, each joint is also filtered
-as a random walk whose process variance follows its innovations, weighed against the reconstruction's per-joint
-variance, so exact 2D keeps the triangulated point and a joint no view fixes comes from the motion. Each track keeps
-its bone lengths of the last ``bone_window`` frames; their robust median is its skeleton.
+Every joint moves with constant velocity (a Kalman filter with white-acceleration noise; time in frames, so a gap is a
+longer prediction). A person joins, by gated Hungarian assignment, the track whose prediction (the body moved with its
+head and trunk: limbs swing) or last position is nearer in mean head-and-trunk distance. Tracks are confirmed after
+``min_hits`` hits in a row and die after ``max_age`` frames unseen (tentative ones at once); ids are never reused.
+With ``smooth`` each joint is also a random walk weighed against the reconstruction's joint variance, so exact 2D
+keeps the triangulated point and a joint no view fixes follows the motion. A track's skeleton is the robust median
+of its bone lengths over the last ``bone_window`` frames.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -33,7 +29,6 @@ from tracking.track_kernels import (
     correct_tracks,
     near_mean_distances,
     pair_mean_distances,
-    robust_skeleton,
 )
 
 # Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
@@ -43,7 +38,6 @@ CORE_JOINTS = np.array([0, 1, 2, 3, 4, 5, 6, 11, 12])
 # unknown: about 15 cm); the motion filter does not take such a joint as a measurement
 UNSEEN_VAR_M2 = 0.15**2
 SKELETON_REFRESH = 5  # hits between two updates of a track's robust skeleton (it changes slowly)
-DENSE_PAIRS = 4096  # up to this many track x pose pairs near_pairs measures them all (building trees costs more)
 COMPILED_PAIRS = 65536  # up to this many, mean_distances tests every pair in one compiled pass (no pair lists)
 BODY_SPAN_M = 1.0  # m: the centres of any two subsets of one body's head and trunk joints lie this close
 
@@ -63,28 +57,6 @@ class Association(NamedTuple):
     count: int
     tracks: np.ndarray
     persons: np.ndarray
-
-
-@dataclass
-class Track:
-    """A snapshot of one track: id, positions and velocities (J, 3) m and m / frame, joints ever seen (J,), last frame
-    with a hit, hits, confirmed, and the bone lengths of its last observations (n, L) m."""
-
-    id: int
-    position: np.ndarray
-    velocity: np.ndarray
-    seen: np.ndarray
-    last_frame: int
-    hits: int
-    confirmed: bool
-    bones: np.ndarray
-
-    def bone_lengths(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The track's robust bone lengths: median (L,) m, its standard error (L,) m and count (L,); NaN / inf unseen."""
-        median, se, count = np.empty((3, self.bones.shape[1]))
-        count = count.astype(np.int64)
-        robust_skeleton(np.ascontiguousarray(self.bones), median, se, count, np.empty((2, len(self.bones))))
-        return median, se, count
 
 
 class TrackState(NamedTuple):
@@ -137,12 +109,6 @@ class TrackState(NamedTuple):
         return TrackState(**fields)
 
 
-def bone_lengths_of(poses3d: np.ndarray) -> np.ndarray:
-    """Bone lengths of poses, NaN where an end is missing: (P, J, 4) -> (P, L) m."""
-    ok = (poses3d[:, BONE_PAIRS[:, 0], 3] > 0) & (poses3d[:, BONE_PAIRS[:, 1], 3] > 0)
-    return np.where(ok, bone_lengths(poses3d), np.nan)
-
-
 def _core_mask(joints: int) -> np.ndarray:
     """The head and trunk joints among J: (J,) bool."""
     core = np.zeros(joints, dtype=bool)
@@ -175,13 +141,9 @@ def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max
 
 
 def near_pairs(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Index pairs of points a (T, 3) and b (P, 3) at most radius apart (none for a non-finite point): KD-trees
-    (scipy) for many points -> rows (K,), cols (K,)."""
+    """Index pairs of points a (T, 3) and b (P, 3) at most radius apart by KD-trees (none for a non-finite point) ->
+    rows (K,), cols (K,)."""
     ia, ib = np.flatnonzero(np.isfinite(a).all(axis=1)), np.flatnonzero(np.isfinite(b).all(axis=1))
-    if len(ia) * len(ib) <= DENSE_PAIRS or not np.isfinite(radius):
-        d = a[ia][:, None] - b[ib][None]
-        rows, cols = np.nonzero(np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2 + d[..., 2] ** 2) <= radius)
-        return ia[rows], ib[cols]
     pairs = cKDTree(a[ia]).sparse_distance_matrix(cKDTree(b[ib]), radius, output_type="ndarray")
     return ia[pairs["i"]], ib[pairs["j"]]
 
@@ -251,26 +213,6 @@ class Tracker:
         self._pool: np.ndarray | None = None  # the tracks' bone windows and room for more (_bone_pool)
         self.last_frame: int | None = None
         self._next_id = 0
-
-    @property
-    def tracks(self) -> list[Track]:
-        """Snapshots of the live tracks, oldest first."""
-        st = self.state
-        if st is None:
-            return []
-        return [
-            Track(
-                id=int(st.ids[t]),
-                position=st.position[t].copy(),
-                velocity=st.velocity[t].copy(),
-                seen=st.seen[t].copy(),
-                last_frame=int(st.last_frame[t]),
-                hits=int(st.hits[t]),
-                confirmed=bool(st.confirmed[t]),
-                bones=st.bones[t][np.isfinite(st.bones[t]).any(axis=1)],
-            )
-            for t in range(len(st.ids))
-        ]
 
     def associate(self, frame: int, poses3d: np.ndarray) -> Association:
         """Pair a coming frame's persons (P, J, 4) with the tracks alive since the last frame, changing nothing:
@@ -380,7 +322,8 @@ class Tracker:
             if lengths.shape != (len(poses3d), len(BONE_PAIRS)):
                 raise ValueError(f"tracking: bone lengths {lengths.shape} do not match {len(poses3d)} poses")
             return lengths
-        return bone_lengths_of(np.where((variance < UNSEEN_VAR_M2)[..., None], poses3d, 0.0))
+        ok = (poses3d[..., 3] > 0) & (variance < UNSEEN_VAR_M2)
+        return np.where(ok[:, BONE_PAIRS[:, 0]] & ok[:, BONE_PAIRS[:, 1]], bone_lengths(poses3d), np.nan)
 
     def _variance(self, variance: np.ndarray | None, poses3d: np.ndarray) -> np.ndarray:
         """The joints' measurement variances (P, J) m^2: the given ones where finite and > 0 (at most UNSEEN_VAR_M2),
