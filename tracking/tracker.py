@@ -12,6 +12,7 @@ of its bone lengths over the last ``bone_window`` frames.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -167,45 +168,45 @@ def warm_up() -> None:
     pair_mean_distances(bodies, one, one, np.empty((1, 1)))
 
 
+@dataclass(eq=False)
 class Tracker:
-    """Frame-by-frame tracker of 3D poses (see the module): associate, optionally skeleton_prior, then update."""
+    """Frame-by-frame tracker of 3D poses (see the module): associate, optionally skeleton_prior, then update; the
+    parameters are those of configs/tracking/on.yaml."""
 
-    def __init__(
-        self,
-        max_distance_m: float = 0.5,
-        gate_growth_m: float = 0.1,
-        min_hits: int = 3,
-        max_age: int = 10,
-        accel_sd_m: float = 0.05,
-        measurement_sd_m: float = 0.03,
-        velocity_sd_m: float = 0.5,
-        bone_window: int = 100,
-        smooth: bool = True,
-        smooth_rate: float = 0.3,
-        smooth_floor_m: float = 0.001,
-        smooth_initial_m: float = 0.01,
-        skeleton_min_frames: int = 5,
-    ) -> None:
-        sizes = (max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m, smooth_floor_m, smooth_initial_m)
-        counts = int(min_hits) >= 1 and int(max_age) >= 0 and int(bone_window) >= 1
-        if not (min(sizes) > 0 and gate_growth_m >= 0 and counts and 0 < smooth_rate <= 1):
+    max_distance_m: float = 0.5  # m: gate of the mean joint distance between a track's prediction and a person
+    gate_growth_m: float = 0.1  # m per frame since the track was last seen
+    min_hits: int = 3  # hits in a row that confirm a track
+    max_age: int = 10  # frames without a hit after which a confirmed track dies
+    accel_sd_m: float = 0.05  # m / frame^2: the motion filter's white acceleration
+    measurement_sd_m: float = 0.03  # m: a joint's SD where the reconstruction gives no variance
+    velocity_sd_m: float = 0.5  # m / frame: a new track's velocity SD
+    bone_window: int = 100  # frames of bone lengths kept per track
+    smooth: bool = True  # each joint also filtered over time (false: ids only)
+    smooth_rate: float = 0.3  # rate of the smoother's process variance
+    smooth_floor_m: float = 0.001  # m per frame: least process SD
+    smooth_initial_m: float = 0.01  # m per frame: a new joint's process SD
+    skeleton_min_frames: int = 5  # frames a bone is seen before the track offers it to the MAP (0: never)
+
+    def __post_init__(self) -> None:
+        sizes = (self.max_distance_m, self.accel_sd_m, self.measurement_sd_m, self.velocity_sd_m)
+        sizes += (self.smooth_floor_m, self.smooth_initial_m)
+        counts = int(self.min_hits) >= 1 and int(self.max_age) >= 0 and int(self.bone_window) >= 1
+        if not (min(sizes) > 0 and self.gate_growth_m >= 0 and counts and 0 < self.smooth_rate <= 1):
             raise ValueError(
                 "tracking: need max_distance_m, accel_sd_m, measurement_sd_m, velocity_sd_m, smooth_floor_m, "
                 "smooth_initial_m > 0, gate_growth_m >= 0, min_hits >= 1, max_age >= 0, bone_window >= 1, "
-                f"0 < smooth_rate <= 1; got {sizes}, {gate_growth_m}, {min_hits}, {max_age}, {bone_window}, {smooth_rate}"
+                f"0 < smooth_rate <= 1; got {self}"
             )
-        self.max_distance_m, self.gate_growth_m = float(max_distance_m), float(gate_growth_m)
-        self.min_hits, self.max_age, self.bone_window = int(min_hits), int(max_age), int(bone_window)
-        self.r2, self.v2 = float(measurement_sd_m) ** 2, float(velocity_sd_m) ** 2
-        self.smooth = bool(smooth)
-        self.skeleton_min_frames = int(skeleton_min_frames)  # 0: the tracks' skeletons are never offered
+        self.min_hits, self.max_age, self.bone_window = int(self.min_hits), int(self.max_age), int(self.bone_window)
+        self.skeleton_min_frames, self.smooth = int(self.skeleton_min_frames), bool(self.smooth)
+        self.r2, self.v2 = float(self.measurement_sd_m) ** 2, float(self.velocity_sd_m) ** 2
         self.filters = Filters(
             unseen_var=UNSEEN_VAR_M2,
-            q=float(accel_sd_m) ** 2,
+            q=float(self.accel_sd_m) ** 2,
             r2=self.r2,
-            rate=float(smooth_rate),
-            floor2=float(smooth_floor_m) ** 2,
-            q0=float(smooth_initial_m) ** 2,
+            rate=float(self.smooth_rate),
+            floor2=float(self.smooth_floor_m) ** 2,
+            q0=float(self.smooth_initial_m) ** 2,
             min_hits=self.min_hits,
             refresh=SKELETON_REFRESH,
         )
@@ -260,7 +261,6 @@ class Tracker:
         frame, poses3d = self._checked(association.frame, reconstruction.poses)
         if association.count != len(poses3d):
             raise ValueError(f"tracking: the association is of {association.count} poses, the update of {len(poses3d)}")
-        smooth = self.smooth and reconstruction.joint_variance is not None  # without variances: ids only
         variance = self._variance(reconstruction.joint_variance, poses3d)
         bones = self._bones(reconstruction.bone_lengths, poses3d, variance)
         if self.state is None:
@@ -273,12 +273,12 @@ class Tracker:
             hits = Hits(
                 frame=frame,
                 tracks=tracks,
-                persons=persons,
+                persons=association.persons,
                 poses3d=poses3d,
                 variance=variance,
                 lengths=np.ascontiguousarray(bones),
                 out=out,
-                smooth=smooth,
+                smooth=self.smooth and reconstruction.joint_variance is not None,  # without variances: ids only
             )
             correct_tracks(st, hits, self.filters)
             ids[persons] = st.ids[tracks]
