@@ -349,8 +349,7 @@ def test_the_association_kernels_equal_the_numpy_formulas():
     poses[:3, CORE_JOINTS, 3] = 0.0
     valid, core = poses[..., 3] > 0, _core_mask(J)
     for points, ok in ((guess, seen), (poses, valid)):
-        out = np.empty((len(points), 3))
-        centres(points, ok, core, out)
+        out = centres(points, ok, core)
         with np.errstate(invalid="ignore"):
             assert np.array_equal(out, _numpy_centres(points[..., :3], ok, core))
     for K in (1, 2, T * P):

@@ -53,10 +53,11 @@ class Hits(NamedTuple):
 
 
 @njit(**_JIT)
-def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray, out: np.ndarray) -> None:
-    """out (N, 3) = mean of the ok head and trunk joints (of all ok joints without any) of points (N, J, >= 3),
-    ok (N, J), core (J,), summed joint by joint as numpy's sum over J would."""
+def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray) -> np.ndarray:
+    """Mean of the ok head and trunk joints (of all ok joints without any), summed joint by joint as numpy's sum over J
+    would: points (N, J, >= 3), ok (N, J), core (J,) -> (N, 3)."""
     N, J = ok.shape
+    out = np.empty((N, 3))
     for i in range(N):
         any_core = False
         for j in range(J):
@@ -71,6 +72,7 @@ def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray, out: np.ndarra
                 v = points[i, j, c] if use else 0.0
                 s = v if j == 0 else s + v
             out[i, c] = s / max(n, 1)
+    return out
 
 
 @njit(**_JIT)

@@ -22,21 +22,12 @@ from scipy.spatial import cKDTree
 from data.bone_lengths import BONE_PAIRS, bone_lengths
 from reconstruction.matching.sparse_assignment import solve_sparse_pairs
 from reconstruction.results import Reconstruction, SkeletonPrior
-from tracking.track_kernels import (
-    Bodies,
-    Filters,
-    Hits,
-    centres,
-    correct_tracks,
-    near_mean_distances,
-    pair_mean_distances,
-)
+from tracking import track_kernels as kernels
+from tracking.track_kernels import Bodies, Filters, Hits
 
-# Joints of the association distance and the body's velocity: head and trunk (COCO-23 nose, eyes, ears,
-# shoulders, hips) move with the body; arms and legs swing by tens of cm between frames at 5 fps.
+# COCO-23 nose, eyes, ears, shoulders, hips: they move with the body; arms and legs swing by tens of cm a frame
 CORE_JOINTS = np.array([0, 1, 2, 3, 4, 5, 6, 11, 12])
-# m^2: variance of a joint no view sees, placed by the reconstruction's bone prior alone (a bone's direction is
-# unknown: about 15 cm); the motion filter does not take such a joint as a measurement
+# m^2: variance of a joint no view sees, placed by the bone prior alone (a bone's direction is unknown: about 15 cm)
 UNSEEN_VAR_M2 = 0.15**2
 SKELETON_REFRESH = 5  # hits between two updates of a track's robust skeleton (it changes slowly)
 COMPILED_PAIRS = 65536  # up to this many, mean_distances tests every pair in one compiled pass (no pair lists)
@@ -117,13 +108,6 @@ def _core_mask(joints: int) -> np.ndarray:
     return core
 
 
-def _centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray) -> np.ndarray:
-    """Mean of the ok head and trunk joints (of all ok joints without any): (N, J, >= 3), (N, J), (J,) -> (N, 3)."""
-    out = np.empty((len(points), 3))
-    centres(points, ok, core, out)
-    return out
-
-
 def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max_m: float = np.inf) -> np.ndarray:
     """Mean distance over the head and trunk joints both have (all shared joints where they share none): guesses
     (T, J, 3), seen (T, J), poses (P, J, 4) -> (T, P) m, inf where nothing is shared or the centres are farther apart
@@ -131,13 +115,13 @@ def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max
     guess, seen = np.ascontiguousarray(guess, dtype=np.float64), np.ascontiguousarray(seen, dtype=bool)
     poses3d, J = np.ascontiguousarray(poses3d, dtype=np.float64), poses3d.shape[1]
     bodies = Bodies(guess=guess, seen=seen, poses3d=poses3d, valid=poses3d[..., 3] > 0, core=_core_mask(J))
-    ca, cb = _centres(guess, seen, bodies.core), _centres(poses3d, bodies.valid, bodies.core)
+    ca, cb = kernels.centres(guess, seen, bodies.core), kernels.centres(poses3d, bodies.valid, bodies.core)
     out, radius = np.full((len(guess), len(poses3d)), np.inf), max_m + BODY_SPAN_M
     if len(ca) * len(cb) <= COMPILED_PAIRS:
-        near_mean_distances(bodies, ca, cb, float(radius), out)
+        kernels.near_mean_distances(bodies, ca, cb, float(radius), out)
         return out
     rows, cols = near_pairs(ca, cb, radius)
-    pair_mean_distances(bodies, rows.astype(np.int64), cols.astype(np.int64), out)
+    kernels.pair_mean_distances(bodies, rows.astype(np.int64), cols.astype(np.int64), out)
     return out
 
 
@@ -152,7 +136,7 @@ def near_pairs(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray,
 def predicted_positions(position: np.ndarray, velocity: np.ndarray, live: np.ndarray, dt: np.ndarray) -> np.ndarray:
     """Each track moved by dt (T,) times its body velocity, the mean velocity of its live head and trunk joints (of
     all its live joints without any; 0 without any): position, velocity (T, J, 3), live (T, J) -> (T, J, 3)."""
-    body = _centres(velocity, live, _core_mask(live.shape[1]))
+    body = kernels.centres(velocity, live, _core_mask(live.shape[1]))
     return position + dt[:, None, None] * body[:, None, :]
 
 
@@ -163,9 +147,7 @@ def warm_up() -> None:
     tracker, pose = Tracker(min_hits=1), np.ones((1, 23, 4))
     for frame in (0, 1):
         tracker.update(tracker.associate(frame, pose), Reconstruction(pose, np.ones(pose.shape[:2])))
-    ok, one = pose[..., 3] > 0, np.zeros(1, dtype=np.int64)
-    bodies = Bodies(guess=pose[..., :3].copy(), seen=ok, poses3d=pose, valid=ok, core=_core_mask(pose.shape[1]))
-    pair_mean_distances(bodies, one, one, np.empty((1, 1)))
+    mean_distances(np.ones((257, 23, 3)), np.ones((257, 23), dtype=bool), np.ones((256, 23, 4)), 0.1)
 
 
 @dataclass(eq=False)
@@ -280,7 +262,7 @@ class Tracker:
                 out=out,
                 smooth=self.smooth and reconstruction.joint_variance is not None,  # without variances: ids only
             )
-            correct_tracks(st, hits, self.filters)
+            kernels.correct_tracks(st, hits, self.filters)
             ids[persons] = st.ids[tracks]
         hit = np.zeros(len(st.ids), dtype=bool)
         hit[tracks] = True
