@@ -135,8 +135,7 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
 
 
 def _identity_rows(m: dict[str, float]) -> list[list[object]]:
-    """Report rows of the correspondence metrics (ground-truth identities known) and of the identity metrics (a
-    tracker and persistent ground-truth ids), where the metrics have them."""
+    """Report rows of the correspondence metrics and of the tracker's identity metrics, where the metrics have them."""
     rows: list[list[object]] = []
     if "matching_precision" in m:
         rows.append(["matching precision, pairs (%)", 100.0 * m["matching_precision"]])

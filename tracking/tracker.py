@@ -1,13 +1,8 @@
-"""Online 3D pose tracker, frame by frame: ``associate`` pairs a frame's persons with the tracks without changing
-them, ``skeleton_prior`` offers the MAP the tracks' bone lengths, ``update`` corrects the tracks and gives ids.
-
-Every joint moves with constant velocity (a Kalman filter with white-acceleration noise; time in frames, so a gap is a
-longer prediction). A person joins, by gated Hungarian assignment, the track whose prediction (the body moved with its
-head and trunk: limbs swing) or last position is nearer in mean head-and-trunk distance. Tracks are confirmed after
-``min_hits`` hits in a row and die after ``max_age`` frames unseen (tentative ones at once); ids are never reused.
-With ``smooth`` each joint is also a random walk weighed against the reconstruction's joint variance, so exact 2D
-keeps the triangulated point and a joint no view fixes follows the motion. A track's skeleton is the robust median
-of its bone lengths over the last ``bone_window`` frames.
+"""Online 3D pose tracker, frame by frame: ``associate`` pairs a frame's persons with the tracks (changing nothing),
+``skeleton_prior`` offers the MAP the tracks' bone lengths, ``update`` corrects the tracks and gives ids. Each joint
+moves with constant velocity (a Kalman filter; time in frames, so a gap is a longer prediction); with ``smooth`` it is
+also a random walk weighed against the reconstruction's joint variance (exact 2D keeps the triangulated point, a joint
+no view fixes follows the motion); a track's skeleton is the robust median of its recent bone lengths.
 """
 
 from __future__ import annotations
@@ -245,9 +240,8 @@ class Tracker:
             raise ValueError(f"tracking: the association is of {association.count} poses, the update of {len(poses3d)}")
         variance = self._variance(reconstruction.joint_variance, poses3d)
         bones = self._bones(reconstruction.bone_lengths, poses3d, variance)
-        if self.state is None:
-            none = np.zeros(0, dtype=np.int64)
-            self.state = self._births(none, frame, poses3d[:0], variance[:0], bones[:0])
+        if self.state is None:  # no track yet
+            self.state = self._births(np.zeros(0, dtype=np.int64), frame, poses3d[:0], variance[:0], bones[:0])
         st, tracks, persons = self.state, self._indices(association), association.persons
         alive, self.last_frame = self._alive(st, frame - 1), frame
         ids, out = np.full(len(poses3d), -1, dtype=np.int64), poses3d.copy()
