@@ -23,9 +23,8 @@ from reconstruction.pipeline import FrameResult, MultiViewPipeline
 
 @dataclass
 class SequenceReport:
-    """Per-frame results, metrics (empty without ground truth), skipped frames by reason, seconds by stage,
-    detections the matcher left out of every person, by reason (matchers that count them), and the
-    summaries and console reports of the sequence's benchmark protocols."""
+    """Per-frame results, metrics (empty without ground truth), skipped frames by reason, seconds by stage, detections
+    left out of every person by reason, and the summaries and console reports of the sequence's benchmark protocols."""
 
     results: list[FrameResult]
     metrics: dict[str, float]
@@ -39,15 +38,15 @@ class SequenceReport:
 def evaluate_sequence(
     sequence: Sequence, pipeline: MultiViewPipeline, evaluator: Pose3DEvaluator, progress: bool = True
 ) -> SequenceReport:
-    """Reconstruct every frame, score it against ground truth where there is some.
-
-    Every sequence also gets the statistics of the reprojection error of the reconstructed joints
-    against the 2D detections they were fitted to (the paper's Table 3; ``reprojection_*`` metrics).
-    """
+    """Reconstruct every frame, score it against ground truth where there is some, and against the 2D detections the
+    joints were fitted to (the reprojection error of the paper's Table 3: ``reprojection_*`` metrics)."""
     attach_protocols(sequence)  # the dataset's own protocols (meta["protocol_inputs"]), unless attached already
     results, skipped, pairs, reprojection = [], Counter(), CorrespondenceCounts(), []
     has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
-    identities = IdentityEvaluator(evaluator.max_dist_m) if _tracks_identities(sequence, pipeline) else None
+    # identity metrics where a tracker runs and the sequence's ground-truth ids persist across frames
+    tracked = pipeline.tracker is not None and bool(sequence.meta.get("persistent_ids"))
+    tracked = tracked and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None)
+    identities = IdentityEvaluator(evaluator.max_dist_m) if tracked else None
     t_eval = 0.0
     for frame in tqdm(sequence.frames, desc="frames", unit="frame", disable=not progress):
         result = pipeline(frame)
@@ -77,20 +76,10 @@ def evaluate_sequence(
     stats = reprojection_stats(np.concatenate(reprojection) if reprojection else np.zeros(0))
     metrics.update({f"reprojection_{k}_px": stats[k] for k in ("mean", "min", "max")})
     metrics["reprojection_var_px2"] = stats["var"]
-    unmatched = Counter(pipeline.unmatched)
     timings = dict(pipeline.timings, evaluation=t_eval)
     protocols = {p.name: p.summary() for p in sequence.protocols}
     reports = [p.report() for p in sequence.protocols]
-    return SequenceReport(results, metrics, skipped, timings, unmatched, protocols, reports)
-
-
-def _tracks_identities(sequence: Sequence, pipeline: MultiViewPipeline) -> bool:
-    """Whether identity metrics apply: a tracker runs and the sequence's GT ids persist across frames."""
-    return (
-        getattr(pipeline, "tracker", None) is not None
-        and bool(sequence.meta.get("persistent_ids"))
-        and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None)
-    )
+    return SequenceReport(results, metrics, skipped, timings, Counter(pipeline.unmatched), protocols, reports)
 
 
 def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str:
@@ -110,8 +99,7 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
                     ["GT persons recalled (%)", m["recall"]],
                     ["predictions matched to GT (%)", m["precision"]],
                     ["GT persons / predictions", f"{m['num_gt']} / {m['num_pred']}"],
-                    *_matching_rows(m),
-                    *_tracking_rows(m),
+                    *_identity_rows(m),
                 ],
             ),
             "",
@@ -146,26 +134,16 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
     return "\n".join(lines)
 
 
-def _matching_rows(m: dict[str, float]) -> list[list[object]]:
-    """Report rows of the correspondence metrics, when ground-truth identities were known."""
-    if "matching_precision" not in m:
-        return []
-    return [
-        ["matching precision, pairs (%)", 100.0 * m["matching_precision"]],
-        ["matching recall, pairs (%)", 100.0 * m["matching_recall"]],
-        ["GT persons matched pure and complete (%)", 100.0 * m["matching_recovered_share"]],
-    ]
-
-
-def _tracking_rows(m: dict[str, float]) -> list[list[object]]:
-    """Report rows of the identity metrics (tracking on, persistent ground-truth ids)."""
-    if "tracking_id_switches" not in m:
-        return []
-    return [
-        [
-            "identity switches (per 100 GT person-frames)",
-            f"{m['tracking_id_switches']} ({m['tracking_id_switches_per_100']:.2f})",
-        ],
-        ["GT person-frames with their most frequent track id (%)", m["tracking_idf1_like"]],
-        ["track fragmentations", m["tracking_fragmentations"]],
-    ]
+def _identity_rows(m: dict[str, float]) -> list[list[object]]:
+    """Report rows of the correspondence metrics and of the tracker's identity metrics, where the metrics have them."""
+    rows: list[list[object]] = []
+    if "matching_precision" in m:
+        rows.append(["matching precision, pairs (%)", 100.0 * m["matching_precision"]])
+        rows.append(["matching recall, pairs (%)", 100.0 * m["matching_recall"]])
+        rows.append(["GT persons matched pure and complete (%)", 100.0 * m["matching_recovered_share"]])
+    if "tracking_id_switches" in m:
+        switches = f"{m['tracking_id_switches']} ({m['tracking_id_switches_per_100']:.2f})"
+        rows.append(["identity switches (per 100 GT person-frames)", switches])
+        rows.append(["GT person-frames with their most frequent track id (%)", m["tracking_idf1_like"]])
+        rows.append(["track fragmentations", m["tracking_fragmentations"]])
+    return rows

@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 from collections import Counter, defaultdict
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any, Callable, Protocol
 
 import numpy as np
@@ -13,24 +12,19 @@ from hydra.utils import instantiate
 
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
-from reconstruction.gather_kernels import gather_detections
-from reconstruction.results import Matches, Reconstruction, SkeletonPrior
+from reconstruction.results import Matches, Reconstruction
+from tracking.tracker import Association, Tracker
 
 Matcher = Callable[[list[ViewDetections], Rig], Matches]
-Reconstructor = Callable[[np.ndarray, np.ndarray, Rig], Reconstruction]
 
 
-class Tracker(Protocol):
-    """What the pipeline needs of a tracker (tracking.Tracker): frame number, poses (P, J, 4), per-joint
-    variances (P, J) or None -> (ids (P,), poses (P, J, 4))."""
+class Reconstructor(Protocol):
+    """A reconstruction stage: (V, P, J, 3), (V, P, 4), rig -> Reconstruction; one with ``takes_skeleton_prior``
+    (the adaptive MAP) also offers ``first_pass`` and ``finish(first, prior)`` (reconstruction/solver/map_solver.py)."""
 
-    def update(
-        self,
-        frame: int,
-        poses3d: np.ndarray,
-        variance: np.ndarray | None = None,
-        bone_lengths: np.ndarray | None = None,
-    ) -> tuple[np.ndarray, np.ndarray]: ...
+    takes_skeleton_prior: bool
+
+    def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig) -> Reconstruction: ...
 
 
 @dataclass
@@ -45,28 +39,22 @@ class FrameResult:
 
 
 def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Stack the matched detections: V views, (P, V) -> poses2d (V, P, J, 3), bboxes (V, P, 4).
-
-    Views where a person has no detection get score 0 and an all-zero box; a joint with a non-finite
-    coordinate or score (a detector's NaN) is missing too (x, y, score 0).
-    """
-    J = next((v.keypoints.shape[1] for v in views if len(v)), 23)
-    counts = [len(v) for v in views]
-    keypoints = np.concatenate([np.asarray(v.keypoints, dtype=np.float64).reshape(-1, J, 3) for v in views])
-    boxes = np.concatenate([np.asarray(v.bboxes, dtype=np.float64).reshape(-1, 4) for v in views])
-    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return gather_detections(keypoints, boxes, offsets, np.ascontiguousarray(assignment, dtype=np.int64))
-
-
-@lru_cache(maxsize=1)
-def warm_up() -> None:
-    """Compile (or load from numba's cache) the gather's kernel once per process, before a first frame is timed."""
-    gather_detections(np.ones((1, 2, 3)), np.ones((1, 4)), np.array([0, 1]), np.zeros((1, 1), dtype=np.int64))
+    """Stack the matched detections of V views, (P, V) -> poses2d (V, P, J, 3), bboxes (V, P, 4): zeros where a person
+    has no detection, and for a joint with a non-finite entry or a non-finite box entry (a detector's NaN)."""
+    (P, V), J = assignment.shape, next((v.keypoints.shape[1] for v in views if len(v)), 23)
+    poses2d, bboxes = np.zeros((V, P, J, 3)), np.zeros((V, P, 4))
+    for v, dets in enumerate(views):
+        have = assignment[:, v] >= 0
+        if have.any():
+            poses2d[v, have] = dets.keypoints[assignment[have, v]]
+            bboxes[v, have] = dets.bboxes[assignment[have, v]]
+    poses2d[~np.isfinite(poses2d).all(axis=-1)] = 0.0
+    return poses2d, np.where(np.isfinite(bboxes), bboxes, 0.0)
 
 
 class MultiViewPipeline:
-    """Match persons across views, reconstruct them, then (with a tracker) give them track ids; accumulates
-    seconds per stage. One pipeline serves one sequence: a tracker expects increasing frame numbers."""
+    """Match persons across views, reconstruct them, then (with a tracker) give them track ids; accumulates seconds
+    per stage and the detections left unmatched by reason. One pipeline serves one sequence (frames increasing)."""
 
     def __init__(
         self, rig: Rig, matcher: Matcher, reconstructor: Reconstructor, tracker: Tracker | None = None
@@ -76,23 +64,14 @@ class MultiViewPipeline:
         self.reconstructor = reconstructor
         self.tracker = tracker
         self.timings: dict[str, float] = defaultdict(float)
-        self.unmatched: Counter[str] = Counter()  # detections the matcher left out of every person, by reason
+        self.unmatched: Counter[str] = Counter()
 
     @classmethod
-    def from_config(cls, cfg: Any, rig: Rig) -> "MultiViewPipeline":
+    def from_config(cls, cfg: Any, rig: Rig) -> MultiViewPipeline:
         """The pipeline of an eval.yaml config: cfg.matching, cfg.reconstruction and, unless tracking=off (a
         group entry without ``_target_``), cfg.tracking, each built by Hydra's instantiate."""
         tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
         return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
-
-    def _reconstruct(self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray) -> Reconstruction:
-        """The reconstruction of a frame: (V, P, J, 3), (V, P, 4) -> Reconstruction; one that takes a skeleton prior
-        (the adaptive MAP) gets the tracker's bone lengths of the tracks its persons would join."""
-        if self.tracker is not None and getattr(self.reconstructor, "takes_skeleton_prior", False):
-            first = self.reconstructor.first_pass(poses2d, bboxes, self.rig)
-            prior = SkeletonPrior(*self.tracker.skeletons(frame, first.poses)) if len(first.poses) else None
-            return self.reconstructor.finish(first, prior)
-        return self.reconstructor(poses2d, bboxes, self.rig)
 
     def __call__(self, frame: Frame) -> FrameResult:
         """Reconstruct one frame: Frame with V views -> FrameResult."""
@@ -101,20 +80,32 @@ class MultiViewPipeline:
         t0 = time.perf_counter()
         matches = self.matcher(frame.views, self.rig)
         self.unmatched += matches.unmatched
-        assignment = matches.assignment
         t1 = time.perf_counter()
-        poses2d, bboxes = gather_views(frame.views, assignment)
-        if len(assignment):
-            result = self._reconstruct(frame.index, poses2d, bboxes)
-        else:
-            result = Reconstruction(np.zeros((0, poses2d.shape[2], 4)))
-        poses3d = result.poses
+        poses2d, bboxes = gather_views(frame.views, matches.assignment)
+        result, association = Reconstruction(np.zeros((0, poses2d.shape[2], 4))), None
+        if len(matches.assignment):
+            result, association = self._reconstruct(frame.index, poses2d, bboxes)
         t2 = time.perf_counter()
-        ids = None
-        if self.tracker is not None:
-            ids, poses3d = self.tracker.update(frame.index, poses3d, result.joint_variance, result.bone_lengths)
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
-        if self.tracker is not None:
-            self.timings["tracking"] += time.perf_counter() - t2
-        return FrameResult(frame.index, poses3d, assignment, ids)
+        if self.tracker is None:
+            return FrameResult(frame.index, result.poses, matches.assignment)
+        # the pairing the skeleton prior came from (on the first pass's poses) is kept, else the final poses decide
+        if association is None or not self.tracker.skeleton_min_frames or association.count != len(result.poses):
+            association = self.tracker.associate(frame.index, result.poses)
+        ids, poses3d = self.tracker.update(association, result)
+        self.timings["tracking"] += time.perf_counter() - t2
+        return FrameResult(frame.index, poses3d, matches.assignment, ids)
+
+    def _reconstruct(
+        self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray
+    ) -> tuple[Reconstruction, Association | None]:
+        """(V, P, J, 3), (V, P, 4) -> the frame's Reconstruction and the association its tracker's skeleton prior came
+        from (None where none was asked: no tracker, a stage without the adaptive prior, or nobody placed)."""
+        if self.tracker is None or not self.reconstructor.takes_skeleton_prior:
+            return self.reconstructor(poses2d, bboxes, self.rig), None
+        first = self.reconstructor.first_pass(poses2d, bboxes, self.rig)
+        if not len(first.poses):
+            return self.reconstructor.finish(first, None), None
+        association = self.tracker.associate(frame, first.poses)
+        return self.reconstructor.finish(first, self.tracker.skeleton_prior(association)), association

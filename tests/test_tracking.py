@@ -11,10 +11,19 @@ import pytest
 from data.bone_lengths import BONE_PAIRS
 from data.synthetic.body import mean_body, pose_joints
 from evaluation.identity import IdentityEvaluator
+from reconstruction.results import Reconstruction
 from reconstruction.solver.map_solver import combine_estimates
 from tracking import Tracker, tracker
-from tracking.track_kernels import centres, pair_mean_distances, robust_skeleton
-from tracking.tracker import CORE_JOINTS, _core_mask, mean_distances, near_pairs, predicted_positions, robust_lengths
+from tracking.track_kernels import Bodies, centres, pair_mean_distances, robust_skeleton
+from tracking.tracker import (
+    CORE_JOINTS,
+    Tracked,
+    TrackState,
+    _core_mask,
+    mean_distances,
+    near_pairs,
+    predicted_positions,
+)
 
 FPS = 25.0
 
@@ -25,6 +34,11 @@ def _walker(start, heading: float, speed: float, frame: int, scale: float = 1.0,
     x, y = start[0] + speed * t * np.cos(heading), start[1] + speed * t * np.sin(heading)
     joints = pose_joints(mean_body(1.7 * scale), x, y, heading, phase=0.8 * t, walking=walking)
     return np.concatenate([joints, np.ones((len(joints), 1))], axis=1)
+
+
+def _step(tracker: Tracker, frame: int, poses: np.ndarray, variance=None, bones=None) -> Tracked:
+    """One frame through the tracker: associate, then update with the persons' poses (P, J, 4)."""
+    return tracker.update(tracker.associate(frame, poses), Reconstruction(poses, variance, bones))
 
 
 def _noisy(poses: np.ndarray, rng: np.random.Generator, sd: float = 0.02) -> np.ndarray:
@@ -42,7 +56,7 @@ def test_two_people_crossing_paths_keep_their_ids():
         b = _walker((0.0, -2.4), np.pi / 2, 1.2, f - 4)  # along y, 4 frames behind: closest approach ~0.3 m
         order = rng.permutation(2)  # the frame's persons come in any order
         poses = _noisy(np.stack([a, b])[order], rng)
-        ids = tracker.update(f, poses).ids
+        ids = _step(tracker, f, poses).ids
         for slot, person in enumerate(order):
             seen[int(person)].add(int(ids[slot]))
     assert all(len(s) == 1 for s in seen.values()) and seen[0] != seen[1]
@@ -51,37 +65,37 @@ def test_two_people_crossing_paths_keep_their_ids():
 def test_a_person_who_returns_after_the_death_age_gets_a_new_id_and_before_it_keeps_it():
     tracker = Tracker(max_age=5, min_hits=2)
     pose = _walker((0.0, 0.0), 0.0, 0.0, 0)
-    first = tracker.update(0, pose[None]).ids[0]
-    tracker.update(1, pose[None])
-    tracker.update(2, np.zeros((0, 23, 4)))  # missed 4 frames (2..5): within max_age
-    assert tracker.update(6, pose[None]).ids[0] == first
-    assert tracker.update(13, pose[None]).ids[0] != first  # gone 6 frames after its last hit: a new id
+    first = _step(tracker, 0, pose[None]).ids[0]
+    _step(tracker, 1, pose[None])
+    _step(tracker, 2, np.zeros((0, 23, 4)))  # missed 4 frames (2..5): within max_age
+    assert _step(tracker, 6, pose[None]).ids[0] == first
+    assert _step(tracker, 13, pose[None]).ids[0] != first  # gone 6 frames after its last hit: a new id
 
 
 def test_a_tentative_track_missed_once_is_dropped():
     tracker = Tracker(min_hits=3)
     pose = _walker((0.0, 0.0), 0.0, 0.0, 0)
-    first = tracker.update(0, pose[None]).ids[0]
-    tracker.update(1, np.zeros((0, 23, 4)))
-    assert tracker.update(2, pose[None]).ids[0] != first
+    first = _step(tracker, 0, pose[None]).ids[0]
+    _step(tracker, 1, np.zeros((0, 23, 4)))
+    assert _step(tracker, 2, pose[None]).ids[0] != first
 
 
 def test_frames_that_go_backwards_or_repeat_stop_with_a_message():
     tracker = Tracker()
-    tracker.update(5, np.zeros((0, 23, 4)))
+    _step(tracker, 5, np.zeros((0, 23, 4)))
     for bad in (5, 4):
         with pytest.raises(ValueError, match="must\\s+increase"):
-            tracker.update(bad, np.zeros((0, 23, 4)))
+            _step(tracker, bad, np.zeros((0, 23, 4)))
 
 
 def test_a_gap_is_predicted_over_the_missed_frames_not_taken_as_a_jump():
     tracker = Tracker()
     for f in range(20):
-        ids = tracker.update(f, _walker((0.0, 0.0), 0.0, 1.5, f)[None]).ids
+        ids = _step(tracker, f, _walker((0.0, 0.0), 0.0, 1.5, f)[None]).ids
     # frames 20..27 missing: the body is 9 x 6 cm further on at frame 28; taken as one frame's step, the
     # velocity would jump to 0.54 m per frame
-    assert tracker.update(28, _walker((0.0, 0.0), 0.0, 1.5, 28)[None]).ids[0] == ids[0]
-    hips = tracker.tracks[0].velocity[11:13].mean(axis=0)
+    assert _step(tracker, 28, _walker((0.0, 0.0), 0.0, 1.5, 28)[None]).ids[0] == ids[0]
+    hips = tracker.state.velocity[0, 11:13].mean(axis=0)
     np.testing.assert_allclose(hips[:2], [1.5 / FPS, 0.0], atol=0.01)  # horizontal: the hips bob in z
 
 
@@ -89,13 +103,13 @@ def test_the_bone_lengths_of_a_track_converge_to_the_bodys_own():
     rng = np.random.default_rng(1)
     tracker = Tracker()
     for f in range(30):
-        tracker.update(f, _noisy(_walker((0.0, 0.0), 0.3, 1.0, f, scale=1.15)[None], rng, sd=0.005))
-    median, sd, count = tracker.tracks[0].bone_lengths()
+        _step(tracker, f, _noisy(_walker((0.0, 0.0), 0.3, 1.0, f, scale=1.15)[None], rng, sd=0.005))
+    median, se, count = tracker.state.skel_median[0], tracker.state.skel_se[0], tracker.state.skel_count[0]
     truth = _walker((0.0, 0.0), 0.3, 1.0, 0, scale=1.15)
     true_len = np.linalg.norm(truth[BONE_PAIRS[:, 0], :3] - truth[BONE_PAIRS[:, 1], :3], axis=-1)
     assert np.all(count == 30)
     assert np.max(np.abs(median - true_len)) < 0.005
-    assert np.all(sd < 0.03)
+    assert np.all(se < 0.03 / np.sqrt(30))
 
 
 def test_identity_metrics_count_switches_fragments_and_the_kept_share():
@@ -174,10 +188,10 @@ def test_exact_joints_are_kept_and_noisy_ones_are_smoothed():
     raw_err, out_err = [], []
     for f in range(40):
         truth = _walker((0.0, 0.0), 0.2, 0.0, f, walking=False)[None]  # a player on a stage
-        kept = exact.update(f, truth, np.full((1, 23), 1e-10)).poses3d
+        kept = _step(exact, f, truth, np.full((1, 23), 1e-10)).poses3d
         np.testing.assert_allclose(kept, truth, atol=1e-6)
         noisy = _noisy(truth, rng, sd=0.01)
-        out = smooth.update(f, noisy, np.full((1, 23), 1e-4)).poses3d
+        out = _step(smooth, f, noisy, np.full((1, 23), 1e-4)).poses3d
         if f >= 10:
             raw_err.append(np.linalg.norm(noisy[0, :, :3] - truth[0, :, :3], axis=-1).mean())
             out_err.append(np.linalg.norm(out[0, :, :3] - truth[0, :, :3], axis=-1).mean())
@@ -185,7 +199,7 @@ def test_exact_joints_are_kept_and_noisy_ones_are_smoothed():
     plain = Tracker()  # no variances (e.g. reconstruction=vanilla): ids only
     for f in range(5):
         noisy = _noisy(_walker((0.0, 0.0), 0.2, 0.0, f, walking=False)[None], rng, sd=0.01)
-        np.testing.assert_array_equal(plain.update(f, noisy).poses3d, noisy)
+        np.testing.assert_array_equal(_step(plain, f, noisy).poses3d, noisy)
 
 
 def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
@@ -204,9 +218,8 @@ def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
         if f >= 20:
             poses2d[:, 0, hidden, 2] = 0.0
         boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
-        result = rec(poses2d, boxes, rig)
-        alone = result.poses
-        out = tracker.update(f, alone, result.joint_variance).poses3d
+        alone = rec(poses2d, boxes, rig)
+        out = _step(tracker, f, alone, rec.last_joint_variance).poses3d
     tracked, by_prior = (np.linalg.norm(p[0, hidden, :3] - truth[hidden, :3]) for p in (out, alone))
     assert tracked < 0.05 and tracked < by_prior
     assert out[0, hidden, 3] == alone[0, hidden, 3] < 0.5  # the reconstruction's low score is kept
@@ -227,7 +240,9 @@ def test_the_map_reports_each_joints_variance_for_the_tracker():
         poses2d[1:, 0, 9, 2] = 0.0  # the left wrist seen in one view only
         poses2d[:, 0, 10, 2] = 0.0  # the right wrist in none
         boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
-        out[noise] = MLEMAPReconstruction()(poses2d, boxes, rig).joint_variance
+        rec = MLEMAPReconstruction()
+        rec(poses2d, boxes, rig)
+        out[noise] = rec.last_joint_variance
     var = out[1.0][0]
     assert var.shape == (23,) and np.isinf(var[10])
     many = np.ones(23, bool)
@@ -236,19 +251,22 @@ def test_the_map_reports_each_joints_variance_for_the_tracker():
     assert 10 * var[many].max() < var[9] < 0.03**2  # one view: the bone tie fixes its depth
 
 
-def test_robust_lengths_match_numpys_nanmedian():
+def test_the_robust_skeleton_is_numpys_nanmedian_and_mad():
     rng = np.random.default_rng(0)
-    x = rng.normal(size=(7, 31, 5))
-    x[rng.random(x.shape) < 0.3] = np.nan
-    x[0, :, 0] = np.nan
-    median, sd, count = robust_lengths(x, axis=1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        ref = np.nanmedian(x, axis=1)
-        mad = np.nanmedian(np.abs(x - ref[:, None]), axis=1)
-    np.testing.assert_allclose(median, ref, equal_nan=True)
-    np.testing.assert_allclose(sd, np.where(count > 1, 1.4826 * mad, np.nan), equal_nan=True)
-    np.testing.assert_array_equal(count, np.isfinite(x).sum(axis=1))
+    for W in (1, 2, 5, 31, 100):
+        bones = rng.normal(0.3, 0.02, (W, 40))
+        bones[rng.random(bones.shape) < 0.3] = np.nan  # unmeasured
+        bones[:, 0] = np.nan
+        median, se, count = np.empty(40), np.empty(40), np.empty(40, np.int64)
+        robust_skeleton(bones, median, se, count, np.empty((2, W)))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ref = np.nanmedian(bones, axis=0)
+            mad = np.nanmedian(np.abs(bones - ref), axis=0)
+        n = np.isfinite(bones).sum(axis=0)
+        np.testing.assert_array_equal(count, n)
+        np.testing.assert_allclose(median, ref, rtol=1e-15, equal_nan=True)
+        np.testing.assert_allclose(se, np.where(n > 1, 1.4826 * mad / np.sqrt(np.maximum(n, 1)), np.inf), rtol=1e-15)
 
 
 def test_precision_weighted_combination_of_two_bone_estimates():
@@ -279,15 +297,15 @@ def test_a_tracked_persons_own_skeleton_sharpens_the_maps_bones():
             uv = rig.project(truth[None]) + rng.normal(0, 4.0, (3, 1, 23, 2))
             poses2d = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
             boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
-            result = pipe._reconstruct(f, poses2d, boxes)
+            result, association = pipe._reconstruct(f, poses2d, boxes)
             out = result.poses
-            if tracked:
-                tracker.update(f, out, result.joint_variance, result.bone_lengths)
+            if tracked:  # the pairing the skeleton prior came from, as the pipeline keeps it
+                tracker.update(association or tracker.associate(f, out), result)
                 measured.append(np.abs(result.bone_lengths[0] - true_bones).mean())
             if f >= 20:
                 err.append(np.abs(np.linalg.norm(out[0, a, :3] - out[0, b, :3], axis=-1) - true_bones).mean())
         errors[tracked] = np.mean(err)
-    median, _, count = tracker.tracks[0].bone_lengths()
+    median, count = tracker.state.skel_median[0], tracker.state.skel_count[0]
     assert np.all(count == 30)
     assert np.abs(median - true_bones).mean() < 0.5 * np.mean(measured)  # the track knows the body better
     assert errors[True] < errors[False]  # and the MAP's bones follow
@@ -331,15 +349,14 @@ def test_the_association_kernels_equal_the_numpy_formulas():
     poses[:3, CORE_JOINTS, 3] = 0.0
     valid, core = poses[..., 3] > 0, _core_mask(J)
     for points, ok in ((guess, seen), (poses, valid)):
-        out = np.empty((len(points), 3))
-        centres(points, ok, core, out)
+        out = centres(points, ok, core)
         with np.errstate(invalid="ignore"):
             assert np.array_equal(out, _numpy_centres(points[..., :3], ok, core))
     for K in (1, 2, T * P):
         rows, cols = np.divmod(np.arange(T * P), P)
         rows, cols = rows[::-1][:K].copy(), cols[::-1][:K].copy()  # the last: core joints in both
         got = np.full((T, P), np.inf)
-        pair_mean_distances(guess, seen, poses, valid, core, rows, cols, got)
+        pair_mean_distances(Bodies(guess=guess, seen=seen, poses3d=poses, valid=valid, core=core), rows, cols, got)
         core_d = _numpy_pair_mean_distance(
             guess[rows][:, core], seen[rows][:, core], poses[cols][:, core, :3], valid[cols][:, core]
         )
@@ -368,62 +385,48 @@ def test_the_prediction_kernel_equals_the_numpy_formula_bit_for_bit():
     assert np.array_equal(out[3], position[3]) and not np.array_equal(out[0], position[0])
 
 
-def test_the_skeleton_kernel_equals_robust_lengths_bit_for_bit():
-    rng = np.random.default_rng(6)
-    for W in (1, 2, 5, 100):
-        bones = rng.choice([0.2, 0.3, 0.31], (W, 40)) + rng.normal(0, 0.01, (W, 40)) * (rng.random((W, 40)) < 0.8)
-        bones[rng.random(bones.shape) < 0.4] = np.nan  # unmeasured
-        bones[:, 0] = np.nan
-        bones[0, 1], bones[-1, 2] = np.inf, -np.inf
-        median, se, count = np.empty(40), np.empty(40), np.empty(40, np.int64)
-        robust_skeleton(bones, median, se, count, np.empty((2, W)))
-        with np.errstate(invalid="ignore"):
-            m, sd, n = robust_lengths(bones)
-        assert np.array_equal(median, m, equal_nan=True) and np.array_equal(count, n)
-        assert np.array_equal(se, np.where(np.isfinite(sd), sd / np.sqrt(np.maximum(n, 1)), np.inf))
+def _states(joints: int, window: int, *sizes: int, seed: int = 3) -> list[TrackState]:
+    """States of n random tracks each, of the tracker's field shapes and dtypes."""
+    rng, L = np.random.default_rng(seed), len(BONE_PAIRS)
+    empty = Tracker(bone_window=window)._births(
+        np.zeros(0, np.int64), 0, np.zeros((0, joints, 4)), np.zeros((0, joints)), np.zeros((0, L))
+    )
+    return [TrackState(*(rng.normal(size=(n, *a.shape[1:])).astype(a.dtype) for a in empty)) for n in sizes]
 
 
-def test_selecting_tracks_then_appending_new_ones_equals_a_mask_then_a_concatenation():
-    rng = np.random.default_rng(3)
-    joints, window = 23, 5
-    empty = tracker.TrackState.empty(joints, window)
-
-    def grow(st: tracker.TrackState, n: int) -> tracker.TrackState:
-        """n tracks of random fields, each of the state's shape and dtype."""
-        fields = (getattr(st, f) for f in st.__dataclass_fields__)
-        return tracker.TrackState(*(rng.random((n, *a.shape[1:])).astype(a.dtype) for a in fields))
-
-    old, new = grow(empty, 7), grow(empty, 3)
-    keep = np.array([True, False, True, True, False, False, True])
-    out = old.select(keep, new)
-    for f in old.__dataclass_fields__:
-        expected = np.concatenate([getattr(old, f)[keep], getattr(new, f)])
-        np.testing.assert_array_equal(getattr(out, f), expected)
-        assert getattr(out, f).dtype == expected.dtype
-    assert old.select(np.ones(7, bool)) is old and len(old.select(np.zeros(7, bool))) == 0
-    assert len(old.select(np.ones(7, bool), new)) == 10
-
-
-def test_a_select_into_the_bone_pool_equals_the_plain_select():
-    """TrackState.select with the tracker's pool of bone windows: the same tracks as the copying select, and the
-    windows of the output are the pool's first rows."""
+def test_selecting_tracks_into_the_bone_pool_then_appending_equals_a_mask_then_a_concatenation():
     rng = np.random.default_rng(2)
-
-    def state(T: int) -> tracker.TrackState:
-        empty = tracker.TrackState.empty(23, 6)
-        return tracker.TrackState(
-            *(rng.normal(size=(T, *getattr(empty, f).shape[1:])).astype(getattr(empty, f).dtype) for f in FIELDS)
-        )
-
-    FIELDS = tuple(tracker.TrackState.__dataclass_fields__)
-    for keep_rate, births in ((1.0, 3), (0.7, 0), (0.4, 5), (0.0, 2)):
-        st, then = state(12), state(births) if births else None
-        keep = rng.random(12) < keep_rate
-        plain = st.select(keep, then)
+    for keep_rate, births in ((1.0, 3), (0.7, 0), (0.4, 5), (0.0, 2), (1.0, 0)):
+        st, then = _states(23, 6, 12, births)
         pool = np.full((40, 6, len(BONE_PAIRS)), np.nan)
         pool[:12] = st.bones
-        pooled = tracker.TrackState(*(pool[:12] if f == "bones" else getattr(st, f) for f in FIELDS))
-        out = pooled.select(keep, then, pool)
-        for f in FIELDS:
-            np.testing.assert_array_equal(getattr(out, f), getattr(plain, f), err_msg=f)
-        assert out.bones.base is pool and out.bones.ctypes.data == pool.ctypes.data
+        st = st._replace(bones=pool[:12])
+        keep = rng.random(12) < keep_rate
+        want = [np.concatenate([a[keep], b]) for a, b in zip(st, then)]
+        out = st.select(keep, then if births else None, pool)
+        for name, got, expected in zip(TrackState._fields, out, want):
+            np.testing.assert_array_equal(got, expected, err_msg=name)
+            assert got.dtype == expected.dtype
+        assert out.bones.base is pool and out.bones.ctypes.data == pool.ctypes.data or out is st
+    assert st.select(np.ones(12, bool), None, pool) is st
+
+
+def test_associate_changes_nothing_and_update_takes_its_pairing():
+    """associate() is pure (twice the same answer, the tracks unchanged); update() follows the association it is
+    given (here one that pairs the first person with the second one's track) and refuses a stale one."""
+    tracker = Tracker(min_hits=1, skeleton_min_frames=1)
+    a, b = _walker((0.0, 0.0), 0.0, 0.0, 0), _walker((3.0, 0.0), 0.0, 0.0, 0)
+    first = _step(tracker, 0, np.stack([a, b])).ids
+    before = [field.copy() for field in tracker.state]
+    one, two = tracker.associate(1, np.stack([a, b])), tracker.associate(1, np.stack([a, b]))
+    assert all(np.array_equal(x, y) for x, y in zip(one, two)) and sorted(one.tracks) == sorted(first)
+    prior = tracker.skeleton_prior(one)
+    assert prior.lengths.shape == (2, len(BONE_PAIRS)) and np.all(np.isnan(prior.lengths))  # one frame: too few
+    for now, then in zip(tracker.state, before):
+        np.testing.assert_array_equal(now, then)  # NaN equal NaN
+    swapped = one._replace(persons=one.persons[::-1].copy())
+    assert list(tracker.update(swapped, Reconstruction(np.stack([a, b]))).ids) == list(first[::-1])
+    with pytest.raises(ValueError, match="must\\s+increase"):
+        tracker.update(one, Reconstruction(np.stack([a, b])))
+    with pytest.raises(ValueError, match="2 poses"):
+        tracker.update(tracker.associate(2, np.stack([a, b])), Reconstruction(a[None]))

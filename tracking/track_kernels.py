@@ -1,25 +1,63 @@
-"""Compiled (numba) loops of the tracker (tracker.py): the association's centres and pair distances, the motion
-filter's and smoother's update of the hit tracks, and the tracks' robust skeletons.
-
-Same arithmetic in the same order as the numpy formulas they replace, without their (K, J, 3) gathers and
-temporaries: bit-identical results, but for the association's mean distances, summed one joint after another where
-numpy's sum was at times pairwise (1e-16 relative).
-"""
+"""Compiled (numba) loops of the tracker (tracker.py): the association's centres and pair distances, and the motion
+filter's, smoother's and robust skeleton's update of the hit tracks; the same arithmetic in the same order as numpy
+formulas (bit-identical but for the pair distances, summed joint by joint: 1e-16 relative)."""
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 _JIT = {"cache": True, "error_model": "numpy"}
-MAD_TO_SD = 1.4826  # SD of a normal distribution per median absolute deviation (tracker.MAD_TO_SD)
+MAD_TO_SD = 1.4826  # SD of a normal distribution per median absolute deviation
+
+
+class Filters(NamedTuple):
+    """The tracker's constants: unseen joint variance, process variance q and measurement variance r2 (m^2), the
+    smoother's least rate, process floor^2 and a new joint's process variance q0 (m^2), min hits, skeleton refresh."""
+
+    unseen_var: float
+    q: float
+    r2: float
+    rate: float
+    floor2: float
+    q0: float
+    min_hits: int
+    refresh: int
+
+
+class Bodies(NamedTuple):
+    """The association's two sides: guesses (T, J, 3) with their seen joints (T, J), poses (P, J, 4) with their valid
+    joints (P, J), and core (J,) the head and trunk joints."""
+
+    guess: np.ndarray
+    seen: np.ndarray
+    poses3d: np.ndarray
+    valid: np.ndarray
+    core: np.ndarray
+
+
+class Hits(NamedTuple):
+    """One frame's hits: frame, tracks (K,) of the state hit by persons (K,) of poses (P, J, 4) with variances (P, J)
+    m^2 and bone lengths (P, L) m; out (P, J, 4) takes the smoothed joints of confirmed tracks where smooth."""
+
+    frame: int
+    tracks: np.ndarray
+    persons: np.ndarray
+    poses3d: np.ndarray
+    variance: np.ndarray
+    lengths: np.ndarray
+    out: np.ndarray
+    smooth: bool
 
 
 @njit(**_JIT)
-def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray, out: np.ndarray) -> None:
-    """out (N, 3) = mean of the ok head and trunk joints (of all ok joints without any) of points (N, J, >= 3),
-    ok (N, J), core (J,): tracker._centres."""
+def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray) -> np.ndarray:
+    """Mean of the ok head and trunk joints (of all ok joints without any), summed joint by joint as numpy's sum over J
+    would: points (N, J, >= 3), ok (N, J), core (J,) -> (N, 3)."""
     N, J = ok.shape
+    out = np.empty((N, 3))
     for i in range(N):
         any_core = False
         for j in range(J):
@@ -34,17 +72,16 @@ def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray, out: np.ndarra
                 v = points[i, j, c] if use else 0.0
                 s = v if j == 0 else s + v
             out[i, c] = s / max(n, 1)
+    return out
 
 
 @njit(**_JIT)
-def _mean_distance(
-    a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np.ndarray, core: np.ndarray, core_only: bool
-) -> float:
-    """Mean |a - b| over the joints ok in both (the head and trunk ones, core (J,), if core_only): (J, >= 3),
-    (J,) x2 -> m, inf if none."""
+def _mean_distance(bodies: Bodies, t: int, p: int, core_only: bool) -> float:
+    """Mean distance (m) of guess t and pose p over the joints both have (the head and trunk ones if core_only)."""
+    a, a_ok, b, b_ok = bodies.guess[t], bodies.seen[t], bodies.poses3d[p], bodies.valid[p]
     total, n = 0.0, 0
     for j in range(len(a_ok)):
-        if (core[j] or not core_only) and a_ok[j] and b_ok[j]:
+        if (bodies.core[j] or not core_only) and a_ok[j] and b_ok[j]:
             dx, dy, dz = a[j, 0] - b[j, 0], a[j, 1] - b[j, 1], a[j, 2] - b[j, 2]
             total += np.sqrt(dx * dx + dy * dy + dz * dz)
             n += 1
@@ -52,40 +89,23 @@ def _mean_distance(
 
 
 @njit(**_JIT)
-def pair_mean_distances(
-    guess: np.ndarray,
-    seen: np.ndarray,
-    poses3d: np.ndarray,
-    valid: np.ndarray,
-    core: np.ndarray,
-    rows: np.ndarray,
-    cols: np.ndarray,
-    out: np.ndarray,
-) -> None:
-    """out[rows, cols] (T, P) = mean distance over the head and trunk joints both have (all shared joints where that
-    is not finite) of guesses (T, J, 3), seen (T, J) and poses (P, J, 4), valid (P, J); pairs (K,) x2."""
-    for k in range(len(rows)):
-        t, p = rows[k], cols[k]
-        d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, True)
-        if not np.isfinite(d):
-            d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, False)
-        out[t, p] = d
+def _pair_distance(bodies: Bodies, t: int, p: int) -> float:
+    """Mean distance (m) of guess t and pose p over the head and trunk joints both have (all where they share none)."""
+    d = _mean_distance(bodies, t, p, True)
+    return d if np.isfinite(d) else _mean_distance(bodies, t, p, False)
 
 
 @njit(**_JIT)
-def near_mean_distances(
-    guess: np.ndarray,
-    seen: np.ndarray,
-    poses3d: np.ndarray,
-    valid: np.ndarray,
-    core: np.ndarray,
-    ca: np.ndarray,
-    cb: np.ndarray,
-    radius: float,
-    out: np.ndarray,
-) -> None:
-    """:func:`pair_mean_distances` of every pair whose centres ca (T, 3) and cb (P, 3) (both finite) lie at most radius
-    apart, measured as tracker.near_pairs' dense path does: one pass over the T x P pairs, no pair lists."""
+def pair_mean_distances(bodies: Bodies, rows: np.ndarray, cols: np.ndarray, out: np.ndarray) -> None:
+    """out[rows, cols] (T, P) = the pair distances of the pairs (K,) x2 of guesses and poses."""
+    for k in range(len(rows)):
+        out[rows[k], cols[k]] = _pair_distance(bodies, rows[k], cols[k])
+
+
+@njit(**_JIT)
+def near_mean_distances(bodies: Bodies, ca: np.ndarray, cb: np.ndarray, radius: float, out: np.ndarray) -> None:
+    """out (T, P) = the pair distances of every pair whose centres ca (T, 3) and cb (P, 3) (both finite) lie at most
+    radius apart, as tracker.near_pairs' dense path measures them: one pass over the T x P pairs, no pair lists."""
     for t in range(len(ca)):
         if not (np.isfinite(ca[t, 0]) and np.isfinite(ca[t, 1]) and np.isfinite(ca[t, 2])):
             continue
@@ -93,12 +113,8 @@ def near_mean_distances(
             if not (np.isfinite(cb[p, 0]) and np.isfinite(cb[p, 1]) and np.isfinite(cb[p, 2])):
                 continue
             dx, dy, dz = ca[t, 0] - cb[p, 0], ca[t, 1] - cb[p, 1], ca[t, 2] - cb[p, 2]
-            if not np.sqrt(dx * dx + dy * dy + dz * dz) <= radius:
-                continue
-            d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, True)
-            if not np.isfinite(d):
-                d = _mean_distance(guess[t], seen[t], poses3d[p], valid[p], core, False)
-            out[t, p] = d
+            if np.sqrt(dx * dx + dy * dy + dz * dz) <= radius:
+                out[t, p] = _pair_distance(bodies, t, p)
 
 
 @njit(**_JIT)
@@ -108,37 +124,24 @@ def _maximum(a: float, b: float) -> float:
 
 
 @njit(**_JIT)
-def smooth_joints(
-    sx: np.ndarray,
-    sp: np.ndarray,
-    sq: np.ndarray,
-    x_seen: np.ndarray,
-    velocity: np.ndarray,
-    hits: int,
-    dt: float,
-    pose: np.ndarray,
-    variance: np.ndarray,
-    unseen_var: float,
-    rate_min: float,
-    floor2: float,
-    q0: float,
-) -> None:
-    """The smoother of one track's joints (tracker._smooth), in place: sx (J, 3), sp, sq (J,) with seen (J,),
-    velocity (J, 3), hits, dt, pose (J, 4), variance (J,)."""
-    rate = _maximum(rate_min, 1.0 / hits)
+def smooth_joints(st: tuple, t: int, pose: np.ndarray, variance: np.ndarray, dt: float, f: Filters) -> None:
+    """The smoother of track t's joints (st a tracker.TrackState) in place, before its motion filter: a random walk
+    whose process variance follows the innovations, updated with pose (J, 4) of variances (J,) after dt frames."""
+    sx, sp, sq = st.sx[t], st.sp[t], st.sq[t]
+    rate = _maximum(f.rate, 1.0 / st.hits[t])
     for j in range(len(sp)):
         obs = pose[j, 3] > 0
-        fresh, upd = obs and not x_seen[j], obs and x_seen[j]
+        fresh, upd = obs and not st.seen[t, j], obs and st.seen[t, j]
         var = variance[j]
-        moving = var >= unseen_var
-        x0 = sx[j, 0] + dt * (velocity[j, 0] if moving else 0.0)
-        x1 = sx[j, 1] + dt * (velocity[j, 1] if moving else 0.0)
-        x2 = sx[j, 2] + dt * (velocity[j, 2] if moving else 0.0)
+        moving = var >= f.unseen_var  # a joint no view fixes moves on with the motion filter's velocity
+        x0 = sx[j, 0] + dt * (st.velocity[t, j, 0] if moving else 0.0)
+        x1 = sx[j, 1] + dt * (st.velocity[t, j, 1] if moving else 0.0)
+        x2 = sx[j, 2] + dt * (st.velocity[t, j, 2] if moving else 0.0)
         i0, i1, i2 = pose[j, 0] - x0, pose[j, 1] - x1, pose[j, 2] - x2
         q = sq[j]
         if upd:
             excess = (i0 * i0 + i1 * i1 + i2 * i2) / 3 - sp[j] - var
-            q = (1 - rate) * q + rate * _maximum(excess, floor2)
+            q = (1 - rate) * q + rate * _maximum(excess, f.floor2)
         p = sp[j] + dt * q
         gain = p / (p + var)
         if upd:
@@ -150,47 +153,34 @@ def smooth_joints(
         else:
             sx[j, 0], sx[j, 1], sx[j, 2] = x0, x1, x2
             sp[j] = p
-        sq[j] = q0 if fresh else q
+        sq[j] = f.q0 if fresh else q
 
 
 @njit(**_JIT)
-def kalman_joints(
-    position: np.ndarray,
-    velocity: np.ndarray,
-    p00: np.ndarray,
-    p01: np.ndarray,
-    p11: np.ndarray,
-    seen: np.ndarray,
-    live: np.ndarray,
-    dt: float,
-    pose: np.ndarray,
-    variance: np.ndarray,
-    unseen_var: float,
-    q: float,
-    r2: float,
-) -> None:
-    """Constant-velocity Kalman predict over dt and update of one track's joints (tracker._correct), in place:
-    position, velocity (J, 3), covariance entries p00, p01, p11 (J,), seen, live (J,), pose (J, 4), variance (J,)."""
-    a00, a01, a11 = 2 * dt, dt**2, q * dt**4 / 4
-    b01, c11 = q * dt**3 / 2, q * dt**2
+def kalman_joints(st: tuple, t: int, pose: np.ndarray, variance: np.ndarray, dt: float, f: Filters) -> None:
+    """Constant-velocity Kalman predict over dt frames and update with pose (J, 4) of variances (J,) of track t's
+    joints (st a tracker.TrackState), in place; a joint seen for the first time starts there."""
+    position, velocity, p00, p01, p11 = st.position[t], st.velocity[t], st.p00[t], st.p01[t], st.p11[t]
+    a00, a01, a11 = 2 * dt, dt**2, f.q * dt**4 / 4
+    b01, c11 = f.q * dt**3 / 2, f.q * dt**2
     for j in range(len(p00)):
         c00 = p00[j] + a00 * p01[j] + a01 * p11[j] + a11
         c01 = p01[j] + dt * p11[j] + b01
         d11 = p11[j] + c11
-        obs = pose[j, 3] > 0 and variance[j] < unseen_var  # a joint no view fixes is no measurement
-        upd, new = obs and seen[j], obs and not seen[j]
-        k0, k1 = c00 / (c00 + r2), c01 / (c00 + r2)
+        obs = pose[j, 3] > 0 and variance[j] < f.unseen_var  # a joint no view fixes is no measurement
+        upd, new = obs and st.seen[t, j], obs and not st.seen[t, j]
+        k0, k1 = c00 / (c00 + f.r2), c01 / (c00 + f.r2)
         for c in range(3):
             x = position[j, c] + dt * velocity[j, c]
             innov = pose[j, c] - x
             position[j, c] = x + k0 * innov if upd else (pose[j, c] if new else x)
             if upd:
                 velocity[j, c] = velocity[j, c] + k1 * innov
-        live[j] = obs
+        st.live[t, j] = obs
         p00[j] = (1 - k0) * c00 if upd else c00
         p11[j] = d11 - k1 * c01 if upd else d11
         p01[j] = (1 - k0) * c01 if upd else c01
-        seen[j] = seen[j] or obs
+        st.seen[t, j] = st.seen[t, j] or obs
 
 
 @njit(**_JIT)
@@ -218,8 +208,8 @@ def _select(buf: np.ndarray, m: int, k: int) -> float:
 
 @njit(**_JIT)
 def _sorted_median(values: np.ndarray, count: int, lo: int, hi: int, buf: np.ndarray) -> float:
-    """tracker._sorted_median of one row (W,): 0.5 (s[lo] + s[hi]) of its values sorted NaN last, NaN if count is
-    0; the order statistics of the non-NaN values picked without sorting (buf (W,) scratch)."""
+    """0.5 (s[lo] + s[hi]) of a row's values (W,) sorted NaN last, NaN if count is 0; the order statistics picked
+    without sorting (buf (W,) scratch)."""
     m = 0
     for v in values:
         if not np.isnan(v):
@@ -238,15 +228,15 @@ def _sorted_median(values: np.ndarray, count: int, lo: int, hi: int, buf: np.nda
 
 @njit(**_JIT)
 def robust_skeleton(bones: np.ndarray, median: np.ndarray, se: np.ndarray, count: np.ndarray, buf: np.ndarray) -> None:
-    """One track's robust bone lengths (tracker.robust_lengths, then the standard error as tracker._correct
-    takes it) from its window bones (W, L): median, se (L,) m and count (L,); buf (2, W) scratch."""
+    """One track's robust bone lengths from its window bones (W, L), NaN unmeasured: median (L,) m, its standard error
+    se (L,) m (MAD-based SD / sqrt(count); inf below 2 lengths) and count (L,); buf (2, W) scratch."""
     W, L = bones.shape
     for b in range(L):
         n = 0
         for w in range(W):
             n += np.isfinite(bones[w, b])
         lo, hi = max(n - 1, 0) // 2, min(n // 2, max(W - 1, 0))
-        for w in range(W):  # the column into a contiguous row: one type of _sorted_median (each compiles ~0.4 s)
+        for w in range(W):  # the column into a contiguous row: one type of _sorted_median to compile
             buf[1, w] = bones[w, b]
         m = _sorted_median(buf[1], n, lo, hi, buf[0])
         for w in range(W):
@@ -258,70 +248,25 @@ def robust_skeleton(bones: np.ndarray, median: np.ndarray, se: np.ndarray, count
 
 
 @njit(**_JIT)
-def correct_tracks(
-    state: tuple,
-    tracks: np.ndarray,
-    persons: np.ndarray,
-    frame: int,
-    poses3d: np.ndarray,
-    variance: np.ndarray,
-    lengths: np.ndarray,
-    filters: tuple,
-    counts: tuple,
-    out: np.ndarray,
-    smooth: bool,
-) -> None:
-    """tracker.Tracker._correct of each track k in tracks (K,) with its person persons[k] (K,) of poses (P, J, 4),
-    variances (P, J), bone lengths (P, L); state the TrackState's arrays (in its field order, without ids) changed in
-    place; filters (unseen variance, q, r2, smooth rate, smooth floor^2, smooth q0), counts (min hits, skeleton
-    refresh); with smooth, out (P, J, 4) takes the smoothed joints of the confirmed tracks' observed joints."""
-    position, velocity, p00, p01, p11, seen, last_frame, hits, confirmed = state[:9]
-    bones, slot, sx, sp, sq, live, skel_median, skel_se, skel_count = state[9:]
-    unseen_var, q, r2, rate_min, floor2, q0 = filters
-    min_hits, refresh_every = counts
+def correct_tracks(st: tuple, h: Hits, f: Filters) -> None:
+    """Each hit track's smoother, motion filter, bone window and (every f.refresh hits) robust skeleton, in place in
+    st (a tracker.TrackState); with h.smooth, h.out takes the confirmed tracks' smoothed joints where observed."""
+    bones = st.bones
     buf = np.empty((2, bones.shape[1]))
-    for k in range(len(tracks)):
-        t, p = tracks[k], persons[k]
-        dt = float(frame - last_frame[t])
-        smooth_joints(
-            sx[t],
-            sp[t],
-            sq[t],
-            seen[t],
-            velocity[t],
-            hits[t],
-            dt,
-            poses3d[p],
-            variance[p],
-            unseen_var,
-            rate_min,
-            floor2,
-            q0,
-        )
-        kalman_joints(
-            position[t],
-            velocity[t],
-            p00[t],
-            p01[t],
-            p11[t],
-            seen[t],
-            live[t],
-            dt,
-            poses3d[p],
-            variance[p],
-            unseen_var,
-            q,
-            r2,
-        )
-        last_frame[t] = frame
-        hits[t] += 1
-        confirmed[t] |= hits[t] >= min_hits
+    for k in range(len(h.tracks)):
+        t, p = h.tracks[k], h.persons[k]
+        dt = float(h.frame - st.last_frame[t])
+        smooth_joints(st, t, h.poses3d[p], h.variance[p], dt, f)
+        kalman_joints(st, t, h.poses3d[p], h.variance[p], dt, f)
+        st.last_frame[t] = h.frame
+        st.hits[t] += 1
+        st.confirmed[t] |= st.hits[t] >= f.min_hits
         for b in range(bones.shape[2]):  # element-wise: an array assignment compiles numba's broadcasting
-            bones[t, slot[t], b] = lengths[p, b]
-        slot[t] = (slot[t] + 1) % bones.shape[1]
-        if hits[t] % refresh_every == 0:
-            robust_skeleton(bones[t], skel_median[t], skel_se[t], skel_count[t], buf)
-        if smooth and confirmed[t]:
-            for j in range(poses3d.shape[1]):
-                if poses3d[p, j, 3] > 0:
-                    out[p, j, 0], out[p, j, 1], out[p, j, 2] = sx[t, j, 0], sx[t, j, 1], sx[t, j, 2]
+            bones[t, st.slot[t], b] = h.lengths[p, b]
+        st.slot[t] = (st.slot[t] + 1) % bones.shape[1]
+        if st.hits[t] % f.refresh == 0:
+            robust_skeleton(bones[t], st.skel_median[t], st.skel_se[t], st.skel_count[t], buf)
+        if h.smooth and st.confirmed[t]:
+            for j in range(h.poses3d.shape[1]):
+                if h.poses3d[p, j, 3] > 0:
+                    h.out[p, j, 0], h.out[p, j, 1], h.out[p, j, 2] = st.sx[t, j, 0], st.sx[t, j, 1], st.sx[t, j, 2]
