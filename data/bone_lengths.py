@@ -1,20 +1,10 @@
 """Reference bone lengths of the MAP bone prior (paper Eq. 7), and their estimation from 3D ground truth.
 
-Source of the default table: the anthropometric segment proportions of Drillis & Contini (1966), as
-reproduced in D. A. Winter, "Biomechanics and Motor Control of Human Movement" (fig. 4.1), for an adult
-of 1.70 m: the same source and the same numbers as the mean body of the synthetic generator
-(``data.synthetic.body.mean_body()``). The lengths below are the joint-to-joint distances of that mean
-body (they do not depend on the pose: every bone of ``keypoints.BONES`` is rigid in the model), rounded
-to 0.1 mm; ``tests/test_map_reconstruction.py`` checks that the two stay equal.
-
-Standard deviations: the relative spread of an adult mixed-sex population, stature SD 0.09 m / 1.70 m
-= 5.3 % combined with 2 % per-segment proportion variation (sqrt(5.3^2 + 2^2) = 5.7 %, the synthetic
-generator's model as well), plus an absolute 1 cm in quadrature for the uncertainty of where a
-keypoint sits on the body (annotators and detectors place "eye", "ear", "hip" differently by about a
-centimetre). The floor keeps the short face and foot bones (5-9 cm) from getting a millimetre-tight
-prior that the 2D keypoints cannot honour. Real keypoint conventions differ from anatomical joint
-centres (e.g. COCO hips sit wider and higher); re-estimate the table from a dataset's ground truth
-with ``benchmarks/fit_bone_lengths.py`` and point the ``bone_table`` config key at the JSON it writes.
+Default means: the joint-to-joint distances of the synthetic generator's 1.70 m mean body (Drillis & Contini
+1966 via Winter, "Biomechanics and Motor Control of Human Movement", fig. 4.1), rounded to 0.1 mm. SDs: 5.7 %
+relative (stature spread 5.3 % with 2 % per-segment variation) plus 1 cm absolute in quadrature for where a
+keypoint sits on the body, which keeps the 5-9 cm face and foot bones from a prior the 2D keypoints cannot honour.
+Re-estimate from a dataset with ``benchmarks/fit_bone_lengths.py`` and set ``bone_table`` to its JSON.
 """
 
 from __future__ import annotations
@@ -25,13 +15,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from data.keypoints import BONES, NUM_JOINTS
+from data.keypoints import BONES, COCO23_NAMES, NUM_JOINTS
 
 REFERENCE_STATURE_M = 1.70
 RELATIVE_SD = 0.057
 ABSOLUTE_SD_M = 0.010
 
-# Mean bone length (m) of the 1.70 m mean body, in the order of keypoints.BONES.
+# Mean bone length (m) of the 1.70 m mean body by bone name.
 _MEAN_M: Mapping[str, float] = {
     "shoulders": 0.3740,
     "hips": 0.1870,
@@ -59,33 +49,33 @@ _MEAN_M: Mapping[str, float] = {
     "right_heel_big_toe": 0.2556,
 }
 
-# The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up,
-# lowest sole point at z = 0, COCO-23 order, rounded to 1 mm. Used to initialise unseen joints.
-_MEAN_POSE_M = (
-    (0.111, 0.000, 1.559),
-    (0.085, 0.032, 1.597),
-    (0.085, -0.032, 1.597),  # nose, eyes
-    (0.009, 0.072, 1.571),
-    (0.009, -0.072, 1.571),  # ears
-    (0.000, 0.187, 1.389),
-    (0.000, -0.187, 1.389),  # shoulders
-    (0.000, 0.231, 1.076),
-    (0.000, -0.231, 1.076),  # elbows
-    (0.052, 0.265, 0.836),
-    (0.052, -0.265, 0.836),  # wrists
-    (0.000, 0.093, 0.900),
-    (0.000, -0.093, 0.900),  # hips
-    (0.000, 0.109, 0.484),
-    (0.000, -0.109, 0.484),  # knees
-    (-0.022, 0.124, 0.066),
-    (-0.022, -0.124, 0.066),  # ankles
-    (0.191, 0.129, 0.000),
-    (0.142, 0.192, 0.000),
-    (-0.064, 0.120, 0.000),  # left toes, heel
-    (0.191, -0.129, 0.000),
-    (0.142, -0.192, 0.000),
-    (-0.064, -0.120, 0.000),  # right toes, heel
-)
+# The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up, lowest sole
+# point at z = 0, rounded to 1 mm. Used to initialise unseen joints.
+_MEAN_POSITION_M: Mapping[str, tuple[float, float, float]] = {
+    "nose": (0.111, 0.000, 1.559),
+    "left_eye": (0.085, 0.032, 1.597),
+    "right_eye": (0.085, -0.032, 1.597),
+    "left_ear": (0.009, 0.072, 1.571),
+    "right_ear": (0.009, -0.072, 1.571),
+    "left_shoulder": (0.000, 0.187, 1.389),
+    "right_shoulder": (0.000, -0.187, 1.389),
+    "left_elbow": (0.000, 0.231, 1.076),
+    "right_elbow": (0.000, -0.231, 1.076),
+    "left_wrist": (0.052, 0.265, 0.836),
+    "right_wrist": (0.052, -0.265, 0.836),
+    "left_hip": (0.000, 0.093, 0.900),
+    "right_hip": (0.000, -0.093, 0.900),
+    "left_knee": (0.000, 0.109, 0.484),
+    "right_knee": (0.000, -0.109, 0.484),
+    "left_ankle": (-0.022, 0.124, 0.066),
+    "right_ankle": (-0.022, -0.124, 0.066),
+    "left_big_toe": (0.191, 0.129, 0.000),
+    "left_small_toe": (0.142, 0.192, 0.000),
+    "left_heel": (-0.064, 0.120, 0.000),
+    "right_big_toe": (0.191, -0.129, 0.000),
+    "right_small_toe": (0.142, -0.192, 0.000),
+    "right_heel": (-0.064, -0.120, 0.000),
+}
 
 
 def _frozen(values: Any, dtype: Any = np.float64) -> np.ndarray:
@@ -99,7 +89,7 @@ BONE_NAMES: tuple[str, ...] = tuple(BONES)
 BONE_PAIRS = _frozen([BONES[n] for n in BONE_NAMES], np.int64)  # (L, 2)
 BONE_MEAN = _frozen([_MEAN_M[n] for n in BONE_NAMES])  # (L,)
 BONE_STD = _frozen(np.sqrt((RELATIVE_SD * BONE_MEAN) ** 2 + ABSOLUTE_SD_M**2))  # (L,)
-MEAN_POSE = _frozen(_MEAN_POSE_M)  # (J, 3)
+MEAN_POSE = _frozen([_MEAN_POSITION_M[n] for n in COCO23_NAMES])  # (J, 3)
 
 
 def bone_lengths(poses: np.ndarray) -> np.ndarray:
