@@ -67,12 +67,21 @@ class Frame:
 
 @dataclass
 class Sequence:
-    """A rig and its frames, a free-form description of where they came from, and the benchmark
-    protocols to score them with beside the generic metrics (evaluation/protocols/base.py). A loader never
-    builds them (datasets sit below evaluation): it lists their plain-data inputs in ``meta["protocol_inputs"]``
-    and :func:`evaluation.protocols.attach_protocols` builds them."""
+    """A rig, its frames, and the typed facts that change how they are run and scored.
+
+    A loader lists the plain-data inputs of its benchmark protocols in ``protocol_inputs``
+    (``[{"name": ..., **arguments}]``); :func:`evaluation.protocols.attach_protocols` builds them into
+    ``protocols`` (datasets sit below evaluation). ``meta`` holds free-form descriptive extras only.
+    """
 
     rig: Rig
     frames: list[Frame]
     meta: dict = field(default_factory=dict)
     protocols: list = field(default_factory=list)
+    description: str = ""  # one line naming the data, shown in reports and picture titles
+    persistent_ids: bool = False  # gt_ids name one person over the whole sequence: identity metrics apply
+    views_are_ground_truth: bool = False  # views hold ground-truth 2D: a 2D stage's predictions are scored on them
+    protocol_inputs: list[dict] = field(default_factory=list)
+    stage_seconds: dict[str, float] = field(default_factory=dict)  # stages run while loading, e.g. 2D grouping
+    coco_images: list[dict] = field(default_factory=list)  # COCO "images" entries of the frames' images
+    area: tuple[float, float, float, float] | None = None  # the persons' ground area (xmin, xmax, ymin, ymax), m

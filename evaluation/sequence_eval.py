@@ -44,7 +44,7 @@ def evaluate_sequence(
     Every sequence also gets the statistics of the reprojection error of the reconstructed joints
     against the 2D detections they were fitted to (the paper's Table 3; ``reprojection_*`` metrics).
     """
-    attach_protocols(sequence)  # the dataset's own protocols (meta["protocol_inputs"]), unless attached already
+    attach_protocols(sequence)  # the dataset's own protocols (protocol_inputs), unless attached already
     results, skipped, pairs, reprojection = [], Counter(), CorrespondenceCounts(), []
     has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
     identities = IdentityEvaluator(evaluator.max_dist_m) if _tracks_identities(sequence, pipeline) else None
@@ -88,7 +88,7 @@ def _tracks_identities(sequence: Sequence, pipeline: MultiViewPipeline) -> bool:
     """Whether identity metrics apply: a tracker runs and the sequence's GT ids persist across frames."""
     return (
         getattr(pipeline, "tracker", None) is not None
-        and bool(sequence.meta.get("persistent_ids"))
+        and sequence.persistent_ids
         and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None)
     )
 

@@ -5,7 +5,7 @@
 ``panoptic`` (CMU Panoptic), ``wildtrack`` (Wildtrack calibrations, synthetic bodies), ``synthetic``
 (the built-in synthetic crowd, optionally rendered), ``images`` (your calibration and each camera's frames:
 folders, videos or images). A loader lists the inputs of its benchmark protocol in
-``meta["protocol_inputs"]``; :func:`evaluation.protocols.attach_protocols` builds the protocols. A stage
+``Sequence.protocol_inputs``; :func:`evaluation.protocols.attach_protocols` builds the protocols. A stage
 a loader needs (the Shelf PAF grouping) is given to it by the config.
 May import layers 1 and 2 (``data.*``); never the stages, ``evaluation`` or the entry points.
 """

@@ -42,10 +42,9 @@ def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str
         "poses2d": str(poses2d),
         "frames_without_detections": len(empty),
         "frames_not_selected": len(set(views) - set(numbers)),
-        "description": f"{poses2d} ({detections} detections; {len(empty)} frames without any) on {cameras}, "
-        f"no ground truth",
     }
-    return Sequence(rig, out, meta)
+    description = f"{poses2d} ({detections} detections; {len(empty)} frames without any) on {cameras}, no ground truth"
+    return Sequence(rig, out, meta, description=description)
 
 
 def _frame_numbers(frames: list[int] | str) -> list[int]:

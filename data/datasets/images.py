@@ -9,7 +9,7 @@ found in every camera; frame number = the stem when all stems are integers, else
 frame's ``images`` reads its files only when called and returns them at the calibration's image size: an
 image of another size is rescaled (with one ImageSizeWarning per camera at loading, which also names a
 different aspect ratio). Its ``views`` are empty until a 2D stage fills them; ``image_ids`` are
-:func:`data.image_ids.coco_image_id`, and ``meta["coco_images"]`` lists them as COCO "images" entries
+:func:`data.image_ids.coco_image_id`, and ``Sequence.coco_images`` lists them as COCO "images" entries
 (id, frame, camera, file_name, width, height of the file; video_frame for a video) for running one's own
 detector and giving its boxes back with detector=file (boxes in the file's pixels: scale them by the
 calibration's size / (width, height)).
@@ -82,11 +82,12 @@ def load_images(
         "images": {k: str(v) for k, v in images.items()} if isinstance(images, Mapping) else str(images),
         "align": align,
         "image_sizes": {cam.name: list(size) for cam, size in zip(rig, sizes)},
-        "coco_images": coco_images(rig, sources, table, sizes),
-        "description": f"{len(out)} frames of {len(rig)} cameras ({'/'.join(kinds)}) from {_shown(images)} "
-        f"on {cameras}, no detections, no ground truth",
     }
-    return Sequence(rig, out, meta)
+    description = (
+        f"{len(out)} frames of {len(rig)} cameras ({'/'.join(kinds)}) from {_shown(images)} "
+        f"on {cameras}, no detections, no ground truth"
+    )
+    return Sequence(rig, out, meta, description=description, coco_images=coco_images(rig, sources, table, sizes))
 
 
 def _shown(images: str | Path | Mapping) -> str:
@@ -293,7 +294,7 @@ def main(argv: Seq[str] | None = None) -> None:
         sequence = load_images(args.cameras, images, args.pattern, args.frames, args.align)
     except (ValueError, OSError) as exc:
         parser.exit(1, f"error: {exc}\n")
-    doc = {"images": sequence.meta["coco_images"], "categories": [{"id": 1, "name": "person"}]}
+    doc = {"images": sequence.coco_images, "categories": [{"id": 1, "name": "person"}]}
     atomic_write_text(args.out, json.dumps(doc, indent=1))
     print(
         f"wrote {len(doc['images'])} images ({len(sequence.frames)} frames x {len(sequence.rig)} cameras) to {args.out}"

@@ -8,9 +8,9 @@ Ground truth: every body's ``joints19`` (cm, Panoptic world with y down) goes th
 ``PANOPTIC19_TO_COCO23``. A joint is valid when its Panoptic confidence is above ``GT_MIN_CONFIDENCE``
 (0.1, VoxelPose's rule: ``joints_vis = confidence > 0.1``); coco19 has no foot joints, so the six
 COCO-23 foot joints are always invalid. ``gt_ids`` are the Panoptic body ids. The first 15 coco19
-joints (real neck and mid-hip included) are kept per frame in ``meta["gt_panoptic15"]`` for the
+joints (real neck and mid-hip included) are kept per frame in the protocol inputs for the
 Panoptic protocol (:mod:`evaluation.protocols.panoptic`), which the returned Sequence asks for in
-``meta["protocol_inputs"]``; the evaluation layer attaches it as ``PanopticProtocol``
+``Sequence.protocol_inputs``; the evaluation layer attaches it as ``PanopticProtocol``
 (:func:`evaluation.protocols.attach_protocols`; eval.py prints its tables and writes its summary under "panoptic").
 
 2D input: either a ``poses2d.json`` (DESIGN.md), or 2D poses generated from the ground truth by
@@ -76,9 +76,8 @@ def load_panoptic_sequence(
         "sequence": sequence,
         "cameras": names,
         "gt_min_confidence": GT_MIN_CONFIDENCE,
-        "gt_panoptic15": {},
-        "persistent_ids": True,
-    }  # Panoptic body ids name one person over the sequence
+    }
+    gt15 = {}
     if poses2d is not None:
         views_by_frame = _read_poses2d(poses2d, rig, meta)
         source = f"2D poses from {poses2d}"
@@ -103,15 +102,15 @@ def load_panoptic_sequence(
         )
     out = []
     for frame, (ids, joints19) in ground_truth.items():
-        meta["gt_panoptic15"][frame] = panoptic19_to_ours(joints19)[:, :15]
+        gt15[frame] = panoptic19_to_ours(joints19)[:, :15]
         views = views_by_frame.get(frame) or [ViewDetections.empty() for _ in names]
         out.append(Frame(frame, views, _coco23(joints19), ids))
     # Counted, not dropped silently: GT frames without 2D input, 2D frames without GT (not evaluated).
     meta["frames_without_2d"] = sum(f not in views_by_frame for f in ground_truth)
     meta["frames_2d_without_gt"] = sum(f not in all_files for f in views_by_frame)
-    meta["description"] = f"CMU Panoptic {sequence}: cameras {', '.join(names)}; {source}"
-    meta["protocol_inputs"] = [{"name": "panoptic", "gt15": meta["gt_panoptic15"]}]
-    return Sequence(rig, out, meta)
+    description = f"CMU Panoptic {sequence}: cameras {', '.join(names)}; {source}"
+    protocol = [{"name": "panoptic", "gt15": gt15}]  # Panoptic body ids name one person over the sequence
+    return Sequence(rig, out, meta, description=description, persistent_ids=True, protocol_inputs=protocol)
 
 
 def find_pose_files(seq_dir: str | Path) -> dict[int, Path]:

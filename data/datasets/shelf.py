@@ -7,12 +7,12 @@ truth) and ``4d_association/skel.txt`` (4D Association's stored output, the base
 
 2D input: the candidates of every camera frame are grouped into persons by part affinity
 by the ``grouper`` the config gives (``models.paf_grouping.group_view``) into COCO-23 ViewDetections; the seconds spent
-grouping go to ``meta["stage_seconds"]["grouping"]`` (eval.py prints them as a stage). Alternatively a
+grouping go to ``Sequence.stage_seconds["grouping"]`` (eval.py prints them as a stage). Alternatively a
 ``poses2d.json`` (DESIGN.md) of already-grouped COCO-23 detections, keyed by the Shelf frame number.
 Detections carry no identities (person_ids -1).
 
 Ground truth: Shelf-14 + mid-hip is not COCO-23, so ``Frame.gt_poses`` is None (the generic evaluator
-skips it); ``meta["protocol_inputs"]`` holds what the Shelf protocol needs (GT, its path, the baseline
+skips it); ``Sequence.protocol_inputs`` holds what the Shelf protocol needs (GT, its path, the baseline
 path), and the evaluation layer attaches :class:`evaluation.protocols.shelf.ShelfProtocol` from it
 (:func:`evaluation.protocols.attach_protocols`), which prints the standard Shelf PCP table for ours and
 for 4D Association.
@@ -68,6 +68,7 @@ def load_shelf(
     gts = load_4dassoc_skeletons(gt_path)
     numbers = _frame_numbers(frames, len(gts), first_frame, gt_path)
     meta = {"dataset": "shelf", "root": str(root), "first_frame": first_frame, "frames": len(numbers)}
+    stage_seconds = {}
     if poses2d is None:
         if grouper is None:
             raise ValueError(
@@ -83,7 +84,7 @@ def load_shelf(
             dict(min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score),
             bbox_margin,
         )
-        meta["stage_seconds"] = {"grouping": seconds}
+        stage_seconds["grouping"] = seconds
         source = (
             f"OpenPose BODY_25 candidates of {_under(root, detections)} grouped by PAF (min_paf {min_paf:g}, "
             f"min_joints {min_joints}, min_mean_score {min_mean_score:g})"
@@ -97,11 +98,11 @@ def load_shelf(
         source += "; the 6 foot keypoints removed (dataset.drop_feet)"
     out = [Frame(n, views.get(n) or [ViewDetections.empty() for _ in rig.names]) for n in numbers]
     detected = sum(len(v) for f in out for v in f.views)
-    meta["description"] = (
+    description = (
         f"Shelf frames {numbers[0]}-{numbers[-1]} ({len(numbers)}), cameras "
         f"{', '.join(rig.names)}: {source}; {detected / max(len(out), 1):.1f} detections per frame"
     )
-    meta["protocol_inputs"] = [
+    protocol = [
         {
             "name": "shelf",
             "gt": {n: gts[n - first_frame] for n in numbers},
@@ -111,7 +112,7 @@ def load_shelf(
             "alpha": alpha,
         }
     ]
-    return Sequence(rig, out, meta)
+    return Sequence(rig, out, meta, description=description, protocol_inputs=protocol, stage_seconds=stage_seconds)
 
 
 def without_feet(view: ViewDetections) -> ViewDetections:

@@ -23,7 +23,7 @@ def load_synthetic(render: bool = False, render_seed: int | None = None, **optio
     rig = "ring of cameras" if cfg.rig == "ring" else f"rig {cfg.rig}"
     persons = f"{len(sequence.frames[0].gt_ids) if sequence.frames else 0} persons"
     if not render:
-        sequence.meta["description"] = (
+        sequence.description = (
             f"Synthetic crowd (seed {cfg.seed}): {persons}, {rig}, 2D noise {cfg.noise_px} px at "
             f"{cfg.noise_ref_depth_m} m x (depth ratio)^{cfg.noise_depth_exponent:g}, "
             f"occlusion {'on' if cfg.occlusion else 'off'}, "
@@ -34,9 +34,9 @@ def load_synthetic(render: bool = False, render_seed: int | None = None, **optio
 
     seed = cfg.seed if render_seed is None else int(render_seed)
     sequence = render_sequence(sequence, seed)
-    sequence.meta["description"] = (
+    sequence.description = (
         f"Synthetic crowd (seed {cfg.seed}), rendered (render seed {seed}): {persons}, {rig}, "
         f"views = the render's ground-truth 2D"
     )
-    sequence.meta["views_are_ground_truth"] = True  # what a 2D stage's predictions are scored against
+    sequence.views_are_ground_truth = True
     return sequence

@@ -9,7 +9,7 @@ identities across frames, so each frame is generated on its own (own seed, stand
 ``gt_ids`` number the positions within a frame only. ``Frame.index`` is the Wildtrack frame number.
 
 The sequence asks for the paper's Table 1 protocol, COCO AP/AR of the reprojected 3D poses
-(:class:`evaluation.protocols.reprojection_coco.ReprojectionCOCOProtocol`), in ``meta["protocol_inputs"]``;
+(:class:`evaluation.protocols.reprojection_coco.ReprojectionCOCOProtocol`), in ``Sequence.protocol_inputs``;
 the evaluation layer attaches it (:func:`evaluation.protocols.attach_protocols`).
 """
 
@@ -86,12 +86,12 @@ def load_wildtrack_crowd(
         "frames": chosen,
         "seed": int(seed),
         "options": options,
-        "description": _description(
-            chosen, positions, noise_px, noise_depth_exponent, noise_ref_depth_m, occlusion, miss_rate, fp_rate, seed
-        ),
     }
-    meta["protocol_inputs"] = [{"name": "reprojection_coco", "min_joints": coco_min_joints, "max_dets": coco_max_dets}]
-    return Sequence(rig, out, meta)
+    description = _description(
+        chosen, positions, noise_px, noise_depth_exponent, noise_ref_depth_m, occlusion, miss_rate, fp_rate, seed
+    )
+    protocol = [{"name": "reprojection_coco", "min_joints": coco_min_joints, "max_dets": coco_max_dets}]
+    return Sequence(rig, out, meta, description=description, protocol_inputs=protocol)
 
 
 def _choose_frames(positions: dict[int, np.ndarray], frames: int | list[int], path: Path) -> list[int]:

@@ -244,18 +244,20 @@ def render_sequence(sequence: Sequence, seed: int) -> Sequence:
                 image_ids=[coco_image_id(frame.index, v, len(rig)) for v in range(len(rig))],
             )
         )
-    meta = {
-        **sequence.meta,
-        "render": {"seed": int(seed), "persons_left_out": left_out},
-        "coco_images": coco_images(frames, rig),
-    }
-    return Sequence(rig, frames, meta, list(sequence.protocols))
+    render = {"seed": int(seed), "persons_left_out": left_out}
+    return replace(
+        sequence,
+        frames=frames,
+        meta={**sequence.meta, "render": render},
+        protocols=list(sequence.protocols),
+        coco_images=coco_images(frames, rig),
+    )
 
 
 def _area(sequence: Sequence) -> tuple[float, float, float, float]:
-    """The persons' area: meta["area"] where the dataset gives it, else the extent of the ground truth."""
-    if sequence.meta.get("area") is not None:
-        return tuple(float(v) for v in sequence.meta["area"])
+    """The persons' area: the sequence's where the dataset gives it, else the extent of the ground truth."""
+    if sequence.area is not None:
+        return sequence.area
     points = [f.gt_poses[..., :2].reshape(-1, 2) for f in sequence.frames if f.gt_poses is not None]
     points = np.concatenate(points) if points else np.zeros((0, 2))
     if len(points) == 0:

@@ -55,14 +55,8 @@ def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
         views = [observe_view(cam, poses[f, ids], ids, cfg, rng) for cam in rig]
         gt = np.concatenate([poses[f, ids], np.ones((len(ids), poses.shape[2], 1))], axis=-1)
         frames.append(Frame(index=f, views=views, gt_poses=gt, gt_ids=ids.astype(np.int64)))
-    meta = {
-        "source": "synthetic",
-        "persistent_ids": True,  # gt_ids name the same person in every frame (identity metrics apply)
-        "config": cfg.to_dict(),
-        "area": list(scene.area),
-        "persons": [
-            {"id": i, "stature": b.stature, "walking": bool(scene.walking[:, i].any())}
-            for i, b in enumerate(scene.bodies)
-        ],
-    }
-    return Sequence(rig=rig, frames=frames, meta=meta)
+    persons = [
+        {"id": i, "stature": b.stature, "walking": bool(scene.walking[:, i].any())} for i, b in enumerate(scene.bodies)
+    ]
+    meta = {"source": "synthetic", "config": cfg.to_dict(), "persons": persons}
+    return Sequence(rig, frames, meta, persistent_ids=True, area=tuple(float(v) for v in scene.area))
