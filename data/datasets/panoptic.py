@@ -1,23 +1,10 @@
 """CMU Panoptic sequences as the dataset ships them, turned into a :class:`data.multiview.Sequence`.
 
-Layout read (``<root>/<seq>/...``): ``calibration_<seq>.json`` and
-``hdPose3d_stage1_coco19/body3DScene_XXXXXXXX.json`` (frame number XXXXXXXX); HD images are not needed.
-
-Ground truth: every body's ``joints19`` (cm, Panoptic world with y down) goes through
-:func:`data.geometry.calibration.panoptic_world_to_ours` (metres, z up) and into COCO-23 with
-``PANOPTIC19_TO_COCO23``. A joint is valid when its Panoptic confidence is above ``GT_MIN_CONFIDENCE``
-(0.1, VoxelPose's rule: ``joints_vis = confidence > 0.1``); coco19 has no foot joints, so the six
-COCO-23 foot joints are always invalid. ``gt_ids`` are the Panoptic body ids. The first 15 coco19
-joints (real neck and mid-hip included) are kept per frame in the protocol inputs for the
-Panoptic protocol (:mod:`evaluation.protocols.panoptic`), which the returned Sequence asks for in
-``Sequence.protocol_inputs``; the evaluation layer attaches it as ``PanopticProtocol``
-(:func:`evaluation.protocols.attach_protocols`; eval.py prints its tables and writes its summary under "panoptic").
-
-2D input: either a ``poses2d.json`` (DESIGN.md), or 2D poses generated from the ground truth by
-projecting it through the chosen cameras with Gaussian pixel noise and capsule occlusion
-(:func:`data.synthetic.observe.observe_view`, see :func:`observe_ground_truth`). Generated input is for
-protocol checks only: it carries ground-truth identities (so the oracle matcher works) and, like the
-ground truth, has no foot joints; the feet matcher then falls back to the ankles.
+Read: ``<root>/<seq>/calibration_<seq>.json`` and ``hdPose3d_stage1_coco19/body3DScene_XXXXXXXX.json``. Ground
+truth: ``joints19`` (cm, y down) to metres, z up, COCO-23 (feet always invalid), a joint valid when its
+confidence > ``GT_MIN_CONFIDENCE`` (VoxelPose's rule); the first 15 coco19 joints go to the Panoptic protocol
+through ``protocol_inputs``. 2D input: a ``poses2d.json``, or generated from the ground truth (noise, capsule
+occlusion, GT identities, no feet) for protocol checks.
 """
 
 from __future__ import annotations
@@ -58,11 +45,9 @@ def load_panoptic_sequence(
 ) -> Sequence:
     """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) per frame, 2D views.
 
-    ``frames``: None = every body3DScene file found; a list = those frame numbers; a slice or a
-    "start:stop:step" string = positions in the sorted list of found frames ("::12" keeps every 12th).
-    ``poses2d``: a poses2d.json to read the 2D input from; None generates it from the ground truth with
-    ``noise_px`` pixel noise SD (the same at every depth), ``occlusion`` and the other options of
-    :func:`observe_ground_truth`, deterministic for ``seed``.
+    ``frames``: None = every body3DScene file; a list = frame numbers; a slice or "start:stop:step" string =
+    positions among the found frames. ``poses2d``: a poses2d.json of 2D input; None generates it from the
+    ground truth (:func:`observe_ground_truth`, ``noise_px`` the same at every depth), deterministic for ``seed``.
     """
     seq_dir = Path(root) / sequence
     names = list(DEFAULT_CAMERAS if cameras is None else (str(c) for c in cameras))
@@ -82,20 +67,14 @@ def load_panoptic_sequence(
         views_by_frame = _read_poses2d(poses2d, rig, meta)
         source = f"2D poses from {poses2d}"
     else:
-        cfg = SyntheticConfig(
+        observation = dict(
             noise_px=noise_px,
-            noise_depth_exponent=0.0,
             occlusion=occlusion,
             occluded_drop_prob=occluded_drop_prob,
             occluded_noise_scale=occluded_noise_scale,
             min_joints_in_view=min_joints_in_view,
-            miss_rate=0.0,
-            fp_rate=0.0,
         )
-        rng = np.random.default_rng(seed)
-        views_by_frame = {
-            f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng) for f, (ids, j19) in ground_truth.items()
-        }
+        views_by_frame = _generated_views(rig, ground_truth, seed, observation)
         source = (
             f"2D generated from GT: {noise_px} px noise, occlusion {'on' if occlusion else 'off'}, "
             f"seed {seed}, no foot joints"
@@ -175,6 +154,13 @@ def observe_ground_truth(
     valid_by_id = {int(i): gt_poses[n, :, 3] > 0 for n, i in enumerate(ids)}
     filled = _fill_invalid(gt_poses)
     return [_mask_invalid(observe_view(camera, filled, ids, cfg, rng), valid_by_id, camera, cfg) for camera in rig]
+
+
+def _generated_views(rig: Rig, ground_truth: dict, seed: int, observation: dict) -> dict[int, list[ViewDetections]]:
+    """{frame: V ViewDetections} observed from {frame: (ids (G,), joints19 (G, 19, 4))}, depth-independent noise."""
+    cfg = SyntheticConfig(noise_depth_exponent=0.0, miss_rate=0.0, fp_rate=0.0, **observation)
+    rng = np.random.default_rng(seed)
+    return {f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng) for f, (ids, j19) in ground_truth.items()}
 
 
 def _fill_invalid(poses: np.ndarray) -> np.ndarray:
