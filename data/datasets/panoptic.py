@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from data.geometry.calibration import load_panoptic, panoptic_world_to_ours
 from data.geometry.camera import Camera, Rig
 from data.keypoints import FOOT_JOINTS, LEFT_ANKLE, LEFT_FOOT, PANOPTIC19_TO_COCO23, RIGHT_ANKLE, RIGHT_FOOT, to_coco23
 from data.multiview import Frame, Sequence, ViewDetections
-from data.synthetic.config import SyntheticConfig
+from data.synthetic.config import SyntheticConfig, observation_options
 from data.synthetic.observe import bbox_from_keypoints, observe_view
 
 # The five HD cameras of VoxelPose's Panoptic experiments (panel 0, nodes 3, 6, 12, 13, 23).
@@ -36,19 +37,19 @@ def load_panoptic_sequence(
     cameras: list[str] | None = None,
     frames: list[int] | slice | str | None = None,
     poses2d: str | None = None,
-    noise_px: float = 2.0,
-    occlusion: bool = True,
     seed: int = 0,
-    occluded_drop_prob: float = 0.3,
-    occluded_noise_scale: float = 3.0,
-    min_joints_in_view: int = 5,
+    **observation: Any,
 ) -> Sequence:
     """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) per frame, 2D views.
 
     ``frames``: None = every body3DScene file; a list = frame numbers; a slice or "start:stop:step" string =
     positions among the found frames. ``poses2d``: a poses2d.json of 2D input; None generates it from the
-    ground truth (:func:`observe_ground_truth`, ``noise_px`` the same at every depth), deterministic for ``seed``.
+    ground truth (:func:`observe_ground_truth`; ``observation``: noise_px, the same at every depth, occlusion,
+    occluded_drop_prob, occluded_noise_scale, min_joints_in_view), deterministic for ``seed``.
     """
+    keys = ("noise_px", "occlusion", "occluded_drop_prob", "occluded_noise_scale", "min_joints_in_view")
+    fixed = dict(noise_depth_exponent=0.0, miss_rate=0.0, fp_rate=0.0)
+    observation = observation_options("load_panoptic_sequence", observation, keys, **fixed)
     seq_dir = Path(root) / sequence
     names = list(DEFAULT_CAMERAS if cameras is None else (str(c) for c in cameras))
     rig = load_panoptic(seq_dir / f"calibration_{sequence}.json", names)
@@ -67,17 +68,10 @@ def load_panoptic_sequence(
         views_by_frame = _read_poses2d(poses2d, rig, meta)
         source = f"2D poses from {poses2d}"
     else:
-        observation = dict(
-            noise_px=noise_px,
-            occlusion=occlusion,
-            occluded_drop_prob=occluded_drop_prob,
-            occluded_noise_scale=occluded_noise_scale,
-            min_joints_in_view=min_joints_in_view,
-        )
         views_by_frame = _generated_views(rig, ground_truth, seed, observation)
         source = (
-            f"2D generated from GT: {noise_px} px noise, occlusion {'on' if occlusion else 'off'}, "
-            f"seed {seed}, no foot joints"
+            f"2D generated from GT: {observation['noise_px']} px noise, occlusion "
+            f"{'on' if observation['occlusion'] else 'off'}, seed {seed}, no foot joints"
         )
     out = []
     for frame, (ids, joints19) in ground_truth.items():
@@ -158,7 +152,7 @@ def observe_ground_truth(
 
 def _generated_views(rig: Rig, ground_truth: dict, seed: int, observation: dict) -> dict[int, list[ViewDetections]]:
     """{frame: V ViewDetections} observed from {frame: (ids (G,), joints19 (G, 19, 4))}, depth-independent noise."""
-    cfg = SyntheticConfig(noise_depth_exponent=0.0, miss_rate=0.0, fp_rate=0.0, **observation)
+    cfg = SyntheticConfig(**observation)
     rng = np.random.default_rng(seed)
     return {f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng) for f, (ids, j19) in ground_truth.items()}
 

@@ -9,6 +9,7 @@ reprojected 3D poses, ``reprojection_coco``) through ``Sequence.protocol_inputs`
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from data.geometry.calibration import load_wildtrack, load_wildtrack_positions
 from data.geometry.camera import Rig
 from data.multiview import Frame, Sequence
 from data.synthetic import SyntheticConfig, generate_sequence
+from data.synthetic.config import observation_options
 
 POSITIONS_FILE = "gt_positions_mvdet.txt"
 # The annotated region (m), grid cells 0..480 x 0..1440 of 2.5 cm from (-3, -9).
@@ -25,41 +27,22 @@ WILDTRACK_AREA = (-3.0, 9.0, -9.0, 27.0)
 def load_wildtrack_crowd(
     root: str | Path = "../shared/data/wildtrack",
     frames: int | list[int] = 20,
-    noise_px: float = 5.0,
-    noise_depth_exponent: float = 0.0,
-    noise_ref_depth_m: float = 5.0,
-    occlusion: bool = True,
-    occluded_drop_prob: float = 0.3,
-    occluded_noise_scale: float = 3.0,
-    miss_rate: float = 0.0,
-    fp_rate: float = 0.0,
-    min_joints_in_view: int = 5,
     seed: int = 0,
     coco_min_joints: int = 1,
     coco_max_dets: int = 100,
+    **observation: Any,
 ) -> Sequence:
     """The Wildtrack rig (7 views) and F frames of synthetic bodies at the annotated positions, GT (P, 23, 4).
 
-    ``frames``: the first N annotated frames (an int), or a list of annotated frame numbers.
-    The observation options are those of :class:`data.synthetic.SyntheticConfig`; ``coco_min_joints``
-    and ``coco_max_dets`` go to the ReprojectionCOCOProtocol (its min_joints and max_dets).
-    Deterministic for a seed (frame f is drawn from the seed sequence (seed, f)).
+    ``frames``: the first N annotated frames (an int), or a list of annotated frame numbers. ``observation``:
+    :data:`data.synthetic.config.OBSERVATION_KEYS` (default 5 px at every depth). ``coco_min_joints`` and
+    ``coco_max_dets`` go to the ReprojectionCOCOProtocol. Frame f is drawn from the seed sequence (seed, f).
     """
+    options = observation_options("load_wildtrack_crowd", observation, noise_px=5.0, noise_depth_exponent=0.0)
     root = Path(root)
     rig = load_wildtrack(root)
     positions = load_wildtrack_positions(root / POSITIONS_FILE)
     chosen = _choose_frames(positions, frames, root / POSITIONS_FILE)
-    options = dict(
-        noise_px=noise_px,
-        noise_depth_exponent=noise_depth_exponent,
-        noise_ref_depth_m=noise_ref_depth_m,
-        occlusion=occlusion,
-        occluded_drop_prob=occluded_drop_prob,
-        occluded_noise_scale=occluded_noise_scale,
-        miss_rate=miss_rate,
-        fp_rate=fp_rate,
-        min_joints_in_view=min_joints_in_view,
-    )
     out = [_frame(number, positions[number], rig, root, seed, options) for number in chosen]
     meta = {"dataset": "wildtrack", "root": str(root), "frames": chosen, "seed": int(seed), "options": options}
     protocol = [{"name": "reprojection_coco", "min_joints": coco_min_joints, "max_dets": coco_max_dets}]

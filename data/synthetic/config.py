@@ -166,6 +166,28 @@ class SyntheticConfig:
         return out
 
 
+OBSERVATION_KEYS = (
+    "noise_px",
+    "noise_ref_depth_m",
+    "noise_depth_exponent",
+    "occlusion",
+    "occluded_drop_prob",
+    "occluded_noise_scale",
+    "miss_rate",
+    "fp_rate",
+    "min_joints_in_view",
+)
+
+
+def observation_options(where: str, options: dict, keys: tuple[str, ...] = OBSERVATION_KEYS, **fixed: Any) -> dict:
+    """Every observation option of a dataset built on the synthetic detector: SyntheticConfig's defaults, then
+    ``fixed`` (the dataset's own defaults), then ``options``; a name outside ``keys`` is a ValueError."""
+    unknown = sorted(set(options) - set(keys))
+    if unknown:
+        raise ValueError(f"{where}: unknown option {unknown[0]!r} (known: {', '.join(keys)})")
+    return {**{k: getattr(SyntheticConfig, k) for k in OBSERVATION_KEYS}, **fixed, **options}
+
+
 def _floats(value: Any, n: int, key: str) -> tuple[float, ...]:
     """A tuple of n finite floats, or a ValueError naming the option."""
     try:
