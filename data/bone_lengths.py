@@ -21,61 +21,49 @@ REFERENCE_STATURE_M = 1.70
 RELATIVE_SD = 0.057
 ABSOLUTE_SD_M = 0.010
 
-# Mean bone length (m) of the 1.70 m mean body by bone name.
+# Mean bone length (m) of the 1.70 m mean body by bone name; a sided name ("torso") stands for both sides.
 _MEAN_M: Mapping[str, float] = {
     "shoulders": 0.3740,
     "hips": 0.1870,
-    "left_torso": 0.4984,
-    "right_torso": 0.4984,
-    "left_upper_arm": 0.3162,
-    "right_upper_arm": 0.3162,
-    "left_forearm": 0.2482,
-    "right_forearm": 0.2482,
-    "left_thigh": 0.4165,
-    "right_thigh": 0.4165,
-    "left_shin": 0.4182,
-    "right_shin": 0.4182,
-    "left_nose_eye": 0.0556,
-    "right_nose_eye": 0.0556,
-    "left_eye_ear": 0.0900,
-    "right_eye_ear": 0.0900,
-    "left_ankle_heel": 0.0788,
-    "right_ankle_heel": 0.0788,
-    "left_ankle_big_toe": 0.2233,
-    "right_ankle_big_toe": 0.2233,
-    "left_toes": 0.0802,
-    "right_toes": 0.0802,
-    "left_heel_big_toe": 0.2556,
-    "right_heel_big_toe": 0.2556,
+    "torso": 0.4984,
+    "upper_arm": 0.3162,
+    "forearm": 0.2482,
+    "thigh": 0.4165,
+    "shin": 0.4182,
+    "nose_eye": 0.0556,
+    "eye_ear": 0.0900,
+    "ankle_heel": 0.0788,
+    "ankle_big_toe": 0.2233,
+    "toes": 0.0802,
+    "heel_big_toe": 0.2556,
 }
 
 # The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up, lowest sole
-# point at z = 0, rounded to 1 mm. Used to initialise unseen joints.
+# point at z = 0, rounded to 1 mm; a sided name gives the left joint, the right one is its mirror (y -> -y).
+# Used to initialise unseen joints.
 _MEAN_POSITION_M: Mapping[str, tuple[float, float, float]] = {
     "nose": (0.111, 0.000, 1.559),
-    "left_eye": (0.085, 0.032, 1.597),
-    "right_eye": (0.085, -0.032, 1.597),
-    "left_ear": (0.009, 0.072, 1.571),
-    "right_ear": (0.009, -0.072, 1.571),
-    "left_shoulder": (0.000, 0.187, 1.389),
-    "right_shoulder": (0.000, -0.187, 1.389),
-    "left_elbow": (0.000, 0.231, 1.076),
-    "right_elbow": (0.000, -0.231, 1.076),
-    "left_wrist": (0.052, 0.265, 0.836),
-    "right_wrist": (0.052, -0.265, 0.836),
-    "left_hip": (0.000, 0.093, 0.900),
-    "right_hip": (0.000, -0.093, 0.900),
-    "left_knee": (0.000, 0.109, 0.484),
-    "right_knee": (0.000, -0.109, 0.484),
-    "left_ankle": (-0.022, 0.124, 0.066),
-    "right_ankle": (-0.022, -0.124, 0.066),
-    "left_big_toe": (0.191, 0.129, 0.000),
-    "left_small_toe": (0.142, 0.192, 0.000),
-    "left_heel": (-0.064, 0.120, 0.000),
-    "right_big_toe": (0.191, -0.129, 0.000),
-    "right_small_toe": (0.142, -0.192, 0.000),
-    "right_heel": (-0.064, -0.120, 0.000),
+    "eye": (0.085, 0.032, 1.597),
+    "ear": (0.009, 0.072, 1.571),
+    "shoulder": (0.000, 0.187, 1.389),
+    "elbow": (0.000, 0.231, 1.076),
+    "wrist": (0.052, 0.265, 0.836),
+    "hip": (0.000, 0.093, 0.900),
+    "knee": (0.000, 0.109, 0.484),
+    "ankle": (-0.022, 0.124, 0.066),
+    "big_toe": (0.191, 0.129, 0.000),
+    "small_toe": (0.142, 0.192, 0.000),
+    "heel": (-0.064, 0.120, 0.000),
 }
+
+
+def _by_side(table: Mapping, name: str, mirror: bool = False) -> Any:
+    """The entry of a name in a table whose sided entries are keyed without "left_" / "right_"."""
+    side, _, rest = name.partition("_")
+    if name in table or side not in ("left", "right"):
+        return table[name]
+    value = table[rest]
+    return (value[0], -value[1], value[2]) if mirror and side == "right" else value
 
 
 def _frozen(values: Any, dtype: Any = np.float64) -> np.ndarray:
@@ -87,9 +75,9 @@ def _frozen(values: Any, dtype: Any = np.float64) -> np.ndarray:
 
 BONE_NAMES: tuple[str, ...] = tuple(BONES)
 BONE_PAIRS = _frozen([BONES[n] for n in BONE_NAMES], np.int64)  # (L, 2)
-BONE_MEAN = _frozen([_MEAN_M[n] for n in BONE_NAMES])  # (L,)
+BONE_MEAN = _frozen([_by_side(_MEAN_M, n) for n in BONE_NAMES])  # (L,)
 BONE_STD = _frozen(np.sqrt((RELATIVE_SD * BONE_MEAN) ** 2 + ABSOLUTE_SD_M**2))  # (L,)
-MEAN_POSE = _frozen([_MEAN_POSITION_M[n] for n in COCO23_NAMES])  # (J, 3)
+MEAN_POSE = _frozen([_by_side(_MEAN_POSITION_M, n, mirror=True) for n in COCO23_NAMES])  # (J, 3)
 
 
 def bone_lengths(poses: np.ndarray) -> np.ndarray:
