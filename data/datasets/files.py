@@ -1,13 +1,6 @@
-"""Your own rig: a calibration file and a poses2d.json (DESIGN.md) turned into a Sequence without ground truth.
-
-The calibration is read by :func:`data.geometry.calibration.load_rig` (format detected: cameras.json,
-4D Association, VoxelPose, Panoptic, a Wildtrack folder, Shelf P-matrices); the 2D poses by
-:func:`data.formats.poses2d_io.read_poses2d`, which checks every entry against the calibration's camera names and image sizes. The rig check
-(:mod:`data.geometry.check_rig`) then runs with the 2D poses: errors stop, warnings (RigWarning) name
-the camera and the likely mistake.
-Frames are the frame numbers found in the file, or the ones asked for: a frame without any detection
-in any view is still a frame (the pipeline then reports it as skipped), so that a detector's output,
-which omits empty frames, can be evaluated over a fixed range.
+"""Your own rig: a calibration (any format :func:`data.geometry.calibration.load_rig` reads) and a poses2d.json
+turned into a Sequence without ground truth, checked by :mod:`data.geometry.check_rig` with the 2D poses.
+A selected frame without any detection stays a frame, so a detector's output can be scored over a fixed range.
 """
 
 from __future__ import annotations

@@ -1,21 +1,11 @@
 """Multi-view images (dataset=images): a calibration and every camera's frames, no detections, no ground truth.
 
-Each camera's frames are a folder of images, a video or one image (:mod:`data.formats.image_sources`),
-found under one folder by the camera's name (a sub-folder, or a video or image file with that stem), by
-a ``pattern`` (``cam{i}.png``, ``{name}.mp4``, ``{name}/*.jpg``: {i} = view index, {name} = camera name;
-a glob in the last part selects a folder's files), or given per camera by a mapping. Frames are matched
-across cameras by position (align=index; frame number = position) or by file stem (align=name: the stems
-found in every camera; frame number = the stem when all stems are integers, else the position). A
-frame's ``images`` reads its files only when called and returns them at the calibration's image size: an
-image of another size is rescaled (with one ImageSizeWarning per camera at loading, which also names a
-different aspect ratio). Its ``views`` are empty until a 2D stage fills them; ``image_ids`` are
-:func:`data.image_ids.coco_image_id`, and ``Sequence.coco_images`` lists them as COCO "images" entries
-(id, frame, camera, file_name, width, height of the file; video_frame for a video) for running one's own
-detector and giving its boxes back with detector=file (boxes in the file's pixels: scale them by the
-calibration's size / (width, height)).
-
-CLI: ``python -m data.datasets.images --cameras cameras.json --images DIR [--pattern P] [--frames F]
-[--align index|name] -o coco_images.json`` writes that COCO images list.
+A camera's frames (a folder, a video or one image) are found by its name, a ``pattern`` ({i} view index,
+{name} camera name, a glob in the last part) or a mapping, and matched across cameras by position
+(align=index) or by file stem (align=name). Images are read lazily at the calibration's size (rescaled with an
+ImageSizeWarning). ``Sequence.coco_images`` lists the COCO "images" entries, for running one's own detector and
+giving its boxes back with detector=file (in the file's pixels). CLI: ``python -m data.datasets.images
+--cameras cameras.json --images DIR [--pattern P] [--frames F] [--align index|name] -o coco_images.json``.
 """
 
 from __future__ import annotations

@@ -1,13 +1,9 @@
-"""OpenPose's own JSON output (``--write_json``): BODY_25 people per image, read as COCO-23 detections.
-
-Command line: one folder of ``<name>_<frame:012d>_keypoints.json`` files per camera -> poses2d.json::
+"""OpenPose's ``--write_json`` output (BODY_25 people per image) read as COCO-23 detections; a CLI to poses2d.json::
 
     python -m data.formats.openpose_json cam_a=openpose/cam_a cam_b=openpose/cam_b -o poses2d.json
     python -m data.formats.openpose_json 'openpose/*' -o poses2d.json      # camera name = folder name
 
-A folder argument may be ``name=folder`` (camera name given) or a folder or glob pattern (camera name =
-folder name). Keypoint scores are clipped to [0, 1] (OpenPose's confidences can exceed 1 slightly).
-``--cameras cameras.json`` checks the names against a calibration and the pixels against its image sizes.
+Scores are clipped to [0, 1]; ``--cameras cameras.json`` checks names and pixels against a calibration.
 """
 
 from __future__ import annotations

@@ -1,11 +1,7 @@
 """COCO OKS keypoint AP/AR through pycocotools, on COCO-23 or its body (COCO-17) or foot (6 joints) subset.
 
-The subset's keypoints and OKS sigmas are handed to pycocotools as if they were the whole skeleton, as
-COCO-WholeBody evaluates its parts: the object area (OKS scale and area ranges) stays the person's area,
-and a person without a labelled joint in the subset has ``num_keypoints = 0`` and is ignored, as COCO
-ignores it. A detection's area (used only to ignore unmatched detections outside an area range) is the
-extent of all its 23 keypoints, as ``COCO.loadRes`` computes it for 23-keypoint results, whatever the
-subset.
+A subset is handed to pycocotools as the whole skeleton, as COCO-WholeBody evaluates its parts: areas stay the
+person's, a person with no labelled joint in the subset is ignored, a detection's area spans all 23 keypoints.
 """
 
 from __future__ import annotations

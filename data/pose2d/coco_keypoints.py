@@ -1,10 +1,5 @@
-"""COCO-format keypoint annotation files (COCO-WholeBody, COCO-23, CrowdPose) to and from ImageRecords.
-
-Every loader returns one :class:`data.pose2d.records.ImageRecord` per entry of the file's ``images`` list, in
-file order, with every non-crowd person of that image in COCO-23 order, however few joints it has: the
-joints of persons that are not training samples are still needed for the multi-modal targets of the
-others. :func:`training_persons` picks the training samples of a record.
-"""
+"""COCO-format keypoint files (COCO-WholeBody, COCO-23, CrowdPose) to and from ImageRecords: one record per
+``images`` entry, every non-crowd person in COCO-23 order (all are needed for the multi-modal targets)."""
 
 from __future__ import annotations
 

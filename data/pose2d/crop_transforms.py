@@ -1,15 +1,7 @@
 """Top-down crop geometry and augmentation: box -> crop, crop affine, horizontal flip.
 
-Pixel convention (used by every function here and by models/heatmap_codec.py): continuous
-coordinates with pixel centres at integers, so pixel ``i`` covers ``[i - 0.5, i + 0.5]`` and an image
-of width ``W`` spans ``[-0.5, W - 0.5]``. This is the convention of ``cv2.warpAffine``
-(``dst(x) = src(M^-1 x)`` on pixel indices) and ``cv2.flip``. Consequences:
-
-- a horizontal flip maps ``x -> W - 1 - x`` (not ``W - x``), so flipping twice is the identity and a
-  flipped image and its flipped keypoints stay registered to the pixel;
-- a crop of extent ``scale`` (pixels of the image) fills the output's full extent ``out_size``: the
-  crop centre goes to ``((w - 1) / 2, (h - 1) / 2)`` and lengths scale by ``w / scale_w``, which is
-  isotropic when the box has the output's aspect ratio (:func:`box_to_center_scale` ensures it).
+Pixel centres at integers (``cv2.warpAffine``'s and ``cv2.flip``'s convention, also models/heatmap_codec.py's):
+a flip maps x -> W - 1 - x, so flipping twice is the identity; a crop's centre goes to ((w - 1) / 2, (h - 1) / 2).
 """
 
 from __future__ import annotations

@@ -1,13 +1,8 @@
 """The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels.
 
-Used by the single-image generator (:mod:`data.pose2d.synthetic_images`) and the multi-view scene
-renderer (:mod:`data.pose2d.scene_render`). Bodies are the capsules of :mod:`data.synthetic.capsules`,
-projected as tapered capsules, shaded in three layers and painted far to near (persons, then their
-parts). Painting also fills an owner map (H, W) uint16: 0 = no body, else 1 + person x parts + part.
-A joint is labelled v = 2 when the painted pixel under it belongs to a body part of its own person that
-carries it and no other body is in the way (the capsule occlusion test), v = 1 when it is hidden (by
-another person, or by its own body or head), and v = 0 (x = y = 0) outside the image. A person's box
-is that of its painted pixels.
+Persons are painted far to near into an owner map (H, W) uint16 (0 = no body, else 1 + person x parts + part).
+A joint is v = 2 when the pixel under it belongs to its own person's part that carries it and no other body is
+in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image; a box is that of the painted pixels.
 """
 
 from __future__ import annotations

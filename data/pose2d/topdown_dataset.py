@@ -1,16 +1,8 @@
 """Top-down person crops with multi-modal heatmap targets (paper Sec. 3.1), and a resumable epoch sampler.
 
-A sample is one person box of one image. Training samples are the annotated persons with at least
-``min_keypoints`` labelled joints; evaluation samples are the detector boxes (``use_det_boxes``) or the
-same annotated persons' boxes (score 1). The crop geometry and the pixel convention are those of
-:mod:`data.pose2d.crop_transforms`; targets come from :meth:`models.heatmap_codec.MultiModalHeatmapCodec.encode_crop`
-with every person of the image, so the other persons' joints inside the crop form the ``mu C`` term.
-
-Augmentation is drawn from ``numpy.random.default_rng([seed, epoch, index])``: a sample is the same
-whatever the worker, the batch order or an interruption, and :meth:`TopDownDataset.set_epoch` moves to
-another epoch's draws. A flip mirrors the WHOLE image and ALL persons (left/right joints swapped), then
-crops; ``affine_inv`` maps crop pixels back to that (possibly flipped) image. Images are RGB, normalised
-with the ImageNet mean and std.
+Targets hold every person of the image (the others' joints in the crop form the ``mu C`` term). Augmentation
+is drawn from ``default_rng([seed, epoch, index])``, so a sample does not depend on workers, order or an
+interruption; a flip mirrors the whole image and all persons before cropping.
 """
 
 from __future__ import annotations
