@@ -17,7 +17,6 @@ import numpy as np
 
 from data.keypoints import BONES, COCO23_NAMES, NUM_JOINTS
 
-REFERENCE_STATURE_M = 1.70
 RELATIVE_SD = 0.057
 ABSOLUTE_SD_M = 0.010
 

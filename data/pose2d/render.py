@@ -360,9 +360,3 @@ def painted_boxes(owner: np.ndarray, num: int) -> np.ndarray:
         r, c = np.flatnonzero(rows[p]), np.flatnonzero(cols[p])
         boxes[p] = (c[0], r[0], c[-1] + 1 - c[0], r[-1] + 1 - r[0])
     return boxes
-
-
-def owner_person(owner: np.ndarray) -> np.ndarray:
-    """Person index (H, W) int64 of every pixel of an owner map (H, W), -1 where no body is painted."""
-    ids = owner.astype(np.int64) - 1
-    return np.where(ids >= 0, ids // len(PART_GROUPS), -1)
