@@ -86,11 +86,8 @@ def bone_lengths(poses: np.ndarray) -> np.ndarray:
 
 
 def estimate_bone_table(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean, SD (ddof 1) and sample count of every bone over valid joints: (N, J, 4) -> (L,), (L,), (L,).
-
-    A bone counts in a pose when both its joints have validity > 0 and finite coordinates. Bones with
-    no sample get NaN mean and SD; bones with one sample get SD NaN.
-    """
+    """Mean, SD (ddof 1) and count of every bone over poses whose two joints are valid and finite: (N, J, 4) ->
+    (L,), (L,), (L,); NaN mean without samples, NaN SD with fewer than two."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
     ok = (poses[..., 3] > 0) & np.all(np.isfinite(poses[..., :3]), axis=-1)
     both = ok[:, BONE_PAIRS[:, 0]] & ok[:, BONE_PAIRS[:, 1]]
@@ -115,11 +112,8 @@ def bone_table_dict(mean: np.ndarray, std: np.ndarray, count: np.ndarray | None 
 
 
 def resolve_bone_table(table: str | Path | Mapping | None) -> tuple[np.ndarray, np.ndarray]:
-    """The reference (mean (L,), std (L,)) from None (defaults), a JSON path or a {"bones": ...} mapping.
-
-    Bones the table does not name keep their default; an unknown bone name, a non-positive or
-    non-finite value is a ValueError naming the table and the bone.
-    """
+    """The reference (mean (L,), std (L,)) from None (defaults), a JSON path or a {"bones": ...} mapping; unnamed
+    bones keep the default, an unknown bone or a value not finite and > 0 is a ValueError."""
     mean, std = BONE_MEAN.copy(), BONE_STD.copy()
     if table is None:
         return mean, std

@@ -14,11 +14,10 @@ from data.multiview import Frame, Sequence, ViewDetections
 
 
 def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str | None = None) -> Sequence:
-    """The rig of ``cameras`` (V views) and one Frame per frame number with V ViewDetections (N, 23, 3).
+    """The rig of ``cameras`` and one Frame per frame number with V ViewDetections (N, 23, 3).
 
-    ``frames``: None = every frame number in ``poses2d``; a list of frame numbers; or "start:stop[:step]"
-    = range(start, stop, step) of frame numbers. Frames of the file outside the selection are dropped
-    (counted in ``meta["frames_not_selected"]``); selected frames absent from the file have no detections.
+    ``frames``: None = those of the file, a list, or "start:stop[:step]"; frames outside it are counted in
+    ``meta["frames_not_selected"]``.
     """
     rig = load_rig(cameras, check=False)
     if not Path(poses2d).is_file():

@@ -44,12 +44,8 @@ def load_images(
     frames: list[int] | int | str | None = None,
     align: str = "index",
 ) -> Sequence:
-    """The rig of ``cameras`` (V views) and one Frame per selected frame: empty views, lazy images
-    (V of (H, W, 3) uint8 BGR at the calibration size) and COCO image ids (V,).
-
-    ``frames``: None = all; a list of frame numbers (each must exist); or "start:stop[:step]" = the frames
-    whose number is in range(start, stop, step).
-    """
+    """The rig of ``cameras`` and one Frame per selected frame: empty views, lazy images (V of (H, W, 3) uint8 BGR
+    at the calibration size), image ids (V,); ``frames``: None, frame numbers, or "start:stop[:step]" of numbers."""
     if align not in ALIGNS:
         raise ValueError(f"align={align!r}: must be one of {', '.join(ALIGNS)}")
     rig = load_rig(cameras)

@@ -42,9 +42,8 @@ def load_panoptic_sequence(
 ) -> Sequence:
     """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) per frame, 2D views.
 
-    ``frames``: None = every body3DScene file; a list = frame numbers; a slice or "start:stop:step" string =
-    positions among the found frames. ``poses2d``: a poses2d.json of 2D input; None generates it from the
-    ground truth (:func:`observe_ground_truth`; ``observation``: noise_px, the same at every depth, occlusion,
+    ``frames``: None = all, a list = frame numbers, a slice or "start:stop:step" = positions among the found frames.
+    ``poses2d``: a poses2d.json; None generates 2D from the GT (``observation``: noise_px at every depth, occlusion,
     occluded_drop_prob, occluded_noise_scale, min_joints_in_view), deterministic for ``seed``.
     """
     keys = ("noise_px", "occlusion", "occluded_drop_prob", "occluded_noise_scale", "min_joints_in_view")
@@ -135,13 +134,9 @@ def _coco23(joints19: np.ndarray) -> np.ndarray:
 def observe_ground_truth(
     rig: Rig, gt_poses: np.ndarray, gt_ids: np.ndarray, cfg: SyntheticConfig, rng: np.random.Generator
 ) -> list[ViewDetections]:
-    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera of the rig.
+    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera: V ViewDetections.
 
-    The synthetic generator's :func:`observe_view` does the projection, noise, occlusion and scores.
-    Joints invalid in the ground truth (the feet always) are filled in only so that its capsule body
-    model has no segments to the origin (feet at the ankle, others at the mean of the valid joints),
-    and are then removed (score 0); a person left with fewer than ``cfg.min_joints_in_view`` joints is
-    not detected in that view.
+    Invalid GT joints are filled in for the capsule model only (feet at the ankle, others at the mean), then removed.
     """
     gt_poses = np.asarray(gt_poses, dtype=np.float64)
     ids = np.asarray(gt_ids, dtype=np.int64)

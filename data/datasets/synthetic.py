@@ -6,12 +6,8 @@ from data.multiview import Sequence
 
 
 def load_synthetic(render: bool = False, render_seed: int | None = None, **options) -> Sequence:
-    """The built-in synthetic crowd; options are the fields of ``data.synthetic.SyntheticConfig``.
-
-    render=True: every frame gets lazy rendered images of its cameras (``frame.images``), COCO
-    ``image_ids``, and views holding the render's ground-truth 2D instead of the simulated detections
-    (data/pose2d/scene_render.py); render_seed (None = seed) sets the look of the render.
-    """
+    """The built-in synthetic crowd (options: SyntheticConfig's fields); render=True replaces the views by the
+    render's ground-truth 2D with lazy images and COCO image ids (render_seed None = seed)."""
     from data.synthetic import SyntheticConfig, generate_sequence
 
     if not isinstance(render, bool):

@@ -32,12 +32,8 @@ def load_wildtrack_crowd(
     coco_max_dets: int = 100,
     **observation: Any,
 ) -> Sequence:
-    """The Wildtrack rig (7 views) and F frames of synthetic bodies at the annotated positions, GT (P, 23, 4).
-
-    ``frames``: the first N annotated frames (an int), or a list of annotated frame numbers. ``observation``:
-    :data:`data.synthetic.config.OBSERVATION_KEYS` (default 5 px at every depth). ``coco_min_joints`` and
-    ``coco_max_dets`` go to the ReprojectionCOCOProtocol. Frame f is drawn from the seed sequence (seed, f).
-    """
+    """The Wildtrack rig (7 views) and synthetic bodies at the annotated positions of ``frames`` (the first N or a
+    list), GT (P, 23, 4); ``observation``: OBSERVATION_KEYS (default 5 px at every depth); coco_*: the protocol's."""
     options = observation_options("load_wildtrack_crowd", observation, noise_px=5.0, noise_depth_exponent=0.0)
     root = Path(root)
     rig = load_wildtrack(root)

@@ -73,11 +73,8 @@ def remove_stale_temporaries(folder: str | Path, target: str | None = None, recu
 
 @contextmanager
 def atomic_open(path: str | Path, binary: bool = False, fsync: bool = False) -> Iterator[IO]:
-    """Open a temporary file beside path for writing; on success it replaces path, on error it vanishes.
-
-    The file gets the permissions a plain open() would give (0666 minus the umask), not mkstemp's 0600.
-    Stale temporaries of the same target, left by a killed writer, are removed first.
-    """
+    """Open a temporary beside path for writing (plain open()'s permissions); on success it replaces path, on error
+    it vanishes; stale temporaries of the target are removed first."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path.parent, target=path.name)

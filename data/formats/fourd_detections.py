@@ -177,10 +177,8 @@ def _float_or_nan(token: str) -> float:
 
 
 def load_4dassoc_detections(path: str | Path, image_size: tuple[int, int] = (1032, 776)) -> list[FrameCandidates]:
-    """Read a 4D Association detection file: per frame 25 candidate arrays (n_j, 3) px and 26 PAFs (n_a, n_b).
-
-    image_size (w, h) converts the file's normalised coordinates: pixel = x * (w - 1), y * (h - 1).
-    """
+    """A 4D Association detection file -> per frame 25 candidate arrays (n_j, 3) px and 26 PAFs (n_a, n_b);
+    normalised coordinates to pixels x * (w - 1), y * (h - 1) of image_size."""
     path = Path(path)
     layout = _Layout(path, _numbers(path))
     skeleton = layout.count("the header's skeleton type")

@@ -300,11 +300,8 @@ def _xml_array(path: Path, tag: str, shape: tuple[int, ...], camera: str) -> np.
 
 
 def load_wildtrack(root: str | Path) -> Rig:
-    """Wildtrack calibrations/{intrinsic/intr_*, extrinsic/extr_*}.xml of the 7 cameras, tvec cm -> m.
-
-    The Wildtrack world is already z up with the ground at z = 0 (camera centres 1.7-3.4 m above it,
-    heads project above feet), so only the unit changes.
-    """
+    """Wildtrack calibrations/{intrinsic/intr_*, extrinsic/extr_*}.xml of the 7 cameras, tvec cm -> m (the world
+    is already z up, ground z = 0)."""
     root = Path(root)
     calib = root / "calibrations" if (root / "calibrations").is_dir() else root
     cameras = []
@@ -375,10 +372,8 @@ def detect_format(path: str | Path) -> str:
 
 
 def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: Any) -> Rig:
-    """Load any supported calibration: fmt in cameras_json, 4dassoc, voxelpose, panoptic, wildtrack,
-    shelf_p, or auto (detected from the file content or folder layout); kwargs go to the loader. With
-    ``check``, the rig check (data/geometry/check_rig.py) runs: RigError (a CalibrationError) where every
-    result would be garbage, RigWarning for what looks wrong."""
+    """Any supported calibration: fmt cameras_json, 4dassoc, voxelpose, panoptic, wildtrack, shelf_p or auto (detected);
+    kwargs go to the loader; ``check`` runs the rig check (RigError where every result would be garbage, RigWarning)."""
     loaders = {
         "cameras_json": load_cameras_json,
         "4dassoc": load_4dassoc,

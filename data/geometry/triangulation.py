@@ -12,9 +12,8 @@ RQI_TOLERANCE = 1e-10  # accepted eigenvector error bound (sine of the angle); t
 def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -> np.ndarray:
     """Score-weighted DLT of every joint: undistorted (u, v, score) (V, P, J, 3), proj (V, 3, 4) -> (P, J, 4).
 
-    Each view adds two unit-normalised equations weighted by the score. Output (x, y, z, confidence): the mean
-    score of the views used, all zeros for a joint seen in fewer than ``min_views`` views (non-finite pixels or
-    scores are not seen) or whose equations overflow.
+    Confidence = the mean score of the views used; all zeros for a joint seen in fewer than ``min_views`` views
+    (non-finite pixels or scores are not seen) or whose equations overflow.
     """
     poses2d = np.asarray(poses2d, dtype=np.float64)
     proj = np.asarray(proj, dtype=np.float64)
@@ -183,10 +182,8 @@ def _normalise(v: np.ndarray, w_positive: bool) -> None:
 
 
 def reprojection_error(points3d: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """Pixel distance between projected 3D joints and the 2D joints: (P, J, 4|3), (V, P, J, 3) -> (V, P, J).
-
-    NaN where the 2D joint has score 0 or the 3D joint has confidence 0.
-    """
+    """Pixel distance of projected 3D joints to 2D joints: (P, J, 4|3), (V, P, J, 3) -> (V, P, J), NaN where either
+    has score / confidence 0."""
     points3d = np.asarray(points3d, dtype=np.float64)
     poses2d = np.asarray(poses2d, dtype=np.float64)
     homog = np.concatenate([points3d[..., :3], np.ones(points3d.shape[:-1] + (1,))], axis=-1)

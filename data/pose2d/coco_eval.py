@@ -33,12 +33,8 @@ _CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
 def evaluate_keypoints(
     gt: Sequence[ImageRecord] | dict, predictions: Iterable[dict], subset: str = "all"
 ) -> dict[str, float]:
-    """COCO OKS AP/AR of predictions ({image_id, keypoints (23, 3) or 69 numbers, score}) on one subset.
-
-    ``gt``: ImageRecords, or a COCO-format dict whose annotations hold COCO-23 ``keypoints`` (69 numbers)
-    or COCO-17 ``keypoints`` plus optional COCO-WholeBody ``foot_kpts``. Returns the ten COCO stats
-    (STAT_NAMES); -1 where pycocotools has nothing to average (e.g. no medium-sized person).
-    """
+    """COCO OKS AP/AR of predictions ({image_id, keypoints (23, 3) or 69 numbers, score}) on one subset -> the ten
+    STAT_NAMES stats (-1 where empty); ``gt``: ImageRecords or a COCO dict (COCO-23, or COCO-17 + ``foot_kpts``)."""
     if subset not in SUBSET_JOINTS:
         raise ValueError(f"subset must be one of {sorted(SUBSET_JOINTS)}, got {subset!r}")
     joints = np.array(SUBSET_JOINTS[subset])

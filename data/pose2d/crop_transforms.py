@@ -14,11 +14,8 @@ from data.keypoints import flip_permutation
 
 
 def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.25) -> tuple[np.ndarray, np.ndarray]:
-    """Person box (4,) x, y, w, h -> crop centre (2,) and extent (2,) w, h in image pixels.
-
-    The box is grown along one side to the aspect ratio ``aspect`` = w / h of the network input
-    (never shrunk), then both sides are multiplied by ``padding``.
-    """
+    """Box (4,) x, y, w, h -> crop centre (2,) and extent (2,) px: grown (never shrunk) to ``aspect`` = w / h,
+    then times ``padding``."""
     x, y, w, h = np.asarray(box_xywh, dtype=np.float64).reshape(4)
     center = np.array([x + w / 2, y + h / 2])
     if w > aspect * h:
@@ -31,12 +28,10 @@ def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.
 def crop_affine(
     center: np.ndarray, scale: np.ndarray, rotation_deg: float, out_size: tuple[int, int], inverse: bool = False
 ) -> np.ndarray:
-    """(2, 3) affine from image pixels to crop pixels (or back with ``inverse``).
+    """(2, 3) affine from image pixels to crop pixels of out_size (w, h) (or back with ``inverse``).
 
-    center (2,), scale (2,) = crop extent w, h in image pixels, out_size = (w, h) of the crop. A positive
-    ``rotation_deg`` turns the image content counter-clockwise in the crop, as
-    ``cv2.getRotationMatrix2D`` does: ``out = S R (p - center) + ((w - 1) / 2, (h - 1) / 2)`` with
-    ``R = [[cos, sin], [-sin, cos]]`` and ``S = diag(w / scale_w, h / scale_h)``.
+    ``out = S R (p - center) + ((w - 1) / 2, (h - 1) / 2)``, S = diag(w / scale_w, h / scale_h), R turning the
+    content counter-clockwise by ``rotation_deg`` as ``cv2.getRotationMatrix2D``; center (2,), scale (2,) px.
     """
     center = np.asarray(center, dtype=np.float64).reshape(2)
     scale = np.asarray(scale, dtype=np.float64).reshape(2)
@@ -68,11 +63,8 @@ def flip_points(points: np.ndarray, image_width: int) -> np.ndarray:
 
 
 def flip_keypoints(keypoints: np.ndarray, image_width: int) -> np.ndarray:
-    """Keypoints (N, 23, 3) of EVERY person in a horizontally flipped image -> (N, 23, 3).
-
-    x -> W - 1 - x for labelled joints (v > 0; unlabelled ones keep their coordinates, COCO's 0, 0), and
-    left and right joints swap places (:func:`data.keypoints.flip_permutation`).
-    """
+    """Keypoints (N, 23, 3) of every person in a horizontally flipped image -> (N, 23, 3): labelled x -> W - 1 - x,
+    left and right joints swapped."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     out = keypoints[..., flip_permutation(), :].copy()
     labelled = out[..., 2] > 0

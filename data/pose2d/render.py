@@ -195,10 +195,8 @@ def draw_shadows(image: np.ndarray, camera: Camera, poses: np.ndarray) -> None:
 
 
 def capsule_outlines(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray, n: int = 7) -> np.ndarray:
-    """Outlines of tapered 2D capsules from a (..., 2) radius ra (...) to b (..., 2) radius rb: (..., 2n, 2).
-
-    A point capsule (a = b) is a circle.
-    """
+    """Outlines of tapered 2D capsules (a circle when a = b) from a (..., 2) radius ra (...) to b (..., 2) radius
+    rb: (..., 2n, 2)."""
     d = b - a
     length = np.linalg.norm(d, axis=-1, keepdims=True)
     unit = np.where(length > 1e-6, d / np.maximum(length, 1e-6), [1.0, 0.0])

@@ -29,10 +29,9 @@ def build_rig(cfg: SyntheticConfig, area: tuple[float, float, float, float]) -> 
 
 
 def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
-    """A synthetic Sequence: F frames of V views; gt_poses (P, 23, 4) with valid = 1, gt_ids (P,).
+    """A synthetic Sequence of F frames of V views, gt_poses (P, 23, 4) valid 1, gt_ids (P,), on ``rig`` or cfg's rig.
 
-    The rig is ``rig`` when given, else built from cfg (a ring, or cfg.rig read as a calibration).
-    Everything is drawn from numpy Generators seeded by cfg.seed: the scene, then one stream per frame.
+    Drawn from numpy Generators seeded by cfg.seed: the scene, then one stream per frame.
     """
     scene_seed, render_seed = np.random.SeedSequence(cfg.seed).spawn(2)
     scene = simulate_scene(cfg, np.random.default_rng(scene_seed))
