@@ -12,19 +12,13 @@ from data.geometry.camera import Rig
 
 @dataclass
 class ViewDetections:
-    """The 2D detections of one camera in one frame, N persons, COCO-23 keypoints.
+    """The 2D detections of one camera in one frame: N persons, COCO-23 keypoints in distorted original pixels."""
 
-    keypoints (N, 23, 3): x, y in distorted pixels of the original image, score (0 = missing).
-    bboxes (N, 4): x, y, w, h in pixels. scores (N,): detection confidence.
-    person_ids (N,): ground-truth identity, -1 for a false positive or when unknown.
-    occluded (N, 23): ground-truth "hidden behind another body" flags where known, else all False.
-    """
-
-    keypoints: np.ndarray
-    bboxes: np.ndarray
-    scores: np.ndarray
-    person_ids: np.ndarray
-    occluded: np.ndarray | None = None
+    keypoints: np.ndarray  # (N, 23, 3) x, y, score (0 = missing)
+    bboxes: np.ndarray  # (N, 4) x, y, w, h px
+    scores: np.ndarray  # (N,) detection confidence
+    person_ids: np.ndarray  # (N,) ground-truth identity, -1 for a false positive or when unknown
+    occluded: np.ndarray | None = None  # (N, 23) ground-truth "hidden behind another body" flags, else all False
 
     def __post_init__(self) -> None:
         keypoints = np.asarray(self.keypoints, dtype=np.float64)
@@ -47,22 +41,15 @@ class ViewDetections:
 
 @dataclass
 class Frame:
-    """One multi-view frame: detections per view (rig order) and, where known, 3D ground truth.
-
-    gt_poses (P, J, 4): x, y, z (m, world) and validity (1 = annotated); gt_ids (P,).
-    images: where the cameras' images are known (dataset=images, dataset=synthetic with render=true), a
-    callable returning them, per view in rig order (H, W, 3) uint8 BGR at the calibration's image size;
-    read only when called, so a long sequence holds no pixels. ``views`` then holds the ground-truth 2D
-    (render) or nothing (images) until a 2D stage fills it. image_ids: per view, the COCO image id of
-    that image (the key of a detections file, detector=file).
-    """
+    """One multi-view frame: detections per view (rig order) and, where known, 3D ground truth and images."""
 
     index: int
-    views: list[ViewDetections]
-    gt_poses: np.ndarray | None = None
-    gt_ids: np.ndarray | None = None
+    views: list[ViewDetections]  # with images: the render's ground-truth 2D, or empty until a 2D stage fills it
+    gt_poses: np.ndarray | None = None  # (P, J, 4) x, y, z (m, world), validity (1 = annotated)
+    gt_ids: np.ndarray | None = None  # (P,)
+    # per view (H, W, 3) uint8 BGR at the calibration's size, read only when called (a sequence holds no pixels)
     images: Callable[[], list[np.ndarray]] | None = None
-    image_ids: list[int] | None = None
+    image_ids: list[int] | None = None  # per view, the COCO image id (the key of a detections file)
 
 
 @dataclass

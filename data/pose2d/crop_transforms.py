@@ -74,23 +74,15 @@ def flip_keypoints(keypoints: np.ndarray, image_width: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CropAugmentation:
-    """Random crop augmentation settings (SimpleBaseline/HRNet style).
+    """Random crop augmentation settings (SimpleBaseline/HRNet style); 0 turns each off."""
 
-    scale_factor: std of the scale multiplier around 1, clipped to 1 +- scale_factor.
-    rotation_factor: std of the rotation in degrees, clipped to +- 2 rotation_factor, applied with
-    probability rotation_prob (else 0). flip_prob: probability of a horizontal flip.
-    shift_factor: std of the box centre shift as a fraction of the box width / height (a detector's error).
-    colour_factor: brightness, contrast and saturation factors drawn in 1 +- colour_factor; hue_deg: hue
-    shift drawn in +- hue_deg (data/pose2d/photometric.py). 0 turns each off.
-    """
-
-    scale_factor: float = 0.25
-    rotation_factor: float = 30.0
-    rotation_prob: float = 0.6
-    flip_prob: float = 0.5
-    shift_factor: float = 0.0
-    colour_factor: float = 0.0
-    hue_deg: float = 0.0
+    scale_factor: float = 0.25  # std of the scale multiplier around 1, clipped to 1 +- scale_factor
+    rotation_factor: float = 30.0  # std of the rotation (deg), clipped to +- 2 rotation_factor
+    rotation_prob: float = 0.6  # probability of rotating at all
+    flip_prob: float = 0.5  # probability of a horizontal flip
+    shift_factor: float = 0.0  # std of the box centre shift, fraction of the box w / h (a detector's error)
+    colour_factor: float = 0.0  # brightness, contrast, saturation factors in 1 +- colour_factor (photometric.py)
+    hue_deg: float = 0.0  # hue shift drawn in +- hue_deg
 
 
 def sample_augmentation(

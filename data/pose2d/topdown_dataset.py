@@ -52,13 +52,9 @@ class TopDownDataset(Dataset):
     """Person crops of ImageRecords -> dict(image (3, H, W), target (23, h, w), weight (23,), affine_inv (2, 3),
     image_id, box (4,), area, score, flipped).
 
-    input_size is (w, h) and must be the codec's. With ``train`` the samples are the persons of
-    :func:`data.pose2d.coco_keypoints.training_persons` and ``augment`` (None: none) is applied; without it
-    there is never augmentation and the samples are the detector boxes of records that have them when
-    ``use_det_boxes`` (their target and weight are 0: no person is known to be the own one), else the
-    annotated persons as in training. ``seed`` and the epoch (:meth:`set_epoch`) seed the augmentation.
-    ``cache_size`` decoded images are kept (least recently used first out) per dataset copy, i.e. per
-    DataLoader worker.
+    Training: the persons of :func:`training_persons`, ``augment`` applied. Otherwise no augmentation, and the
+    detector boxes with ``use_det_boxes`` (target and weight 0), else the annotated persons. ``input_size`` (w, h)
+    must be the codec's; ``cache_size`` decoded images are kept per DataLoader worker.
     """
 
     def __init__(
@@ -182,9 +178,8 @@ class TopDownDataset(Dataset):
 
 
 class EpochSampler(Sampler[int]):
-    """A seeded permutation of range(size) per epoch (or the identity without shuffle), sharded over ranks
-    as DistributedSampler shards it (padded by wrapping to a multiple of world_size, then rank::world_size),
-    that can start part-way through an epoch: what exact resumption needs."""
+    """A seeded permutation of range(size) per epoch (identity without shuffle), sharded as DistributedSampler
+    shards it, that can start part-way through an epoch (exact resumption)."""
 
     def __init__(self, size: int, seed: int = 0, shuffle: bool = True, rank: int = 0, world_size: int = 1) -> None:
         self.size, self.seed, self.shuffle = int(size), int(seed), bool(shuffle)
