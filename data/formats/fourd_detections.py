@@ -84,7 +84,7 @@ class _Layout:
 
     def __init__(self, path: Path, values: np.ndarray) -> None:
         self.path, self.values, self.pos = path, values, 0
-        self.numbers = values.tolist()  # Python floats: per-count indexing is ~10x cheaper than on the array
+        self.numbers = values.tolist()  # Python floats: the per-count walk indexes a list, not numpy scalars
         bad = np.flatnonzero(~np.isfinite(values))
         self.first_bad = int(bad[0]) if len(bad) else len(values)
 
