@@ -21,11 +21,7 @@ from data.keypoints import BODY_JOINTS, FOOT_JOINTS, NUM_BODY_JOINTS, NUM_JOINTS
 from data.pose2d.coco_keypoints import coco23_document
 from data.pose2d.records import ImageRecord
 
-SUBSET_JOINTS: dict[str, tuple[int, ...]] = {
-    "all": tuple(range(NUM_JOINTS)),
-    "body": BODY_JOINTS,
-    "foot": FOOT_JOINTS,
-}
+SUBSET_JOINTS: dict[str, tuple[int, ...]] = {"all": tuple(range(NUM_JOINTS)), "body": BODY_JOINTS, "foot": FOOT_JOINTS}
 STAT_NAMES = ("AP", "AP50", "AP75", "APm", "APl", "AR", "AR50", "AR75", "ARm", "ARl")
 _CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
 
