@@ -73,7 +73,7 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     sequence, front_timings, view_report = run_2d_stage(cfg, sequence, out_dir)
     pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
-    stage_s = sequence.meta.get("stage_seconds", {})  # e.g. 2D grouping done while loading
+    stage_s = sequence.stage_seconds  # e.g. 2D grouping done while loading
     report.timings = {"dataset": t_data - sum(stage_s.values()), **stage_s, **front_timings, **report.timings}
     if view_report is not None:
         report.metrics.update(view_report[0])
@@ -94,7 +94,7 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
         if hasattr(protocol, "write"):  # e.g. the Shelf-14 predictions that were scored
             protocol.write(out_dir)
     text = (
-        f"{sequence.meta.get('description', 'dataset')}: {len(sequence.frames)} frames, "
+        f"{sequence.description or 'dataset'}: {len(sequence.frames)} frames, "
         f"{len(sequence.rig)} cameras\n{format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation))}"
     )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
@@ -128,7 +128,7 @@ def draw_pictures(
     elif cfg.vis_sequence:
         from evaluation.pictures.sequence_view import save_sequence_pictures
 
-        title = f"{sequence.meta.get('description', 'dataset')}: {out_dir.name}"
+        title = f"{sequence.description or 'dataset'}: {out_dir.name}"
         pictures = save_sequence_pictures(
             out_dir / cfg.vis_dir, report.results, sequence.rig, title, cfg.vis_sequence_max_mb
         )

@@ -143,7 +143,7 @@ def run_row(sequence, cfg) -> list:
         1e3
         * (
             sum(report.timings.get(k, 0.0) for k in ("matching", "reconstruction", "tracking"))
-            + sequence.meta.get("stage_seconds", {}).get("grouping", 0.0)
+            + sequence.stage_seconds.get("grouping", 0.0)
         )
         / frames
     )

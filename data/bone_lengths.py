@@ -1,20 +1,10 @@
 """Reference bone lengths of the MAP bone prior (paper Eq. 7), and their estimation from 3D ground truth.
 
-Source of the default table: the anthropometric segment proportions of Drillis & Contini (1966), as
-reproduced in D. A. Winter, "Biomechanics and Motor Control of Human Movement" (fig. 4.1), for an adult
-of 1.70 m: the same source and the same numbers as the mean body of the synthetic generator
-(``data.synthetic.body.mean_body()``). The lengths below are the joint-to-joint distances of that mean
-body (they do not depend on the pose: every bone of ``keypoints.BONES`` is rigid in the model), rounded
-to 0.1 mm; ``tests/test_map_reconstruction.py`` checks that the two stay equal.
-
-Standard deviations: the relative spread of an adult mixed-sex population, stature SD 0.09 m / 1.70 m
-= 5.3 % combined with 2 % per-segment proportion variation (sqrt(5.3^2 + 2^2) = 5.7 %, the synthetic
-generator's model as well), plus an absolute 1 cm in quadrature for the uncertainty of where a
-keypoint sits on the body (annotators and detectors place "eye", "ear", "hip" differently by about a
-centimetre). The floor keeps the short face and foot bones (5-9 cm) from getting a millimetre-tight
-prior that the 2D keypoints cannot honour. Real keypoint conventions differ from anatomical joint
-centres (e.g. COCO hips sit wider and higher); re-estimate the table from a dataset's ground truth
-with ``benchmarks/fit_bone_lengths.py`` and point the ``bone_table`` config key at the JSON it writes.
+Default means: the joint-to-joint distances of the synthetic generator's 1.70 m mean body (Drillis & Contini
+1966 via Winter, "Biomechanics and Motor Control of Human Movement", fig. 4.1), rounded to 0.1 mm. SDs: 5.7 %
+relative (stature spread 5.3 % with 2 % per-segment variation) plus 1 cm absolute in quadrature for where a
+keypoint sits on the body, which keeps the 5-9 cm face and foot bones from a prior the 2D keypoints cannot honour.
+Re-estimate from a dataset with ``benchmarks/fit_bone_lengths.py`` and set ``bone_table`` to its JSON.
 """
 
 from __future__ import annotations
@@ -25,67 +15,54 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from data.keypoints import BONES, NUM_JOINTS
+from data.keypoints import BONES, COCO23_NAMES, NUM_JOINTS
 
-REFERENCE_STATURE_M = 1.70
 RELATIVE_SD = 0.057
 ABSOLUTE_SD_M = 0.010
 
-# Mean bone length (m) of the 1.70 m mean body, in the order of keypoints.BONES.
+# Mean bone length (m) of the 1.70 m mean body by bone name; a sided name ("torso") stands for both sides.
 _MEAN_M: Mapping[str, float] = {
     "shoulders": 0.3740,
     "hips": 0.1870,
-    "left_torso": 0.4984,
-    "right_torso": 0.4984,
-    "left_upper_arm": 0.3162,
-    "right_upper_arm": 0.3162,
-    "left_forearm": 0.2482,
-    "right_forearm": 0.2482,
-    "left_thigh": 0.4165,
-    "right_thigh": 0.4165,
-    "left_shin": 0.4182,
-    "right_shin": 0.4182,
-    "left_nose_eye": 0.0556,
-    "right_nose_eye": 0.0556,
-    "left_eye_ear": 0.0900,
-    "right_eye_ear": 0.0900,
-    "left_ankle_heel": 0.0788,
-    "right_ankle_heel": 0.0788,
-    "left_ankle_big_toe": 0.2233,
-    "right_ankle_big_toe": 0.2233,
-    "left_toes": 0.0802,
-    "right_toes": 0.0802,
-    "left_heel_big_toe": 0.2556,
-    "right_heel_big_toe": 0.2556,
+    "torso": 0.4984,
+    "upper_arm": 0.3162,
+    "forearm": 0.2482,
+    "thigh": 0.4165,
+    "shin": 0.4182,
+    "nose_eye": 0.0556,
+    "eye_ear": 0.0900,
+    "ankle_heel": 0.0788,
+    "ankle_big_toe": 0.2233,
+    "toes": 0.0802,
+    "heel_big_toe": 0.2556,
 }
 
-# The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up,
-# lowest sole point at z = 0, COCO-23 order, rounded to 1 mm. Used to initialise unseen joints.
-_MEAN_POSE_M = (
-    (0.111, 0.000, 1.559),
-    (0.085, 0.032, 1.597),
-    (0.085, -0.032, 1.597),  # nose, eyes
-    (0.009, 0.072, 1.571),
-    (0.009, -0.072, 1.571),  # ears
-    (0.000, 0.187, 1.389),
-    (0.000, -0.187, 1.389),  # shoulders
-    (0.000, 0.231, 1.076),
-    (0.000, -0.231, 1.076),  # elbows
-    (0.052, 0.265, 0.836),
-    (0.052, -0.265, 0.836),  # wrists
-    (0.000, 0.093, 0.900),
-    (0.000, -0.093, 0.900),  # hips
-    (0.000, 0.109, 0.484),
-    (0.000, -0.109, 0.484),  # knees
-    (-0.022, 0.124, 0.066),
-    (-0.022, -0.124, 0.066),  # ankles
-    (0.191, 0.129, 0.000),
-    (0.142, 0.192, 0.000),
-    (-0.064, 0.120, 0.000),  # left toes, heel
-    (0.191, -0.129, 0.000),
-    (0.142, -0.192, 0.000),
-    (-0.064, -0.120, 0.000),  # right toes, heel
-)
+# The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up, lowest sole
+# point at z = 0, rounded to 1 mm; a sided name gives the left joint, the right one is its mirror (y -> -y).
+# Used to initialise unseen joints.
+_MEAN_POSITION_M: Mapping[str, tuple[float, float, float]] = {
+    "nose": (0.111, 0.000, 1.559),
+    "eye": (0.085, 0.032, 1.597),
+    "ear": (0.009, 0.072, 1.571),
+    "shoulder": (0.000, 0.187, 1.389),
+    "elbow": (0.000, 0.231, 1.076),
+    "wrist": (0.052, 0.265, 0.836),
+    "hip": (0.000, 0.093, 0.900),
+    "knee": (0.000, 0.109, 0.484),
+    "ankle": (-0.022, 0.124, 0.066),
+    "big_toe": (0.191, 0.129, 0.000),
+    "small_toe": (0.142, 0.192, 0.000),
+    "heel": (-0.064, 0.120, 0.000),
+}
+
+
+def _by_side(table: Mapping, name: str, mirror: bool = False) -> Any:
+    """The entry of a name in a table whose sided entries are keyed without "left_" / "right_"."""
+    side, _, rest = name.partition("_")
+    if name in table or side not in ("left", "right"):
+        return table[name]
+    value = table[rest]
+    return (value[0], -value[1], value[2]) if mirror and side == "right" else value
 
 
 def _frozen(values: Any, dtype: Any = np.float64) -> np.ndarray:
@@ -97,9 +74,9 @@ def _frozen(values: Any, dtype: Any = np.float64) -> np.ndarray:
 
 BONE_NAMES: tuple[str, ...] = tuple(BONES)
 BONE_PAIRS = _frozen([BONES[n] for n in BONE_NAMES], np.int64)  # (L, 2)
-BONE_MEAN = _frozen([_MEAN_M[n] for n in BONE_NAMES])  # (L,)
+BONE_MEAN = _frozen([_by_side(_MEAN_M, n) for n in BONE_NAMES])  # (L,)
 BONE_STD = _frozen(np.sqrt((RELATIVE_SD * BONE_MEAN) ** 2 + ABSOLUTE_SD_M**2))  # (L,)
-MEAN_POSE = _frozen(_MEAN_POSE_M)  # (J, 3)
+MEAN_POSE = _frozen([_by_side(_MEAN_POSITION_M, n, mirror=True) for n in COCO23_NAMES])  # (J, 3)
 
 
 def bone_lengths(poses: np.ndarray) -> np.ndarray:
@@ -109,11 +86,8 @@ def bone_lengths(poses: np.ndarray) -> np.ndarray:
 
 
 def estimate_bone_table(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean, SD (ddof 1) and sample count of every bone over valid joints: (N, J, 4) -> (L,), (L,), (L,).
-
-    A bone counts in a pose when both its joints have validity > 0 and finite coordinates. Bones with
-    no sample get NaN mean and SD; bones with one sample get SD NaN.
-    """
+    """Mean, SD (ddof 1) and count of every bone over poses whose two joints are valid and finite: (N, J, 4) ->
+    (L,), (L,), (L,); NaN mean without samples, NaN SD with fewer than two."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
     ok = (poses[..., 3] > 0) & np.all(np.isfinite(poses[..., :3]), axis=-1)
     both = ok[:, BONE_PAIRS[:, 0]] & ok[:, BONE_PAIRS[:, 1]]
@@ -138,11 +112,8 @@ def bone_table_dict(mean: np.ndarray, std: np.ndarray, count: np.ndarray | None 
 
 
 def resolve_bone_table(table: str | Path | Mapping | None) -> tuple[np.ndarray, np.ndarray]:
-    """The reference (mean (L,), std (L,)) from None (defaults), a JSON path or a {"bones": ...} mapping.
-
-    Bones the table does not name keep their default; an unknown bone name, a non-positive or
-    non-finite value is a ValueError naming the table and the bone.
-    """
+    """The reference (mean (L,), std (L,)) from None (defaults), a JSON path or a {"bones": ...} mapping; unnamed
+    bones keep the default, an unknown bone or a value not finite and > 0 is a ValueError."""
     mean, std = BONE_MEAN.copy(), BONE_STD.copy()
     if table is None:
         return mean, std

@@ -12,19 +12,13 @@ from data.geometry.camera import Rig
 
 @dataclass
 class ViewDetections:
-    """The 2D detections of one camera in one frame, N persons, COCO-23 keypoints.
+    """The 2D detections of one camera in one frame: N persons, COCO-23 keypoints in distorted original pixels."""
 
-    keypoints (N, 23, 3): x, y in distorted pixels of the original image, score (0 = missing).
-    bboxes (N, 4): x, y, w, h in pixels. scores (N,): detection confidence.
-    person_ids (N,): ground-truth identity, -1 for a false positive or when unknown.
-    occluded (N, 23): ground-truth "hidden behind another body" flags where known, else all False.
-    """
-
-    keypoints: np.ndarray
-    bboxes: np.ndarray
-    scores: np.ndarray
-    person_ids: np.ndarray
-    occluded: np.ndarray | None = None
+    keypoints: np.ndarray  # (N, 23, 3) x, y, score (0 = missing)
+    bboxes: np.ndarray  # (N, 4) x, y, w, h px
+    scores: np.ndarray  # (N,) detection confidence
+    person_ids: np.ndarray  # (N,) ground-truth identity, -1 for a false positive or when unknown
+    occluded: np.ndarray | None = None  # (N, 23) ground-truth "hidden behind another body" flags, else all False
 
     def __post_init__(self) -> None:
         keypoints = np.asarray(self.keypoints, dtype=np.float64)
@@ -47,32 +41,34 @@ class ViewDetections:
 
 @dataclass
 class Frame:
-    """One multi-view frame: detections per view (rig order) and, where known, 3D ground truth.
-
-    gt_poses (P, J, 4): x, y, z (m, world) and validity (1 = annotated); gt_ids (P,).
-    images: where the cameras' images are known (dataset=images, dataset=synthetic with render=true), a
-    callable returning them, per view in rig order (H, W, 3) uint8 BGR at the calibration's image size;
-    read only when called, so a long sequence holds no pixels. ``views`` then holds the ground-truth 2D
-    (render) or nothing (images) until a 2D stage fills it. image_ids: per view, the COCO image id of
-    that image (the key of a detections file, detector=file).
-    """
+    """One multi-view frame: detections per view (rig order) and, where known, 3D ground truth and images."""
 
     index: int
-    views: list[ViewDetections]
-    gt_poses: np.ndarray | None = None
-    gt_ids: np.ndarray | None = None
+    views: list[ViewDetections]  # with images: the render's ground-truth 2D, or empty until a 2D stage fills it
+    gt_poses: np.ndarray | None = None  # (P, J, 4) x, y, z (m, world), validity (1 = annotated)
+    gt_ids: np.ndarray | None = None  # (P,)
+    # per view (H, W, 3) uint8 BGR at the calibration's size, read only when called (a sequence holds no pixels)
     images: Callable[[], list[np.ndarray]] | None = None
-    image_ids: list[int] | None = None
+    image_ids: list[int] | None = None  # per view, the COCO image id (the key of a detections file)
 
 
 @dataclass
 class Sequence:
-    """A rig and its frames, a free-form description of where they came from, and the benchmark
-    protocols to score them with beside the generic metrics (evaluation/protocols/base.py). A loader never
-    builds them (datasets sit below evaluation): it lists their plain-data inputs in ``meta["protocol_inputs"]``
-    and :func:`evaluation.protocols.attach_protocols` builds them."""
+    """A rig, its frames, and the typed facts that change how they are run and scored.
+
+    A loader lists the plain-data inputs of its benchmark protocols in ``protocol_inputs``
+    (``[{"name": ..., **arguments}]``); :func:`evaluation.protocols.attach_protocols` builds them into
+    ``protocols`` (datasets sit below evaluation). ``meta`` holds free-form descriptive extras only.
+    """
 
     rig: Rig
     frames: list[Frame]
     meta: dict = field(default_factory=dict)
     protocols: list = field(default_factory=list)
+    description: str = ""  # one line naming the data, shown in reports and picture titles
+    persistent_ids: bool = False  # gt_ids name one person over the whole sequence: identity metrics apply
+    views_are_ground_truth: bool = False  # views hold ground-truth 2D: a 2D stage's predictions are scored on them
+    protocol_inputs: list[dict] = field(default_factory=list)
+    stage_seconds: dict[str, float] = field(default_factory=dict)  # stages run while loading, e.g. 2D grouping
+    coco_images: list[dict] = field(default_factory=list)  # COCO "images" entries of the frames' images
+    area: tuple[float, float, float, float] | None = None  # the persons' ground area (xmin, xmax, ymin, ymax), m

@@ -51,7 +51,7 @@ def estimate_2d(
 ) -> tuple[Sequence, list[list[ViewDetections]] | None]:
     """Run the 2D stage on every frame -> (a new Sequence whose views are the predictions, the ground-truth
     views per frame (V each) when the frames carry them, else None). The input sequence is not modified."""
-    has_gt = sequence.meta.get("views_are_ground_truth", False)
+    has_gt = sequence.views_are_ground_truth
     frames, gt_views = [], []
     for frame in tqdm(sequence.frames, desc="2D poses", unit="frame", disable=not progress):
         predicted = front_end(frame)

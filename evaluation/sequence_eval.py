@@ -40,11 +40,11 @@ def evaluate_sequence(
 ) -> SequenceReport:
     """Reconstruct every frame, score it against ground truth where there is some, and against the 2D detections the
     joints were fitted to (the reprojection error of the paper's Table 3: ``reprojection_*`` metrics)."""
-    attach_protocols(sequence)  # the dataset's own protocols (meta["protocol_inputs"]), unless attached already
+    attach_protocols(sequence)  # the dataset's own protocols (protocol_inputs), unless attached already
     results, skipped, pairs, reprojection = [], Counter(), CorrespondenceCounts(), []
     has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
     # identity metrics where a tracker runs and the sequence's ground-truth ids persist across frames
-    tracked = pipeline.tracker is not None and bool(sequence.meta.get("persistent_ids"))
+    tracked = pipeline.tracker is not None and sequence.persistent_ids
     tracked = tracked and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None)
     identities = IdentityEvaluator(evaluator.max_dist_m) if tracked else None
     t_eval = 0.0

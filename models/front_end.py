@@ -78,6 +78,6 @@ class Pose2DFrontEnd:
         detector = instantiate(cfg.detector) if pose2d.needs_boxes else None
         if hasattr(detector, "check_image_ids"):  # detector=file: every entry names an image of the dataset
             detector.check_image_ids({i for f in sequence.frames for i in (f.image_ids or [])})
-        if hasattr(detector, "set_file_sizes") and "coco_images" in sequence.meta:
-            detector.set_file_sizes({im["id"]: (im["width"], im["height"]) for im in sequence.meta["coco_images"]})
+        if hasattr(detector, "set_file_sizes") and sequence.coco_images:
+            detector.set_file_sizes({im["id"]: (im["width"], im["height"]) for im in sequence.coco_images})
         return cls(pose2d, detector)

@@ -75,7 +75,7 @@ def test_folder_and_video_give_the_rendered_images(scene, rendered, tmp_path):
             np.testing.assert_array_equal(y, truth)
             psnr = [cv2.PSNR(z, images[v]) for images in rendered]  # MJPG is lossy: nearest to its own frame
             assert psnr[f] > 25 and np.argmax(psnr) == f
-    assert videos.meta["coco_images"][4] == {
+    assert videos.coco_images[4] == {
         "id": coco_image_id(1, 1, 3),
         "frame": 1,
         "camera": "1",
@@ -119,7 +119,7 @@ def test_shelf_images_are_rescaled_to_the_calibration_with_one_warning_per_camer
     original = cv2.imread(str(folder / "cam2.png"))
     expected = cv2.resize(original, (1032, 776), interpolation=cv2.INTER_AREA)
     np.testing.assert_array_equal(images[2], expected)
-    assert seq.meta["coco_images"][2]["width"] == 1920 and seq.meta["image_sizes"]["2"] == [1920, 1080]
+    assert seq.coco_images[2]["width"] == 1920 and seq.meta["image_sizes"]["2"] == [1920, 1080]
 
 
 def test_same_aspect_ratio_warns_without_the_aspect_note(scene, rendered, tmp_path):

@@ -28,84 +28,51 @@ def test_bones_and_limbs_connect_valid_joints():
         assert 0 <= a < 23 and 0 <= b < 23 and a != b
 
 
-BODY25 = [
-    "nose",
-    "neck",
-    "right_shoulder",
-    "right_elbow",
-    "right_wrist",
-    "left_shoulder",
-    "left_elbow",
-    "left_wrist",
-    "mid_hip",
-    "right_hip",
-    "right_knee",
-    "right_ankle",
-    "left_hip",
-    "left_knee",
-    "left_ankle",
-    "right_eye",
-    "left_eye",
-    "right_ear",
-    "left_ear",
-    "left_big_toe",
-    "left_small_toe",
-    "left_heel",
-    "right_big_toe",
-    "right_small_toe",
-    "right_heel",
-]
-PANOPTIC19 = [
-    "neck",
-    "nose",
-    "mid_hip",
-    "left_shoulder",
-    "left_elbow",
-    "left_wrist",
-    "left_hip",
-    "left_knee",
-    "left_ankle",
-    "right_shoulder",
-    "right_elbow",
-    "right_wrist",
-    "right_hip",
-    "right_knee",
-    "right_ankle",
-    "left_eye",
-    "left_ear",
-    "right_eye",
-    "right_ear",
-]
-CROWDPOSE14 = [
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-    "left_hip",
-    "right_hip",
-    "left_knee",
-    "right_knee",
-    "left_ankle",
-    "right_ankle",
-    "head",
-    "neck",
-]
+# COCO's published 17-keypoint order (person_keypoints annotations' "keypoints" list).
+COCO17 = (
+    "nose left_eye right_eye left_ear right_ear left_shoulder right_shoulder left_elbow right_elbow left_wrist"
+    " right_wrist left_hip right_hip left_knee right_knee left_ankle right_ankle".split()
+)
 
 
-def test_index_maps_agree_with_joint_names():
-    for names, index_map in (
-        (BODY25, kp.BODY25_TO_COCO23),
-        (PANOPTIC19, kp.PANOPTIC19_TO_COCO23),
-        (list(kp.SHELF14_NAMES), kp.SHELF14_TO_COCO23),
-        (CROWDPOSE14, kp.CROWDPOSE14_TO_COCO23),
-    ):
-        for j, src in enumerate(index_map):
-            if src >= 0:
-                assert names[src] == kp.COCO23_NAMES[j]
-            else:
-                assert kp.COCO23_NAMES[j] not in names
+def test_names_round_trip_and_coco17_order():
+    assert kp.COCO23_NAMES[:17] == tuple(COCO17)
+    for name in kp.COCO23_NAMES:
+        assert kp.COCO23_NAMES[kp.JOINT_INDEX[name]] == name
+    assert kp.joint_indices(kp.COCO23_NAMES) == tuple(range(23))
+    assert kp.FLIP_PAIRS == (
+        (1, 2),
+        (3, 4),
+        (5, 6),
+        (7, 8),
+        (9, 10),
+        (11, 12),
+        (13, 14),
+        (15, 16),
+        (17, 20),
+        (18, 21),
+        (19, 22),
+    )
+    assert (kp.LEFT_FOOT, kp.RIGHT_FOOT, kp.LEFT_ANKLE, kp.RIGHT_ANKLE) == ((17, 18, 19), (20, 21, 22), 15, 16)
+    assert kp.JOINT_GROUPS["head"] == (0, 1, 2, 3, 4) and kp.JOINT_GROUPS["knee"] == (13, 14)
+    assert kp.BONES["left_heel_big_toe"] == (19, 17) and kp.LIMBS[:3] == ((15, 13), (13, 11), (16, 14))
+
+
+def test_derived_maps_equal_the_published_orders():
+    """The maps derived from the names equal the integer orders of the formats' documentation."""
+    n = -1
+    published = {
+        "BODY25_TO_COCO23": [0, 16, 15, 18, 17, 5, 2, 6, 3, 7, 4, 12, 9, 13, 10, 14, 11, 19, 20, 21, 22, 23, 24],
+        "PANOPTIC19_TO_COCO23": [1, 15, 17, 16, 18, 3, 9, 4, 10, 5, 11, 6, 12, 7, 13, 8, 14, n, n, n, n, n, n],
+        "SHELF14_TO_COCO23": [n, n, n, n, n, 9, 8, 10, 7, 11, 6, 3, 2, 4, 1, 5, 0, n, n, n, n, n, n],
+        "CROWDPOSE14_TO_COCO23": [n, n, n, n, n, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, n, n, n, n, n, n],
+        "COCO17_TO_COCO23": [*range(17), n, n, n, n, n, n],
+        "COCO23_TO_SHELF14_LIMBS": [16, 14, 12, 11, 13, 15, 10, 8, 6, 5, 7, 9],
+    }
+    for name, order in published.items():
+        np.testing.assert_array_equal(getattr(kp, name), order, err_msg=name)
+    assert kp.SHELF_PCP_PARTS["upper_arms"] == ((8, 7), (9, 10)) and kp.SHELF_PCP_PARTS["torso"] == ((14, 12),)
+    assert kp.SHELF15_SOURCES[12] == (0, 3, 4, 5, 6) and kp.SHELF15_SOURCES[14] == (11, 12)
 
 
 def test_to_coco23_gathers_and_zeroes_missing():

@@ -172,7 +172,7 @@ def test_sequence_has_bodies_cameras_and_ids(band1, panoptic: Path) -> None:
     assert {f.index: len(f.gt_poses) for f in band1.frames} == BODIES["160906_band1"]
     for frame in band1.frames:
         assert len(frame.views) == 5 and list(frame.gt_ids) == [0, 1, 2]
-        assert band1.meta["gt_panoptic15"][frame.index].shape == (3, 15, 4)
+        assert band1.protocol_inputs[0]["gt15"][frame.index].shape == (3, 15, 4)
     one = load_panoptic_sequence(panoptic, "160906_band2", cameras=["00_00", "00_16"], frames=[140])
     assert [f.index for f in one.frames] == [140] and list(one.rig.names) == ["00_00", "00_16"]
     assert [f.index for f in load_panoptic_sequence(panoptic, "160906_band2", frames="1:").frames] == [140]
@@ -208,7 +208,7 @@ def test_poses2d_input_round_trip(band1, panoptic: Path, tmp_path: Path) -> None
 def test_combined_evaluator_and_report(band1) -> None:
     ev = PanopticEvaluator()
     for frame in band1.frames:
-        ev.update(frame.gt_poses, band1.meta["gt_panoptic15"][frame.index])
+        ev.update(frame.gt_poses, band1.protocol_inputs[0]["gt15"][frame.index])
     s = ev.summary()
     # COCO-23 GT against the stored Panoptic-15: the synthesised neck is < 1.5 cm off; body 2 has no
     # right hip, so its synthesised mid-hip is missing and its torso (neck -> mid-hip) counts wrong.

@@ -48,7 +48,7 @@ def test_render_false_is_the_plain_synthetic_sequence(rendered):
             np.testing.assert_array_equal(va.keypoints, vb.keypoints)
         np.testing.assert_array_equal(a.gt_poses, r.gt_poses)
         np.testing.assert_array_equal(a.gt_ids, r.gt_ids)
-    assert plain.meta["description"].startswith("Synthetic crowd (seed 1): 6 persons, ring of cameras, 2D noise")
+    assert plain.description.startswith("Synthetic crowd (seed 1): 6 persons, ring of cameras, 2D noise")
     with pytest.raises(ValueError, match="render='yes' must be true or false"):
         load_synthetic(render="yes", **SMALL)
 
@@ -69,7 +69,7 @@ def test_images_have_the_calibration_size_on_a_real_rig(shared_data):
 
 def test_labels_agree_with_the_projection_and_the_painting(rendered):
     seq = rendered
-    scene = Scene(seq.rig, 1, tuple(seq.meta["area"]))
+    scene = Scene(seq.rig, 1, seq.area)
     checked = 0
     for frame in seq.frames:
         poses, ids = frame.gt_poses[..., :3], frame.gt_ids
@@ -94,7 +94,7 @@ def test_labels_agree_with_the_projection_and_the_painting(rendered):
 
 def test_a_person_keeps_its_colours_across_views_and_frames(rendered):
     seq = rendered
-    scene = Scene(seq.rig, 1, tuple(seq.meta["area"]))
+    scene = Scene(seq.rig, 1, seq.area)
     hues: dict[int, list[float]] = {}
     for frame in seq.frames:
         poses, ids = frame.gt_poses[..., :3], frame.gt_ids

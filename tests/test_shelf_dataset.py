@@ -71,8 +71,8 @@ def test_load_shelf_gives_five_views_of_grouped_detections(five_frames) -> None:
             assert view.keypoints.shape[1:] == (23, 3) and np.all(view.person_ids == -1)
             visible = view.keypoints[..., 2] > 0
             assert np.all(view.keypoints[..., 0][visible] <= 1031) and np.all(view.keypoints[..., 1][visible] <= 775)
-    assert seq.meta["stage_seconds"]["grouping"] > 0
-    assert "Shelf frames 300-304" in seq.meta["description"]
+    assert seq.stage_seconds["grouping"] > 0
+    assert "Shelf frames 300-304" in seq.description
     assert [type(p) for p in seq.protocols] == [ShelfProtocol]
 
 
@@ -137,7 +137,7 @@ def test_poses2d_input_replaces_grouping(five_frames, tmp_path: Path) -> None:
     path = tmp_path / "poses2d.json"
     write_poses2d(path, {f.index: f.views for f in five_frames.frames[:3]}, list(five_frames.rig.names))
     seq = load_shelf(five_frames.meta["root"], frames="0:3", poses2d=str(path))
-    assert "stage_seconds" not in seq.meta and seq.meta["poses2d_frames_not_selected"] == 0
+    assert not seq.stage_seconds and seq.meta["poses2d_frames_not_selected"] == 0
     for mine, grouped in zip(seq.frames, five_frames.frames):
         assert [len(v) for v in mine.views] == [len(v) for v in grouped.views]
         assert np.allclose(mine.views[2].keypoints, grouped.views[2].keypoints, atol=1e-4)

@@ -1,13 +1,6 @@
-"""Your own rig: a calibration file and a poses2d.json (DESIGN.md) turned into a Sequence without ground truth.
-
-The calibration is read by :func:`data.geometry.calibration.load_rig` (format detected: cameras.json,
-4D Association, VoxelPose, Panoptic, a Wildtrack folder, Shelf P-matrices); the 2D poses by
-:func:`data.formats.poses2d_io.read_poses2d`, which checks every entry against the calibration's camera names and image sizes. The rig check
-(:mod:`data.geometry.check_rig`) then runs with the 2D poses: errors stop, warnings (RigWarning) name
-the camera and the likely mistake.
-Frames are the frame numbers found in the file, or the ones asked for: a frame without any detection
-in any view is still a frame (the pipeline then reports it as skipped), so that a detector's output,
-which omits empty frames, can be evaluated over a fixed range.
+"""Your own rig: a calibration (any format :func:`data.geometry.calibration.load_rig` reads) and a poses2d.json
+turned into a Sequence without ground truth, checked by :mod:`data.geometry.check_rig` with the 2D poses.
+A selected frame without any detection stays a frame, so a detector's output can be scored over a fixed range.
 """
 
 from __future__ import annotations
@@ -21,11 +14,10 @@ from data.multiview import Frame, Sequence, ViewDetections
 
 
 def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str | None = None) -> Sequence:
-    """The rig of ``cameras`` (V views) and one Frame per frame number with V ViewDetections (N, 23, 3).
+    """The rig of ``cameras`` and one Frame per frame number with V ViewDetections (N, 23, 3).
 
-    ``frames``: None = every frame number in ``poses2d``; a list of frame numbers; or "start:stop[:step]"
-    = range(start, stop, step) of frame numbers. Frames of the file outside the selection are dropped
-    (counted in ``meta["frames_not_selected"]``); selected frames absent from the file have no detections.
+    ``frames``: None = those of the file, a list, or "start:stop[:step]"; frames outside it are counted in
+    ``meta["frames_not_selected"]``.
     """
     rig = load_rig(cameras, check=False)
     if not Path(poses2d).is_file():
@@ -42,10 +34,9 @@ def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str
         "poses2d": str(poses2d),
         "frames_without_detections": len(empty),
         "frames_not_selected": len(set(views) - set(numbers)),
-        "description": f"{poses2d} ({detections} detections; {len(empty)} frames without any) on {cameras}, "
-        f"no ground truth",
     }
-    return Sequence(rig, out, meta)
+    description = f"{poses2d} ({detections} detections; {len(empty)} frames without any) on {cameras}, no ground truth"
+    return Sequence(rig, out, meta, description=description)
 
 
 def _frame_numbers(frames: list[int] | str) -> list[int]:

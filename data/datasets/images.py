@@ -1,21 +1,11 @@
 """Multi-view images (dataset=images): a calibration and every camera's frames, no detections, no ground truth.
 
-Each camera's frames are a folder of images, a video or one image (:mod:`data.formats.image_sources`),
-found under one folder by the camera's name (a sub-folder, or a video or image file with that stem), by
-a ``pattern`` (``cam{i}.png``, ``{name}.mp4``, ``{name}/*.jpg``: {i} = view index, {name} = camera name;
-a glob in the last part selects a folder's files), or given per camera by a mapping. Frames are matched
-across cameras by position (align=index; frame number = position) or by file stem (align=name: the stems
-found in every camera; frame number = the stem when all stems are integers, else the position). A
-frame's ``images`` reads its files only when called and returns them at the calibration's image size: an
-image of another size is rescaled (with one ImageSizeWarning per camera at loading, which also names a
-different aspect ratio). Its ``views`` are empty until a 2D stage fills them; ``image_ids`` are
-:func:`data.image_ids.coco_image_id`, and ``meta["coco_images"]`` lists them as COCO "images" entries
-(id, frame, camera, file_name, width, height of the file; video_frame for a video) for running one's own
-detector and giving its boxes back with detector=file (boxes in the file's pixels: scale them by the
-calibration's size / (width, height)).
-
-CLI: ``python -m data.datasets.images --cameras cameras.json --images DIR [--pattern P] [--frames F]
-[--align index|name] -o coco_images.json`` writes that COCO images list.
+A camera's frames (a folder, a video or one image) are found by its name, a ``pattern`` ({i} view index,
+{name} camera name, a glob in the last part) or a mapping, and matched across cameras by position
+(align=index) or by file stem (align=name). Images are read lazily at the calibration's size (rescaled with an
+ImageSizeWarning). ``Sequence.coco_images`` lists the COCO "images" entries, for running one's own detector and
+giving its boxes back with detector=file (in the file's pixels). CLI: ``python -m data.datasets.images
+--cameras cameras.json --images DIR [--pattern P] [--frames F] [--align index|name] -o coco_images.json``.
 """
 
 from __future__ import annotations
@@ -54,12 +44,8 @@ def load_images(
     frames: list[int] | int | str | None = None,
     align: str = "index",
 ) -> Sequence:
-    """The rig of ``cameras`` (V views) and one Frame per selected frame: empty views, lazy images
-    (V of (H, W, 3) uint8 BGR at the calibration size) and COCO image ids (V,).
-
-    ``frames``: None = all; a list of frame numbers (each must exist); or "start:stop[:step]" = the frames
-    whose number is in range(start, stop, step).
-    """
+    """The rig of ``cameras`` and one Frame per selected frame: empty views, lazy images (V of (H, W, 3) uint8 BGR
+    at the calibration size), image ids (V,); ``frames``: None, frame numbers, or "start:stop[:step]" of numbers."""
     if align not in ALIGNS:
         raise ValueError(f"align={align!r}: must be one of {', '.join(ALIGNS)}")
     rig = load_rig(cameras)
@@ -82,11 +68,12 @@ def load_images(
         "images": {k: str(v) for k, v in images.items()} if isinstance(images, Mapping) else str(images),
         "align": align,
         "image_sizes": {cam.name: list(size) for cam, size in zip(rig, sizes)},
-        "coco_images": coco_images(rig, sources, table, sizes),
-        "description": f"{len(out)} frames of {len(rig)} cameras ({'/'.join(kinds)}) from {_shown(images)} "
-        f"on {cameras}, no detections, no ground truth",
     }
-    return Sequence(rig, out, meta)
+    description = (
+        f"{len(out)} frames of {len(rig)} cameras ({'/'.join(kinds)}) from {_shown(images)} "
+        f"on {cameras}, no detections, no ground truth"
+    )
+    return Sequence(rig, out, meta, description=description, coco_images=coco_images(rig, sources, table, sizes))
 
 
 def _shown(images: str | Path | Mapping) -> str:
@@ -293,7 +280,7 @@ def main(argv: Seq[str] | None = None) -> None:
         sequence = load_images(args.cameras, images, args.pattern, args.frames, args.align)
     except (ValueError, OSError) as exc:
         parser.exit(1, f"error: {exc}\n")
-    doc = {"images": sequence.meta["coco_images"], "categories": [{"id": 1, "name": "person"}]}
+    doc = {"images": sequence.coco_images, "categories": [{"id": 1, "name": "person"}]}
     atomic_write_text(args.out, json.dumps(doc, indent=1))
     print(
         f"wrote {len(doc['images'])} images ({len(sequence.frames)} frames x {len(sequence.rig)} cameras) to {args.out}"

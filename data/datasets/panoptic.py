@@ -1,23 +1,10 @@
 """CMU Panoptic sequences as the dataset ships them, turned into a :class:`data.multiview.Sequence`.
 
-Layout read (``<root>/<seq>/...``): ``calibration_<seq>.json`` and
-``hdPose3d_stage1_coco19/body3DScene_XXXXXXXX.json`` (frame number XXXXXXXX); HD images are not needed.
-
-Ground truth: every body's ``joints19`` (cm, Panoptic world with y down) goes through
-:func:`data.geometry.calibration.panoptic_world_to_ours` (metres, z up) and into COCO-23 with
-``PANOPTIC19_TO_COCO23``. A joint is valid when its Panoptic confidence is above ``GT_MIN_CONFIDENCE``
-(0.1, VoxelPose's rule: ``joints_vis = confidence > 0.1``); coco19 has no foot joints, so the six
-COCO-23 foot joints are always invalid. ``gt_ids`` are the Panoptic body ids. The first 15 coco19
-joints (real neck and mid-hip included) are kept per frame in ``meta["gt_panoptic15"]`` for the
-Panoptic protocol (:mod:`evaluation.protocols.panoptic`), which the returned Sequence asks for in
-``meta["protocol_inputs"]``; the evaluation layer attaches it as ``PanopticProtocol``
-(:func:`evaluation.protocols.attach_protocols`; eval.py prints its tables and writes its summary under "panoptic").
-
-2D input: either a ``poses2d.json`` (DESIGN.md), or 2D poses generated from the ground truth by
-projecting it through the chosen cameras with Gaussian pixel noise and capsule occlusion
-(:func:`data.synthetic.observe.observe_view`, see :func:`observe_ground_truth`). Generated input is for
-protocol checks only: it carries ground-truth identities (so the oracle matcher works) and, like the
-ground truth, has no foot joints; the feet matcher then falls back to the ankles.
+Read: ``<root>/<seq>/calibration_<seq>.json`` and ``hdPose3d_stage1_coco19/body3DScene_XXXXXXXX.json``. Ground
+truth: ``joints19`` (cm, y down) to metres, z up, COCO-23 (feet always invalid), a joint valid when its
+confidence > ``GT_MIN_CONFIDENCE`` (VoxelPose's rule); the first 15 coco19 joints go to the Panoptic protocol
+through ``protocol_inputs``. 2D input: a ``poses2d.json``, or generated from the ground truth (noise, capsule
+occlusion, GT identities, no feet) for protocol checks.
 """
 
 from __future__ import annotations
@@ -25,6 +12,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -32,7 +20,7 @@ from data.geometry.calibration import load_panoptic, panoptic_world_to_ours
 from data.geometry.camera import Camera, Rig
 from data.keypoints import FOOT_JOINTS, LEFT_ANKLE, LEFT_FOOT, PANOPTIC19_TO_COCO23, RIGHT_ANKLE, RIGHT_FOOT, to_coco23
 from data.multiview import Frame, Sequence, ViewDetections
-from data.synthetic.config import SyntheticConfig
+from data.synthetic.config import SyntheticConfig, observation_options
 from data.synthetic.observe import bbox_from_keypoints, observe_view
 
 # The five HD cameras of VoxelPose's Panoptic experiments (panel 0, nodes 3, 6, 12, 13, 23).
@@ -49,21 +37,18 @@ def load_panoptic_sequence(
     cameras: list[str] | None = None,
     frames: list[int] | slice | str | None = None,
     poses2d: str | None = None,
-    noise_px: float = 2.0,
-    occlusion: bool = True,
     seed: int = 0,
-    occluded_drop_prob: float = 0.3,
-    occluded_noise_scale: float = 3.0,
-    min_joints_in_view: int = 5,
+    **observation: Any,
 ) -> Sequence:
     """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) per frame, 2D views.
 
-    ``frames``: None = every body3DScene file found; a list = those frame numbers; a slice or a
-    "start:stop:step" string = positions in the sorted list of found frames ("::12" keeps every 12th).
-    ``poses2d``: a poses2d.json to read the 2D input from; None generates it from the ground truth with
-    ``noise_px`` pixel noise SD (the same at every depth), ``occlusion`` and the other options of
-    :func:`observe_ground_truth`, deterministic for ``seed``.
+    ``frames``: None = all, a list = frame numbers, a slice or "start:stop:step" = positions among the found frames.
+    ``poses2d``: a poses2d.json; None generates 2D from the GT (``observation``: noise_px at every depth, occlusion,
+    occluded_drop_prob, occluded_noise_scale, min_joints_in_view), deterministic for ``seed``.
     """
+    keys = ("noise_px", "occlusion", "occluded_drop_prob", "occluded_noise_scale", "min_joints_in_view")
+    fixed = dict(noise_depth_exponent=0.0, miss_rate=0.0, fp_rate=0.0)
+    observation = observation_options("load_panoptic_sequence", observation, keys, **fixed)
     seq_dir = Path(root) / sequence
     names = list(DEFAULT_CAMERAS if cameras is None else (str(c) for c in cameras))
     rig = load_panoptic(seq_dir / f"calibration_{sequence}.json", names)
@@ -76,42 +61,28 @@ def load_panoptic_sequence(
         "sequence": sequence,
         "cameras": names,
         "gt_min_confidence": GT_MIN_CONFIDENCE,
-        "gt_panoptic15": {},
-        "persistent_ids": True,
-    }  # Panoptic body ids name one person over the sequence
+    }
+    gt15 = {}
     if poses2d is not None:
         views_by_frame = _read_poses2d(poses2d, rig, meta)
         source = f"2D poses from {poses2d}"
     else:
-        cfg = SyntheticConfig(
-            noise_px=noise_px,
-            noise_depth_exponent=0.0,
-            occlusion=occlusion,
-            occluded_drop_prob=occluded_drop_prob,
-            occluded_noise_scale=occluded_noise_scale,
-            min_joints_in_view=min_joints_in_view,
-            miss_rate=0.0,
-            fp_rate=0.0,
-        )
-        rng = np.random.default_rng(seed)
-        views_by_frame = {
-            f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng) for f, (ids, j19) in ground_truth.items()
-        }
+        views_by_frame = _generated_views(rig, ground_truth, seed, observation)
         source = (
-            f"2D generated from GT: {noise_px} px noise, occlusion {'on' if occlusion else 'off'}, "
-            f"seed {seed}, no foot joints"
+            f"2D generated from GT: {observation['noise_px']} px noise, occlusion "
+            f"{'on' if observation['occlusion'] else 'off'}, seed {seed}, no foot joints"
         )
     out = []
     for frame, (ids, joints19) in ground_truth.items():
-        meta["gt_panoptic15"][frame] = panoptic19_to_ours(joints19)[:, :15]
+        gt15[frame] = panoptic19_to_ours(joints19)[:, :15]
         views = views_by_frame.get(frame) or [ViewDetections.empty() for _ in names]
         out.append(Frame(frame, views, _coco23(joints19), ids))
     # Counted, not dropped silently: GT frames without 2D input, 2D frames without GT (not evaluated).
     meta["frames_without_2d"] = sum(f not in views_by_frame for f in ground_truth)
     meta["frames_2d_without_gt"] = sum(f not in all_files for f in views_by_frame)
-    meta["description"] = f"CMU Panoptic {sequence}: cameras {', '.join(names)}; {source}"
-    meta["protocol_inputs"] = [{"name": "panoptic", "gt15": meta["gt_panoptic15"]}]
-    return Sequence(rig, out, meta)
+    description = f"CMU Panoptic {sequence}: cameras {', '.join(names)}; {source}"
+    protocol = [{"name": "panoptic", "gt15": gt15}]  # Panoptic body ids name one person over the sequence
+    return Sequence(rig, out, meta, description=description, persistent_ids=True, protocol_inputs=protocol)
 
 
 def find_pose_files(seq_dir: str | Path) -> dict[int, Path]:
@@ -163,19 +134,22 @@ def _coco23(joints19: np.ndarray) -> np.ndarray:
 def observe_ground_truth(
     rig: Rig, gt_poses: np.ndarray, gt_ids: np.ndarray, cfg: SyntheticConfig, rng: np.random.Generator
 ) -> list[ViewDetections]:
-    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera of the rig.
+    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera: V ViewDetections.
 
-    The synthetic generator's :func:`observe_view` does the projection, noise, occlusion and scores.
-    Joints invalid in the ground truth (the feet always) are filled in only so that its capsule body
-    model has no segments to the origin (feet at the ankle, others at the mean of the valid joints),
-    and are then removed (score 0); a person left with fewer than ``cfg.min_joints_in_view`` joints is
-    not detected in that view.
+    Invalid GT joints are filled in for the capsule model only (feet at the ankle, others at the mean), then removed.
     """
     gt_poses = np.asarray(gt_poses, dtype=np.float64)
     ids = np.asarray(gt_ids, dtype=np.int64)
     valid_by_id = {int(i): gt_poses[n, :, 3] > 0 for n, i in enumerate(ids)}
     filled = _fill_invalid(gt_poses)
     return [_mask_invalid(observe_view(camera, filled, ids, cfg, rng), valid_by_id, camera, cfg) for camera in rig]
+
+
+def _generated_views(rig: Rig, ground_truth: dict, seed: int, observation: dict) -> dict[int, list[ViewDetections]]:
+    """{frame: V ViewDetections} observed from {frame: (ids (G,), joints19 (G, 19, 4))}, depth-independent noise."""
+    cfg = SyntheticConfig(**observation)
+    rng = np.random.default_rng(seed)
+    return {f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng) for f, (ids, j19) in ground_truth.items()}
 
 
 def _fill_invalid(poses: np.ndarray) -> np.ndarray:

@@ -1,22 +1,11 @@
 """The Shelf benchmark (frames 300..600) as a :class:`data.multiview.Sequence`, scored by its own protocol.
 
-Layout read under ``root`` (4D Association's data/shelf, see ../shared/data/PROVENANCE.md):
-``4d_association/calibration.json`` (the 5 cameras), ``4d_association/detection/<camera>.txt``
-(ungrouped OpenPose BODY_25 candidates and PAFs), ``4d_association/gt.txt`` (Shelf-14 + mid-hip ground
-truth) and ``4d_association/skel.txt`` (4D Association's stored output, the baseline).
-
-2D input: the candidates of every camera frame are grouped into persons by part affinity
-by the ``grouper`` the config gives (``models.paf_grouping.group_view``) into COCO-23 ViewDetections; the seconds spent
-grouping go to ``meta["stage_seconds"]["grouping"]`` (eval.py prints them as a stage). Alternatively a
-``poses2d.json`` (DESIGN.md) of already-grouped COCO-23 detections, keyed by the Shelf frame number.
-Detections carry no identities (person_ids -1).
-
-Ground truth: Shelf-14 + mid-hip is not COCO-23, so ``Frame.gt_poses`` is None (the generic evaluator
-skips it); ``meta["protocol_inputs"]`` holds what the Shelf protocol needs (GT, its path, the baseline
-path), and the evaluation layer attaches :class:`evaluation.protocols.shelf.ShelfProtocol` from it
-(:func:`evaluation.protocols.attach_protocols`), which prints the standard Shelf PCP table for ours and
-for 4D Association.
-``Frame.index`` is the Shelf frame number (file frame i = ``first_frame`` + i).
+Read under ``root`` (4D Association's data/shelf, see ../shared/data/PROVENANCE.md): ``4d_association/``
+``calibration.json`` (5 cameras), ``detection/<camera>.txt`` (OpenPose BODY_25 candidates and PAFs, grouped
+into COCO-23 persons by the configured ``grouper``; its seconds go to ``stage_seconds["grouping"]``), ``gt.txt``
+(Shelf-14 + mid-hip) and ``skel.txt`` (4D Association's output, the baseline). Or a ``poses2d.json`` of grouped
+detections keyed by Shelf frame number. Shelf-14 is not COCO-23, so ``gt_poses`` is None and the Shelf protocol
+(:class:`evaluation.protocols.shelf.ShelfProtocol`) gets the ground truth through ``protocol_inputs``.
 """
 
 from __future__ import annotations
@@ -50,17 +39,12 @@ def load_shelf(
     drop_feet: bool = False,
     grouper: Callable | None = None,
 ) -> Sequence:
-    """The Shelf rig (5 views) and one Frame per chosen frame with V ViewDetections (N, 23, 3), gt_poses None.
+    """The Shelf rig (5 views) and one Frame per chosen frame (``index`` = Shelf frame number), views (N, 23, 3).
 
-    Paths are relative to ``root`` unless absolute. ``frames``: None = all frames of gt.txt; a
-    "start:stop[:step]" string = positions in the file (``"0:50"`` = Shelf frames 300..349); a list =
-    Shelf frame numbers. ``min_paf``, ``min_joints``, ``min_mean_score`` go to group_people;
-    ``drop_feet``: the 6 foot keypoints of every detection are removed (score 0, ankles kept), as a
-    COCO-17 detector would give them;
-    ``bbox_margin`` grows the boxes around the joints. ``grouper``: ``grouper(frame_candidates, min_paf=,
-    min_joints=, min_mean_score=, margin=) -> ViewDetections`` (``models.paf_grouping.group_view``), needed
-    unless ``poses2d`` is given. ``poses2d``: grouped COCO-23 input instead of the
-    detection files (no grouping). ``baseline``: None = no 4D Association comparison. ``alpha``: PCP.
+    Paths are relative to ``root`` unless absolute. ``frames``: None = all of gt.txt, "start:stop[:step]" =
+    positions in the file, a list = frame numbers. ``grouper(frame_candidates, min_paf=, min_joints=,
+    min_mean_score=, margin=bbox_margin) -> ViewDetections`` is needed unless ``poses2d`` is given. ``drop_feet``
+    removes the 6 foot keypoints (as a COCO-17 detector). ``baseline`` None: no 4D Association comparison.
     """
     root = Path(root)
     rig = load_4dassoc(_under(root, calibration))
@@ -68,22 +52,12 @@ def load_shelf(
     gts = load_4dassoc_skeletons(gt_path)
     numbers = _frame_numbers(frames, len(gts), first_frame, gt_path)
     meta = {"dataset": "shelf", "root": str(root), "first_frame": first_frame, "frames": len(numbers)}
+    stage_seconds = {}
     if poses2d is None:
-        if grouper is None:
-            raise ValueError(
-                "load_shelf: grouping the detection files needs a grouper "
-                "(dataset.grouper: models.paf_grouping.group_view), or give dataset.poses2d"
-            )
-        views, seconds = _grouped_views(
-            _under(root, detections),
-            rig,
-            numbers,
-            first_frame,
-            grouper,
-            dict(min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score),
-            bbox_margin,
+        grouping = dict(min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score, margin=bbox_margin)
+        views, stage_seconds["grouping"] = _grouped_views(
+            _under(root, detections), rig, numbers, first_frame, grouper, grouping
         )
-        meta["stage_seconds"] = {"grouping": seconds}
         source = (
             f"OpenPose BODY_25 candidates of {_under(root, detections)} grouped by PAF (min_paf {min_paf:g}, "
             f"min_joints {min_joints}, min_mean_score {min_mean_score:g})"
@@ -97,21 +71,15 @@ def load_shelf(
         source += "; the 6 foot keypoints removed (dataset.drop_feet)"
     out = [Frame(n, views.get(n) or [ViewDetections.empty() for _ in rig.names]) for n in numbers]
     detected = sum(len(v) for f in out for v in f.views)
-    meta["description"] = (
+    description = (
         f"Shelf frames {numbers[0]}-{numbers[-1]} ({len(numbers)}), cameras "
         f"{', '.join(rig.names)}: {source}; {detected / max(len(out), 1):.1f} detections per frame"
     )
-    meta["protocol_inputs"] = [
-        {
-            "name": "shelf",
-            "gt": {n: gts[n - first_frame] for n in numbers},
-            "gt_path": gt_path,
-            "baseline_path": None if baseline is None else _under(root, baseline),
-            "first_frame": first_frame,
-            "alpha": alpha,
-        }
-    ]
-    return Sequence(rig, out, meta)
+    protocol = {"name": "shelf", "gt": {n: gts[n - first_frame] for n in numbers}, "gt_path": gt_path}
+    protocol.update(
+        baseline_path=None if baseline is None else _under(root, baseline), first_frame=first_frame, alpha=alpha
+    )
+    return Sequence(rig, out, meta, description=description, protocol_inputs=[protocol], stage_seconds=stage_seconds)
 
 
 def without_feet(view: ViewDetections) -> ViewDetections:
@@ -150,14 +118,19 @@ def _frame_numbers(frames: str | list[int] | None, count: int, first: int, gt_pa
 
 
 def _grouped_views(
-    folder: Path, rig: Rig, numbers: list[int], first: int, grouper: Callable, grouping: dict, margin: float
+    folder: Path, rig: Rig, numbers: list[int], first: int, grouper: Callable | None, grouping: dict
 ) -> tuple[dict[int, list[ViewDetections]], float]:
     """{frame: V ViewDetections} from <folder>/<camera>.txt, and the seconds spent grouping."""
+    if grouper is None:
+        raise ValueError(
+            "load_shelf: grouping the detection files needs a grouper "
+            "(dataset.grouper: models.paf_grouping.group_view), or give dataset.poses2d"
+        )
     per_camera = [
         _camera_candidates(folder, name, rig.cameras[v].size, numbers, first) for v, name in enumerate(rig.names)
     ]
     t0 = time.perf_counter()
-    views = {n: [grouper(c[i], **grouping, margin=margin) for c in per_camera] for i, n in enumerate(numbers)}
+    views = {n: [grouper(c[i], **grouping) for c in per_camera] for i, n in enumerate(numbers)}
     return views, time.perf_counter() - t0
 
 

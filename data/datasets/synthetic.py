@@ -6,12 +6,8 @@ from data.multiview import Sequence
 
 
 def load_synthetic(render: bool = False, render_seed: int | None = None, **options) -> Sequence:
-    """The built-in synthetic crowd; options are the fields of ``data.synthetic.SyntheticConfig``.
-
-    render=True: every frame gets lazy rendered images of its cameras (``frame.images``), COCO
-    ``image_ids``, and views holding the render's ground-truth 2D instead of the simulated detections
-    (data/pose2d/scene_render.py); render_seed (None = seed) sets the look of the render.
-    """
+    """The built-in synthetic crowd (options: SyntheticConfig's fields); render=True replaces the views by the
+    render's ground-truth 2D with lazy images and COCO image ids (render_seed None = seed)."""
     from data.synthetic import SyntheticConfig, generate_sequence
 
     if not isinstance(render, bool):
@@ -23,7 +19,7 @@ def load_synthetic(render: bool = False, render_seed: int | None = None, **optio
     rig = "ring of cameras" if cfg.rig == "ring" else f"rig {cfg.rig}"
     persons = f"{len(sequence.frames[0].gt_ids) if sequence.frames else 0} persons"
     if not render:
-        sequence.meta["description"] = (
+        sequence.description = (
             f"Synthetic crowd (seed {cfg.seed}): {persons}, {rig}, 2D noise {cfg.noise_px} px at "
             f"{cfg.noise_ref_depth_m} m x (depth ratio)^{cfg.noise_depth_exponent:g}, "
             f"occlusion {'on' if cfg.occlusion else 'off'}, "
@@ -34,9 +30,9 @@ def load_synthetic(render: bool = False, render_seed: int | None = None, **optio
 
     seed = cfg.seed if render_seed is None else int(render_seed)
     sequence = render_sequence(sequence, seed)
-    sequence.meta["description"] = (
+    sequence.description = (
         f"Synthetic crowd (seed {cfg.seed}), rendered (render seed {seed}): {persons}, {rig}, "
         f"views = the render's ground-truth 2D"
     )
-    sequence.meta["views_are_ground_truth"] = True  # what a 2D stage's predictions are scored against
+    sequence.views_are_ground_truth = True
     return sequence

@@ -1,27 +1,23 @@
 """Wildtrack as a semi-synthetic crowd: the 7 real calibrations, synthetic bodies at the annotated positions.
 
-Wildtrack ships no 2D or 3D poses, only ground-plane positions (``gt_positions_mvdet.txt``, 400
-annotated frames 0, 5, ..., 1995, about 24-38 persons each). Every chosen annotated frame becomes one
-frame of the sequence: a synthetic body (data/synthetic) stands at each annotated position, facing a
-random direction, and the synthetic detector observes it in each real camera (distortion, 2D noise,
-capsule occlusion, misses, false positives as in SyntheticConfig). The annotations carry no
-identities across frames, so each frame is generated on its own (own seed, standing bodies) and
-``gt_ids`` number the positions within a frame only. ``Frame.index`` is the Wildtrack frame number.
-
-The sequence asks for the paper's Table 1 protocol, COCO AP/AR of the reprojected 3D poses
-(:class:`evaluation.protocols.reprojection_coco.ReprojectionCOCOProtocol`), in ``meta["protocol_inputs"]``;
-the evaluation layer attaches it (:func:`evaluation.protocols.attach_protocols`).
+Wildtrack ships only ground-plane positions (``gt_positions_mvdet.txt``, frames 0, 5, ..., 1995) and no
+identities across frames, so each chosen frame is generated on its own (standing bodies, own seed) and
+``gt_ids`` number the positions within a frame. It asks for the paper's Table 1 protocol (COCO AP/AR of the
+reprojected 3D poses, ``reprojection_coco``) through ``Sequence.protocol_inputs``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from data.geometry.calibration import load_wildtrack, load_wildtrack_positions
+from data.geometry.camera import Rig
 from data.multiview import Frame, Sequence
 from data.synthetic import SyntheticConfig, generate_sequence
+from data.synthetic.config import observation_options
 
 POSITIONS_FILE = "gt_positions_mvdet.txt"
 # The annotated region (m), grid cells 0..480 x 0..1440 of 2.5 cm from (-3, -9).
@@ -31,67 +27,40 @@ WILDTRACK_AREA = (-3.0, 9.0, -9.0, 27.0)
 def load_wildtrack_crowd(
     root: str | Path = "../shared/data/wildtrack",
     frames: int | list[int] = 20,
-    noise_px: float = 5.0,
-    noise_depth_exponent: float = 0.0,
-    noise_ref_depth_m: float = 5.0,
-    occlusion: bool = True,
-    occluded_drop_prob: float = 0.3,
-    occluded_noise_scale: float = 3.0,
-    miss_rate: float = 0.0,
-    fp_rate: float = 0.0,
-    min_joints_in_view: int = 5,
     seed: int = 0,
     coco_min_joints: int = 1,
     coco_max_dets: int = 100,
+    **observation: Any,
 ) -> Sequence:
-    """The Wildtrack rig (7 views) and F frames of synthetic bodies at the annotated positions, GT (P, 23, 4).
-
-    ``frames``: the first N annotated frames (an int), or a list of annotated frame numbers.
-    The observation options are those of :class:`data.synthetic.SyntheticConfig`; ``coco_min_joints``
-    and ``coco_max_dets`` go to the ReprojectionCOCOProtocol (its min_joints and max_dets).
-    Deterministic for a seed (frame f is drawn from the seed sequence (seed, f)).
-    """
+    """The Wildtrack rig (7 views) and synthetic bodies at the annotated positions of ``frames`` (the first N or a
+    list), GT (P, 23, 4); ``observation``: OBSERVATION_KEYS (default 5 px at every depth); coco_*: the protocol's."""
+    options = observation_options("load_wildtrack_crowd", observation, noise_px=5.0, noise_depth_exponent=0.0)
     root = Path(root)
     rig = load_wildtrack(root)
     positions = load_wildtrack_positions(root / POSITIONS_FILE)
     chosen = _choose_frames(positions, frames, root / POSITIONS_FILE)
-    options = dict(
-        noise_px=noise_px,
-        noise_depth_exponent=noise_depth_exponent,
-        noise_ref_depth_m=noise_ref_depth_m,
-        occlusion=occlusion,
-        occluded_drop_prob=occluded_drop_prob,
-        occluded_noise_scale=occluded_noise_scale,
-        miss_rate=miss_rate,
-        fp_rate=fp_rate,
-        min_joints_in_view=min_joints_in_view,
+    out = [_frame(number, positions[number], rig, root, seed, options) for number in chosen]
+    meta = {"dataset": "wildtrack", "root": str(root), "frames": chosen, "seed": int(seed), "options": options}
+    protocol = [{"name": "reprojection_coco", "min_joints": coco_min_joints, "max_dets": coco_max_dets}]
+    return Sequence(
+        rig, out, meta, description=_description(chosen, positions, seed, options), protocol_inputs=protocol
     )
-    out = []
-    for number in chosen:
-        frame_seed = int(np.random.SeedSequence([int(seed), number]).generate_state(1)[0])
-        cfg = SyntheticConfig(
-            seed=frame_seed,
-            positions=[positions[number]],
-            area=WILDTRACK_AREA,
-            min_spacing_m=0.0,
-            rig=str(root),
-            rig_format="wildtrack",
-            **options,
-        )
-        frame = generate_sequence(cfg, rig=rig).frames[0]
-        out.append(Frame(number, frame.views, frame.gt_poses, frame.gt_ids))
-    meta = {
-        "dataset": "wildtrack",
-        "root": str(root),
-        "frames": chosen,
-        "seed": int(seed),
-        "options": options,
-        "description": _description(
-            chosen, positions, noise_px, noise_depth_exponent, noise_ref_depth_m, occlusion, miss_rate, fp_rate, seed
-        ),
-    }
-    meta["protocol_inputs"] = [{"name": "reprojection_coco", "min_joints": coco_min_joints, "max_dets": coco_max_dets}]
-    return Sequence(rig, out, meta)
+
+
+def _frame(number: int, positions: np.ndarray, rig: Rig, root: Path, seed: int, options: dict) -> Frame:
+    """Frame ``number``: synthetic bodies standing at its annotated positions (P, 2), drawn from (seed, number)."""
+    frame_seed = int(np.random.SeedSequence([int(seed), number]).generate_state(1)[0])
+    cfg = SyntheticConfig(
+        seed=frame_seed,
+        positions=[positions],
+        area=WILDTRACK_AREA,
+        min_spacing_m=0.0,
+        rig=str(root),
+        rig_format="wildtrack",
+        **options,
+    )
+    frame = generate_sequence(cfg, rig=rig).frames[0]
+    return Frame(number, frame.views, frame.gt_poses, frame.gt_ids)
 
 
 def _choose_frames(positions: dict[int, np.ndarray], frames: int | list[int], path: Path) -> list[int]:
@@ -111,26 +80,18 @@ def _choose_frames(positions: dict[int, np.ndarray], frames: int | list[int], pa
     return chosen
 
 
-def _description(
-    chosen: list[int],
-    positions: dict[int, np.ndarray],
-    noise_px: float,
-    exponent: float,
-    ref_depth: float,
-    occlusion: bool,
-    miss_rate: float,
-    fp_rate: float,
-    seed: int,
-) -> str:
-    """One line saying what the sequence is."""
+def _description(chosen: list[int], positions: dict[int, np.ndarray], seed: int, o: dict) -> str:
+    """One line saying what the sequence is, from the observation options o."""
     people = np.mean([len(positions[f]) for f in chosen])
+    noise, exponent = o["noise_px"], o["noise_depth_exponent"]
     noise = (
-        f"{noise_px:g} px at every depth"
+        f"{noise:g} px at every depth"
         if exponent == 0
-        else f"{noise_px:g} px at {ref_depth:g} m x (depth ratio)^{exponent:g}"
+        else f"{noise:g} px at {o['noise_ref_depth_m']:g} m x (depth ratio)^{exponent:g}"
     )
     return (
         f"Wildtrack rig (7 real calibrations), synthetic bodies at the annotated positions of "
         f"{len(chosen)} frames ({people:.1f} persons per frame), seed {seed}: 2D noise {noise}, "
-        f"occlusion {'on' if occlusion else 'off'}, miss rate {miss_rate:g}, false positives {fp_rate:g} per view"
+        f"occlusion {'on' if o['occlusion'] else 'off'}, miss rate {o['miss_rate']:g}, "
+        f"false positives {o['fp_rate']:g} per view"
     )

@@ -1,11 +1,7 @@
-"""Atomic file output: write under a temporary name beside the target, then rename it into place, so
-an interrupted run never leaves a half-written file (DESIGN.md). Used by every writer of the repo.
+"""Atomic file output: write a temporary beside the target, then rename it into place (DESIGN.md).
 
-A temporary is named ``.<target name>.<host>.<pid>.<random>.tmp``. It is removed on every exit Python
-sees (an exception, KeyboardInterrupt, SystemExit: SIGTERM becomes one when the entry points call
-:func:`exit_on_sigterm`). A process killed outright (SIGKILL, power loss) leaves it behind; such a stale
-temporary (its writer is no longer running on this host) is removed by the next write to the same target
-and by the run-folder check of eval.py / train.py, and is never read as an output.
+A temporary ``.<name>.<host>.<pid>.<random>.tmp`` is removed on every exit Python sees (SIGTERM too, with
+:func:`exit_on_sigterm`); one left by a killed writer is removed by the next write to that target.
 """
 
 from __future__ import annotations
@@ -77,11 +73,8 @@ def remove_stale_temporaries(folder: str | Path, target: str | None = None, recu
 
 @contextmanager
 def atomic_open(path: str | Path, binary: bool = False, fsync: bool = False) -> Iterator[IO]:
-    """Open a temporary file beside path for writing; on success it replaces path, on error it vanishes.
-
-    The file gets the permissions a plain open() would give (0666 minus the umask), not mkstemp's 0600.
-    Stale temporaries of the same target, left by a killed writer, are removed first.
-    """
+    """Open a temporary beside path for writing (plain open()'s permissions); on success it replaces path, on error
+    it vanishes; stale temporaries of the target are removed first."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path.parent, target=path.name)

@@ -70,6 +70,7 @@ def _frame_map(items: list[str]) -> dict[int, int]:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
+    """Command line (module docstring): write the detection-results file."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("poses2d", help="poses2d.json (DESIGN.md)")
     parser.add_argument("--cameras", required=True, help="the calibration (its image sizes, camera names)")

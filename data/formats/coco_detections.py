@@ -19,10 +19,7 @@ KEYS = ("image_id", "category_id", "bbox", "score")
 
 @dataclass(frozen=True)
 class CocoDetections:
-    """The M entries of a detections file, in file order.
-
-    image_ids (M,) int64, category_ids (M,) int64, boxes (M, 4) x, y, w, h float64, scores (M,) float64.
-    """
+    """The M entries of a detections file, in file order: ids (M,) int64, boxes (M, 4) x, y, w, h, scores (M,)."""
 
     path: Path
     image_ids: np.ndarray

@@ -49,30 +49,21 @@ BODY25_LIMB_ARRAY = np.array(BODY25_PAF_LIMBS, dtype=np.int64)  # the limbs as (
 
 @dataclass
 class PackedCandidates:
-    """A frame's candidates and PAFs as four flat arrays (what the compiled grouping reads).
+    """A frame's candidates and PAFs as four flat arrays (what the compiled grouping reads)."""
 
-    points (M, 3): the candidates of joint j at points[joint_start[j]:joint_start[j + 1]] (joint_start (J + 1,));
-    paf_values (K,): limb k's PAF matrix row-major at paf_values[paf_start[k]:paf_start[k + 1]] (paf_start (L + 1,)).
-    """
-
-    points: np.ndarray
-    joint_start: np.ndarray
-    paf_values: np.ndarray
-    paf_start: np.ndarray
+    points: np.ndarray  # (M, 3): joint j's candidates at points[joint_start[j]:joint_start[j + 1]]
+    joint_start: np.ndarray  # (J + 1,)
+    paf_values: np.ndarray  # (K,): limb k's PAF matrix, row-major, at paf_values[paf_start[k]:paf_start[k + 1]]
+    paf_start: np.ndarray  # (L + 1,)
 
 
 @dataclass
 class FrameCandidates:
-    """One camera frame of ungrouped detections.
+    """One camera frame of ungrouped detections."""
 
-    candidates: 25 arrays (n_j, 3), x, y in pixels and score, one per BODY_25 joint.
-    pafs: 26 arrays (n_a, n_b), PAF scores between the candidates of limb (a, b) of BODY25_PAF_LIMBS.
-    packed: the same numbers as PackedCandidates, when the reader has them (None: built by the grouping).
-    """
-
-    candidates: list[np.ndarray]
-    pafs: list[np.ndarray]
-    packed: PackedCandidates | None = field(default=None, repr=False)
+    candidates: list[np.ndarray]  # 25 arrays (n_j, 3): x, y px, score, one per BODY_25 joint
+    pafs: list[np.ndarray]  # 26 arrays (n_a, n_b): PAF scores between the candidates of limb (a, b)
+    packed: PackedCandidates | None = field(default=None, repr=False)  # the same numbers (None: built on use)
 
 
 class _Layout:
@@ -84,7 +75,7 @@ class _Layout:
 
     def __init__(self, path: Path, values: np.ndarray) -> None:
         self.path, self.values, self.pos = path, values, 0
-        self.numbers = values.tolist()  # Python floats: per-count indexing is ~10x cheaper than on the array
+        self.numbers = values.tolist()  # Python floats: the per-count walk indexes a list, not numpy scalars
         bad = np.flatnonzero(~np.isfinite(values))
         self.first_bad = int(bad[0]) if len(bad) else len(values)
 
@@ -177,10 +168,8 @@ def _float_or_nan(token: str) -> float:
 
 
 def load_4dassoc_detections(path: str | Path, image_size: tuple[int, int] = (1032, 776)) -> list[FrameCandidates]:
-    """Read a 4D Association detection file: per frame 25 candidate arrays (n_j, 3) px and 26 PAFs (n_a, n_b).
-
-    image_size (w, h) converts the file's normalised coordinates: pixel = x * (w - 1), y * (h - 1).
-    """
+    """A 4D Association detection file -> per frame 25 candidate arrays (n_j, 3) px and 26 PAFs (n_a, n_b);
+    normalised coordinates to pixels x * (w - 1), y * (h - 1) of image_size."""
     path = Path(path)
     layout = _Layout(path, _numbers(path))
     skeleton = layout.count("the header's skeleton type")

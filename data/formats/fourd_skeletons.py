@@ -8,11 +8,8 @@ import numpy as np
 
 
 def load_4dassoc_skeletons(path: str | Path) -> list[dict[int, np.ndarray]]:
-    """gt.txt / skel.txt -> per frame {actor id: (J, 4) x, y, z (metres), valid}.
-
-    Layout: header 'J F'; per frame a person count, then per person its id and a 4 x J matrix
-    (rows x, y, z, valid). Frame i of the list is the file's i-th frame (Shelf frame 300 + i).
-    """
+    """gt.txt / skel.txt -> per frame {actor id: (J, 4) x, y, z (m), valid}: header 'J F', per frame a person
+    count, per person its id and a 4 x J matrix; list item i is the file's frame i."""
     path = Path(path)
     try:
         tokens = path.read_text().split()

@@ -1,10 +1,5 @@
-"""The frames of one camera on disk: a folder of images, a video file, or a single image.
-
-A folder's frames are its image files in natural order (``img2`` before ``img10``), each named by its
-stem; a video's frames are read with OpenCV (``cv2.VideoCapture``, seeking by frame index); a single
-image is one frame. Frames are read only when asked for, as (H, W, 3) uint8 BGR. A source that cannot
-be opened, or a frame that cannot be read, raises :class:`ImageSourceError`, one line naming the path.
-"""
+"""The frames of one camera on disk, read lazily as (H, W, 3) uint8 BGR: a folder of images (natural order),
+a video (OpenCV, seeking by index) or one image; a failure is an :class:`ImageSourceError` naming the path."""
 
 from __future__ import annotations
 

@@ -1,13 +1,9 @@
-"""OpenPose's own JSON output (``--write_json``): BODY_25 people per image, read as COCO-23 detections.
-
-Command line: one folder of ``<name>_<frame:012d>_keypoints.json`` files per camera -> poses2d.json::
+"""OpenPose's ``--write_json`` output (BODY_25 people per image) read as COCO-23 detections; a CLI to poses2d.json::
 
     python -m data.formats.openpose_json cam_a=openpose/cam_a cam_b=openpose/cam_b -o poses2d.json
     python -m data.formats.openpose_json 'openpose/*' -o poses2d.json      # camera name = folder name
 
-A folder argument may be ``name=folder`` (camera name given) or a folder or glob pattern (camera name =
-folder name). Keypoint scores are clipped to [0, 1] (OpenPose's confidences can exceed 1 slightly).
-``--cameras cameras.json`` checks the names against a calibration and the pixels against its image sizes.
+Scores are clipped to [0, 1]; ``--cameras cameras.json`` checks names and pixels against a calibration.
 """
 
 from __future__ import annotations
@@ -31,12 +27,8 @@ OPENPOSE_FILE = re.compile(r"^(?P<name>.*)_(?P<frame>\d{12})_keypoints\.json$")
 
 
 def keypoints_to_view_detections(keypoints: np.ndarray, margin: float = 0.1) -> ViewDetections:
-    """Detections (N, J, 3) x, y, score -> ViewDetections with boxes around the joints with score > 0.
-
-    The tight box is grown by `margin` times its width and height on each side, because joints miss
-    the top of the head, the hands and the outline of the body. score = mean score of those joints;
-    a person without joints gets a zero box and score 0. person_ids are all -1.
-    """
+    """Detections (N, J, 3) x, y, score -> ViewDetections: boxes around the scored joints grown by ``margin`` per
+    side (joints miss the head top, hands, outline), score = their mean (0 and a zero box without any), ids -1."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     have = keypoints[..., 2] > 0
     seen = have.any(axis=1)
@@ -83,10 +75,7 @@ def _body25(path: Path, n: int, person: object) -> np.ndarray:
 
 
 def load_openpose_dir(directory: str | Path, margin: float = 0.1) -> dict[int, ViewDetections]:
-    """A folder of ``<name>_<frame:012d>_keypoints.json`` files of one camera -> {frame: ViewDetections}.
-
-    Files not named that way are ignored; `margin` as in keypoints_to_view_detections.
-    """
+    """A folder of one camera's ``<name>_<frame:012d>_keypoints.json`` files -> {frame: ViewDetections}."""
     directory = Path(directory)
     if not directory.is_dir():
         raise ValueError(f"{directory}: not a folder of OpenPose JSON files")

@@ -1,17 +1,9 @@
 """poses2d.json (DESIGN.md): one entry per person per camera per frame, COCO-23 keypoints in pixels.
 
-Entry: {"frame": int, "camera": str, "bbox": [x, y, w, h], "score": float, "keypoints": 69 numbers
-(23 x, y, score)} and optionally "id" (ground-truth person id).
-
-What the reader rejects (Poses2DError, one line naming the file, the entry, its frame and camera):
-an empty list; a key twice in one object; a missing key; strings, booleans or null where numbers
-belong; a frame or id outside 64-bit integers; a camera not in the calibration; a keypoint count
-other than 69; a non-finite number; a score (detection or keypoint) outside [0, 1] (up to
-``SCORE_SLACK`` above 1 is clipped to 1: OpenPose's confidences can exceed 1 slightly); a scored
-keypoint or a box corner farther outside the image than ``OUTSIDE_IMAGE_TOLERANCE`` image sizes; a
-negative box width or height; and the same detection twice (same frame, camera and keypoints, at
-least one of them scored: rejected, not merged, because a duplicate is a concatenation or export bug
-that a merge would hide; detections without any scored joint, e.g. a 2D model's empty boxes, may repeat).
+Entry: {"frame": int, "camera": str, "bbox": [x, y, w, h], "score": float, "keypoints": 69 numbers, "id"?}.
+The reader rejects with one line (Poses2DError) malformed entries, unknown cameras, non-finite numbers, scores
+outside [0, 1] (up to ``SCORE_SLACK`` above is clipped), points farther outside the image than
+``OUTSIDE_IMAGE_TOLERANCE`` image sizes, and the same scored detection twice (an export bug a merge would hide).
 """
 
 from __future__ import annotations

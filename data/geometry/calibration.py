@@ -1,14 +1,9 @@
 """Calibration loaders and savers: every dataset's camera format to one `Rig` (DESIGN.md conventions).
 
-Every loader returns cameras with x_cam = R x_world + t, the world in metres, z up, the floor at z = 0,
-and ``dist`` = OpenCV (k1, k2, p1, p2, k3). Bad files raise `CalibrationError` naming file, camera, key.
-
-Camera order (= view index) per format:
-- cameras.json: the file's order (as saved by save_cameras_json).
-- 4D Association, VoxelPose: the file's keys, numerically sorted when all are integers ("0", "1", ...).
-- Panoptic: the file's HD cameras in file order ("00_00" ... "00_30"), or the order of ``cameras=``.
-- Wildtrack: CVLab1, CVLab2, CVLab3, CVLab4, IDIAP1, IDIAP2, IDIAP3.
-- Shelf P-matrices: P0 ... P4, named "0" ... "4" like the 4D Association and VoxelPose files.
+Cameras come out with x_cam = R x_world + t, metres, z up, floor z = 0, OpenCV ``dist``; bad files raise
+`CalibrationError` naming file, camera and key. View order: the file's (cameras.json, Panoptic or the given
+``cameras``), keys numerically sorted (4D Association, VoxelPose), CVLab1-4 then IDIAP1-3 (Wildtrack), P0-P4
+named "0".."4" (Shelf P-matrices).
 """
 
 from __future__ import annotations
@@ -305,11 +300,8 @@ def _xml_array(path: Path, tag: str, shape: tuple[int, ...], camera: str) -> np.
 
 
 def load_wildtrack(root: str | Path) -> Rig:
-    """Wildtrack calibrations/{intrinsic/intr_*, extrinsic/extr_*}.xml of the 7 cameras, tvec cm -> m.
-
-    The Wildtrack world is already z up with the ground at z = 0 (camera centres 1.7-3.4 m above it,
-    heads project above feet), so only the unit changes.
-    """
+    """Wildtrack calibrations/{intrinsic/intr_*, extrinsic/extr_*}.xml of the 7 cameras, tvec cm -> m (the world
+    is already z up, ground z = 0)."""
     root = Path(root)
     calib = root / "calibrations" if (root / "calibrations").is_dir() else root
     cameras = []
@@ -380,10 +372,8 @@ def detect_format(path: str | Path) -> str:
 
 
 def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: Any) -> Rig:
-    """Load any supported calibration: fmt in cameras_json, 4dassoc, voxelpose, panoptic, wildtrack,
-    shelf_p, or auto (detected from the file content or folder layout); kwargs go to the loader. With
-    ``check``, the rig check (data/geometry/check_rig.py) runs: RigError (a CalibrationError) where every
-    result would be garbage, RigWarning for what looks wrong."""
+    """Any supported calibration: fmt cameras_json, 4dassoc, voxelpose, panoptic, wildtrack, shelf_p or auto (detected);
+    kwargs go to the loader; ``check`` runs the rig check (RigError where every result would be garbage, RigWarning)."""
     loaders = {
         "cameras_json": load_cameras_json,
         "4dassoc": load_4dassoc,

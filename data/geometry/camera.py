@@ -101,11 +101,8 @@ class Camera:
         return out.reshape(uv.shape)
 
     def in_view(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
-        """Whether world points are in front of the camera and inside the image: (..., 3) -> (...,) bool.
-
-        Points outside the calibrated field of view are rejected before distortion is applied,
-        because the distortion polynomial folds far-away points back into the image.
-        """
+        """Whether world points are in front and inside the image: (..., 3) -> (...,) bool; points outside the
+        calibrated field of view are rejected first (distortion folds far points back into the image)."""
         cam = self.world_to_camera(points)
         z = cam[..., 2]
         safe_z = np.where(z > 1e-9, z, 1.0)

@@ -1,30 +1,15 @@
 """Plausibility checks of a calibrated rig, and of 2D poses against it: ``python -m data.geometry.check_rig
 cameras.json [poses2d.json]``.
 
-A calibration can load cleanly and still be wrong: t in millimetres, R transposed (camera -> world), a
-camera copied under two names, the world's z axis not up. The checks below catch what users really get
-wrong; what makes every result garbage is an error (`RigError`, a `CalibrationError`), the rest a
-`RigWarning` naming the camera and the likely mistake. `load_rig` runs the geometric checks on every
-load, `data.datasets.files.load_files` adds the 2D check; this command runs both and prints one line
-per finding.
-
-Geometric checks (`rig_findings`):
-- all camera centres within ``min_baseline_m`` of each other: error (nothing can be triangulated); two
-  of them: warning (that view pair cannot triangulate);
-- a centre farther than ``max_centre_distance_m`` from the world origin: warning (t in mm or cm?);
-- a centre more than ``ground_clearance_m`` below the ground plane z = 0, or lower than
-  ``min_camera_height_m`` above it: warning (the feet matcher cuts foot rays with the planes of the feet
-  and ankles; a camera on such a plane cannot, and its feet are dropped);
-- an image y axis pointing up in the world by more than ``max_image_up`` (sine): warning (upside down,
-  R transposed or the world's z axis down);
-- no pixel of the image seeing the ground plane in front of the camera: warning;
-- a camera that does not see the common scene of the others (the point nearest to their optical axes,
-  allowed ``scene_margin`` image sizes outside the image): warning (R transposed or of another camera?).
-
-2D check (`pose_findings`): per view pair, each detection's joints are triangulated (DLT) with every
-detection of the other view and the mutual best pairs kept; a camera whose pairs reproject worse than
-``max_reprojection`` (a fraction of the image diagonal) gets a warning, naming the correction (R
-transposed, camera -> world pose, t in mm, poses of another camera) that makes its 2D poses fit, if any.
+A calibration can load and still be wrong (t in mm, R transposed, a camera copied, z not up). What makes every
+result garbage is a `RigError`; the rest are `RigWarning`s naming the camera and the likely mistake. Geometric
+checks (`rig_findings`, tolerances in `RigTolerances`): all centres at one place (error) or two at one place;
+centres far from the origin; below or on the ground plane (the feet matcher cuts rays with the feet's planes);
+the image's y axis pointing up; no pixel seeing the ground; a camera not seeing the common scene of the others
+(the point nearest to their optical axes). 2D check (`pose_findings`): per view pair, the mutual best detection
+pairs are triangulated; a camera whose pairs reproject worse than ``max_reprojection`` of the image diagonal is
+named with the correction (R transposed, camera -> world pose, t in mm or cm, another camera's poses) that fits.
+`load_rig` runs the geometric checks on every load, `data.datasets.files.load_files` adds the 2D check.
 """
 
 from __future__ import annotations
@@ -124,90 +109,75 @@ def sees_ground(cam: Camera, grid: int = 9) -> bool:
     return bool(np.any(np.isfinite(s) & (s > 0)))
 
 
+def _about(cams: list[Camera], text: str) -> list[Finding]:
+    """One warning naming the cameras ("camera 'a': text", "cameras 'a', 'b': text"); none without cameras."""
+    return [Finding("warning", f"camera{'s' if len(cams) > 1 else ''} {_names(cams)}: {text}")] if cams else []
+
+
 def rig_findings(rig: Rig, tol: RigTolerances = RigTolerances()) -> list[Finding]:
     """The geometric findings of a rig (module docstring), errors first."""
     cams = list(rig)
-    out: list[Finding] = []
     if len(cams) < 2:
         return [Finding("warning", f"only {len(cams)} camera: nothing can be triangulated")]
     C = np.array([c.center for c in cams])
     dist = np.linalg.norm(C[:, None] - C[None], axis=-1)
     if dist.max() < tol.min_baseline_m:
-        out.append(
+        return [
             Finding(
                 "error",
                 f"all {len(cams)} cameras have their centre at ({C[0, 0]:.3g}, {C[0, 1]:.3g}, "
                 f"{C[0, 2]:.3g}) (within {tol.min_baseline_m} m): no baseline, nothing can be "
                 f"triangulated (R and t copied from one camera?)",
             )
-        )
-        return out
+        ]
+    out = []
     for a, b in zip(*np.nonzero(np.triu(dist < tol.min_baseline_m, 1))):
         same = all(np.array_equal(getattr(cams[a], k), getattr(cams[b], k)) for k in ("K", "R", "t"))
+        what = "have identical calibrations" if same else "share their centre"
         out.append(
             Finding(
                 "warning",
-                f"cameras {cams[a].name!r} and {cams[b].name!r} "
-                f"{'have identical calibrations' if same else 'share their centre'} "
-                f"({dist[a, b]:.3g} m apart): that view pair cannot triangulate "
-                f"(one camera copied under two names?)",
+                f"cameras {cams[a].name!r} and {cams[b].name!r} {what} ({dist[a, b]:.3g} m apart): that view pair "
+                f"cannot triangulate (one camera copied under two names?)",
             )
         )
+    return out + _placement_findings(cams, C, tol) + _scene_findings(cams, tol)
+
+
+def _placement_findings(cams: list[Camera], C: np.ndarray, tol: RigTolerances) -> list[Finding]:
+    """Cameras far from the origin, below or on the ground, upside down, or not seeing the ground; C (V, 3)."""
+    out = []
     far = [c for c, d in zip(cams, np.linalg.norm(C, axis=1)) if d > tol.max_centre_distance_m]
     if far:
         with np.errstate(over="ignore"):
             d = np.minimum(np.linalg.norm([c.center for c in far], axis=1), np.finfo(np.float64).max)
-        out.append(
-            Finding(
-                "warning",
-                f"camera{'s' if len(far) > 1 else ''} {_names(far)}: centre {d.min():.4g}"
-                f"{f'-{d.max():.4g}' if d.max() > d.min() * 1.001 else ''} m from the world origin "
-                f"(more than {tol.max_centre_distance_m:g} m): is t in millimetres or "
-                f"centimetres? cameras.json wants metres",
-            )
+        span = f"{d.min():.4g}{f'-{d.max():.4g}' if d.max() > d.min() * 1.001 else ''}"
+        out += _about(
+            far,
+            f"centre {span} m from the world origin (more than {tol.max_centre_distance_m:g} m): is t in "
+            f"millimetres or centimetres? cameras.json wants metres",
         )
     below = [c for c in cams if c.center[2] < -tol.ground_clearance_m]
+    out += _about(
+        below,
+        "centre below the ground plane z = 0 (the world must be z up with the floor at z = 0; y up or R transposed?)",
+    )
     on = [c for c in cams if -tol.ground_clearance_m <= c.center[2] < tol.min_camera_height_m]
-    if below:
-        out.append(
-            Finding(
-                "warning",
-                f"camera{'s' if len(below) > 1 else ''} {_names(below)}: centre below the "
-                f"ground plane z = 0 (the world must be z up with the floor at z = 0; "
-                f"y up or R transposed?)",
-            )
-        )
-    if on:
-        out.append(
-            Finding(
-                "warning",
-                f"camera{'s' if len(on) > 1 else ''} {_names(on)}: centre at "
-                f"z = {min(c.center[2] for c in on):.3g} m, on or just above the ground "
-                f"plane (below {tol.min_camera_height_m} m): the feet matcher cannot place "
-                f"feet seen from the planes of the feet and ankles and drops them",
-            )
-        )
-    upside = [c for c in cams if c.R[1, 2] > tol.max_image_up]
-    if upside:
-        out.append(
-            Finding(
-                "warning",
-                f"camera{'s' if len(upside) > 1 else ''} {_names(upside)}: the image's y "
-                f"axis points up in the world (upside down? R transposed, or the world's "
-                f"z axis pointing down?)",
-            )
-        )
-    blind = [c for c in cams if c.center[2] >= tol.min_camera_height_m and not sees_ground(c)]
-    if blind:
-        out.append(
-            Finding(
-                "warning",
-                f"camera{'s' if len(blind) > 1 else ''} {_names(blind)}: the ground plane "
-                f"z = 0 is nowhere in the image (looking up? R transposed?); the feet "
-                f"matcher needs the floor in front of the cameras",
-            )
-        )
-    out.extend(_scene_findings(cams, tol))
+    out += _about(
+        on,
+        f"centre at z = {min((c.center[2] for c in on), default=0.0):.3g} m, on or just above the ground plane "
+        f"(below {tol.min_camera_height_m} m): the feet matcher cannot place feet seen from the planes of the feet "
+        f"and ankles and drops them",
+    )
+    out += _about(
+        [c for c in cams if c.R[1, 2] > tol.max_image_up],
+        "the image's y axis points up in the world (upside down? R transposed, or the world's z axis pointing down?)",
+    )
+    out += _about(
+        [c for c in cams if c.center[2] >= tol.min_camera_height_m and not sees_ground(c)],
+        "the ground plane z = 0 is nowhere in the image (looking up? R transposed?); the feet matcher needs the "
+        "floor in front of the cameras",
+    )
     return out
 
 
@@ -230,16 +200,7 @@ def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
         point = axes_point(cams[:i] + cams[i + 1 :], tol.max_axes_condition)
         if point is not None and not sees_point(cam, point, tol.scene_margin):
             lost.append(cam)
-    if lost and len(lost) < len(cams):
-        return [
-            Finding(
-                "warning",
-                f"camera{'s' if len(lost) > 1 else ''} {_names(lost)}: not looking at the "
-                f"common scene of the other cameras (R transposed, camera -> world, or of "
-                f"another camera?)",
-            )
-        ]
-    if lost:
+    if lost and len(lost) == len(cams):
         return [
             Finding(
                 "warning",
@@ -247,7 +208,10 @@ def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
                 "the others look at): R camera -> world instead of world -> camera?",
             )
         ]
-    return []
+    return _about(
+        lost,
+        "not looking at the common scene of the other cameras (R transposed, camera -> world, or of another camera?)",
+    )
 
 
 # --- 2D poses against the rig ------------------------------------------------------------------------

@@ -10,49 +10,28 @@ RQI_TOLERANCE = 1e-10  # accepted eigenvector error bound (sine of the angle); t
 
 
 def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -> np.ndarray:
-    """Score-weighted DLT of every joint of every person at once: (V, P, J, 3) -> (P, J, 4).
+    """Score-weighted DLT of every joint: undistorted (u, v, score) (V, P, J, 3), proj (V, 3, 4) -> (P, J, 4).
 
-    poses2d holds undistorted pixels and a score per view (0 = not seen); proj (V, 3, 4) are the
-    projection matrices of those pixels. Each view contributes two equations, normalised to unit
-    length and weighted by the joint's score. The output is (x, y, z, confidence) with confidence
-    the mean score of the views used, and 0 (with NaN-free zeros for x, y, z) for a joint seen in
-    fewer than ``min_views`` views. Non-finite pixels or scores count as not seen; pixels so large that
-    the equations overflow give confidence 0.
+    Confidence = the mean score of the views used; all zeros for a joint seen in fewer than ``min_views`` views
+    (non-finite pixels or scores are not seen) or whose equations overflow.
     """
     poses2d = np.asarray(poses2d, dtype=np.float64)
     proj = np.asarray(proj, dtype=np.float64)
     V, P, J, _ = poses2d.shape
     if proj.shape != (V, 3, 4):
         raise ValueError(f"proj has shape {proj.shape}, expected ({V}, 3, 4) for {V} views")
-    # the right singular vector of the smallest singular value of the stacked rows A is the eigenvector of
-    # the smallest eigenvalue of A^T A (a 4x4 eigenproblem is cheaper than the SVD)
-    N = np.empty((P * J, 4, 4))
-    conf = np.empty(P * J)
-    solve = np.empty(P * J, dtype=np.bool_)
+    # the right singular vector of A's smallest singular value is the smallest eigenvector of A^T A (4x4)
+    N, conf, solve = np.empty((P * J, 4, 4)), np.empty(P * J), np.empty(P * J, dtype=np.bool_)
     _normal_matrices(
         np.ascontiguousarray(poses2d.reshape(V, P * J, 3)), np.ascontiguousarray(proj), min_views, N, conf, solve
     )
     usable = solve & np.isfinite(N).all(axis=(1, 2))  # pixels so large that the rows overflow: not solvable
-    X, certified = np.empty((P * J, 4)), np.empty(P * J, dtype=np.bool_)
-    _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE, usable, X, certified)
-    redo = usable & ~certified
-    if redo.any():
-        X[redo] = np.linalg.eigh(N[redo])[1][..., 0]
-    out = np.empty((P * J, 4))
-    _dehomogenised(X, usable, conf, out)
+    X = smallest_eigenvectors(N, usable)
+    finite = usable & (np.abs(X[:, 3]) > 1e-12)  # not at infinity
+    out = np.zeros((P * J, 4))
+    out[finite, :3] = X[finite, :3] / X[finite, 3:]
+    out[finite, 3] = conf[finite]
     return out.reshape(P, J, 4)
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _dehomogenised(X: np.ndarray, usable: np.ndarray, conf: np.ndarray, out: np.ndarray) -> None:
-    """out (n, 4) = (X[:3] / X[3], conf) of the usable points (n,) whose X (n, 4) is not at infinity, zeros else."""
-    for i in range(len(X)):
-        if usable[i] and abs(X[i, 3]) > 1e-12:
-            for r in range(3):
-                out[i, r] = X[i, r] / X[i, 3]
-            out[i, 3] = conf[i]
-        else:
-            out[i, 0], out[i, 1], out[i, 2], out[i, 3] = 0.0, 0.0, 0.0, 0.0
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -99,16 +78,16 @@ def _normal_matrices(
                         N[i, k, m] += weight * a[k] * a[m]
 
 
-def smallest_eigenvectors(N: np.ndarray) -> np.ndarray:
-    """Unit eigenvectors of the smallest eigenvalues of symmetric PSD 4x4 matrices: (n, 4, 4) -> (n, 4).
+def smallest_eigenvectors(N: np.ndarray, use: np.ndarray | None = None) -> np.ndarray:
+    """Unit eigenvectors of the smallest eigenvalues of symmetric PSD 4x4 matrices: (n, 4, 4), use (n,) -> (n, 4).
 
-    A compiled Rayleigh quotient iteration per matrix (:func:`_rayleigh_quotient`, ~0.1 us a matrix); LAPACK
-    eigh (~1.4 us a matrix) only redoes the matrices whose result it cannot certify.
+    Zeros where ``use`` is False. A compiled Rayleigh quotient iteration per matrix; LAPACK's eigh redoes the
+    matrices whose result it cannot certify (batched eigh costs an order of magnitude more per 4x4 matrix).
     """
     N = np.ascontiguousarray(N, dtype=np.float64)
-    v = np.empty((len(N), 4))
-    ok = np.empty(len(N), dtype=np.bool_)
-    _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE, np.ones(len(N), dtype=np.bool_), v, ok)
+    use = np.ones(len(N), dtype=np.bool_) if use is None else np.ascontiguousarray(use, dtype=np.bool_)
+    v, ok = np.empty((len(N), 4)), np.empty(len(N), dtype=np.bool_)
+    _rayleigh_quotient(N, RQI_ITERATIONS, RQI_TOLERANCE, use, v, ok)
     if not ok.all():
         v[~ok] = np.linalg.eigh(N[~ok])[1][..., 0]
     return v
@@ -203,10 +182,8 @@ def _normalise(v: np.ndarray, w_positive: bool) -> None:
 
 
 def reprojection_error(points3d: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """Pixel distance between projected 3D joints and the 2D joints: (P, J, 4|3), (V, P, J, 3) -> (V, P, J).
-
-    NaN where the 2D joint has score 0 or the 3D joint has confidence 0.
-    """
+    """Pixel distance of projected 3D joints to 2D joints: (P, J, 4|3), (V, P, J, 3) -> (V, P, J), NaN where either
+    has score / confidence 0."""
     points3d = np.asarray(points3d, dtype=np.float64)
     poses2d = np.asarray(poses2d, dtype=np.float64)
     homog = np.concatenate([points3d[..., :3], np.ones(points3d.shape[:-1] + (1,))], axis=-1)

@@ -1,9 +1,5 @@
-"""Person crops of one image for inference: the crops of TopDownDataset without augmentation, as a batch.
-
-Geometry and pixel convention are data/pose2d/crop_transforms.py's (box grown to the input aspect ratio,
-times padding; ``cv2.warpAffine`` bilinear, black outside the image), so a crop here is the one the
-network was validated on. Normalisation (RGB, ImageNet mean and std) is done on the tensor's device.
-"""
+"""Person crops of one image for inference: TopDownDataset's crops without augmentation, as a batch (same
+geometry and normalisation, so a crop here is the one the network was validated on)."""
 
 from __future__ import annotations
 

@@ -1,11 +1,7 @@
 """COCO OKS keypoint AP/AR through pycocotools, on COCO-23 or its body (COCO-17) or foot (6 joints) subset.
 
-The subset's keypoints and OKS sigmas are handed to pycocotools as if they were the whole skeleton, as
-COCO-WholeBody evaluates its parts: the object area (OKS scale and area ranges) stays the person's area,
-and a person without a labelled joint in the subset has ``num_keypoints = 0`` and is ignored, as COCO
-ignores it. A detection's area (used only to ignore unmatched detections outside an area range) is the
-extent of all its 23 keypoints, as ``COCO.loadRes`` computes it for 23-keypoint results, whatever the
-subset.
+A subset is handed to pycocotools as the whole skeleton, as COCO-WholeBody evaluates its parts: areas stay the
+person's, a person with no labelled joint in the subset is ignored, a detection's area spans all 23 keypoints.
 """
 
 from __future__ import annotations
@@ -25,11 +21,7 @@ from data.keypoints import BODY_JOINTS, FOOT_JOINTS, NUM_BODY_JOINTS, NUM_JOINTS
 from data.pose2d.coco_keypoints import coco23_document
 from data.pose2d.records import ImageRecord
 
-SUBSET_JOINTS: dict[str, tuple[int, ...]] = {
-    "all": tuple(range(NUM_JOINTS)),
-    "body": BODY_JOINTS,
-    "foot": FOOT_JOINTS,
-}
+SUBSET_JOINTS: dict[str, tuple[int, ...]] = {"all": tuple(range(NUM_JOINTS)), "body": BODY_JOINTS, "foot": FOOT_JOINTS}
 STAT_NAMES = ("AP", "AP50", "AP75", "APm", "APl", "AR", "AR50", "AR75", "ARm", "ARl")
 _CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
 
@@ -37,12 +29,8 @@ _CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
 def evaluate_keypoints(
     gt: Sequence[ImageRecord] | dict, predictions: Iterable[dict], subset: str = "all"
 ) -> dict[str, float]:
-    """COCO OKS AP/AR of predictions ({image_id, keypoints (23, 3) or 69 numbers, score}) on one subset.
-
-    ``gt``: ImageRecords, or a COCO-format dict whose annotations hold COCO-23 ``keypoints`` (69 numbers)
-    or COCO-17 ``keypoints`` plus optional COCO-WholeBody ``foot_kpts``. Returns the ten COCO stats
-    (STAT_NAMES); -1 where pycocotools has nothing to average (e.g. no medium-sized person).
-    """
+    """COCO OKS AP/AR of predictions ({image_id, keypoints (23, 3) or 69 numbers, score}) on one subset -> the ten
+    STAT_NAMES stats (-1 where empty); ``gt``: ImageRecords or a COCO dict (COCO-23, or COCO-17 + ``foot_kpts``)."""
     if subset not in SUBSET_JOINTS:
         raise ValueError(f"subset must be one of {sorted(SUBSET_JOINTS)}, got {subset!r}")
     joints = np.array(SUBSET_JOINTS[subset])

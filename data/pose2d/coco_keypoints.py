@@ -1,10 +1,5 @@
-"""COCO-format keypoint annotation files (COCO-WholeBody, COCO-23, CrowdPose) to and from ImageRecords.
-
-Every loader returns one :class:`data.pose2d.records.ImageRecord` per entry of the file's ``images`` list, in
-file order, with every non-crowd person of that image in COCO-23 order, however few joints it has: the
-joints of persons that are not training samples are still needed for the multi-modal targets of the
-others. :func:`training_persons` picks the training samples of a record.
-"""
+"""COCO-format keypoint files (COCO-WholeBody, COCO-23, CrowdPose) to and from ImageRecords: one record per
+``images`` entry, every non-crowd person in COCO-23 order (all are needed for the multi-modal targets)."""
 
 from __future__ import annotations
 
@@ -140,12 +135,8 @@ def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd:
 
 
 def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
-    """COCO-format keypoints of 23 x 3 numbers (OpenPose foot layout, our synthetic set) -> records.
-
-    A file of COCO-17 body keypoints (17 x 3) is read too, its feet unlabelled. The count is taken
-    from the person category's ``keypoints`` names when it lists 17 or 23, else from the first
-    annotation; every annotation must have it.
-    """
+    """COCO-format keypoints of 23 x 3 numbers (or COCO-17's 17 x 3, feet unlabelled) -> records; the count comes
+    from the person category's ``keypoints`` names, else the first annotation, and every annotation must have it."""
     path = Path(ann_file)
     doc = _read_json(path, "annotation file")
     count = _coco23_count(path, doc)
@@ -192,12 +183,8 @@ def load_crowdpose(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool
 def load_detections(
     det_file: str | Path, records: list[ImageRecord], score_threshold: float = 0.0, category_id: int = 1
 ) -> list[ImageRecord]:
-    """New records with det_boxes (M, 4) / det_scores (M,) from a COCO detection-results file.
-
-    The file is read and checked by :func:`data.formats.coco_detections.read_coco_detections`. Entries of
-    another category or with score < score_threshold are dropped; entries of images not in ``records`` are
-    ignored. The given records are not modified.
-    """
+    """New records with det_boxes (M, 4) / det_scores (M,) from a COCO detection-results file: other categories,
+    scores below score_threshold and unknown images dropped."""
     dets = read_coco_detections(det_file)  # every entry checked; a bad one is named
     keep = (dets.category_ids == category_id) & (dets.scores >= score_threshold)
     found: dict[int, list[tuple[np.ndarray, float]]] = {r.image_id: [] for r in records}
@@ -233,12 +220,8 @@ def load_keypoint_dataset(
     skip_crowd: bool = True,
     det_score_threshold: float = 0.0,
 ) -> list[ImageRecord]:
-    """Records of a keypoint dataset of this kind ("coco_wholebody", "coco23", "crowdpose").
-
-    Images without any person of at least min_keypoints labelled joints are dropped (min_keypoints
-    <= 0 keeps every image, as evaluation needs). Each kept record still holds every non-crowd person;
-    :func:`training_persons` selects the samples. det_file adds detector boxes (:func:`load_detections`).
-    """
+    """Records of a keypoint dataset ("coco_wholebody", "coco23", "crowdpose"): images with a person of at least
+    min_keypoints labelled joints (<= 0 keeps all), every non-crowd person kept; det_file adds detector boxes."""
     loaders = {"coco_wholebody": load_coco_wholebody, "coco23": load_coco23, "crowdpose": load_crowdpose}
     if kind not in loaders:
         raise ValueError(f"unknown keypoint dataset kind {kind!r}; expected one of {', '.join(KINDS)}")
@@ -302,9 +285,6 @@ def _file_name(record: ImageRecord, image_root: str | Path | None) -> str:
 def write_coco_keypoints(
     path: str | Path, records: list[ImageRecord], image_root: str | Path | None = None, info: dict | None = None
 ) -> None:
-    """Write records as a COCO-23 annotation file (atomic), readable by :func:`load_coco23`.
-
-    Annotation ids are 1..N in record order. The file states all 23 joints as annotated; a record's
-    ``labelled`` mask is not stored.
-    """
+    """Write records as a COCO-23 annotation file (atomic, ids 1..N), readable by :func:`load_coco23`; the
+    ``labelled`` mask is not stored."""
     atomic_write_text(path, json.dumps(coco23_document(records, image_root, info)))

@@ -1,15 +1,7 @@
 """Top-down crop geometry and augmentation: box -> crop, crop affine, horizontal flip.
 
-Pixel convention (used by every function here and by models/heatmap_codec.py): continuous
-coordinates with pixel centres at integers, so pixel ``i`` covers ``[i - 0.5, i + 0.5]`` and an image
-of width ``W`` spans ``[-0.5, W - 0.5]``. This is the convention of ``cv2.warpAffine``
-(``dst(x) = src(M^-1 x)`` on pixel indices) and ``cv2.flip``. Consequences:
-
-- a horizontal flip maps ``x -> W - 1 - x`` (not ``W - x``), so flipping twice is the identity and a
-  flipped image and its flipped keypoints stay registered to the pixel;
-- a crop of extent ``scale`` (pixels of the image) fills the output's full extent ``out_size``: the
-  crop centre goes to ``((w - 1) / 2, (h - 1) / 2)`` and lengths scale by ``w / scale_w``, which is
-  isotropic when the box has the output's aspect ratio (:func:`box_to_center_scale` ensures it).
+Pixel centres at integers (``cv2.warpAffine``'s and ``cv2.flip``'s convention, also models/heatmap_codec.py's):
+a flip maps x -> W - 1 - x, so flipping twice is the identity; a crop's centre goes to ((w - 1) / 2, (h - 1) / 2).
 """
 
 from __future__ import annotations
@@ -22,11 +14,8 @@ from data.keypoints import flip_permutation
 
 
 def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.25) -> tuple[np.ndarray, np.ndarray]:
-    """Person box (4,) x, y, w, h -> crop centre (2,) and extent (2,) w, h in image pixels.
-
-    The box is grown along one side to the aspect ratio ``aspect`` = w / h of the network input
-    (never shrunk), then both sides are multiplied by ``padding``.
-    """
+    """Box (4,) x, y, w, h -> crop centre (2,) and extent (2,) px: grown (never shrunk) to ``aspect`` = w / h,
+    then times ``padding``."""
     x, y, w, h = np.asarray(box_xywh, dtype=np.float64).reshape(4)
     center = np.array([x + w / 2, y + h / 2])
     if w > aspect * h:
@@ -39,12 +28,10 @@ def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.
 def crop_affine(
     center: np.ndarray, scale: np.ndarray, rotation_deg: float, out_size: tuple[int, int], inverse: bool = False
 ) -> np.ndarray:
-    """(2, 3) affine from image pixels to crop pixels (or back with ``inverse``).
+    """(2, 3) affine from image pixels to crop pixels of out_size (w, h) (or back with ``inverse``).
 
-    center (2,), scale (2,) = crop extent w, h in image pixels, out_size = (w, h) of the crop. A positive
-    ``rotation_deg`` turns the image content counter-clockwise in the crop, as
-    ``cv2.getRotationMatrix2D`` does: ``out = S R (p - center) + ((w - 1) / 2, (h - 1) / 2)`` with
-    ``R = [[cos, sin], [-sin, cos]]`` and ``S = diag(w / scale_w, h / scale_h)``.
+    ``out = S R (p - center) + ((w - 1) / 2, (h - 1) / 2)``, S = diag(w / scale_w, h / scale_h), R turning the
+    content counter-clockwise by ``rotation_deg`` as ``cv2.getRotationMatrix2D``; center (2,), scale (2,) px.
     """
     center = np.asarray(center, dtype=np.float64).reshape(2)
     scale = np.asarray(scale, dtype=np.float64).reshape(2)
@@ -76,11 +63,8 @@ def flip_points(points: np.ndarray, image_width: int) -> np.ndarray:
 
 
 def flip_keypoints(keypoints: np.ndarray, image_width: int) -> np.ndarray:
-    """Keypoints (N, 23, 3) of EVERY person in a horizontally flipped image -> (N, 23, 3).
-
-    x -> W - 1 - x for labelled joints (v > 0; unlabelled ones keep their coordinates, COCO's 0, 0), and
-    left and right joints swap places (:func:`data.keypoints.flip_permutation`).
-    """
+    """Keypoints (N, 23, 3) of every person in a horizontally flipped image -> (N, 23, 3): labelled x -> W - 1 - x,
+    left and right joints swapped."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     out = keypoints[..., flip_permutation(), :].copy()
     labelled = out[..., 2] > 0
@@ -90,23 +74,15 @@ def flip_keypoints(keypoints: np.ndarray, image_width: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CropAugmentation:
-    """Random crop augmentation settings (SimpleBaseline/HRNet style).
+    """Random crop augmentation settings (SimpleBaseline/HRNet style); 0 turns each off."""
 
-    scale_factor: std of the scale multiplier around 1, clipped to 1 +- scale_factor.
-    rotation_factor: std of the rotation in degrees, clipped to +- 2 rotation_factor, applied with
-    probability rotation_prob (else 0). flip_prob: probability of a horizontal flip.
-    shift_factor: std of the box centre shift as a fraction of the box width / height (a detector's error).
-    colour_factor: brightness, contrast and saturation factors drawn in 1 +- colour_factor; hue_deg: hue
-    shift drawn in +- hue_deg (data/pose2d/photometric.py). 0 turns each off.
-    """
-
-    scale_factor: float = 0.25
-    rotation_factor: float = 30.0
-    rotation_prob: float = 0.6
-    flip_prob: float = 0.5
-    shift_factor: float = 0.0
-    colour_factor: float = 0.0
-    hue_deg: float = 0.0
+    scale_factor: float = 0.25  # std of the scale multiplier around 1, clipped to 1 +- scale_factor
+    rotation_factor: float = 30.0  # std of the rotation (deg), clipped to +- 2 rotation_factor
+    rotation_prob: float = 0.6  # probability of rotating at all
+    flip_prob: float = 0.5  # probability of a horizontal flip
+    shift_factor: float = 0.0  # std of the box centre shift, fraction of the box w / h (a detector's error)
+    colour_factor: float = 0.0  # brightness, contrast, saturation factors in 1 +- colour_factor (photometric.py)
+    hue_deg: float = 0.0  # hue shift drawn in +- hue_deg
 
 
 def sample_augmentation(

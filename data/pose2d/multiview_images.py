@@ -1,13 +1,10 @@
-"""Synthetic multi-view crowd images with COCO-23 labels: the 3D scene of :mod:`data.synthetic` as every camera
-of its rig sees it, rendered by :mod:`data.pose2d.scene_render` (the drawing path of the single-image
-generator), so that a 2D model can be trained on the distribution the 3D evaluation (dataset=synthetic
-render=true) uses.
+"""Synthetic multi-view crowd images with COCO-23 labels, the distribution dataset=synthetic render=true uses.
+
+The 3D scene of :mod:`data.synthetic` as every camera sees it (:mod:`data.pose2d.scene_render`).
 
 CLI: ``python -m data.pose2d.multiview_images --out DIR --num-frames N --seed S [--persons 10] [--cameras 5]
-[--size 1280x720] [--focal PX] [--rig ring|CALIBRATION [--area XMIN XMAX YMIN YMAX]] [--density 0.3] [--render-seed R]`` writes
-``DIR/images/<frame:06d>_<camera>.jpg`` and ``DIR/annotations.json`` (COCO-23, the format of
-:mod:`data.pose2d.synthetic_images`; image ids = data.image_ids.coco_image_id); read them with
-``data.pose2d.coco_keypoints.load_coco23(DIR / "annotations.json", DIR / "images")``.
+[--size 1280x720] [--focal PX] [--rig ring|CALIBRATION [--area XMIN XMAX YMIN YMAX]] [--density 0.3]
+[--render-seed R]`` writes ``DIR/images/<frame:06d>_<camera>.jpg`` and ``DIR/annotations.json`` (COCO-23).
 """
 
 from __future__ import annotations

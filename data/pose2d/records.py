@@ -12,23 +12,18 @@ from data.keypoints import NUM_JOINTS
 
 @dataclass
 class ImageRecord:
-    """One image and every annotated person in it, keypoints in COCO-23 order.
-
-    keypoints (N, 23, 3): x, y in pixels of the image and v (0 = unlabelled, > 0 labelled; COCO's 1/2 kept).
-    boxes (N, 4): x, y, w, h of the annotated persons. areas (N,): COCO area (OKS scale), else w * h.
-    labelled (23,): the joints this dataset annotates at all (CrowdPose-14: no eyes, ears, feet).
-    det_boxes (M, 4), det_scores (M,): detector boxes for top-down evaluation, when a detections file
-    was given (else empty; evaluation then uses the ground-truth boxes with score 1).
-    """
+    """One image and every annotated person in it, keypoints in COCO-23 order."""
 
     image_id: int
     file: Path
     width: int
     height: int
-    keypoints: np.ndarray
-    boxes: np.ndarray
-    areas: np.ndarray
+    keypoints: np.ndarray  # (N, 23, 3) x, y px, v (0 = unlabelled, > 0 labelled; COCO's 1/2 kept)
+    boxes: np.ndarray  # (N, 4) x, y, w, h
+    areas: np.ndarray  # (N,) COCO area (OKS scale), else w * h
+    # (23,) the joints this dataset annotates at all (CrowdPose-14: no eyes, ears, feet)
     labelled: np.ndarray = field(default_factory=lambda: np.ones(NUM_JOINTS, dtype=bool))
+    # detector boxes (M, 4) and scores (M,) for top-down evaluation (empty: the ground-truth boxes, score 1)
     det_boxes: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     det_scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
 

@@ -1,13 +1,8 @@
 """The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels.
 
-Used by the single-image generator (:mod:`data.pose2d.synthetic_images`) and the multi-view scene
-renderer (:mod:`data.pose2d.scene_render`). Bodies are the capsules of :mod:`data.synthetic.capsules`,
-projected as tapered capsules, shaded in three layers and painted far to near (persons, then their
-parts). Painting also fills an owner map (H, W) uint16: 0 = no body, else 1 + person x parts + part.
-A joint is labelled v = 2 when the painted pixel under it belongs to a body part of its own person that
-carries it and no other body is in the way (the capsule occlusion test), v = 1 when it is hidden (by
-another person, or by its own body or head), and v = 0 (x = y = 0) outside the image. A person's box
-is that of its painted pixels.
+Persons are painted far to near into an owner map (H, W) uint16 (0 = no body, else 1 + person x parts + part).
+A joint is v = 2 when the pixel under it belongs to its own person's part that carries it and no other body is
+in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image; a box is that of the painted pixels.
 """
 
 from __future__ import annotations
@@ -200,10 +195,8 @@ def draw_shadows(image: np.ndarray, camera: Camera, poses: np.ndarray) -> None:
 
 
 def capsule_outlines(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray, n: int = 7) -> np.ndarray:
-    """Outlines of tapered 2D capsules from a (..., 2) radius ra (...) to b (..., 2) radius rb: (..., 2n, 2).
-
-    A point capsule (a = b) is a circle.
-    """
+    """Outlines of tapered 2D capsules (a circle when a = b) from a (..., 2) radius ra (...) to b (..., 2) radius
+    rb: (..., 2n, 2)."""
     d = b - a
     length = np.linalg.norm(d, axis=-1, keepdims=True)
     unit = np.where(length > 1e-6, d / np.maximum(length, 1e-6), [1.0, 0.0])
@@ -365,9 +358,3 @@ def painted_boxes(owner: np.ndarray, num: int) -> np.ndarray:
         r, c = np.flatnonzero(rows[p]), np.flatnonzero(cols[p])
         boxes[p] = (c[0], r[0], c[-1] + 1 - c[0], r[-1] + 1 - r[0])
     return boxes
-
-
-def owner_person(owner: np.ndarray) -> np.ndarray:
-    """Person index (H, W) int64 of every pixel of an owner map (H, W), -1 where no body is painted."""
-    ids = owner.astype(np.int64) - 1
-    return np.where(ids >= 0, ids // len(PART_GROUPS), -1)

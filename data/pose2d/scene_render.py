@@ -1,13 +1,8 @@
 """Rendered views of a multi-view 3D crowd: each camera's image of the bodies, and its ground-truth 2D.
 
-The drawing path is :mod:`data.pose2d.render`'s (capsule bodies, shading, shadows, ground lines, grain).
-The scene around the persons is static: a floor on z = 0 (a smooth world texture and tile lines, the
-same in every view) around the persons' area, a backdrop per camera above the horizon, and a sun whose
-direction sets each view's highlights. A person's look (clothing, skin, hair) depends only on (seed,
-person id), so it stays the same across frames and views. Every image is deterministic per (seed,
-frame, view); its ground-truth 2D comes from the same painting (render.person_labels): v = 2 seen,
-v = 1 hidden, v = 0 outside the image. A person is painted in a view only when all its joints are in
-front of the camera (and, under lens distortion, inside the calibrated field of view).
+A static scene (textured floor on z = 0, a backdrop per camera, a sun); a person's look depends only on
+(seed, person id) and every image only on (seed, frame, view). A person is painted only when all its joints are
+in front of the camera (and inside the calibrated field of view under distortion).
 """
 
 from __future__ import annotations
@@ -244,18 +239,20 @@ def render_sequence(sequence: Sequence, seed: int) -> Sequence:
                 image_ids=[coco_image_id(frame.index, v, len(rig)) for v in range(len(rig))],
             )
         )
-    meta = {
-        **sequence.meta,
-        "render": {"seed": int(seed), "persons_left_out": left_out},
-        "coco_images": coco_images(frames, rig),
-    }
-    return Sequence(rig, frames, meta, list(sequence.protocols))
+    render = {"seed": int(seed), "persons_left_out": left_out}
+    return replace(
+        sequence,
+        frames=frames,
+        meta={**sequence.meta, "render": render},
+        protocols=list(sequence.protocols),
+        coco_images=coco_images(frames, rig),
+    )
 
 
 def _area(sequence: Sequence) -> tuple[float, float, float, float]:
-    """The persons' area: meta["area"] where the dataset gives it, else the extent of the ground truth."""
-    if sequence.meta.get("area") is not None:
-        return tuple(float(v) for v in sequence.meta["area"])
+    """The persons' area: the sequence's where the dataset gives it, else the extent of the ground truth."""
+    if sequence.area is not None:
+        return sequence.area
     points = [f.gt_poses[..., :2].reshape(-1, 2) for f in sequence.frames if f.gt_poses is not None]
     points = np.concatenate(points) if points else np.zeros((0, 2))
     if len(points) == 0:

@@ -1,14 +1,10 @@
 """Synthetic crowded images with COCO-23 keypoints, for training the 2D model on a CPU.
 
-Each image shows a crowd from :mod:`data.synthetic` (bodies with COCO-23 joints) seen by one low
-camera, so that people hide each other, drawn over a random textured background by the drawing path
-of :mod:`data.pose2d.render` (capsule bodies, shading, shadows, floor lines, grain), which also gives the
-labels: v = 2 seen, v = 1 hidden, v = 0 (x = y = 0) outside the image; the box is that of the person's
-painted pixels, area = w * h. Multi-view crowd images of the 3D scene: :mod:`data.pose2d.multiview_images`.
+A crowd of :mod:`data.synthetic` seen by one low camera over a random background, drawn by
+:mod:`data.pose2d.render`.
 
 CLI: ``python -m data.pose2d.synthetic_images --out DIR --num-images N --seed S [--size 640x480]`` writes
-``DIR/images/NNNNNN.jpg`` and ``DIR/annotations.json``; read them with
-``data.pose2d.coco_keypoints.load_coco23(DIR / "annotations.json", DIR / "images")``.
+``DIR/images/NNNNNN.jpg`` and ``DIR/annotations.json`` (read with ``coco_keypoints.load_coco23``).
 """
 
 from __future__ import annotations

@@ -1,16 +1,8 @@
 """Top-down person crops with multi-modal heatmap targets (paper Sec. 3.1), and a resumable epoch sampler.
 
-A sample is one person box of one image. Training samples are the annotated persons with at least
-``min_keypoints`` labelled joints; evaluation samples are the detector boxes (``use_det_boxes``) or the
-same annotated persons' boxes (score 1). The crop geometry and the pixel convention are those of
-:mod:`data.pose2d.crop_transforms`; targets come from :meth:`models.heatmap_codec.MultiModalHeatmapCodec.encode_crop`
-with every person of the image, so the other persons' joints inside the crop form the ``mu C`` term.
-
-Augmentation is drawn from ``numpy.random.default_rng([seed, epoch, index])``: a sample is the same
-whatever the worker, the batch order or an interruption, and :meth:`TopDownDataset.set_epoch` moves to
-another epoch's draws. A flip mirrors the WHOLE image and ALL persons (left/right joints swapped), then
-crops; ``affine_inv`` maps crop pixels back to that (possibly flipped) image. Images are RGB, normalised
-with the ImageNet mean and std.
+Targets hold every person of the image (the others' joints in the crop form the ``mu C`` term). Augmentation
+is drawn from ``default_rng([seed, epoch, index])``, so a sample does not depend on workers, order or an
+interruption; a flip mirrors the whole image and all persons before cropping.
 """
 
 from __future__ import annotations
@@ -60,13 +52,9 @@ class TopDownDataset(Dataset):
     """Person crops of ImageRecords -> dict(image (3, H, W), target (23, h, w), weight (23,), affine_inv (2, 3),
     image_id, box (4,), area, score, flipped).
 
-    input_size is (w, h) and must be the codec's. With ``train`` the samples are the persons of
-    :func:`data.pose2d.coco_keypoints.training_persons` and ``augment`` (None: none) is applied; without it
-    there is never augmentation and the samples are the detector boxes of records that have them when
-    ``use_det_boxes`` (their target and weight are 0: no person is known to be the own one), else the
-    annotated persons as in training. ``seed`` and the epoch (:meth:`set_epoch`) seed the augmentation.
-    ``cache_size`` decoded images are kept (least recently used first out) per dataset copy, i.e. per
-    DataLoader worker.
+    Training: the persons of :func:`training_persons`, ``augment`` applied. Otherwise no augmentation, and the
+    detector boxes with ``use_det_boxes`` (target and weight 0), else the annotated persons. ``input_size`` (w, h)
+    must be the codec's; ``cache_size`` decoded images are kept per DataLoader worker.
     """
 
     def __init__(
@@ -190,9 +178,8 @@ class TopDownDataset(Dataset):
 
 
 class EpochSampler(Sampler[int]):
-    """A seeded permutation of range(size) per epoch (or the identity without shuffle), sharded over ranks
-    as DistributedSampler shards it (padded by wrapping to a multiple of world_size, then rank::world_size),
-    that can start part-way through an epoch: what exact resumption needs."""
+    """A seeded permutation of range(size) per epoch (identity without shuffle), sharded as DistributedSampler
+    shards it, that can start part-way through an epoch (exact resumption)."""
 
     def __init__(self, size: int, seed: int = 0, shuffle: bool = True, rank: int = 0, world_size: int = 1) -> None:
         self.size, self.seed, self.shuffle = int(size), int(seed), bool(shuffle)

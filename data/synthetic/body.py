@@ -200,11 +200,8 @@ def local_pose(body: BodyShape, phase: float, walking: bool) -> np.ndarray:
 def pose_joints(
     body: BodyShape, x: float, y: float, theta: float, phase: float = 0.0, walking: bool = False
 ) -> np.ndarray:
-    """COCO-23 world joints of a person at ground point (x, y) facing heading theta (rad): (23, 3).
-
-    ``phase`` in [0, 1) is the gait phase of the left leg (0 = left heel strike); it is ignored when
-    standing. The lowest sole point (heel or toe) is exactly on the ground z = 0.
-    """
+    """COCO-23 world joints (23, 3) at ground point (x, y), heading theta (rad), left-leg gait ``phase`` in [0, 1)
+    (0 = left heel strike; ignored when standing); the lowest sole point is on z = 0."""
     local = local_pose(body, phase, walking)
     c, s = math.cos(theta), math.sin(theta)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

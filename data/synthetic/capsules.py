@@ -61,11 +61,7 @@ def body_capsules(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
-    """Least distance between segments [p1, q1] and [p2, q2], broadcast: (..., 3) x 4 -> (...,).
-
-    Closest points of two segments after Ericson, "Real-Time Collision Detection", 5.1.9; zero-length
-    segments (points) are handled.
-    """
+    """Least distance between segments [p1, q1] and [p2, q2] (Ericson 5.1.9, points too): (..., 3) x 4 -> (...,)."""
     eps = 1e-12
     d1, d2, r = np.broadcast_arrays(q1 - p1, q2 - p2, p1 - p2)
     a = np.einsum("...i,...i->...", d1, d1)
@@ -94,12 +90,8 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
 
 
 def occluded_joints(center: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Joints whose line of sight from the camera centre (3,) crosses another person's capsule.
-
-    poses (P, J, 3) world joints -> (P, J) bool. The segment from the centre to the joint is tested
-    against every capsule of every other person; persons far from a sight line are culled by a
-    bounding sphere first, so the cost stays near linear in the number of joints.
-    """
+    """Joints whose sight line from the camera centre (3,) crosses another person's capsule: poses (P, J, 3) ->
+    (P, J) bool; persons far from a sight line are culled by a bounding sphere first."""
     poses = np.asarray(poses, dtype=np.float64)
     num, joints = poses.shape[:2]
     hidden = np.zeros((num, joints), dtype=bool)

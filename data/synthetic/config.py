@@ -11,102 +11,48 @@ import numpy as np
 
 @dataclass
 class SyntheticConfig:
-    """Every option of :func:`data.synthetic.generate_sequence`, with its default.
+    """Every option of :func:`data.synthetic.generate_sequence`, with its default (configs/dataset/synthetic.yaml)."""
 
-    Scene
-      seed: seed of the numpy Generator; the same seed gives identical arrays.
-      num_frames: frames to generate (ignored when ``positions`` is given: one frame per entry).
-      num_persons: persons in the scene (ignored when ``positions`` is given).
-      density: persons per m^2; the default square area has side sqrt(num_persons / density),
-        centred at the origin (0.3 -> 10 persons in a 5.8 x 5.8 m square). Ignored when ``area`` is set.
-      min_spacing_m: least distance between two persons' ground points, kept while walking too.
-      walking_fraction: share of persons that walk; the others stand still.
-      walk_speed_mps: (low, high) range of the walking speeds, drawn uniformly per walker.
-      fps: frame rate; a walker moves speed / fps metres between frames.
-      area: optional [xmin, xmax, ymin, ymax] (m) of the region the persons stay in; overrides
-        ``density``. Set it for a real rig, whose cameras look at their own region.
-      positions: optional ground positions per frame, a list of (N_f, 2) arrays or nested lists
-        (m); row i is person i in every frame and a NaN row is a person absent from that frame.
-        Persons are placed there instead of sampled (walking and heading follow their motion).
-    Cameras
-      rig: "ring" for :func:`data.synthetic.rigs.ring_rig`, else a calibration file or folder path.
-      rig_format: format of that calibration (see data.geometry.calibration.load_rig); "auto" detects.
-      num_cameras, camera_radius_m, camera_height_m: the ring: cameras on a circle of this radius
-        around the area centre, at this height, looking at the centre at ``look_at_height_m``.
-        camera_radius_m = None (default) puts the ring 4 m outside the area's corners (half
-        diagonal + 4 m: 8.1 m for the default 10 persons at 0.3 per m^2).
-      image_size: (width, height) in pixels; focal_px: focal length in pixels (no distortion).
-    Observations
-      noise_px: pixel noise SD at ``noise_ref_depth_m``; it grows with depth (0 = exact).
-      noise_ref_depth_m: depth (m) at which the pixel noise SD equals ``noise_px``.
-      noise_depth_exponent: SD = noise_px * (depth / noise_ref_depth_m) ** exponent: 1 (default)
-        grows linearly with depth, 0 is the same pixel noise at every depth, -1 shrinks with the
-        person's apparent size (closer to how a 2D detector's error scales).
-      occlusion: mark joints hidden behind another person's body (capsule model).
-      occluded_drop_prob: probability that a hidden joint is missing (score 0) from a detection.
-      occluded_noise_scale: factor on the pixel noise SD of hidden joints.
-      miss_rate: probability that a person is missed entirely in one view.
-      fp_rate: mean number of false-positive detections per view per frame (Poisson).
-      min_joints_in_view: a person with fewer valid joints in a view is not detected there.
-    """
-
-    seed: int = 0
-    num_frames: int = 20
-    num_persons: int = 10
-    density: float = 0.3
-    min_spacing_m: float = 0.6
-    walking_fraction: float = 0.5
-    walk_speed_mps: tuple[float, float] = (1.2, 1.5)
-    fps: float = 5.0
-    area: tuple[float, float, float, float] | None = None
+    # scene
+    seed: int = 0  # seed of the numpy Generators: the same seed gives identical arrays
+    num_frames: int = 20  # ignored when ``positions`` is given (one frame per entry)
+    num_persons: int = 10  # ignored when ``positions`` is given
+    density: float = 0.3  # persons per m^2: a square of side sqrt(num_persons / density) at the origin, unless area
+    min_spacing_m: float = 0.6  # least distance between two persons' ground points, walking too
+    walking_fraction: float = 0.5  # share of persons that walk; the others stand
+    walk_speed_mps: tuple[float, float] = (1.2, 1.5)  # (low, high) of the walking speeds, uniform per walker
+    fps: float = 5.0  # a walker moves speed / fps metres between frames
+    area: tuple[float, float, float, float] | None = None  # [xmin, xmax, ymin, ymax] (m) the persons stay in
+    # ground positions per frame, (N_f, 2) each (m); row i is person i, a NaN row an absent person
     positions: list | None = None
+    # cameras: a ring around the area centre looking at look_at_height_m, or a calibration file / folder
     rig: str = "ring"
-    rig_format: str = "auto"
+    rig_format: str = "auto"  # data.geometry.calibration.load_rig's fmt
     num_cameras: int = 5
-    camera_radius_m: float | None = None
+    camera_radius_m: float | None = None  # None: the area's half diagonal + 4 m
     camera_height_m: float = 2.5
     look_at_height_m: float = 1.0
-    image_size: tuple[int, int] = (1280, 720)
-    focal_px: float = 1000.0
-    noise_px: float = 2.0
+    image_size: tuple[int, int] = (1280, 720)  # (width, height) px
+    focal_px: float = 1000.0  # no distortion
+    # observations
+    noise_px: float = 2.0  # pixel noise SD at noise_ref_depth_m (0 = exact)
     noise_ref_depth_m: float = 5.0
-    noise_depth_exponent: float = 1.0
-    occlusion: bool = True
-    occluded_drop_prob: float = 0.3
-    occluded_noise_scale: float = 3.0
-    miss_rate: float = 0.0
-    fp_rate: float = 0.0
-    min_joints_in_view: int = 5
+    noise_depth_exponent: float = 1.0  # SD = noise_px * (depth / noise_ref_depth_m) ** exponent
+    occlusion: bool = True  # mark joints hidden behind another person's body (capsule model)
+    occluded_drop_prob: float = 0.3  # a hidden joint is missing (score 0) with this probability
+    occluded_noise_scale: float = 3.0  # factor on the pixel noise SD of hidden joints
+    miss_rate: float = 0.0  # probability that a person is missed in one view
+    fp_rate: float = 0.0  # mean false-positive detections per view per frame (Poisson)
+    min_joints_in_view: int = 5  # fewer valid joints in a view: not detected there
 
     def __post_init__(self) -> None:
         # Hydra hands over ListConfig / str values; normalise them to plain Python types.
-        self.seed = int(self.seed)
-        self.num_frames = int(self.num_frames)
-        self.num_persons = int(self.num_persons)
-        self.num_cameras = int(self.num_cameras)
-        self.min_joints_in_view = int(self.min_joints_in_view)
+        plain = {"int": int, "float": float, "bool": bool, "str": str}
+        for f in fields(self):
+            if f.type in plain:
+                setattr(self, f.name, plain[f.type](getattr(self, f.name)))
         if self.camera_radius_m is not None:
             self.camera_radius_m = float(self.camera_radius_m)
-        for key in (
-            "density",
-            "min_spacing_m",
-            "walking_fraction",
-            "fps",
-            "camera_height_m",
-            "look_at_height_m",
-            "focal_px",
-            "noise_px",
-            "noise_ref_depth_m",
-            "noise_depth_exponent",
-            "occluded_drop_prob",
-            "occluded_noise_scale",
-            "miss_rate",
-            "fp_rate",
-        ):
-            setattr(self, key, float(getattr(self, key)))
-        self.occlusion = bool(self.occlusion)
-        self.rig = str(self.rig)
-        self.rig_format = str(self.rig_format)
         self.walk_speed_mps = _floats(self.walk_speed_mps, 2, "walk_speed_mps")
         self.image_size = tuple(int(v) for v in _floats(self.image_size, 2, "image_size"))
         if self.area is not None:
@@ -164,6 +110,28 @@ class SyntheticConfig:
                 value = [p.tolist() for p in value]
             out[f.name] = value
         return out
+
+
+OBSERVATION_KEYS = (
+    "noise_px",
+    "noise_ref_depth_m",
+    "noise_depth_exponent",
+    "occlusion",
+    "occluded_drop_prob",
+    "occluded_noise_scale",
+    "miss_rate",
+    "fp_rate",
+    "min_joints_in_view",
+)
+
+
+def observation_options(where: str, options: dict, keys: tuple[str, ...] = OBSERVATION_KEYS, **fixed: Any) -> dict:
+    """Every observation option of a dataset built on the synthetic detector: SyntheticConfig's defaults, then
+    ``fixed`` (the dataset's own defaults), then ``options``; a name outside ``keys`` is a ValueError."""
+    unknown = sorted(set(options) - set(keys))
+    if unknown:
+        raise ValueError(f"{where}: unknown option {unknown[0]!r} (known: {', '.join(keys)})")
+    return {**{k: getattr(SyntheticConfig, k) for k in OBSERVATION_KEYS}, **fixed, **options}
 
 
 def _floats(value: Any, n: int, key: str) -> tuple[float, ...]:

@@ -29,10 +29,9 @@ def build_rig(cfg: SyntheticConfig, area: tuple[float, float, float, float]) -> 
 
 
 def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
-    """A synthetic Sequence: F frames of V views; gt_poses (P, 23, 4) with valid = 1, gt_ids (P,).
+    """A synthetic Sequence of F frames of V views, gt_poses (P, 23, 4) valid 1, gt_ids (P,), on ``rig`` or cfg's rig.
 
-    The rig is ``rig`` when given, else built from cfg (a ring, or cfg.rig read as a calibration).
-    Everything is drawn from numpy Generators seeded by cfg.seed: the scene, then one stream per frame.
+    Drawn from numpy Generators seeded by cfg.seed: the scene, then one stream per frame.
     """
     scene_seed, render_seed = np.random.SeedSequence(cfg.seed).spawn(2)
     scene = simulate_scene(cfg, np.random.default_rng(scene_seed))
@@ -55,14 +54,8 @@ def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
         views = [observe_view(cam, poses[f, ids], ids, cfg, rng) for cam in rig]
         gt = np.concatenate([poses[f, ids], np.ones((len(ids), poses.shape[2], 1))], axis=-1)
         frames.append(Frame(index=f, views=views, gt_poses=gt, gt_ids=ids.astype(np.int64)))
-    meta = {
-        "source": "synthetic",
-        "persistent_ids": True,  # gt_ids name the same person in every frame (identity metrics apply)
-        "config": cfg.to_dict(),
-        "area": list(scene.area),
-        "persons": [
-            {"id": i, "stature": b.stature, "walking": bool(scene.walking[:, i].any())}
-            for i, b in enumerate(scene.bodies)
-        ],
-    }
-    return Sequence(rig=rig, frames=frames, meta=meta)
+    persons = [
+        {"id": i, "stature": b.stature, "walking": bool(scene.walking[:, i].any())} for i, b in enumerate(scene.bodies)
+    ]
+    meta = {"source": "synthetic", "config": cfg.to_dict(), "persons": persons}
+    return Sequence(rig, frames, meta, persistent_ids=True, area=tuple(float(v) for v in scene.area))

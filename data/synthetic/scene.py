@@ -22,11 +22,8 @@ _STAND_SPEED = 0.3  # m/s below which a person of the positions hook is standing
 
 @dataclass(frozen=True)
 class SceneTrack:
-    """The persons' states over the frames.
-
-    area (xmin, xmax, ymin, ymax) m; bodies: one per person; positions (F, P, 2) m (NaN where absent);
-    headings (F, P) rad; phases (F, P) gait phase in [0, 1); walking (F, P) bool; present (F, P) bool.
-    """
+    """The persons' states: area (4,) m, bodies (P,), positions (F, P, 2) m (NaN absent), headings (F, P) rad,
+    phases (F, P) in [0, 1), walking (F, P) bool, present (F, P) bool."""
 
     area: tuple[float, float, float, float]
     bodies: tuple[BodyShape, ...]

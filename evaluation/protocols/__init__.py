@@ -5,7 +5,7 @@ Association's stored output scored the same way); ``panoptic`` the Panoptic AP /
 ``reprojection_coco`` the COCO AP/AR of reprojected 3D poses (Wildtrack, paper Table 1).
 
 A dataset loader (layer 2) may not import these: it lists the plain-data inputs of its protocols in
-``sequence.meta["protocol_inputs"]`` (``[{"name": ..., **arguments}]``) and :func:`attach_protocols`
+``sequence.protocol_inputs`` (``[{"name": ..., **arguments}]``) and :func:`attach_protocols`
 builds them into ``sequence.protocols``. eval.py calls it after loading; ``evaluate_sequence`` calls it
 too (it is idempotent), so a sequence built in code is scored the same way.
 
@@ -21,7 +21,7 @@ from evaluation.protocols.panoptic import PanopticProtocol
 from evaluation.protocols.reprojection_coco import ReprojectionCOCOProtocol
 from evaluation.protocols.shelf import ShelfProtocol
 
-# protocol name in meta["protocol_inputs"] -> builder(sequence, **arguments)
+# protocol name in protocol_inputs -> builder(sequence, **arguments)
 BUILDERS: dict[str, Callable] = {
     "shelf": lambda sequence, **arguments: ShelfProtocol(**arguments),
     "panoptic": lambda sequence, **arguments: PanopticProtocol(**arguments),
@@ -30,12 +30,12 @@ BUILDERS: dict[str, Callable] = {
 
 
 def attach_protocols(sequence: Sequence) -> Sequence:
-    """Build the protocols ``sequence.meta["protocol_inputs"]`` asks for into ``sequence.protocols``, once.
+    """Build the protocols ``sequence.protocol_inputs`` asks for into ``sequence.protocols``, once.
 
     A sequence that already carries protocols is left as it is. Returns the sequence.
     """
     if not sequence.protocols:
-        for spec in sequence.meta.get("protocol_inputs", ()):
+        for spec in sequence.protocol_inputs:
             arguments = {k: v for k, v in spec.items() if k != "name"}
             if spec["name"] not in BUILDERS:
                 raise ValueError(f"unknown dataset protocol {spec['name']!r}; known: {', '.join(BUILDERS)}")

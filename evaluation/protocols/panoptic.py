@@ -4,7 +4,7 @@ All three work on the 15 Panoptic joints (the first 15 of coco19, metres, column
 confidence): 0 neck, 1 nose, 2 mid-hip, 3 l-shoulder, 4 l-elbow, 5 l-wrist, 6 l-hip, 7 l-knee,
 8 l-ankle, 9 r-shoulder, 10 r-elbow, 11 r-wrist, 12 r-hip, 13 r-knee, 14 r-ankle. COCO-23 predictions
 are mapped with :func:`coco23_to_panoptic15`; the ground truth is best taken as stored (the loader keeps
-it in ``Sequence.meta["gt_panoptic15"]``), whose neck is within ~1.5 cm of the mid-shoulders.
+it in ``Sequence.protocol_inputs``), whose neck is within ~1.5 cm of the mid-shoulders.
 
 VoxelPose AP (Tu et al., ECCV 2020, ``lib/dataset/panoptic.py: evaluate``), reproduced here:
 - GT persons whose mid-hip (root) is invalid are not evaluated (VoxelPose skips them when loading);
@@ -340,7 +340,7 @@ class PanopticProtocol:
     """The Panoptic protocols as a dataset protocol (evaluation/protocols/base.py) for eval.py.
 
     ``gt15`` maps a frame index to its stored Panoptic-15 ground truth (G, 15, 4) (the loader's
-    ``meta["gt_panoptic15"]``); frames without an entry are not scored. Each frame's predictions are
+    ``Sequence.protocol_inputs``); frames without an entry are not scored. Each frame's predictions are
     ``result.poses3d`` (P, 23, 4), scored by the mean confidence of their 15 mapped joints.
     """
 
