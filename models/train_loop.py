@@ -1,5 +1,4 @@
-"""The training loop of train.py: data, model, optimizer, resume, epochs, validation, checkpoints, wired from
-the pieces in models/training.py. ``run(cfg, run_dir)`` is also how tests and scripts train in-process."""
+"""The training loop of train.py (data, model, optimizer, resume, epochs, validation, checkpoints); also in-process."""
 
 from __future__ import annotations
 
@@ -49,11 +48,10 @@ def _reached(state: TrainState, max_steps: int | None) -> bool:
 
 
 def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None) -> dict:
-    """Train (or resume) per cfg into run_dir -> {"losses": {global step: loss}, "metrics": last validation
-    metrics, "state": final TrainState}. Only rank 0 validates, logs and saves.
+    """Train (or resume) per cfg into run_dir -> {"losses": {step: loss}, "metrics": last validation, "state"}.
 
-    checkpoint: cfg.resume already read (read here when None); choices: the config groups chosen, stored in
-    the checkpoints so that a resume command can tell whether its group overrides change anything.
+    checkpoint: cfg.resume already read (None: read here); choices: the config groups chosen, stored in the
+    checkpoints so that a resume can tell whether its overrides change anything. Only rank 0 validates and saves.
     """
     check_train_config(cfg)
     if cfg.resume and checkpoint is None:
@@ -91,34 +89,11 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     losses: dict[int, float] = {}
     metrics: dict[str, float] = {}
     while state.epoch < trainer.epochs and not _reached(state, trainer.max_steps):
-        train_set.set_epoch(state.epoch)
-        sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
-        remaining, first_step = len(train_loader), state.global_step + 1
-        epoch_losses = train_one_epoch(
-            net,
-            train_loader,
-            loss_fn,
-            optimizer,
-            device,
-            state,
-            trainer.max_steps,
-            writer,
-            trainer.log_every,
-            trainer.progress and rank == 0,
+        finished = _epoch(
+            trainer, net, train_set, sampler, train_loader, loss_fn, optimizer, device, state, writer, losses, rank
         )
-        losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
-        finished = len(epoch_losses) == remaining
         if finished:
             scheduler.step()
-            state.epoch, state.step_in_epoch = state.epoch + 1, 0
-        log.info(
-            "epoch %d%s: mean loss %.6g over %d steps (global step %d)",
-            state.epoch - finished,
-            "" if finished else " (stopped)",
-            np.mean(epoch_losses) if epoch_losses else np.nan,
-            len(epoch_losses),
-            state.global_step,
-        )
         last = state.epoch >= trainer.epochs or _reached(state, trainer.max_steps)
         if rank == 0:
             if last or (finished and state.epoch % trainer.val_every == 0):
@@ -131,6 +106,51 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     if world > 1:
         dist.destroy_process_group()
     return {"losses": losses, "metrics": metrics, "state": state}
+
+
+def _epoch(
+    trainer: DictConfig,
+    net: nn.Module,
+    train_set: Any,
+    sampler: EpochSampler,
+    loader: DataLoader,
+    loss_fn: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    device: torch.device,
+    state: TrainState,
+    writer: SummaryWriter | None,
+    losses: dict[int, float],
+    rank: int,
+) -> bool:
+    """Train the rest of the current epoch (or up to max_steps), adding {global step: loss} to losses -> finished."""
+    train_set.set_epoch(state.epoch)
+    sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
+    remaining, first_step = len(loader), state.global_step + 1
+    epoch_losses = train_one_epoch(
+        net,
+        loader,
+        loss_fn,
+        optimizer,
+        device,
+        state,
+        trainer.max_steps,
+        writer,
+        trainer.log_every,
+        trainer.progress and rank == 0,
+    )
+    losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
+    finished = len(epoch_losses) == remaining
+    if finished:
+        state.epoch, state.step_in_epoch = state.epoch + 1, 0
+    log.info(
+        "epoch %d%s: mean loss %.6g over %d steps (global step %d)",
+        state.epoch - finished,
+        "" if finished else " (stopped)",
+        np.mean(epoch_losses) if epoch_losses else np.nan,
+        len(epoch_losses),
+        state.global_step,
+    )
+    return finished
 
 
 def _validate(
