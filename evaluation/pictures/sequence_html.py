@@ -13,7 +13,7 @@ import html
 import json
 import math
 from pathlib import Path
-from typing import Iterable
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -142,14 +142,7 @@ def sequence_html(
         every = max(every + 1, math.ceil(every * len(data) / max(budget, 1.0)))
 
 
-def write_sequence_html(
-    path: str | Path,
-    frames: Iterable[tuple],
-    rig: Rig,
-    title: str = "sequence",
-    max_mb: float = DEFAULT_MAX_MB,
-    id_note: str | None = None,
-) -> Path:
-    """Write the viewer of (frame, poses (P, 23, 4), ids (P,) or None) tuples atomically -> path."""
-    atomic_write_text(path, sequence_html(frames, rig, title, max_mb, id_note))
+def write_sequence_html(path: str | Path, frames: Iterable[tuple], rig: Rig, **options: Any) -> Path:
+    """Write the viewer of (frame, poses (P, 23, 4), ids (P,) or None) tuples atomically (options: of sequence_html)."""
+    atomic_write_text(path, sequence_html(frames, rig, **options))
     return Path(path)

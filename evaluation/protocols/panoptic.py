@@ -52,22 +52,9 @@ if TYPE_CHECKING:
     from data.multiview import Frame
     from reconstruction.pipeline import FrameResult
 
-PANOPTIC15_NAMES: tuple[str, ...] = (
-    "neck",
-    "nose",
-    "mid_hip",
-    "left_shoulder",
-    "left_elbow",
-    "left_wrist",
-    "left_hip",
-    "left_knee",
-    "left_ankle",
-    "right_shoulder",
-    "right_elbow",
-    "right_wrist",
-    "right_hip",
-    "right_knee",
-    "right_ankle",
+PANOPTIC15_NAMES: tuple[str, ...] = tuple(
+    "neck nose mid_hip left_shoulder left_elbow left_wrist left_hip left_knee left_ankle "
+    "right_shoulder right_elbow right_wrist right_hip right_knee right_ankle".split()
 )
 NECK, NOSE, MID_HIP = 0, 1, 2
 ROOT = (6, 12)  # root-aligned MPJPE: mean of left and right hip, the same construction on both sides
