@@ -1,20 +1,7 @@
-"""Multi-peak heatmap decoding: several joint candidates per joint channel (CrowdPose's joint-candidate SPPE).
+"""Multi-peak heatmap decoding: several joint candidates per joint channel (CrowdPose's joint-candidate SPPE), in torch.
 
-Everything runs in torch on the heatmaps' device, for all crops at once. The scans over whole heatmaps
-(local maxima, top-M) run in the heatmaps' precision (float32; float16 input is promoted); the sub-pixel
-step and the back-projection use the few gathered values in float64.
-
-Coordinates. A candidate ``xy`` is in *heatmap pixels*, integer values at pixel centres (the peak pixel
-``(col, row)`` is ``(col, row)``), plus a sub-pixel offset. The crop-input pixel is obtained with the
-pixel-centre convention ``x_in = (x_hm + 0.5) * stride - 0.5`` (heatmap pixel ``i`` covers input pixels
-``[i * stride, (i + 1) * stride)``, whose centre is ``(i + 0.5) * stride - 0.5``), then the inverse crop
-affine takes input pixels to image pixels.
-
-Sub-pixel refinement. Along each axis a parabola is fitted to the *log* heatmap at the peak and its two
-neighbours and the peak moves to its vertex, ``dx = (l[-1] - l[+1]) / (2 (l[-1] - 2 l[0] + l[+1]))``,
-clamped to half a pixel. This is the Taylor (Newton) step on the log heatmap with a diagonal Hessian
-(DARK, Zhang et al. CVPR 2020) and is exact for an axis-aligned Gaussian peak. A peak on the heatmap
-border, or one that is not strictly concave in the log along an axis, is not moved along that axis.
+Candidates are in heatmap pixels (pixel centres at integers; input pixel = (x_hm + 0.5) * stride - 0.5); the
+sub-pixel step is DARK's Newton step on the log heatmap per axis, exact for a Gaussian peak, at most half a pixel.
 """
 
 from __future__ import annotations

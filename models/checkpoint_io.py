@@ -1,14 +1,7 @@
-"""Checkpoint files of train.py, checked when read: a versioned envelope around the serialized state.
+"""Checkpoint files of train.py: a versioned envelope (format, version, kind, sha256, payload) around the state.
 
-A file is ``torch.save({"format": FORMAT, "version": VERSION, "kind": "resume" | "weights", "sha256": <hex>,
-"payload": <uint8 tensor>})``, where payload holds the torch-serialized state dict (as a tensor it is stored raw,
-not as a pickled string) and sha256 is its digest. Reading
-checks the envelope, the digest and the keys the kind needs, so a truncated, empty, random or bit-flipped
-file, or a weights file (best.pth) given where a resume checkpoint (last.ckpt) is needed, stops with one
-CheckpointError naming the file. Files of this repo written before the envelope (a plain state dict, no
-checksum) are still read, with a warning: nothing can be checked but their keys.
-
-The payload is unpickled in full (it holds numpy and python RNG states): load only checkpoints you trust.
+A damaged file, or a weights file given where a resume checkpoint is needed, stops with one CheckpointError
+naming the file; pre-envelope files are read with a warning. The payload is unpickled: load only trusted files.
 """
 
 from __future__ import annotations

@@ -1,10 +1,4 @@
-"""FastPose heatmap network (AlphaPose's SPPE): ResNet trunk, PixelShuffle, two DUC blocks, 3x3 head.
-
-Channel plan: the trunk's C channels become C/4 after ``PixelShuffle(2)``; each DUC doubles the
-channels with its conv and quarters them with its shuffle (out = 2 * in before the shuffle). For
-ResNet-50+ this is AlphaPose's 2048 -> 512 -> DUC(512, 1024) -> 256 -> DUC(256, 512) -> 128; for
-ResNet-18/34 it is 512 -> 128 -> DUC(128, 256) -> 64 -> DUC(64, 128) -> 32. Output stride 4.
-"""
+"""FastPose heatmap network (AlphaPose's SPPE): ResNet trunk, PixelShuffle, two DUC blocks, 3x3 head; stride 4."""
 
 from __future__ import annotations
 

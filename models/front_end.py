@@ -1,10 +1,4 @@
-"""The images-to-2D front of the pipeline: a frame's camera images -> person boxes -> 2D poses per view.
-
-``detector`` (configs/detector/) gives each view's person boxes (N, 5) x, y, w, h, score; ``pose2d``
-(configs/pose2d/) turns images and boxes into ViewDetections. A 2D source that finds the persons itself
-(``needs_boxes = False``, e.g. Keypoint R-CNN) is run without a detector. The seconds spent reading images,
-detecting and estimating 2D poses add up in ``timings`` (the same stage names eval.py prints).
-"""
+"""The images-to-2D front of the pipeline: a frame's camera images -> person boxes -> 2D poses per view."""
 
 from __future__ import annotations
 

@@ -1,10 +1,7 @@
 """Multi-modal heatmap targets of the paper's Eq. 1 (``T + mu C``) and their decoding.
 
-Coordinates follow data/pose2d/crop_transforms.py: pixel centres at integers, an image of width W spans
-[-0.5, W - 0.5]. Crop-input and heatmap pixels share that convention, so a heatmap of width w covers the
-same extent as an input of width W and ``x_hm = (x_in + 0.5) * w / W - 0.5``; a stride-4 heatmap pixel i
-thus sits at the centre of input pixels 4i .. 4i + 3, and a flip x -> W - 1 - x of the input is exactly
-x -> w - 1 - x of the heatmap (flipped targets are mirrored targets, to float precision).
+Pixel centres at integers in crop and heatmap: x_hm = (x_in + 0.5) * w / W - 0.5, so a flip of the input is
+exactly a flip of the heatmap.
 """
 
 from __future__ import annotations

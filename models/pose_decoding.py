@@ -1,10 +1,5 @@
-"""Heatmaps of person crops -> keypoints in image pixels: the decoding shared by the SPPE stage
-(models/sppe_stage.py) and the COCO evaluation of a checkpoint (evaluation/pose2d_eval.py).
-
-``single``: one peak per joint (:meth:`models.heatmap_codec.MultiModalHeatmapCodec.decode`, DARK refinement),
-as train.py's validation. ``association``: the paper's joint-candidate SPPE, the top-M local maxima per joint
-(models/candidates.py, in torch on the heatmaps' device, all crops at once), then CrowdPose's global joint
-association over the crops of each image (models/joint_association.py), so two boxes never claim one joint.
+"""Heatmaps of person crops -> keypoints in image pixels (``single``: one peak per joint; ``association``: candidates
+then the global joint association), shared by the SPPE stage and evaluation/pose2d_eval.py.
 """
 
 from __future__ import annotations

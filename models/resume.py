@@ -1,11 +1,4 @@
-"""The config of a resumed training run: the one stored in its checkpoint, changed only where that is safe.
-
-``python train.py resume=<run>/checkpoints/last.ckpt`` continues the stored run whatever the defaults say.
-An override on the resume command is checked against the stored config: one that changes nothing is
-accepted (repeating the original overrides is fine), one of the keys listed in ``resume_may_change``
-(train.yaml: the length of the run, logging, devices) is applied, any other (model, data, loss, optimizer,
-batch size, seed ...) stops the run with one line, because the checkpoint's state would not fit it.
-"""
+"""The config of a resumed training run: the checkpoint's, changed only by overrides listed in resume_may_change."""
 
 from __future__ import annotations
 

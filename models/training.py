@@ -1,10 +1,7 @@
-"""Training pieces of the top-down SPPE used by train.py: builders from the Hydra config, one training
-epoch, validation with COCO OKS AP, checkpoints that resume exactly, distributed setup.
+"""Training pieces of the top-down SPPE used by train.py: builders, one epoch, validation, checkpoints, distributed.
 
-Exact resumption rests on three things: the sample order is a seeded permutation per epoch
-(data.pose2d.topdown_dataset.EpochSampler, which can start part-way through an epoch), augmentation is seeded
-per (epoch, sample), and a checkpoint holds the model, optimizer, scheduler, the position (epoch, step in
-epoch, global step) and the torch / numpy / python RNG states.
+Exact resumption: seeded per-epoch sample order, augmentation seeded per (epoch, sample), and checkpoints with
+model, optimizer, scheduler, position and the torch / numpy / python RNG states.
 """
 
 from __future__ import annotations
