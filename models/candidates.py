@@ -18,13 +18,7 @@ _LOG_EPS = 1e-10
 def find_candidates(
     heatmaps: torch.Tensor | np.ndarray, threshold: float = 0.1, top_m: int = 3, nms_kernel: int = 3
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-M local maxima per channel: heatmaps (B, J, h, w) -> xy (B, J, M, 2) heatmap px, scores (B, J, M).
-
-    A candidate is a pixel equal to the maximum of its ``nms_kernel`` neighbourhood and above
-    ``threshold``; candidates are sorted by score (the heatmap value at the peak pixel), best first.
-    Unused slots have score 0 and xy 0. Two equal adjacent maxima (a plateau) both survive. Both outputs
-    are float64 tensors on the heatmaps' device.
-    """
+    """Top-M local maxima per channel: heatmaps (B, J, h, w) -> xy (B, J, M, 2) heatmap px, scores (B, J, M) float64."""
     if nms_kernel < 1 or nms_kernel % 2 == 0:
         raise ValueError(f"nms_kernel must be a positive odd number, got {nms_kernel}")
     if threshold < 0 or top_m < 1:
@@ -56,11 +50,7 @@ def _next_above(threshold: float, dtype: torch.dtype) -> float:
 
 
 def _neighbourhood_max(hm: torch.Tensor, kernel: int) -> torch.Tensor:
-    """Maximum over each pixel's kernel x kernel neighbourhood of (B, J, h, w), outside = -inf: (B, J, h, w).
-
-    Separable shifted maxima, written in place: the same result as a stride-1 max_pool2d, several times
-    faster on the CPU.
-    """
+    """Maximum over each pixel's kernel x kernel neighbourhood (B, J, h, w), outside -inf (max_pool2d, faster on CPU)."""
     r = kernel // 2
     h, w = hm.shape[-2:]
     padded = F.pad(hm, (r, r, r, r), value=float("-inf"))
@@ -96,12 +86,7 @@ def _parabola_offset(
 def candidates_to_image(
     xy: torch.Tensor, inverse_affines: torch.Tensor | np.ndarray, stride: float | Sequence[float]
 ) -> torch.Tensor:
-    """Heatmap pixels to image pixels: xy (B, J, M, 2), inverse_affines (B, 2, 3) -> (B, J, M, 2) float64.
-
-    ``stride`` is the input-to-heatmap size ratio (a number, or (sx, sy)); ``inverse_affines[b]`` maps
-    crop-input pixels to image pixels. Uses ``x_in = (x_hm + 0.5) * stride - 0.5`` (module docstring).
-    Slots with score 0 are transformed too and stay meaningless. Runs on xy's device.
-    """
+    """Heatmap px xy (B, J, M, 2), inverse_affines (B, 2, 3) -> image px (B, J, M, 2) float64."""
     xy = torch.as_tensor(xy).to(torch.float64)
     affines = torch.as_tensor(inverse_affines, dtype=torch.float64, device=xy.device).reshape(-1, 2, 3)
     s = torch.as_tensor(np.broadcast_to(np.asarray(stride, dtype=np.float64), (2,)).copy(), device=xy.device)

@@ -87,10 +87,7 @@ def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
 
 
 def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
-    """The checked state dict of a train.py file; kind 'resume' also refuses a weights-only file (best.pth).
-
-    Raises FileNotFoundError for a missing file, CheckpointError (a ValueError) for a file that cannot be used.
-    """
+    """The checked state dict of a train.py file; kind 'resume' also refuses a weights-only file (best.pth)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such checkpoint")

@@ -25,11 +25,7 @@ def flip_back(heatmaps: torch.Tensor) -> torch.Tensor:
 def predict_heatmaps(
     model: nn.Module, crops: torch.Tensor, batch_size: int = 32, flip_test: bool = True, amp: bool = False
 ) -> torch.Tensor:
-    """Normalised crops (B, 3, H, W) on the model's device -> float32 heatmaps (B, 23, H/4, W/4) there.
-
-    Passes of ``batch_size`` crops (twice as many images with ``flip_test``); ``amp``: float16 autocast when
-    the crops are on CUDA (ignored elsewhere).
-    """
+    """Normalised crops (B, 3, H, W) on the model's device -> float32 heatmaps (B, 23, H/4, W/4) there."""
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     use_amp = bool(amp) and crops.device.type == "cuda"

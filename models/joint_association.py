@@ -19,12 +19,7 @@ from reconstruction.matching.sparse_assignment import linear_sum_assignment
 def associate_joints(
     xy: np.ndarray, scores: np.ndarray, boxes: np.ndarray, dist_thresh: float = 1.0, sigmas: np.ndarray | None = None
 ) -> np.ndarray:
-    """Associate joint candidates to persons: xy (P, J, M, 2) image px, scores (P, J, M), boxes (P, 4) xywh
-    -> keypoints (P, J, 3) x, y, score.
-
-    ``sigmas`` (J,): per-joint OKS sigmas of the node radius; defaults to the COCO-23 ones (J must be 23).
-    Candidates with score <= 0 are absent.
-    """
+    """Joint candidates xy (P, J, M, 2), scores (P, J, M), boxes (P, 4) xywh -> keypoints (P, J, 3) x, y, score."""
     xy = np.asarray(xy, dtype=np.float64)
     scores = np.asarray(scores, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
@@ -95,12 +90,9 @@ def own_best(xy: np.ndarray, scores: np.ndarray) -> np.ndarray:
 
 
 def joint_nodes(xy: np.ndarray, scores: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Cluster the candidates of each joint type into joint nodes: xy (P, J, M, 2), scores (P, J, M), radii
-    (P, J) -> node labels (P, J, M), unique over all joint types, numbered 0.. in (joint, person, slot) order of
-    each node's first candidate; -1 where there is no candidate (score <= 0).
+    """Candidates xy (P, J, M, 2), scores (P, J, M), radii (P, J) -> node labels (P, J, M) (-1: no candidate).
 
-    Two candidates of one joint type and different persons are linked when their distance is at most the
-    mean of their persons' radii; the nodes are the connected components of the links.
+    Nodes are connected components of links between candidates of different persons closer than their mean radius.
     """
     n_persons, n_joints, m = scores.shape
     pts = xy.transpose(1, 0, 2, 3).reshape(n_joints, n_persons * m, 2)

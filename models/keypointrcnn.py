@@ -26,12 +26,7 @@ def keypoint_scores(logits: np.ndarray, center: float, scale: float) -> np.ndarr
 
 
 class KeypointRCNN:
-    """``stage(images, boxes=None) -> list[ViewDetections]``: persons and COCO-23 keypoints per view.
-
-    weights: ``coco`` (KeypointRCNN_ResNet50_FPN_Weights.DEFAULT through torchvision's weights API), a
-    state-dict file, or None (random, for tests). Persons with box score >= ``score_threshold`` are kept.
-    ``boxes`` is ignored: the model finds the persons itself (``needs_boxes`` is False).
-    """
+    """``stage(images, boxes=None) -> list[ViewDetections]``: persons and COCO-23 keypoints per view (boxes ignored)."""
 
     needs_boxes = False
 

@@ -64,15 +64,10 @@ def associate_by_image(
 def separate_pairs(
     keypoints: np.ndarray, candidates: np.ndarray, boxes: np.ndarray, min_sep: float = 0.05, min_ratio: float = 0.3
 ) -> np.ndarray:
-    """Keypoints (B, 23, 3), their candidates (B, 23, M, 3), boxes (B, 4) x, y, w, h -> a copy (B, 23, 3) where a
-    person's left and right joint of a pair no longer sit on one spot (closer than min_sep x box height).
+    """Keypoints (B, 23, 3), candidates (B, 23, M, 3), boxes (B, 4) xywh -> (B, 23, 3) with left/right joints apart.
 
-    A network that cannot tell a person's left arm from the right gives both channels two near-equal peaks,
-    and each channel's best is then often the same arm: one arm is lost. Where that happens, the side whose
-    best other candidate (min_sep x height or more from the kept joint, inside the box grown by a tenth,
-    scoring at least min_ratio of the joint it replaces) scores higher moves there. Which arm gets which label
-    stays the network's guess; the 3D stage makes the labels consistent (reconstruction/solver/side_labels.py).
-    The face's pairs (eyes, ears) are left alone: they sit closer than min_sep on every person.
+    A network unsure of a person's sides gives both channels the same arm; where a pair sits closer than min_sep x
+    box height, the side whose best other candidate scores higher moves there (faces are left alone).
     """
     out = np.array(keypoints, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)

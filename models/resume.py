@@ -30,12 +30,7 @@ def _group_unchanged(
 def resume_config(
     cfg: DictConfig, checkpoint: dict, overrides: list[str], choices: dict[str, str], path: str | Path
 ) -> DictConfig:
-    """The stored config of checkpoint (read from path) with the safe overrides of this command applied.
-
-    cfg: the config Hydra composed for the resume command; overrides: its command-line overrides
-    (hydra.overrides.task); choices: its config-group choices. Keys added to train.yaml since the checkpoint
-    was written take their defaults.
-    """
+    """The checkpoint's stored config with this command's safe overrides (hydra.overrides.task) applied."""
     stored = OmegaConf.create(checkpoint["config"])
     safe = set(cfg.resume_may_change)
     updates: dict[str, Any] = {}

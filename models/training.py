@@ -184,11 +184,7 @@ def train_one_epoch(
     log_every: int = 50,
     progress: bool = False,
 ) -> list[float]:
-    """Train over the loader (the rest of state.epoch) until it ends or state.global_step reaches max_steps.
-
-    Advances state.step_in_epoch and state.global_step; logs loss/body/foot and the learning rate to the
-    writer every log_every steps. Returns the loss of each step taken.
-    """
+    """Train the rest of state.epoch (or up to max_steps), logging every log_every steps -> the loss of each step."""
     model.train()
     losses: list[float] = []
     if max_steps is not None and state.global_step >= max_steps:
@@ -351,12 +347,7 @@ def load_checkpoint(
     scheduler: Any = None,
     restore_rng: bool = True,
 ) -> TrainState:
-    """Load a :func:`save_checkpoint` file (a path, or what read_checkpoint returned) into model (and optimizer,
-    scheduler, RNG states) -> its TrainState.
-
-    Tensors are read onto the CPU and copied onto the model's device by load_state_dict. The file is
-    unpickled in full (it holds RNG states), so load only checkpoints you trust.
-    """
+    """Load a :func:`save_checkpoint` file (path or read_checkpoint's dict) into model, optimizer, scheduler, RNGs -> TrainState."""
     if not isinstance(checkpoint, dict):
         checkpoint = read_checkpoint(checkpoint, "resume")
     model.load_state_dict(checkpoint["model"])

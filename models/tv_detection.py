@@ -28,10 +28,8 @@ def detection_builder(name: str, key: str) -> Callable[..., nn.Module]:
 def load_detection_state(model: nn.Module, path: str | Path) -> None:
     """Load a state-dict file into a detection model built with weights=None; ValueError naming the file.
 
-    BatchNorm ``num_batches_tracked`` may be absent (torchvision's COCO files hold frozen BatchNorm): in eval
-    mode a BatchNorm with the file's statistics computes what the frozen one does (eps 1e-5; the v1 Faster
-    R-CNN and RetinaNet COCO builds set eps 0, so their own files differ by that eps: use ``coco`` with the
-    file in torch's cache for the exact build)."""
+    An absent BatchNorm ``num_batches_tracked`` is fine: torchvision's COCO files hold frozen BatchNorm.
+    """
     state = read_state_dict(path)
     what = f"torchvision's {type(model).__name__}"
     check_state_fits(model.state_dict(), state, str(path), what, may_miss=lambda k: k.endswith("num_batches_tracked"))
