@@ -50,7 +50,7 @@ def _next_above(threshold: float, dtype: torch.dtype) -> float:
 
 
 def _neighbourhood_max(hm: torch.Tensor, kernel: int) -> torch.Tensor:
-    """Maximum over each pixel's kernel x kernel neighbourhood (B, J, h, w), outside -inf (max_pool2d, faster on CPU)."""
+    """Maximum over each pixel's kernel x kernel neighbourhood (B, J, h, w), outside -inf (max_pool2d, faster)."""
     r = kernel // 2
     h, w = hm.shape[-2:]
     padded = F.pad(hm, (r, r, r, r), value=float("-inf"))

@@ -28,7 +28,7 @@ class DUC(nn.Module):
 
 
 class FastPose(nn.Module):
-    """Single-person pose network: (B, 3, H, W) crops -> (B, num_joints, H/4, W/4); pretrained None | imagenet | file."""
+    """Single-person pose network: (B, 3, H, W) crops -> (B, J, H/4, W/4); pretrained None | imagenet | file."""
 
     def __init__(
         self, depth: int = 50, num_joints: int = NUM_JOINTS, se: bool = False, pretrained: str | Path | None = None

@@ -60,7 +60,7 @@ class MultiModalHeatmapCodec:
         return gy[..., :, None] * gx[..., None, :]
 
     def encode(self, own: np.ndarray, others: np.ndarray, labelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Target (23, h, w) float32 = T + mu C and weight (23,) from own (23, 3), others (M, 23, 3) x, y, v, labelled (23,).
+        """Target (23, h, w) = T + mu C, weight (23,) of own (23, 3), others (M, 23, 3) x, y, v, labelled (23,).
 
         Not clipped: clipping would flatten the own peak where two people's joints meet, the case the term is for.
         A channel counts (weight 1) when the own joint or any other person's joint j is present on the crop.

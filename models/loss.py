@@ -9,7 +9,7 @@ from data.keypoints import BODY_JOINTS, FOOT_JOINTS, NUM_JOINTS
 
 
 class WeightedHeatmapLoss(nn.Module):
-    """Per-channel heatmap MSE, body channels weighted 1 and foot channels lambda: (17 body + 6 lambda foot) / (17 + 6 lambda)."""
+    """Per-channel heatmap MSE (B, 23, h, w), Eq. 1: (17 body + 6 lambda foot) / (17 + 6 lambda)."""
 
     def __init__(self, foot_weight: float = 1.5) -> None:
         super().__init__()

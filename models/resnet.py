@@ -76,7 +76,7 @@ def _is_se_key(name: str) -> bool:
 
 
 def load_trunk_state(model: ResNet, state: dict[str, Tensor], source: str) -> list[str]:
-    """Load a torchvision ImageNet state dict (fc dropped) into model -> the SE keys left new; ValueError naming source."""
+    """Load a torchvision ImageNet state dict into model -> the SE keys left new; ValueError naming source."""
     state = {k: v for k, v in state.items() if not k.startswith("fc.")}
     own = model.state_dict()
     check_state_fits(own, state, source, f"a ResNet-{model.depth} trunk", may_miss=_is_se_key)

@@ -347,7 +347,7 @@ def load_checkpoint(
     scheduler: Any = None,
     restore_rng: bool = True,
 ) -> TrainState:
-    """Load a :func:`save_checkpoint` file (path or read_checkpoint's dict) into model, optimizer, scheduler, RNGs -> TrainState."""
+    """Load a :func:`save_checkpoint` file into model, optimizer, scheduler, RNGs -> state."""
     if not isinstance(checkpoint, dict):
         checkpoint = read_checkpoint(checkpoint, "resume")
     model.load_state_dict(checkpoint["model"])

@@ -1,10 +1,6 @@
-"""A self-contained HTML viewer of a sequence: 3D skeletons per frame coloured by id, the cameras, the
-ground grid; a frame slider, play/pause, mouse orbit and zoom.
+"""A self-contained HTML viewer of a sequence (sequence_view.html with the data as JSON; no network needed).
 
-The page is ``sequence_view.html`` (beside this module: inline JS drawing on a 2D canvas) with the data
-embedded as JSON in ``<script type="application/json" id="sequence-data">``; it needs no network.
-Coordinates are rounded to the millimetre; a sequence whose data would exceed ``max_bytes`` is shown
-every k-th frame, with k the smallest that fits (the page says so).
+A sequence whose data would exceed ``max_mb`` is shown every k-th frame, k the smallest that fits.
 """
 
 from __future__ import annotations

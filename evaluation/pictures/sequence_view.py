@@ -1,9 +1,6 @@
-"""Pictures over time: the scrubbable HTML viewer and the ground trajectories PNG of a sequence.
+"""Pictures over time: the HTML viewer and the ground trajectories PNG of a sequence.
 
 ``python -m evaluation.pictures.sequence_view <run dir>/poses3d.json <cameras> [-o out.html] [--png traj.png]``
-(any calibration ``data.geometry.calibration.load_rig`` reads); eval.py writes both into
-``<run dir>/pictures/`` with ``vis_sequence=true``. Frames are (frame, poses (P, 23, 4), ids (P,) or None)
-tuples, ids None meaning tracking off (the index in the frame stands for the id).
 """
 
 from __future__ import annotations

@@ -1,15 +1,7 @@
-"""Dataset protocols (layer 4): the benchmarks' own published metrics, beside the generic evaluation.
+"""Dataset protocols: the benchmarks' own published metrics, beside the generic evaluation.
 
-``base`` holds the interface (``DatasetProtocol``); ``shelf`` the Shelf PCP protocol (and 4D
-Association's stored output scored the same way); ``panoptic`` the Panoptic AP / MPJPE protocol;
-``reprojection_coco`` the COCO AP/AR of reprojected 3D poses (Wildtrack, paper Table 1).
-
-A dataset loader (layer 2) may not import these: it lists the plain-data inputs of its protocols in
-``sequence.meta["protocol_inputs"]`` (``[{"name": ..., **arguments}]``) and :func:`attach_protocols`
-builds them into ``sequence.protocols``. eval.py calls it after loading; ``evaluate_sequence`` calls it
-too (it is idempotent), so a sequence built in code is scored the same way.
-
-May import every lower layer (``data``, the stages) and the rest of ``evaluation``.
+A dataset loader may not import these: it lists their plain-data inputs in ``sequence.meta["protocol_inputs"]``
+and :func:`attach_protocols` builds them (idempotent, so a sequence built in code is scored the same way).
 """
 
 from __future__ import annotations

@@ -1,40 +1,9 @@
-"""CMU Panoptic protocols: VoxelPose's AP / recall / MPJPE, and the paper's root-aligned MPJPE and PCP.
+"""CMU Panoptic protocols on 15 joints: VoxelPose's AP / recall / MPJPE, the paper's root-aligned MPJPE and PCP.
 
-All three work on the 15 Panoptic joints (the first 15 of coco19, metres, column 3 = validity or
-confidence): 0 neck, 1 nose, 2 mid-hip, 3 l-shoulder, 4 l-elbow, 5 l-wrist, 6 l-hip, 7 l-knee,
-8 l-ankle, 9 r-shoulder, 10 r-elbow, 11 r-wrist, 12 r-hip, 13 r-knee, 14 r-ankle. COCO-23 predictions
-are mapped with :func:`coco23_to_panoptic15`; the ground truth is best taken as stored (the loader keeps
-it in ``Sequence.meta["gt_panoptic15"]``), whose neck is within ~1.5 cm of the mid-shoulders.
-
-VoxelPose AP (Tu et al., ECCV 2020, ``lib/dataset/panoptic.py: evaluate``), reproduced here:
-- GT persons whose mid-hip (root) is invalid are not evaluated (VoxelPose skips them when loading);
-  frames without GT persons are skipped with their predictions.
-- Each prediction is assigned to the GT person of its frame with the smallest MPJPE over the
-  GT-valid joints (here: valid in both, as our predictions can miss joints; VoxelPose's never do).
-- Over the whole sequence, predictions sorted by score (descending): a true positive at threshold t
-  when its MPJPE < t and its GT person was not taken by a higher-scored one, else a false positive.
-- AP = area under the precision-recall curve with precision made monotone from the right (VOC):
-  sum over true positives of (1 / #GT) x interpolated precision there; t = 25, 50, ..., 150 mm.
-  VoxelPose adds 1e-5 to the denominators, so its perfect AP reads 99.999; ours reads 100.
-- recall@t: share of GT persons taken at t; recall@500 mm: share of GT persons that are the nearest
-  GT of some prediction within 500 mm (no score order, no one-to-one).
-- MPJPE: mean over the true positives at 500 mm (in score order) of their MPJPE.
-
-Root-aligned MPJPE (paper Table 4; the paper does not state the protocol, this is our reading): each GT
-person is paired one-to-one with a prediction by Hungarian matching on mean joint distance (pairs
-farther than ``max_dist_m`` unpaired); both poses are translated to put the mean of their two hips at
-the origin (not Panoptic's own mid-hip joint, which our COCO-23 predictions lack: up to centimetres
-apart, that offset would be added to every joint);
-13 joints compared: nose ("Head"), shoulders, elbows, wrists, hips, knees and ankles ("Foot": coco19
-has no feet). Reported per group, over the 13 joints, and as the mean of the 7 groups (the paper's
-"Average" 50.0 is 49.9 as the mean of its groups, 50.3 over 13 joints).
-
-PCP (paper Table 5) on the same pairs, absolute coordinates, alpha = 0.5: a part is correct when the
-mean of its two end-point errors is at most alpha x its GT length. Parts: head = neck -> nose (coco19
-has no head top), torso = neck -> mid-hip, upper arms = shoulder -> elbow, lower arms = elbow -> wrist,
-upper legs = hip -> knee, lower legs = knee -> ankle. Parts with an invalid GT end are not counted; a
-missing predicted end or an unpaired GT person makes the part wrong. The average is the mean of the 6
-part groups (the paper's 91.3 is exactly that).
+VoxelPose AP: predictions in score order are true positives at t when their MPJPE to their nearest unclaimed GT
+is under t (t = 25..150 mm, VOC-style AP, without VoxelPose's 1e-5, so perfect reads 100). Root-aligned MPJPE
+and PCP (paper Tables 4-5, our reading) pair persons one-to-one (Hungarian) and align at the mean of the hips,
+which COCO-23 predictions have (Panoptic's own mid-hip they lack).
 """
 
 from __future__ import annotations
@@ -82,11 +51,7 @@ PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {
 
 
 def coco23_to_panoptic15(poses: np.ndarray) -> np.ndarray:
-    """COCO-23 poses to the 15 Panoptic joints: (..., 23, 4) -> (..., 15, 4).
-
-    Joints other than neck and mid-hip are copied by name. Neck = mean of the two shoulders and
-    mid-hip = mean of the two hips, valid (column 3 = the lower of the two) only when both are.
-    """
+    """COCO-23 poses (..., 23, 4) -> (..., 15, 4); neck, mid-hip: the means of shoulders, hips."""
     poses = np.asarray(poses, dtype=np.float64)
     out = np.zeros(poses.shape[:-2] + (15, poses.shape[-1]))
     for j, name in enumerate(PANOPTIC15_NAMES):
@@ -324,12 +289,7 @@ def format_panoptic_report(summary: dict[str, float]) -> str:
 
 
 class PanopticProtocol:
-    """The Panoptic protocols as a dataset protocol (evaluation/protocols/base.py) for eval.py.
-
-    ``gt15`` maps a frame index to its stored Panoptic-15 ground truth (G, 15, 4) (the loader's
-    ``meta["gt_panoptic15"]``); frames without an entry are not scored. Each frame's predictions are
-    ``result.poses3d`` (P, 23, 4), scored by the mean confidence of their 15 mapped joints.
-    """
+    """The Panoptic protocols as a dataset protocol; gt15 {frame: (G, 15, 4)}, predictions scored by mean confidence."""
 
     name = "panoptic"
 

@@ -41,7 +41,7 @@ def person_boxes(
     score_threshold: float,
     nms_iou: float,
 ) -> np.ndarray:
-    """Boxes (M, 4) x1 y1 x2 y2, labels (M,), scores (M,) -> person boxes (N, 5) x, y, w, h, score after NMS, best first."""
+    """Boxes (M, 4) x1 y1 x2 y2, labels (M,), scores (M,) -> person boxes (N, 5) xywh, score, after NMS."""
     boxes_xyxy = np.asarray(boxes_xyxy, np.float64).reshape(-1, 4)
     keep = (np.asarray(labels) == person_label) & (np.asarray(scores) >= score_threshold)
     boxes, kept_scores = boxes_xyxy[keep], np.asarray(scores, np.float64)[keep]

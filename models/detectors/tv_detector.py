@@ -12,7 +12,7 @@ from models.tv_detection import build_detection_model, detect
 
 
 class TorchvisionDetector:
-    """A torchvision detection model (e.g. fasterrcnn_resnet50_fpn_v2) keeping persons only; weights coco | file | None."""
+    """A torchvision detection model (e.g. fasterrcnn_resnet50_fpn_v2), persons only; weights coco | file | None."""
 
     needs_images = True
 
