@@ -24,11 +24,11 @@ from data.multiview import ViewDetections
 from data.pose2d.coco_eval import evaluate_keypoints, write_coco_results
 from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.pose2d.topdown_dataset import EpochSampler, TopDownDataset
+from models.checkpoint_io import load_trained_model
 from models.devices import resolve_device
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.heatmap_inference import predict_heatmaps
 from models.pose_decoding import DECODERS, associate_by_image, joint_candidates, person_scores
-from models.trained_model import load_trained_model
 from models.training import AP_SUBSETS, build_codec, decode_predictions
 
 

@@ -13,6 +13,9 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+from torch import nn
 
 from data.formats.atomic_io import atomic_open
 from models.load_errors import CheckpointError
@@ -104,3 +107,12 @@ def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
     if found not in KEYS or missing:
         raise CheckpointError(f"{path}: {found!r} checkpoint lacks {', '.join(missing) or 'a known kind'}")
     return state
+
+
+def load_trained_model(path: str | Path, device: torch.device) -> tuple[nn.Module, DictConfig]:
+    """The network of a train.py checkpoint or weights file, in eval mode on device, and its training config."""
+    checkpoint = read_checkpoint(path)  # a missing or damaged file -> FileNotFoundError / CheckpointError
+    train_cfg = OmegaConf.create(checkpoint["config"])
+    model = instantiate(train_cfg.model, pretrained=None)  # the weights come from the checkpoint
+    model.load_state_dict(checkpoint["model"])
+    return model.to(device).eval(), train_cfg

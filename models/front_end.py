@@ -52,9 +52,7 @@ class Pose2DFrontEnd:
 
     @classmethod
     def from_config(cls, cfg: Any, sequence: Sequence) -> "Pose2DFrontEnd | None":
-        """The front end of an eval.yaml config (cfg.pose2d, cfg.detector, built by Hydra's instantiate) for
-        ``sequence``; None for pose2d=none (the dataset gives the 2D poses). A 2D stage without images, or
-        images without a 2D stage, stops with a ConfigError naming the key."""
+        """The front end of an eval.yaml config for ``sequence``; None for pose2d=none; a mismatch is a ConfigError."""
         has_images = bool(sequence.frames) and sequence.frames[0].images is not None
         if not cfg.pose2d.get("_target_"):
             if has_images and not any(len(v) for f in sequence.frames for v in f.views):

@@ -32,8 +32,6 @@ class MultiModalHeatmapCodec:
         self.mu = float(mu)
         self._ratio = np.array(self.heatmap_size, dtype=np.float64) / np.array(self.input_size)
 
-    # --- coordinates -------------------------------------------------------------------------------
-
     def input_to_heatmap(self, points: np.ndarray) -> np.ndarray:
         """Crop-input pixels (..., 2) -> heatmap pixels (..., 2)."""
         return (np.asarray(points, dtype=np.float64) + 0.5) * self._ratio - 0.5
@@ -48,8 +46,6 @@ class MultiModalHeatmapCodec:
         size = np.array(self.input_size, dtype=np.float64)
         return np.all((points >= -0.5) & (points <= size - 0.5), axis=-1)
 
-    # --- encoding ----------------------------------------------------------------------------------
-
     def gaussians(self, points: np.ndarray) -> np.ndarray:
         """Unit-peak Gaussians at sub-pixel crop-input points (..., 2) -> (..., h, w) float64."""
         centres = self.input_to_heatmap(points)
@@ -63,7 +59,6 @@ class MultiModalHeatmapCodec:
         """Target (23, h, w) = T + mu C, weight (23,) of own (23, 3), others (M, 23, 3) x, y, v, labelled (23,).
 
         Not clipped: clipping would flatten the own peak where two people's joints meet, the case the term is for.
-        A channel counts (weight 1) when the own joint or any other person's joint j is present on the crop.
         """
         own = np.asarray(own, dtype=np.float64).reshape(NUM_JOINTS, 3)
         others = np.asarray(others, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
@@ -87,13 +82,10 @@ class MultiModalHeatmapCodec:
         others = np.delete(keypoints, own_index, axis=0)
         return self.encode(keypoints[own_index], others, labelled)
 
-    # --- decoding ----------------------------------------------------------------------------------
-
     def decode(self, heatmaps: np.ndarray | torch.Tensor, modulate: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Heatmaps (..., 23, h, w) -> keypoints (..., 23, 2) crop-input px, scores (..., 23): argmax + DARK step.
 
-        With ``modulate`` the log is of the blurred heatmap, except within 2 sigma of the border (the zero-padded blur
-        drags those peaks inward).
+        ``modulate`` blurs first, except within 2 sigma of the border, where the zero-padded blur drags peaks inward.
         """
         if isinstance(heatmaps, torch.Tensor):
             heatmaps = heatmaps.detach().cpu().numpy()

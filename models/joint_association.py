@@ -90,10 +90,7 @@ def own_best(xy: np.ndarray, scores: np.ndarray) -> np.ndarray:
 
 
 def joint_nodes(xy: np.ndarray, scores: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Candidates xy (P, J, M, 2), scores (P, J, M), radii (P, J) -> node labels (P, J, M) (-1: no candidate).
-
-    Nodes are connected components of links between candidates of different persons closer than their mean radius.
-    """
+    """Candidates xy (P, J, M, 2), scores (P, J, M), radii (P, J) -> node labels (P, J, M) (-1: no candidate)."""
     n_persons, n_joints, m = scores.shape
     pts = xy.transpose(1, 0, 2, 3).reshape(n_joints, n_persons * m, 2)
     valid = (scores > 0).transpose(1, 0, 2).reshape(n_joints, n_persons * m)

@@ -37,8 +37,7 @@ def joint_candidates(
     threshold: float = 0.1,
     top_m: int = 3,
 ) -> np.ndarray:
-    """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3) -> candidates (B, 23, M, 3) x, y, score in
-    image px: the top-M local maxima of each joint channel above threshold (score 0: no candidate)."""
+    """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3) -> candidates (B, 23, M, 3) x, y, score in image px."""
     xy, scores = find_candidates(heatmaps, threshold=threshold, top_m=top_m)
     stride = np.array(codec.input_size, dtype=np.float64) / np.array(codec.heatmap_size)
     image_xy = candidates_to_image(xy, inverse_affines, stride)
@@ -66,8 +65,7 @@ def separate_pairs(
 ) -> np.ndarray:
     """Keypoints (B, 23, 3), candidates (B, 23, M, 3), boxes (B, 4) xywh -> (B, 23, 3) with left/right joints apart.
 
-    A network unsure of a person's sides gives both channels the same arm; where a pair sits closer than min_sep x
-    box height, the side whose best other candidate scores higher moves there (faces are left alone).
+    A network unsure of a person's sides gives both channels the same arm; the side with the better other one moves.
     """
     out = np.array(keypoints, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)

@@ -18,6 +18,7 @@ from data.config_checks import ConfigError, is_int, is_number
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from data.pose2d.box_crops import crop_boxes, normalize_crops
+from models.checkpoint_io import load_trained_model
 from models.devices import resolve_device
 from models.heatmap_inference import predict_heatmaps
 from models.pose_decoding import (
@@ -29,7 +30,6 @@ from models.pose_decoding import (
     single_peaks,
 )
 from models.pose_nms import find_duplicates, merge_joints
-from models.trained_model import load_trained_model
 from models.training import build_codec
 
 KEY = "pose2d"  # the config group, named in error messages

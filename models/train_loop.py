@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import torch
 import torch.distributed as dist
+from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
@@ -20,16 +21,13 @@ from data.formats.atomic_io import atomic_write_text
 from data.pose2d.coco_eval import write_coco_results
 from data.pose2d.topdown_dataset import EpochSampler
 from models.checkpoint_io import read_checkpoint
+from models.loss import WeightedHeatmapLoss
 from models.train_config import check_train_config
 from models.training import (
     TrainState,
     build_codec,
     build_dataset,
     build_loader,
-    build_loss,
-    build_model,
-    build_optimizer,
-    build_scheduler,
     load_checkpoint,
     save_checkpoint,
     save_weights,
@@ -50,8 +48,7 @@ def _reached(state: TrainState, max_steps: int | None) -> bool:
 def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None) -> dict:
     """Train (or resume) per cfg into run_dir -> {"losses": {step: loss}, "metrics": last validation, "state"}.
 
-    checkpoint: cfg.resume already read (None: read here); choices: the config groups chosen, stored in the
-    checkpoints so that a resume can tell whether its overrides change anything. Only rank 0 validates and saves.
+    choices (the config groups chosen) go into the checkpoints, so that a resume can tell what its overrides change.
     """
     check_train_config(cfg)
     if cfg.resume and checkpoint is None:
@@ -70,9 +67,10 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     val_loader = build_loader(
         val_set, trainer.val_batch_size, trainer.num_workers, EpochSampler(len(val_set), shuffle=False), device
     )
-    model = build_model(cfg).to(device)
-    loss_fn, optimizer = build_loss(cfg), build_optimizer(cfg, model)
-    scheduler = build_scheduler(cfg, optimizer)
+    model = instantiate(cfg.model).to(device)  # e.g. models.fastpose.FastPose
+    loss_fn = WeightedHeatmapLoss(cfg.loss.foot_weight)  # Eq. 1's lambda; mu is in the codec
+    optimizer = instantiate(cfg.optimizer, _convert_="all")(params=model.parameters())
+    scheduler = instantiate(cfg.scheduler, _convert_="all")(optimizer=optimizer)  # stepped per epoch
     state = load_checkpoint(checkpoint, model, optimizer, scheduler) if checkpoint else TrainState()
     net = DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None) if world > 1 else model
     writer = SummaryWriter(str(run_dir)) if rank == 0 else None

@@ -26,10 +26,7 @@ def detection_builder(name: str, key: str) -> Callable[..., nn.Module]:
 
 
 def load_detection_state(model: nn.Module, path: str | Path) -> None:
-    """Load a state-dict file into a detection model built with weights=None; ValueError naming the file.
-
-    An absent BatchNorm ``num_batches_tracked`` is fine: torchvision's COCO files hold frozen BatchNorm.
-    """
+    """Load a state-dict file into a detection model built with weights=None; ValueError naming it."""
     state = read_state_dict(path)
     what = f"torchvision's {type(model).__name__}"
     check_state_fits(model.state_dict(), state, str(path), what, may_miss=lambda k: k.endswith("num_batches_tracked"))
@@ -39,9 +36,7 @@ def load_detection_state(model: nn.Module, path: str | Path) -> None:
 def build_detection_model(
     name: str, weights: str | None, group: str, **kwargs: object
 ) -> tuple[nn.Module, list[str] | None]:
-    """(model in eval mode, its category names when known) for weights ``coco`` (the DEFAULT weights through
-    the weights API; offline one line naming ``<group>.weights``), a state-dict file, or None (random, for
-    tests). ``kwargs`` go to the builder (e.g. min_size, box_detections_per_img)."""
+    """(model in eval mode, its category names) for weights ``coco`` | a state-dict file | None."""
     builder = detection_builder(name, f"{group}.model")
     if weights == COCO:
         default = torchvision.models.get_model_weights(name).DEFAULT

@@ -130,10 +130,7 @@ def image_grid(images: list[np.ndarray], labels: list[str] | None = None, tile_w
 def load_view_images(
     folder: str | Path, rig: Rig, pattern: str = "cam{i}.png"
 ) -> tuple[list[np.ndarray | None], list[tuple[float, float]]]:
-    """One RGB image per camera, ``pattern`` formatted with i (view index) and name -> (images, scales).
-
-    scales[v] = (image w / camera w, image h / camera h); a missing file gives None and (1, 1).
-    """
+    """One RGB image per camera (pattern with i, name) -> images, scales (V, 2) image / camera size."""
     images, scales = [], []
     for i, camera in enumerate(rig):
         path = Path(folder) / pattern.format(i=i, name=camera.name)

@@ -22,10 +22,7 @@ BUILDERS: dict[str, Callable] = {
 
 
 def attach_protocols(sequence: Sequence) -> Sequence:
-    """Build the protocols ``sequence.meta["protocol_inputs"]`` asks for into ``sequence.protocols``, once.
-
-    A sequence that already carries protocols is left as it is. Returns the sequence.
-    """
+    """Build the protocols ``sequence.meta["protocol_inputs"]`` asks for into ``sequence.protocols`` (once)."""
     if not sequence.protocols:
         for spec in sequence.meta.get("protocol_inputs", ()):
             arguments = {k: v for k, v in spec.items() if k != "name"}

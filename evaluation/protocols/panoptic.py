@@ -66,10 +66,7 @@ def coco23_to_panoptic15(poses: np.ndarray) -> np.ndarray:
 
 
 def pairwise_mpjpe(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """MPJPE (m) of every prediction to every GT person over joints valid in both: (P, J, 4), (G, J, 4) -> (P, G).
-
-    inf where a pair shares no valid joint.
-    """
+    """MPJPE (m) over joints valid in both: (P, J, 4), (G, J, 4) -> (P, G), inf where a pair shares none."""
     pred, gt = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
     dist = np.linalg.norm(pred[:, None, :, :3] - gt[None, :, :, :3], axis=-1)
     both = (pred[:, None, :, 3] > 0) & (gt[None, :, :, 3] > 0)
@@ -80,10 +77,7 @@ def pairwise_mpjpe(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
 def average_precision(
     scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, num_gt: int, threshold: float
 ) -> tuple[float, float]:
-    """VoxelPose AP and recall (fractions) at one threshold: scores, errors, gt_index (N,) -> (ap, recall).
-
-    errors are each prediction's MPJPE to its nearest GT, whose sequence-wide index is gt_index.
-    """
+    """VoxelPose AP and recall (fractions) at one threshold: scores, errors, gt_index (N,) -> (ap, recall)."""
     if num_gt == 0:
         return float("nan"), float("nan")
     order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")

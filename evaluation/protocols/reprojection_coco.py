@@ -88,10 +88,7 @@ def view_predictions(camera: Camera, poses3d: np.ndarray, min_joints: int = 1) -
 def coco_keypoint_stats(
     image_ids: list[int], gt: list[dict], predictions: list[dict], subset: str = "all", max_dets: int = 100
 ) -> dict[str, float]:
-    """pycocotools OKS AP/AR (fractions, STAT_NAMES; -1: nothing to average) of gt and prediction dicts.
-
-    A detection without a keypoint score > 0 in the subset is left out, as a GT person without a labelled joint is.
-    """
+    """pycocotools OKS AP/AR (fractions, STAT_NAMES; -1: nothing to average) of gt and prediction dicts."""
     if subset not in SUBSET_JOINTS:
         raise ValueError(f"subset must be one of {sorted(SUBSET_JOINTS)}, got {subset!r}")
     joints = np.array(SUBSET_JOINTS[subset])

@@ -80,10 +80,7 @@ def _skel19_head(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def select_prediction(pred: np.ndarray, gt: np.ndarray) -> tuple[int, float]:
-    """Index and mean 14-joint distance (m) of the closest prediction: (P, 15, 3), (15, 3) -> (i, d).
-
-    Returns (-1, nan) when no prediction has a finite joint among the 14.
-    """
+    """Index and mean 14-joint distance (m) of the closest prediction: (P, 15, 3), (15, 3) -> (i, d) or (-1, nan)."""
     dist = np.linalg.norm(pred[:, :14, :3] - gt[None, :14, :3], axis=-1)
     present = np.isfinite(dist)
     count = present.sum(-1)
@@ -365,10 +362,7 @@ def _headline(summary: dict) -> str:
 
 
 def load_actors_gt(mat_path: str | Path, frames: range = SHELF_TEST_FRAMES) -> list[dict[int, np.ndarray]]:
-    """TUM actorsGT.mat -> per frame {actor id 0..3: (15, 4)}, mid-hip appended, valid 1.
-
-    Row f of actor3D is Shelf frame f (0-based), as VoxelPose reads it; gt.txt frame i matches row 300 + i.
-    """
+    """TUM actorsGT.mat -> per frame {actor id 0..3: (15, 4)}, mid-hip appended; row f = Shelf frame f."""
     actors = scipy.io.loadmat(str(mat_path))["actor3D"].ravel()
     out = []
     for f in frames:
