@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from data.keypoints import JOINT_INDEX
-from evaluation.association import match_to_ground_truth
+from evaluation.association import match_to_ground_truth, mean_joint_distance
 from evaluation.mpjpe import joint_errors
 from evaluation.report import format_table
 
@@ -65,15 +65,6 @@ def coco23_to_panoptic15(poses: np.ndarray) -> np.ndarray:
     return out
 
 
-def pairwise_mpjpe(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """MPJPE (m) over joints valid in both: (P, J, 4), (G, J, 4) -> (P, G), inf where a pair shares none."""
-    pred, gt = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
-    dist = np.linalg.norm(pred[:, None, :, :3] - gt[None, :, :, :3], axis=-1)
-    both = (pred[:, None, :, 3] > 0) & (gt[None, :, :, 3] > 0)
-    count = both.sum(-1)
-    return np.where(count > 0, np.where(both, dist, 0.0).sum(-1) / np.maximum(count, 1), np.inf)
-
-
 def average_precision(
     scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, num_gt: int, threshold: float
 ) -> tuple[float, float]:
@@ -116,7 +107,7 @@ class PanopticAPEvaluator:
             return
         self.num_pred += len(pred)
         if len(pred):
-            dist = pairwise_mpjpe(pred, gt)
+            dist = mean_joint_distance(pred, gt)
             nearest = np.argmin(dist, axis=1)
             self.errors += (1000.0 * dist[np.arange(len(pred)), nearest]).tolist()
             self.gt_index += (self.num_gt + nearest).tolist()
