@@ -18,11 +18,7 @@ def mean_joint_distance(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
 
 
 def match_to_ground_truth(pred: np.ndarray, gt: np.ndarray, max_dist_m: float = 0.5) -> np.ndarray:
-    """One-to-one matching minimising mean joint distance: (P, J, 4), (G, J, 4) -> pairs (K, 2).
-
-    Each row of the result is (prediction index, ground-truth index); pairs farther apart than
-    ``max_dist_m`` (mean over shared joints) are not matched.
-    """
+    """One-to-one matching by mean joint distance: (P, J, 4), (G, J, 4) -> pairs (K, 2) within max_dist_m."""
     if len(pred) == 0 or len(gt) == 0:
         return np.zeros((0, 2), dtype=np.int64)
     cost = mean_joint_distance(pred, gt)

@@ -1,10 +1,4 @@
-"""Cross-view correspondence metrics of a matcher's assignment against ground-truth identities.
-
-Pairs: every two detections a predicted person holds is a predicted pair; it is correct when both
-have the same ground-truth id >= 0. The ground-truth pairs are the pairs of detections in different
-views sharing an id >= 0. A ground-truth person (an id seen in >= 2 views) is recovered when one
-predicted person holds all and only their detections (pure and complete).
-"""
+"""Cross-view correspondence metrics of a matcher's assignment against GT ids: pair precision / recall, recovery."""
 
 from __future__ import annotations
 

@@ -1,14 +1,4 @@
-"""Identity metrics of a tracker against ground-truth ids: switches, IDF1-like share, fragmentation.
-
-Per frame, every ground-truth person is paired one-to-one with a prediction (Hungarian on the mean joint
-distance, unmatched beyond ``max_dist_m``: :func:`evaluation.association.match_to_ground_truth`), and the
-track id of that prediction recorded. Then, per ground-truth person over the sequence:
-
-- identity switches: frames where its track id differs from the one it had when last matched (MOT IDSW);
-- IDF1-like share: ground-truth person-frames whose prediction carries the track id that person had most
-  often, over all its person-frames (unmatched frames count against it);
-- fragmentations: times its matched run is interrupted by unmatched frames and resumed (MOT Frag).
-"""
+"""Identity metrics of a tracker against ground-truth ids: switches (MOT IDSW), IDF1-like share, fragmentations."""
 
 from __future__ import annotations
 
@@ -39,7 +29,7 @@ class IdentityEvaluator:
         self.history[gt_id].append(track_id)
 
     def summary(self, gt_ids: tuple[int, ...] | None = None) -> dict[str, float]:
-        """Over the given ground-truth ids (default all): id_switches, id_switches_per_100 (per 100 GT person-frames), idf1_like (%), fragmentations, frames."""
+        """GT ids (default all) -> id_switches, id_switches_per_100, idf1_like %, fragmentations, frames."""
         switches = fragments = kept = total = 0
         for gt_id, tracks in self.history.items():
             if gt_ids is not None and gt_id not in gt_ids:

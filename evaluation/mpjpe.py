@@ -6,11 +6,7 @@ import numpy as np
 
 
 def joint_errors(pred: np.ndarray, gt: np.ndarray, root: tuple[int, ...] | None = None) -> np.ndarray:
-    """Per-joint Euclidean errors (m) of paired poses: (K, J, 4), (K, J, 4) -> (K, J), NaN if not both valid.
-
-    With ``root`` (joint indices whose mean is the root, e.g. the two hips) both poses are translated
-    to their root first (root-aligned MPJPE); otherwise the error is absolute.
-    """
+    """Per-joint errors (m) of paired poses (K, J, 4), (K, J, 4) -> (K, J), NaN if not both valid; root: align first."""
     pred = np.asarray(pred, dtype=np.float64)
     gt = np.asarray(gt, dtype=np.float64)
     p, g = pred[..., :3], gt[..., :3]

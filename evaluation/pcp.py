@@ -13,11 +13,7 @@ PART_GROUP = np.array([i for i, pairs in enumerate(SHELF_PCP_PARTS.values()) for
 
 
 def correct_parts(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.ndarray:
-    """Which of the 10 parts are correct: (K, 15, 3), (K, 15, 3) -> (K, 10) bool.
-
-    A part (a, b) is correct when the mean of the end-point errors is at most alpha times the
-    ground-truth part length: (|p_a - g_a| + |p_b - g_b|) / 2 <= alpha |g_a - g_b|.
-    """
+    """Which of the 10 parts are correct: (K, 15, 3), (K, 15, 3) -> (K, 10) bool (mean end error <= alpha x length)."""
     pred = np.asarray(pred, dtype=np.float64)[..., :3]
     gt = np.asarray(gt, dtype=np.float64)[..., :3]
     a, b = PART_JOINTS[:, 0], PART_JOINTS[:, 1]

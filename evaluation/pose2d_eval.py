@@ -1,16 +1,7 @@
 """2D evaluation of a train.py checkpoint on a COCO-format keypoint set (``python eval.py checkpoint=...``).
 
-The checkpoint (``last.ckpt`` or ``best.pth``) holds its training config, which rebuilds the network and
-the target codec (input size, sigma). Every person box (ground truth, or a detections file's) is cropped
-without augmentation and decoded either with one peak per joint (``decode=single``, as train.py's
-validation) or as the paper's joint-candidate SPPE does (``decode=association``): up to ``top_m`` local
-maxima per joint (models.candidates), then CrowdPose's global joint association over all boxes of an
-image (models.joint_association), so two boxes never claim one joint; with ``flip_test`` the mirrored
-crop's heatmaps are averaged in first. Flip test and decoding are the SPPE stage's own code
-(models.heatmap_inference, models.pose_decoding). Outputs: COCO OKS AP/AR (all 23, body 17, foot 6)
-through data.pose2d.coco_eval, the COCO results file and poses2d.json for the multi-view pipeline
-(``eval.py dataset=files dataset.poses2d=...``). An image entry of the annotation file may carry ``frame``
-and ``camera``; without them the frame is the image id and the camera "0".
+Decoding, flip test and joint association are the SPPE stage's own code; outputs: COCO OKS AP/AR (all, body,
+foot), the COCO results file and poses2d.json (frame and camera from the image entry, else image id and "0").
 """
 
 from __future__ import annotations
@@ -33,11 +24,11 @@ from data.multiview import ViewDetections
 from data.pose2d.coco_eval import evaluate_keypoints, write_coco_results
 from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.pose2d.topdown_dataset import EpochSampler, TopDownDataset
+from models.checkpoint_io import load_trained_model
 from models.devices import resolve_device
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.heatmap_inference import predict_heatmaps
 from models.pose_decoding import DECODERS, associate_by_image, joint_candidates, person_scores
-from models.trained_model import load_trained_model
 from models.training import AP_SUBSETS, build_codec, decode_predictions
 
 

@@ -1,9 +1,7 @@
-"""The 2D stage of a run on images: estimate every frame's 2D poses, label them with ground-truth ids, and
-score them per view with COCO OKS AP/AR against the render's ground truth (dataset=synthetic render=true).
+"""The 2D stage of a run on images, scored per view with COCO OKS AP/AR against the render's ground truth.
 
-A predicted person gets the id of the ground-truth person it overlaps most by OKS (COCO-23 sigmas, the
-ground truth's box area) when that OKS is at least ``min_oks``, one-to-one per view (Hungarian), else -1; the
-ids feed the cross-view matching precision/recall, exactly as simulated detections do.
+A predicted person takes the id of the GT person it overlaps most by OKS (>= ``min_oks``, one-to-one), so that
+the cross-view matching can be scored as with simulated detections.
 """
 
 from __future__ import annotations

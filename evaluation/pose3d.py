@@ -11,15 +11,7 @@ from evaluation.pcp import PART_JOINTS, correct_parts, part_validity, pcp_by_par
 
 
 class Pose3DEvaluator:
-    """Accumulates frames of COCO-23 predictions and ground truth, then summarises.
-
-    Protocol: every ground-truth person is paired one-to-one with a prediction by Hungarian
-    matching on the mean joint distance (pairs farther than ``max_dist_m`` are unmatched); MPJPE is
-    absolute (no root alignment) over matched pairs and joints valid in both; PCP uses the 10
-    Shelf parts on Shelf-14 built from COCO-23 (:func:`coco23_to_shelf14`), alpha = ``alpha``, over the
-    parts whose ground-truth ends rest on valid joints only (Panoptic leaves some joints unannotated),
-    and counts every part of an unmatched ground-truth person as wrong.
-    """
+    """Accumulates frames of COCO-23 predictions and GT: one-to-one matched absolute MPJPE and Shelf-parts PCP."""
 
     def __init__(self, max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
         self.max_dist_m = max_dist_m

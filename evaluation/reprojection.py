@@ -1,9 +1,4 @@
-"""Reprojection error of reconstructed 3D joints (the statistics of the paper's Table 3).
-
-Every reconstructed joint (confidence > 0) is projected into every view where its 2D joint has
-score > 0 and compared, in undistorted pixels, with either the 2D detection (what the solver fits)
-or, where ground truth is known, the noise-free projection of the ground-truth 3D joint.
-"""
+"""Reprojection error of 3D joints in undistorted pixels, against the 2D detections or the GT (paper Table 3)."""
 
 from __future__ import annotations
 
@@ -38,12 +33,7 @@ def frame_reprojection_errors(
     rig: Rig,
     gt_points3d: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Pixel errors of one frame: (P, J, 4), (P, V), V views [, GT (P, J, 3|4) per person] -> (V, P, J).
-
-    Against the 2D detections, or with gt_points3d against the undistorted projections of the
-    ground-truth joints of each reconstructed person. NaN where the 2D joint has score 0 or the 3D
-    joint has confidence 0.
-    """
+    """Pixel errors of one frame: (P, J, 4), (P, V), V views [, GT (P, J, 3|4)] -> (V, P, J), NaN where unscored."""
     poses2d, _ = gather_views(views, assignment)
     und = rig.undistort(poses2d)
     proj = rig.projection_matrices()

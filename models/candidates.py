@@ -1,20 +1,7 @@
-"""Multi-peak heatmap decoding: several joint candidates per joint channel (CrowdPose's joint-candidate SPPE).
+"""Multi-peak heatmap decoding: several joint candidates per joint channel (CrowdPose's joint-candidate SPPE), in torch.
 
-Everything runs in torch on the heatmaps' device, for all crops at once. The scans over whole heatmaps
-(local maxima, top-M) run in the heatmaps' precision (float32; float16 input is promoted); the sub-pixel
-step and the back-projection use the few gathered values in float64.
-
-Coordinates. A candidate ``xy`` is in *heatmap pixels*, integer values at pixel centres (the peak pixel
-``(col, row)`` is ``(col, row)``), plus a sub-pixel offset. The crop-input pixel is obtained with the
-pixel-centre convention ``x_in = (x_hm + 0.5) * stride - 0.5`` (heatmap pixel ``i`` covers input pixels
-``[i * stride, (i + 1) * stride)``, whose centre is ``(i + 0.5) * stride - 0.5``), then the inverse crop
-affine takes input pixels to image pixels.
-
-Sub-pixel refinement. Along each axis a parabola is fitted to the *log* heatmap at the peak and its two
-neighbours and the peak moves to its vertex, ``dx = (l[-1] - l[+1]) / (2 (l[-1] - 2 l[0] + l[+1]))``,
-clamped to half a pixel. This is the Taylor (Newton) step on the log heatmap with a diagonal Hessian
-(DARK, Zhang et al. CVPR 2020) and is exact for an axis-aligned Gaussian peak. A peak on the heatmap
-border, or one that is not strictly concave in the log along an axis, is not moved along that axis.
+Candidates are in heatmap pixels (pixel centres at integers; input pixel = (x_hm + 0.5) * stride - 0.5); the
+sub-pixel step is DARK's Newton step on the log heatmap per axis, exact for a Gaussian peak, at most half a pixel.
 """
 
 from __future__ import annotations
@@ -31,13 +18,7 @@ _LOG_EPS = 1e-10
 def find_candidates(
     heatmaps: torch.Tensor | np.ndarray, threshold: float = 0.1, top_m: int = 3, nms_kernel: int = 3
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Top-M local maxima per channel: heatmaps (B, J, h, w) -> xy (B, J, M, 2) heatmap px, scores (B, J, M).
-
-    A candidate is a pixel equal to the maximum of its ``nms_kernel`` neighbourhood and above
-    ``threshold``; candidates are sorted by score (the heatmap value at the peak pixel), best first.
-    Unused slots have score 0 and xy 0. Two equal adjacent maxima (a plateau) both survive. Both outputs
-    are float64 tensors on the heatmaps' device.
-    """
+    """Top-M local maxima per channel: heatmaps (B, J, h, w) -> xy (B, J, M, 2) heatmap px, scores (B, J, M) float64."""
     if nms_kernel < 1 or nms_kernel % 2 == 0:
         raise ValueError(f"nms_kernel must be a positive odd number, got {nms_kernel}")
     if threshold < 0 or top_m < 1:
@@ -69,11 +50,7 @@ def _next_above(threshold: float, dtype: torch.dtype) -> float:
 
 
 def _neighbourhood_max(hm: torch.Tensor, kernel: int) -> torch.Tensor:
-    """Maximum over each pixel's kernel x kernel neighbourhood of (B, J, h, w), outside = -inf: (B, J, h, w).
-
-    Separable shifted maxima, written in place: the same result as a stride-1 max_pool2d, several times
-    faster on the CPU.
-    """
+    """Maximum over each pixel's kernel x kernel neighbourhood (B, J, h, w), outside -inf (max_pool2d, faster)."""
     r = kernel // 2
     h, w = hm.shape[-2:]
     padded = F.pad(hm, (r, r, r, r), value=float("-inf"))
@@ -109,12 +86,7 @@ def _parabola_offset(
 def candidates_to_image(
     xy: torch.Tensor, inverse_affines: torch.Tensor | np.ndarray, stride: float | Sequence[float]
 ) -> torch.Tensor:
-    """Heatmap pixels to image pixels: xy (B, J, M, 2), inverse_affines (B, 2, 3) -> (B, J, M, 2) float64.
-
-    ``stride`` is the input-to-heatmap size ratio (a number, or (sx, sy)); ``inverse_affines[b]`` maps
-    crop-input pixels to image pixels. Uses ``x_in = (x_hm + 0.5) * stride - 0.5`` (module docstring).
-    Slots with score 0 are transformed too and stay meaningless. Runs on xy's device.
-    """
+    """Heatmap px xy (B, J, M, 2), inverse_affines (B, 2, 3) -> image px (B, J, M, 2) float64."""
     xy = torch.as_tensor(xy).to(torch.float64)
     affines = torch.as_tensor(inverse_affines, dtype=torch.float64, device=xy.device).reshape(-1, 2, 3)
     s = torch.as_tensor(np.broadcast_to(np.asarray(stride, dtype=np.float64), (2,)).copy(), device=xy.device)

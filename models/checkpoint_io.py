@@ -1,14 +1,7 @@
-"""Checkpoint files of train.py, checked when read: a versioned envelope around the serialized state.
+"""Checkpoint files of train.py: a versioned envelope (format, version, kind, sha256, payload) around the state.
 
-A file is ``torch.save({"format": FORMAT, "version": VERSION, "kind": "resume" | "weights", "sha256": <hex>,
-"payload": <uint8 tensor>})``, where payload holds the torch-serialized state dict (as a tensor it is stored raw,
-not as a pickled string) and sha256 is its digest. Reading
-checks the envelope, the digest and the keys the kind needs, so a truncated, empty, random or bit-flipped
-file, or a weights file (best.pth) given where a resume checkpoint (last.ckpt) is needed, stops with one
-CheckpointError naming the file. Files of this repo written before the envelope (a plain state dict, no
-checksum) are still read, with a warning: nothing can be checked but their keys.
-
-The payload is unpickled in full (it holds numpy and python RNG states): load only checkpoints you trust.
+A damaged file, or a weights file given where a resume checkpoint is needed, stops with one CheckpointError
+naming the file; pre-envelope files are read with a warning. The payload is unpickled: load only trusted files.
 """
 
 from __future__ import annotations
@@ -20,6 +13,9 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+from torch import nn
 
 from data.formats.atomic_io import atomic_open
 from models.load_errors import CheckpointError
@@ -94,10 +90,7 @@ def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
 
 
 def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
-    """The checked state dict of a train.py file; kind 'resume' also refuses a weights-only file (best.pth).
-
-    Raises FileNotFoundError for a missing file, CheckpointError (a ValueError) for a file that cannot be used.
-    """
+    """The checked state dict of a train.py file; kind 'resume' also refuses a weights-only file (best.pth)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such checkpoint")
@@ -114,3 +107,12 @@ def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
     if found not in KEYS or missing:
         raise CheckpointError(f"{path}: {found!r} checkpoint lacks {', '.join(missing) or 'a known kind'}")
     return state
+
+
+def load_trained_model(path: str | Path, device: torch.device) -> tuple[nn.Module, DictConfig]:
+    """The network of a train.py checkpoint or weights file, in eval mode on device, and its training config."""
+    checkpoint = read_checkpoint(path)  # a missing or damaged file -> FileNotFoundError / CheckpointError
+    train_cfg = OmegaConf.create(checkpoint["config"])
+    model = instantiate(train_cfg.model, pretrained=None)  # the weights come from the checkpoint
+    model.load_state_dict(checkpoint["model"])
+    return model.to(device).eval(), train_cfg

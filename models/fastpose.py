@@ -1,10 +1,4 @@
-"""FastPose heatmap network (AlphaPose's SPPE): ResNet trunk, PixelShuffle, two DUC blocks, 3x3 head.
-
-Channel plan: the trunk's C channels become C/4 after ``PixelShuffle(2)``; each DUC doubles the
-channels with its conv and quarters them with its shuffle (out = 2 * in before the shuffle). For
-ResNet-50+ this is AlphaPose's 2048 -> 512 -> DUC(512, 1024) -> 256 -> DUC(256, 512) -> 128; for
-ResNet-18/34 it is 512 -> 128 -> DUC(128, 256) -> 64 -> DUC(64, 128) -> 32. Output stride 4.
-"""
+"""FastPose heatmap network (AlphaPose's SPPE): ResNet trunk, PixelShuffle, two DUC blocks, 3x3 head; stride 4."""
 
 from __future__ import annotations
 
@@ -34,11 +28,7 @@ class DUC(nn.Module):
 
 
 class FastPose(nn.Module):
-    """Single-person pose network: (B, 3, H, W) crops -> (B, num_joints, H/4, W/4) heatmaps.
-
-    pretrained: None (random trunk), ``"imagenet"`` (torchvision's weights API, downloaded into torch's
-    cache; offline one line) or the path of a torchvision ImageNet ResNet state-dict file.
-    """
+    """Single-person pose network: (B, 3, H, W) crops -> (B, J, H/4, W/4); pretrained None | imagenet | file."""
 
     def __init__(
         self, depth: int = 50, num_joints: int = NUM_JOINTS, se: bool = False, pretrained: str | Path | None = None

@@ -1,10 +1,4 @@
-"""The images-to-2D front of the pipeline: a frame's camera images -> person boxes -> 2D poses per view.
-
-``detector`` (configs/detector/) gives each view's person boxes (N, 5) x, y, w, h, score; ``pose2d``
-(configs/pose2d/) turns images and boxes into ViewDetections. A 2D source that finds the persons itself
-(``needs_boxes = False``, e.g. Keypoint R-CNN) is run without a detector. The seconds spent reading images,
-detecting and estimating 2D poses add up in ``timings`` (the same stage names eval.py prints).
-"""
+"""The images-to-2D front of the pipeline: a frame's camera images -> person boxes -> 2D poses per view."""
 
 from __future__ import annotations
 
@@ -58,9 +52,7 @@ class Pose2DFrontEnd:
 
     @classmethod
     def from_config(cls, cfg: Any, sequence: Sequence) -> "Pose2DFrontEnd | None":
-        """The front end of an eval.yaml config (cfg.pose2d, cfg.detector, built by Hydra's instantiate) for
-        ``sequence``; None for pose2d=none (the dataset gives the 2D poses). A 2D stage without images, or
-        images without a 2D stage, stops with a ConfigError naming the key."""
+        """The front end of an eval.yaml config for ``sequence``; None for pose2d=none; a mismatch is a ConfigError."""
         has_images = bool(sequence.frames) and sequence.frames[0].images is not None
         if not cfg.pose2d.get("_target_"):
             if has_images and not any(len(v) for f in sequence.frames for v in f.views):

@@ -1,10 +1,7 @@
 """Multi-modal heatmap targets of the paper's Eq. 1 (``T + mu C``) and their decoding.
 
-Coordinates follow data/pose2d/crop_transforms.py: pixel centres at integers, an image of width W spans
-[-0.5, W - 0.5]. Crop-input and heatmap pixels share that convention, so a heatmap of width w covers the
-same extent as an input of width W and ``x_hm = (x_in + 0.5) * w / W - 0.5``; a stride-4 heatmap pixel i
-thus sits at the centre of input pixels 4i .. 4i + 3, and a flip x -> W - 1 - x of the input is exactly
-x -> w - 1 - x of the heatmap (flipped targets are mirrored targets, to float precision).
+Pixel centres at integers in crop and heatmap: x_hm = (x_in + 0.5) * w / W - 0.5, so a flip of the input is
+exactly a flip of the heatmap.
 """
 
 from __future__ import annotations
@@ -20,11 +17,7 @@ _LOG_EPS = 1e-10
 
 
 class MultiModalHeatmapCodec:
-    """Encode a person's crop into (23, h, w) targets and decode heatmaps back to crop-input pixels.
-
-    input_size and heatmap_size are (w, h); sigma is the Gaussian std in heatmap pixels; mu is the
-    attention factor of the other persons' joints (mu = 0: the plain single-person target).
-    """
+    """Encode a person's crop into (23, h, w) targets and decode heatmaps; sizes (w, h), sigma in heatmap px."""
 
     def __init__(
         self,
@@ -38,8 +31,6 @@ class MultiModalHeatmapCodec:
         self.sigma = float(sigma)
         self.mu = float(mu)
         self._ratio = np.array(self.heatmap_size, dtype=np.float64) / np.array(self.input_size)
-
-    # --- coordinates -------------------------------------------------------------------------------
 
     def input_to_heatmap(self, points: np.ndarray) -> np.ndarray:
         """Crop-input pixels (..., 2) -> heatmap pixels (..., 2)."""
@@ -55,8 +46,6 @@ class MultiModalHeatmapCodec:
         size = np.array(self.input_size, dtype=np.float64)
         return np.all((points >= -0.5) & (points <= size - 0.5), axis=-1)
 
-    # --- encoding ----------------------------------------------------------------------------------
-
     def gaussians(self, points: np.ndarray) -> np.ndarray:
         """Unit-peak Gaussians at sub-pixel crop-input points (..., 2) -> (..., h, w) float64."""
         centres = self.input_to_heatmap(points)
@@ -67,20 +56,9 @@ class MultiModalHeatmapCodec:
         return gy[..., :, None] * gx[..., None, :]
 
     def encode(self, own: np.ndarray, others: np.ndarray, labelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Target (23, h, w) float32 = T + mu C and weight (23,) float32 from crop-input keypoints.
+        """Target (23, h, w) = T + mu C, weight (23,) of own (23, 3), others (M, 23, 3) x, y, v, labelled (23,).
 
-        own (23, 3) and others (M, 23, 3) are x, y, v in crop-input pixels; labelled (23,) marks the joints
-        the dataset annotates at all. A joint is *present* when labelled[j], v > 0 and it lies on the crop
-        (:meth:`inside`). T_j = Gaussian of the own joint j if present, else 0; C_j = element-wise maximum
-        of the present other persons' Gaussians of joint j (overlapping people do not add up), else 0.
-        The sum is not clipped (values lie in [0, 1 + mu]): Eq. 1 regresses the plain sum, the others'
-        peaks (mu <= 1) never exceed the own one, and clipping would flatten the own peak exactly where
-        two people's joints meet, the crowded case the term is for.
-
-        Weight rule: weight_j = 1 when the own joint j is present, or when any other person's joint j is
-        present (an own joint that is unlabelled or off the crop then still teaches mu C, the issue's "a
-        channel stays in the loss when the own joint is unlabelled but other people's are present");
-        weight_j = 0 when labelled[j] is False or no person's joint j is present.
+        Not clipped: clipping would flatten the own peak where two people's joints meet, the case the term is for.
         """
         own = np.asarray(own, dtype=np.float64).reshape(NUM_JOINTS, 3)
         others = np.asarray(others, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
@@ -104,18 +82,10 @@ class MultiModalHeatmapCodec:
         others = np.delete(keypoints, own_index, axis=0)
         return self.encode(keypoints[own_index], others, labelled)
 
-    # --- decoding ----------------------------------------------------------------------------------
-
     def decode(self, heatmaps: np.ndarray | torch.Tensor, modulate: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """Heatmaps (..., 23, h, w) -> keypoints (..., 23, 2) in crop-input pixels, scores (..., 23).
+        """Heatmaps (..., 23, h, w) -> keypoints (..., 23, 2) crop-input px, scores (..., 23): argmax + DARK step.
 
-        The score is the heatmap maximum; the position is the argmax refined by one Newton step on the
-        log heatmap (DARK, Zhang et al. CVPR 2020), exact for a Gaussian peak. The step is skipped where
-        the log is not concave at the argmax and limited to half a pixel; along an axis where the argmax
-        is on the border no step is taken. With ``modulate`` (DARK's modulation against noisy
-        predictions) the log is taken of the heatmap blurred by a Gaussian of std sigma, but only for
-        argmaxes at least 2 sigma from the border: there the zero-padded blur drags the peak inward by up
-        to a pixel, so those keep the step on the raw heatmap.
+        ``modulate`` blurs first, except within 2 sigma of the border, where the zero-padded blur drags peaks inward.
         """
         if isinstance(heatmaps, torch.Tensor):
             heatmaps = heatmaps.detach().cpu().numpy()

@@ -1,13 +1,7 @@
 """Heatmaps of a batch of person crops: the network in chunks, optional flip test, float16 autocast on CUDA.
 
-Flip test: each crop also goes through the network mirrored; that output is mirrored back and its left and
-right channels swapped (data.keypoints.flip_permutation, feet included), then averaged with the plain
-output. Alignment: SimpleBaseline and AlphaPose shift the mirrored-back heatmap by one pixel because their
-heatmap pixel i sits at input pixel ``stride * i``, so a mirror of the input is not a mirror of the
-heatmap. Here heatmap pixel i is the centre of input pixels ``stride * i .. stride * (i + 1) - 1``
-(models/heatmap_codec.py), the input mirror ``x -> W - 1 - x`` is exactly the heatmap mirror
-``x -> w - 1 - x``, and no shift is applied: a network that is exactly mirror-equivariant gives the same
-heatmaps with and without the flip test.
+No one-pixel shift after the flip (unlike SimpleBaseline): heatmap pixel i is the centre of input pixels
+stride * i .. stride * (i + 1) - 1, so the input mirror is exactly the heatmap mirror.
 """
 
 from __future__ import annotations
@@ -31,11 +25,7 @@ def flip_back(heatmaps: torch.Tensor) -> torch.Tensor:
 def predict_heatmaps(
     model: nn.Module, crops: torch.Tensor, batch_size: int = 32, flip_test: bool = True, amp: bool = False
 ) -> torch.Tensor:
-    """Normalised crops (B, 3, H, W) on the model's device -> float32 heatmaps (B, 23, H/4, W/4) there.
-
-    Passes of ``batch_size`` crops (twice as many images with ``flip_test``); ``amp``: float16 autocast when
-    the crops are on CUDA (ignored elsewhere).
-    """
+    """Normalised crops (B, 3, H, W) on the model's device -> float32 heatmaps (B, 23, H/4, W/4) there."""
     if batch_size < 1:
         raise ValueError(f"batch_size must be >= 1, got {batch_size}")
     use_amp = bool(amp) and crops.device.type == "cuda"

@@ -1,30 +1,9 @@
 """CrowdPose's global maximum joints association (Li et al. CVPR 2019) over the boxes of one image.
 
-Per joint type ``j``:
-
-1. Joint nodes. The candidates of joint ``j`` from all boxes are linked when they come from different
-   boxes and lie closer than an OKS-like radius ``dist_thresh * sigma_j * (s_p + s_q) / 2``, where
-   ``s_p = sqrt(w_p h_p)`` is the scale of box ``p`` and ``sigma_j`` its COCO OKS sigma (CrowdPose's own
-   grouping criterion is ``d <= sigma_j * sqrt(area)``, i.e. ``dist_thresh = 1``). The connected
-   components of these links are the nodes: physical joints seen from several boxes. Components do not
-   depend on the order of the boxes (long chains of close joints in a dense crowd may merge; a lower
-   ``dist_thresh`` splits them).
-2. Matching. A bipartite graph persons x nodes with weight = the score of the person's best candidate in
-   the node (0 if it has none) is solved as a maximum-weight matching
-   (``scipy.optimize.linear_sum_assignment(maximize=True)``), so no two persons claim one node.
-
-A matched person gets the position and score of its own best candidate in its node. An unmatched person
-(its every candidate claimed by someone with more to gain) keeps the position of its best candidate with
-score 0, as CrowdPose keeps only matched joints; the position is kept because COCO's OKS uses the
-coordinates of every predicted keypoint, whatever its score. A person with no candidate gets (0, 0, 0).
-Exact ties between matchings are broken by scipy, i.e. by person order.
-
-Vectorised: the links of all joint types are one array and one connected-components call; a joint type
-where no node is claimed by two persons needs no matching (each person takes its best candidate, which
-is what the matching would give), so scipy's Hungarian runs only on the joint types with a shared node.
-The node columns are in the order of the per-joint formulation (first candidate in person, slot order),
-so ties break as they did there (benchmarks/reference_decoding.py, the earlier loop, is the test's
-reference).
+Per joint type, candidates from different boxes closer than dist_thresh * sigma_j * (s_p + s_q) / 2 (s = sqrt of
+box area) form nodes (connected components); persons x nodes is a maximum-weight matching (weight: the person's
+best candidate score in the node). An unmatched person keeps its best candidate's position with score 0, because
+COCO's OKS uses every predicted coordinate. Only joint types with a node shared by two persons need the matching.
 """
 
 from __future__ import annotations
@@ -40,12 +19,7 @@ from data.keypoints import NUM_JOINTS, OKS_SIGMAS
 def associate_joints(
     xy: np.ndarray, scores: np.ndarray, boxes: np.ndarray, dist_thresh: float = 1.0, sigmas: np.ndarray | None = None
 ) -> np.ndarray:
-    """Associate joint candidates to persons: xy (P, J, M, 2) image px, scores (P, J, M), boxes (P, 4) xywh
-    -> keypoints (P, J, 3) x, y, score.
-
-    ``sigmas`` (J,): per-joint OKS sigmas of the node radius; defaults to the COCO-23 ones (J must be 23).
-    Candidates with score <= 0 are absent.
-    """
+    """Joint candidates xy (P, J, M, 2), scores (P, J, M), boxes (P, 4) xywh -> keypoints (P, J, 3) x, y, score."""
     xy = np.asarray(xy, dtype=np.float64)
     scores = np.asarray(scores, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
@@ -116,13 +90,7 @@ def own_best(xy: np.ndarray, scores: np.ndarray) -> np.ndarray:
 
 
 def joint_nodes(xy: np.ndarray, scores: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Cluster the candidates of each joint type into joint nodes: xy (P, J, M, 2), scores (P, J, M), radii
-    (P, J) -> node labels (P, J, M), unique over all joint types, numbered 0.. in (joint, person, slot) order of
-    each node's first candidate; -1 where there is no candidate (score <= 0).
-
-    Two candidates of one joint type and different persons are linked when their distance is at most the
-    mean of their persons' radii; the nodes are the connected components of the links.
-    """
+    """Candidates xy (P, J, M, 2), scores (P, J, M), radii (P, J) -> node labels (P, J, M) (-1: no candidate)."""
     n_persons, n_joints, m = scores.shape
     pts = xy.transpose(1, 0, 2, 3).reshape(n_joints, n_persons * m, 2)
     valid = (scores > 0).transpose(1, 0, 2).reshape(n_joints, n_persons * m)

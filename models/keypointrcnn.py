@@ -1,10 +1,7 @@
-"""Baseline 2D source: torchvision's Keypoint R-CNN (COCO-17, detects the persons itself) as COCO-23 poses.
+"""Baseline 2D source: torchvision's Keypoint R-CNN (COCO-17) as COCO-23 poses, the 6 foot joints missing.
 
-The 6 foot joints do not exist in COCO-17 and get score 0 (missing). torchvision's keypoint scores are
-the heatmap logits at the chosen location (the mask-head loss is a softmax over the heatmap's positions),
-not probabilities; they are mapped to [0, 1] by ``sigmoid((logit - logit_center) / logit_scale)``. With the
-default centre 2 a joint scores 0.5 where Detectron draws a keypoint (logit > 2); the map is monotone, so
-rankings and per-joint comparisons keep their order.
+Its keypoint scores are heatmap logits; sigmoid((logit - logit_center) / logit_scale) maps them to [0, 1] (the
+default centre 2 gives 0.5 where Detectron draws a keypoint) and keeps their order.
 """
 
 from __future__ import annotations
@@ -29,12 +26,7 @@ def keypoint_scores(logits: np.ndarray, center: float, scale: float) -> np.ndarr
 
 
 class KeypointRCNN:
-    """``stage(images, boxes=None) -> list[ViewDetections]``: persons and COCO-23 keypoints per view.
-
-    weights: ``coco`` (KeypointRCNN_ResNet50_FPN_Weights.DEFAULT through torchvision's weights API), a
-    state-dict file, or None (random, for tests). Persons with box score >= ``score_threshold`` are kept.
-    ``boxes`` is ignored: the model finds the persons itself (``needs_boxes`` is False).
-    """
+    """``stage(images, boxes=None) -> list[ViewDetections]``: persons and COCO-23 keypoints per view (boxes ignored)."""
 
     needs_boxes = False
 

@@ -9,14 +9,7 @@ from data.keypoints import BODY_JOINTS, FOOT_JOINTS, NUM_JOINTS
 
 
 class WeightedHeatmapLoss(nn.Module):
-    """Per-channel heatmap MSE, body channels weighted 1 and the 6 foot channels lambda (Eq. 1).
-
-    With m_bj = w_bj * mean_pixels (P_bj - G_bj)^2 (G = T + mu C from the codec, w the target weight):
-        body = mean over b and the 17 body j of m_bj,   foot = mean over b and the 6 foot j of m_bj,
-        loss = (17 body + 6 lambda foot) / (17 + 6 lambda)
-             = mean_b [sum_body m_bj + lambda sum_foot m_bj] / (17 + 6 lambda),
-    i.e. Eq. 1 averaged over the batch. Channels with weight 0 still count in the normaliser, as in Eq. 1.
-    """
+    """Per-channel heatmap MSE (B, 23, h, w), Eq. 1: (17 body + 6 lambda foot) / (17 + 6 lambda)."""
 
     def __init__(self, foot_weight: float = 1.5) -> None:
         super().__init__()

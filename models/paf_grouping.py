@@ -1,10 +1,6 @@
-"""Greedy part-affinity grouping of BODY_25 joint candidates into persons, in the manner of OpenPose.
+"""Greedy part-affinity grouping of BODY_25 joint candidates into persons, as OpenPose does.
 
-Per limb, candidate pairs are taken by decreasing PAF score, each candidate at most once per limb.
-The limb connections are then folded, limb by limb in the given order, into persons (one candidate
-per joint slot): a connection extends the person holding one of its ends, joins two persons whose
-slots do not overlap, or starts a new person. Persons with too few joints or too low a mean joint
-score are dropped.
+The greedy loops are two numba kernels: in Python they dominate the Shelf grouping stage (warm_up() compiles them).
 """
 
 from __future__ import annotations
@@ -35,10 +31,9 @@ def limb_connections(paf: np.ndarray, min_paf: float) -> np.ndarray:
 
 @numba.njit(cache=True)
 def _greedy_pairs(flat: np.ndarray, start: int, n_a: int, n_b: int, min_paf: float, out: np.ndarray) -> int:
-    """Greedy one-to-one pairs of the (n_a, n_b) PAF block flat[start:], best first, into out (C, 2); -> C.
+    """Greedy one-to-one pairs of the (n_a, n_b) PAF block flat[start:], best first, into out (C, 2) -> C.
 
-    Repeatedly takes the largest score above min_paf among unused rows and columns; the first in
-    row-major order wins a tie, as a stable sort by decreasing score would.
+    A tie goes to the first in row-major order, as a stable sort by decreasing score would.
     """
     used_a = np.zeros(n_a, dtype=np.bool_)
     used_b = np.zeros(n_b, dtype=np.bool_)
@@ -67,9 +62,8 @@ def _assemble(
 ) -> np.ndarray:
     """Fold every limb's greedy connections into persons -> slots (P, J): candidate index per joint or -1.
 
-    A connection extends the person holding one of its ends (a filled slot is a conflict: the earlier,
-    stronger link stays), joins two persons whose slots do not overlap, or starts a person. Merged-away
-    persons stay as empty rows.
+    A connection extends the person holding one end (a filled slot keeps its earlier, stronger link), joins
+    two persons whose slots do not overlap, or starts a person; merged-away persons stay as empty rows.
     """
     num_joints = len(cand_start) - 1
     owner = np.full(cand_start[-1], -1, dtype=np.int64)
@@ -111,13 +105,8 @@ def group_people(
 ) -> np.ndarray:
     """Group joint candidates (J arrays (n_j, 3) x, y, score) by limb PAFs (L arrays (n_a, n_b)) -> (N, J, 3).
 
-    min_paf: a connection needs a PAF score above this (OpenPose's inter-limb threshold, 0.05).
-    min_joints: persons with fewer joint slots filled (of the J input joints) are dropped; 8 sits in
-    the dip of the joint-count histogram of the groups on Shelf, between fragments (2-7 joints) and
-    bodies (10-25, mostly 19+), so arm and head fragments, false persons for the matching, go.
-    min_mean_score: persons whose mean joint (candidate) score is lower are dropped (0.4 as
-    OpenPose's minimum person score, which there also averages in the PAF scores).
-    Persons come out in order of creation; missing joints are all 0.
+    Persons with fewer than min_joints joints (8: the dip between fragments and bodies on Shelf) or a mean
+    joint score under min_mean_score are dropped; persons come out in order of creation, missing joints 0.
     """
     packed = pack_candidates(candidates, pafs, limbs)
     return group_packed(packed, np.array(limbs).reshape(-1, 2), min_paf, min_joints, min_mean_score)
@@ -169,11 +158,7 @@ def _persons(
 
 
 def grouped_to_view_detections(persons: np.ndarray, margin: float = 0.1) -> ViewDetections:
-    """BODY_25 persons (N, 25, 3) -> ViewDetections in COCO-23 (neck and mid-hip dropped).
-
-    bbox: the box around the COCO-23 joints with score > 0, grown by `margin` times its width and
-    height on each side; score: their mean score (see keypoints_to_view_detections).
-    """
+    """BODY_25 persons (N, 25, 3) -> COCO-23 ViewDetections, boxes grown by margin x their size on each side."""
     persons = np.asarray(persons, dtype=np.float64).reshape(-1, BODY25_NUM_JOINTS, 3)
     return keypoints_to_view_detections(to_coco23(persons, BODY25_TO_COCO23), margin)
 
@@ -185,12 +170,13 @@ def group_view(
     min_mean_score: float = 0.4,
     margin: float = 0.1,
 ) -> ViewDetections:
-    """One camera frame's BODY_25 candidates grouped into persons, as COCO-23 ViewDetections.
-
-    :func:`group_people` (of the reader's packed arrays where it has them) then
-    :func:`grouped_to_view_detections`; the grouper ``configs/dataset/shelf.yaml`` gives
-    :func:`data.datasets.shelf.load_shelf` (a dataset loader may not import this stage).
-    """
+    """One camera frame's BODY_25 candidates grouped into persons -> COCO-23 ViewDetections (the Shelf grouper)."""
     packed = frame.packed if frame.packed is not None else pack_candidates(frame.candidates, frame.pafs)
     persons = group_packed(packed, BODY25_LIMB_ARRAY, min_paf, min_joints, min_mean_score)
     return grouped_to_view_detections(persons, margin)
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the two kernels on a tiny view."""
+    one = np.array([[10.0, 10.0, 0.9]])
+    group_people([one] * BODY25_NUM_JOINTS, [np.ones((1, 1))] * len(BODY25_PAF_LIMBS), min_joints=1)

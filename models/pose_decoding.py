@@ -1,10 +1,5 @@
-"""Heatmaps of person crops -> keypoints in image pixels: the decoding shared by the SPPE stage
-(models/sppe_stage.py) and the COCO evaluation of a checkpoint (evaluation/pose2d_eval.py).
-
-``single``: one peak per joint (:meth:`models.heatmap_codec.MultiModalHeatmapCodec.decode`, DARK refinement),
-as train.py's validation. ``association``: the paper's joint-candidate SPPE, the top-M local maxima per joint
-(models/candidates.py, in torch on the heatmaps' device, all crops at once), then CrowdPose's global joint
-association over the crops of each image (models/joint_association.py), so two boxes never claim one joint.
+"""Heatmaps of person crops -> keypoints in image pixels (``single``: one peak per joint; ``association``: candidates
+then the global joint association), shared by the SPPE stage and evaluation/pose2d_eval.py.
 """
 
 from __future__ import annotations
@@ -42,8 +37,7 @@ def joint_candidates(
     threshold: float = 0.1,
     top_m: int = 3,
 ) -> np.ndarray:
-    """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3) -> candidates (B, 23, M, 3) x, y, score in
-    image px: the top-M local maxima of each joint channel above threshold (score 0: no candidate)."""
+    """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3) -> candidates (B, 23, M, 3) x, y, score in image px."""
     xy, scores = find_candidates(heatmaps, threshold=threshold, top_m=top_m)
     stride = np.array(codec.input_size, dtype=np.float64) / np.array(codec.heatmap_size)
     image_xy = candidates_to_image(xy, inverse_affines, stride)
@@ -69,15 +63,9 @@ def associate_by_image(
 def separate_pairs(
     keypoints: np.ndarray, candidates: np.ndarray, boxes: np.ndarray, min_sep: float = 0.05, min_ratio: float = 0.3
 ) -> np.ndarray:
-    """Keypoints (B, 23, 3), their candidates (B, 23, M, 3), boxes (B, 4) x, y, w, h -> a copy (B, 23, 3) where a
-    person's left and right joint of a pair no longer sit on one spot (closer than min_sep x box height).
+    """Keypoints (B, 23, 3), candidates (B, 23, M, 3), boxes (B, 4) xywh -> (B, 23, 3) with left/right joints apart.
 
-    A network that cannot tell a person's left arm from the right gives both channels two near-equal peaks,
-    and each channel's best is then often the same arm: one arm is lost. Where that happens, the side whose
-    best other candidate (min_sep x height or more from the kept joint, inside the box grown by a tenth,
-    scoring at least min_ratio of the joint it replaces) scores higher moves there. Which arm gets which label
-    stays the network's guess; the 3D stage makes the labels consistent (reconstruction/solver/side_labels.py).
-    The face's pairs (eyes, ears) are left alone: they sit closer than min_sep on every person.
+    A network unsure of a person's sides gives both channels the same arm; the side with the better other one moves.
     """
     out = np.array(keypoints, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)

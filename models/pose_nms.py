@@ -1,17 +1,7 @@
 """Pose-NMS of one image's persons: duplicate boxes of one person merged into one pose (AlphaPose's idea, simplified).
 
-Greedy, best person first (person score, ties by index). The kept person ``a`` is the reference: another
-remaining person ``b`` is its duplicate when their object keypoint similarity exceeds ``oks``,
-
-    OKS(a, b) = mean over the joints j that a sees (score > 0) of exp(-d_j^2 / (2 area_a (2 sigma_j)^2)),
-
-with d_j the distance between a's and b's joint j (b's coordinates count whatever b's score, as in COCO's
-OKS), area_a the area w h of a's box and sigma_j the COCO-23 sigmas (data/keypoints.py). The duplicates are
-removed and merged into ``a``: each joint that ``a`` sees becomes the score-weighted mean position of the
-group's joints that agree with it (per-joint similarity above ``oks``, score > 0), with the highest of their
-scores; a joint ``a`` does not see stays as it is. AlphaPose also merges by a score-weighted mean, but
-groups by a learned pose distance plus a box term. A person whose reference sees no joint has OKS 0 with
-everyone and is never merged.
+Greedy, best person first: b duplicates the kept a when OKS(a, b) over the joints a sees (a's box area, COCO-23
+sigmas) exceeds ``oks``; each joint a sees becomes the score-weighted mean of the group's agreeing joints.
 """
 
 from __future__ import annotations

@@ -1,11 +1,4 @@
-"""ResNet trunk (18/34/50/101/152): torchvision's ResNet without its classifier, optional squeeze-excitation.
-
-The trunk is ``torchvision.models.resnet<depth>(weights=None)`` minus ``avgpool`` and ``fc``, so its state
-dict has torchvision's names (``conv1``, ``bn1``, ``layer1`` ... ``layer4``) and returns the stride-32
-feature map. ``se=True`` adds a squeeze-excitation gate to every block as ``<block>.se`` (``fc.0``, ``fc.2``),
-applied to the output of the block's last BatchNorm, before the residual sum. Weights: ``load_pretrained``
-(a local torchvision ImageNet state dict) or ``load_imagenet`` (torchvision's weights API).
-"""
+"""ResNet trunk (18/34/50/101/152): torchvision's ResNet without avgpool and fc, optional squeeze-excitation gates."""
 
 from __future__ import annotations
 
@@ -83,11 +76,7 @@ def _is_se_key(name: str) -> bool:
 
 
 def load_trunk_state(model: ResNet, state: dict[str, Tensor], source: str) -> list[str]:
-    """Load a torchvision ImageNet state dict into ``model``; returns the SE keys left new.
-
-    ``fc.*`` keys are dropped; every other key must match a trunk key with the same shape, and every
-    trunk key except the squeeze-excitation ones must be present, else a ``ValueError`` names ``source``.
-    """
+    """Load a torchvision ImageNet state dict into model -> the SE keys left new; ValueError naming source."""
     state = {k: v for k, v in state.items() if not k.startswith("fc.")}
     own = model.state_dict()
     check_state_fits(own, state, source, f"a ResNet-{model.depth} trunk", may_miss=_is_se_key)

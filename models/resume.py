@@ -1,11 +1,4 @@
-"""The config of a resumed training run: the one stored in its checkpoint, changed only where that is safe.
-
-``python train.py resume=<run>/checkpoints/last.ckpt`` continues the stored run whatever the defaults say.
-An override on the resume command is checked against the stored config: one that changes nothing is
-accepted (repeating the original overrides is fine), one of the keys listed in ``resume_may_change``
-(train.yaml: the length of the run, logging, devices) is applied, any other (model, data, loss, optimizer,
-batch size, seed ...) stops the run with one line, because the checkpoint's state would not fit it.
-"""
+"""The config of a resumed training run: the checkpoint's, changed only by overrides listed in resume_may_change."""
 
 from __future__ import annotations
 
@@ -37,12 +30,7 @@ def _group_unchanged(
 def resume_config(
     cfg: DictConfig, checkpoint: dict, overrides: list[str], choices: dict[str, str], path: str | Path
 ) -> DictConfig:
-    """The stored config of checkpoint (read from path) with the safe overrides of this command applied.
-
-    cfg: the config Hydra composed for the resume command; overrides: its command-line overrides
-    (hydra.overrides.task); choices: its config-group choices. Keys added to train.yaml since the checkpoint
-    was written take their defaults.
-    """
+    """The checkpoint's stored config with this command's safe overrides (hydra.overrides.task) applied."""
     stored = OmegaConf.create(checkpoint["config"])
     safe = set(cfg.resume_may_change)
     updates: dict[str, Any] = {}

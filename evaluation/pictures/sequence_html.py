@@ -1,10 +1,6 @@
-"""A self-contained HTML viewer of a sequence: 3D skeletons per frame coloured by id, the cameras, the
-ground grid; a frame slider, play/pause, mouse orbit and zoom.
+"""A self-contained HTML viewer of a sequence (sequence_view.html with the data as JSON; no network needed).
 
-The page is ``sequence_view.html`` (beside this module: inline JS drawing on a 2D canvas) with the data
-embedded as JSON in ``<script type="application/json" id="sequence-data">``; it needs no network.
-Coordinates are rounded to the millimetre; a sequence whose data would exceed ``max_bytes`` is shown
-every k-th frame, with k the smallest that fits (the page says so).
+A sequence whose data would exceed ``max_mb`` is shown every k-th frame, k the smallest that fits.
 """
 
 from __future__ import annotations
@@ -13,7 +9,7 @@ import html
 import json
 import math
 from pathlib import Path
-from typing import Iterable
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -142,14 +138,7 @@ def sequence_html(
         every = max(every + 1, math.ceil(every * len(data) / max(budget, 1.0)))
 
 
-def write_sequence_html(
-    path: str | Path,
-    frames: Iterable[tuple],
-    rig: Rig,
-    title: str = "sequence",
-    max_mb: float = DEFAULT_MAX_MB,
-    id_note: str | None = None,
-) -> Path:
-    """Write the viewer of (frame, poses (P, 23, 4), ids (P,) or None) tuples atomically -> path."""
-    atomic_write_text(path, sequence_html(frames, rig, title, max_mb, id_note))
+def write_sequence_html(path: str | Path, frames: Iterable[tuple], rig: Rig, **options: Any) -> Path:
+    """Write the viewer of (frame, poses (P, 23, 4), ids (P,) or None) tuples atomically (options: of sequence_html)."""
+    atomic_write_text(path, sequence_html(frames, rig, **options))
     return Path(path)

@@ -1,9 +1,6 @@
-"""Pictures over time: the scrubbable HTML viewer and the ground trajectories PNG of a sequence.
+"""Pictures over time: the HTML viewer and the ground trajectories PNG of a sequence.
 
 ``python -m evaluation.pictures.sequence_view <run dir>/poses3d.json <cameras> [-o out.html] [--png traj.png]``
-(any calibration ``data.geometry.calibration.load_rig`` reads); eval.py writes both into
-``<run dir>/pictures/`` with ``vis_sequence=true``. Frames are (frame, poses (P, 23, 4), ids (P,) or None)
-tuples, ids None meaning tracking off (the index in the frame stands for the id).
 """
 
 from __future__ import annotations
@@ -34,17 +31,13 @@ FILE_ID_NOTE = "ids as written in {name}: track ids when the run tracked, else e
 
 
 def save_sequence_pictures(
-    out_dir: str | Path,
-    results: Sequence[FrameResult],
-    rig: Rig,
-    title: str = "sequence",
-    max_mb: float = DEFAULT_MAX_MB,
+    out_dir: str | Path, results: Sequence[FrameResult], rig: Rig, title: str, max_mb: float
 ) -> list[Path]:
     """sequence.html and trajectories.png of an eval.py run's results into out_dir -> their paths."""
     frames = [(r.frame, r.poses3d, r.ids) for r in results]
     out_dir = Path(out_dir)
     return [
-        write_sequence_html(out_dir / HTML_NAME, frames, rig, title, max_mb),
+        write_sequence_html(out_dir / HTML_NAME, frames, rig, title=title, max_mb=max_mb),
         plot_trajectories(out_dir / PNG_NAME, frames, rig),
     ]
 
@@ -75,7 +68,8 @@ def main(argv: list[str] | None = None) -> list[Path]:
         raise SystemExit(f"error: {err}") from None
     output = args.output or args.poses3d.with_name(HTML_NAME)
     note = FILE_ID_NOTE.format(name=args.poses3d.name)
-    paths = [write_sequence_html(output, frames, rig, args.title or str(args.poses3d), args.max_mb, note)]
+    title = args.title or str(args.poses3d)
+    paths = [write_sequence_html(output, frames, rig, title=title, max_mb=args.max_mb, id_note=note)]
     if args.png:
         paths.append(plot_trajectories(args.png, frames, rig))
     print("Wrote " + ", ".join(str(p) for p in paths))

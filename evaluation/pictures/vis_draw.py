@@ -1,9 +1,4 @@
-"""Skeletons drawn over camera images: per-person colours, reprojections, an image grid, image loading.
-
-Images are RGB ``uint8`` arrays (H, W, 3). A projected pixel (u, v) of a camera lands at
-(u * sx, v * sy) of an image that was resized from the camera size by (sx, sy) (e.g. Shelf's pictures,
-stretched from 1032x776 to 1920x1080).
-"""
+"""Skeletons drawn over RGB uint8 camera images (H, W, 3), possibly resized by (sx, sy) from the camera size."""
 
 from __future__ import annotations
 
@@ -24,11 +19,7 @@ _SHIFT = 4  # cv2 sub-pixel bits: coordinates are drawn at 1/16 px
 
 
 def person_colors(n: int) -> np.ndarray:
-    """n distinct colours, the same for person p in every picture: -> (n, 3) RGB floats in [0, 1].
-
-    tab10 then the light tab20 shades, greys left out (grey means "unmatched" and is the empty canvas);
-    beyond 18 persons, golden-ratio hue steps.
-    """
+    """n distinct colours, the same for person p in every picture -> (n, 3) RGB in [0, 1], no grey."""
     tab10 = np.asarray(colormaps["tab10"].colors, dtype=np.float64)
     light = np.asarray(colormaps["tab20"].colors, dtype=np.float64)[1::2]
     palette = np.concatenate([np.delete(tab10, 7, axis=0), np.delete(light, 7, axis=0)])
@@ -47,11 +38,7 @@ def _rgb255(color: np.ndarray | tuple) -> tuple[int, int, int]:
 def project_skeleton(
     camera: Camera, pose: np.ndarray, scale: tuple[float, float] = (1.0, 1.0)
 ) -> tuple[np.ndarray, np.ndarray]:
-    """One 3D pose into a (resized) image: pose (J, 4) x, y, z, score -> pixels (J, 2), drawable (J,).
-
-    A joint is drawable when its score is > 0, it is finite and in front of the camera within the
-    calibrated field of view (the distortion polynomial folds farther points back into the image).
-    """
+    """One 3D pose (J, 4) into a (resized) image -> pixels (J, 2), drawable (J,) (in the field of view)."""
     pose = np.asarray(pose, dtype=np.float64)
     xyz = np.where(np.isfinite(pose[:, :3]), pose[:, :3], 0.0)
     ok = (pose[:, 3] > 0) & np.isfinite(pose).all(axis=1)
@@ -101,12 +88,7 @@ def draw_reprojections(
     image_scale: list[tuple[float, float]] | None = None,
     gt_poses: np.ndarray | None = None,
 ) -> list[np.ndarray]:
-    """3D poses (P, J, 4) reprojected (with distortion) over every view: V images -> V RGB (H, W, 3).
-
-    Person p has colour ``person_colors(P)[p]`` in every view; ground truth (G, J, 4), when given, is
-    drawn first in thin black. A view without an image gets a grey canvas of its camera size.
-    ``image_scale`` is (sx, sy) per view, from camera pixels to image pixels (default (1, 1)).
-    """
+    """3D poses (P, J, 4) reprojected (with distortion) over V images -> V RGB (H, W, 3); GT (G, J, 4) in thin black."""
     poses3d = np.asarray(poses3d, dtype=np.float64)
     colors = [_rgb255(c) for c in person_colors(len(poses3d))]
     scales = image_scale if image_scale is not None else [(1.0, 1.0)] * len(rig)
@@ -148,10 +130,7 @@ def image_grid(images: list[np.ndarray], labels: list[str] | None = None, tile_w
 def load_view_images(
     folder: str | Path, rig: Rig, pattern: str = "cam{i}.png"
 ) -> tuple[list[np.ndarray | None], list[tuple[float, float]]]:
-    """One RGB image per camera, ``pattern`` formatted with i (view index) and name -> (images, scales).
-
-    scales[v] = (image w / camera w, image h / camera h); a missing file gives None and (1, 1).
-    """
+    """One RGB image per camera (pattern with i, name) -> images, scales (V, 2) image / camera size."""
     images, scales = [], []
     for i, camera in enumerate(rig):
         path = Path(folder) / pattern.format(i=i, name=camera.name)

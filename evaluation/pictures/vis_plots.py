@@ -1,8 +1,4 @@
-"""Matplotlib pictures of one frame: the 3D scene, the top view and the feet on the ground plane.
-
-Figures are built with :class:`matplotlib.figure.Figure` (no pyplot, no display, Agg canvas).
-Estimates are solid in ``person_colors``; ground truth is dashed black; cameras are markers.
-"""
+"""Matplotlib figures (no pyplot) of one frame: the 3D scene, the top view and the feet on the ground plane."""
 
 from __future__ import annotations
 
@@ -122,11 +118,7 @@ def feet_owner(assignment: np.ndarray, view: int, num_detections: int) -> np.nda
 def plot_feet_on_ground(
     views: list[ViewDetections], rig: Rig, assignment: np.ndarray, features: list[FeetFeatures], title: str = ""
 ) -> Figure:
-    """Each detection's feet location p on z = 0, coloured by its person in the (P, V) assignment.
-
-    Unmatched detections are grey crosses; the marker shape is the camera; a thin line joins the
-    left and right foot where both are known. Detections without a location are counted in the title.
-    """
+    """Each detection's feet location on z = 0, coloured by its person in the (P, V) assignment (unmatched: grey)."""
     if not len(views) == len(features) == len(rig) or any(len(d) != len(f) for d, f in zip(views, features)):
         raise ValueError("views, features and rig must agree: one FeetFeatures per view, one row per detection")
     assignment = np.asarray(assignment, dtype=np.int64).reshape(-1, len(rig))

@@ -1,12 +1,11 @@
-"""The tracks' ground trajectories seen from above (matplotlib): per id the x-y path of its root, start
-and end marked, the cameras with their viewing direction; colours as in the HTML viewer."""
+"""The tracks' ground trajectories seen from above (matplotlib); colours as in the HTML viewer."""
 
 from __future__ import annotations
 
 import io
 import math
 from pathlib import Path
-from typing import Iterable
+from typing import Any, Iterable
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -20,6 +19,7 @@ FIGSIZE_IN = (10.0, 8.0)
 DPI = 100  # the PNG is FIGSIZE_IN * DPI pixels: (1000, 800)
 START_MARKER, END_MARKER = "o", "s"
 START_SIZE, END_SIZE = 10.0, 5.0  # points
+START = dict(marker=START_MARKER, markersize=START_SIZE, markerfacecolor="none")  # a ring
 ARROW_FRACTION = 0.06  # a camera's viewing-direction arrow, as a fraction of the plot's extent
 LEGEND_ROWS = 30  # legend entries per column
 
@@ -34,9 +34,8 @@ def ground_tracks(frames: list[SequenceFrame]) -> dict[int, np.ndarray]:
 
 
 def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> Figure:
-    """The top view of (frame, poses (P, 23, 4), ids (P,) or None) tuples: a path per id (broken where
-    it is absent; dots without tracking), start (ring) and end (square) marked, cameras as named triangles
-    with an arrow along the viewing direction."""
+    """The top view of (frame, poses (P, 23, 4), ids (P,) or None) tuples: a path per id (dots without tracking),
+    start (ring) and end (square) marked, the cameras with their viewing direction."""
     seq, tracked = sequence_frames(frames)
     tracks = ground_tracks(seq)
     colors = id_colors(tracks)
@@ -51,22 +50,22 @@ def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> F
         else:  # an id is an index in each frame: joining them would join different persons
             ax.plot(*xy.T, color=colors[i], marker=".", markersize=3, linestyle="none")
         ax.plot(*xy[seen[-1]], marker=END_MARKER, color=colors[i], markersize=END_SIZE, linestyle="none")
-        ax.plot(
-            *xy[seen[0]],
-            marker=START_MARKER,
-            color=colors[i],
-            markersize=START_SIZE,
-            markerfacecolor="none",
-            linestyle="none",
-        )  # a ring over the end: a standing person shows both
+        ax.plot(*xy[seen[0]], color=colors[i], linestyle="none", **START)  # a ring over the end: both show
         ax.annotate(str(i), xy[seen[-1]], xytext=(4, 4), textcoords="offset points", fontsize=7, color=colors[i])
-    points = np.concatenate(
-        [
-            np.zeros((1, 2)),
-            *(xy[np.isfinite(xy).all(axis=1)] for xy in tracks.values()),
-            *(c.center[None, :2] for c in rig),
-        ]
-    )
+    _draw_cameras(ax, rig, tracks)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
+    kind = "tracks" if tracked else "per-frame ids (tracking off)"
+    ax.set_title(title or f"ground trajectories of the root (mid-hip), {len(tracks)} {kind}, {len(seq)} frames")
+    _legend(fig, tracks, colors)
+    return fig
+
+
+def _draw_cameras(ax: Any, rig: Rig, tracks: dict[int, np.ndarray]) -> None:
+    """Each camera as a named triangle with an arrow along its viewing direction, scaled to the plot's extent."""
+    tracked = [xy[np.isfinite(xy).all(axis=1)] for xy in tracks.values()]
+    points = np.concatenate([np.zeros((1, 2)), *tracked, *(c.center[None, :2] for c in rig)])
     arrow = ARROW_FRACTION * max(float(np.ptp(points, axis=0).max()), 1.0)
     for cam in rig:
         c, axis = cam.center, cam.R[2]  # the optical axis in the world
@@ -74,22 +73,12 @@ def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> F
         heading = axis[:2] / max(float(np.linalg.norm(axis[:2])), 1e-9)
         ax.annotate("", c[:2] + arrow * heading, c[:2], arrowprops=dict(arrowstyle="->", color="black"))
         ax.annotate(cam.name, c[:2], xytext=(5, -10), textcoords="offset points", fontsize=8)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
-    kind = "tracks" if tracked else "per-frame ids (tracking off)"
-    ax.set_title(title or f"ground trajectories of the root (mid-hip), {len(tracks)} {kind}, {len(seq)} frames")
+
+
+def _legend(fig: Figure, tracks: dict[int, np.ndarray], colors: dict) -> None:
+    """The legend right of the plot: start, end, camera, then one entry per id."""
     handles = [
-        Line2D(
-            [],
-            [],
-            marker=START_MARKER,
-            color="black",
-            markersize=START_SIZE,
-            markerfacecolor="none",
-            linestyle="none",
-            label="start",
-        ),
+        Line2D([], [], color="black", linestyle="none", label="start", **START),
         Line2D([], [], marker=END_MARKER, color="black", markersize=END_SIZE, linestyle="none", label="end"),
         Line2D([], [], marker="^", color="black", linestyle="none", label="camera"),
     ]
@@ -102,7 +91,6 @@ def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> F
         ncol=math.ceil(len(handles) / LEGEND_ROWS),
         frameon=False,
     )
-    return fig
 
 
 def plot_trajectories(path: str | Path, frames: Iterable[tuple], rig: Rig, title: str = "") -> Path:

@@ -1,9 +1,4 @@
-"""Pictures of one reconstructed frame: reprojections over the camera images, 3D scene, top view, feet.
-
-``save_frame_pictures`` writes ``frame_<n>_views.png``, ``frame_<n>_3d.png``, ``frame_<n>_top.png`` and
-``frame_<n>_feet.png``; ``save_run_pictures`` picks the frame from an eval.py run. The drawing helpers
-live in :mod:`evaluation.pictures.vis_draw` (images) and :mod:`evaluation.pictures.vis_plots` (matplotlib figures).
-"""
+"""Pictures of one reconstructed frame: reprojections over the camera images, 3D scene, top view, feet."""
 
 from __future__ import annotations
 
@@ -66,12 +61,7 @@ def save_frame_pictures(
     image_scale: list[tuple[float, float]] | None = None,
     matcher=None,
 ) -> list[Path]:
-    """The four pictures of one frame into out_dir -> their paths (views, 3d, top, feet).
-
-    result.poses3d (P, 23, 4), result.assignment (P, V); frame.gt_poses (G, 23, 4) is drawn where known.
-    images: V RGB images or None (grey canvas); image_scale: (sx, sy) per view from camera pixels to
-    image pixels. matcher: anything with ``.features(views, rig)`` (a FeetMatcher), else FeetMatcher().
-    """
+    """The four pictures of one frame into out_dir -> paths; poses3d (P, 23, 4), assignment (P, V)."""
     rig, out_dir, n = sequence.rig, Path(out_dir), result.frame
     if len(frame.views) != len(rig):
         raise ValueError(f"frame {frame.index} has {len(frame.views)} views, the rig {len(rig)}")
@@ -96,11 +86,7 @@ def save_run_pictures(
     pattern: str = "cam{i}.png",
     matcher=None,
 ) -> list[Path]:
-    """Pictures of one frame of an eval.py run (``frame`` = its index, None = the first result).
-
-    With ``images_dir``, the camera images are read by :func:`load_view_images` with ``pattern``; without it,
-    the frame's own images where the dataset has them (dataset=images, render=true), else grey canvases.
-    """
+    """Pictures of one frame of an eval.py run (``frame`` = its index, None = the first result) -> their paths."""
     if not results:
         raise ValueError("no reconstructed frame to draw")
     result = results[0] if frame is None else next((r for r in results if r.frame == frame), None)

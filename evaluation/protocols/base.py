@@ -1,10 +1,4 @@
-"""Dataset protocols: the benchmark-specific metrics attached to a Sequence (see :mod:`evaluation.protocols`).
-
-The generic evaluation (evaluation/sequence_eval.py) scores every dataset the same way; a benchmark
-with its own published protocol (Shelf PCP, Panoptic AP, Wildtrack COCO AP of reprojections) adds an
-object with this interface to ``Sequence.protocols``. eval.py feeds it every frame, prints its report
-and writes its summary into metrics.json under its name.
-"""
+"""Dataset protocols: the benchmark-specific metrics attached to a Sequence (see :mod:`evaluation.protocols`)."""
 
 from __future__ import annotations
 

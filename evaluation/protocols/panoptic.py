@@ -1,40 +1,9 @@
-"""CMU Panoptic protocols: VoxelPose's AP / recall / MPJPE, and the paper's root-aligned MPJPE and PCP.
+"""CMU Panoptic protocols on 15 joints: VoxelPose's AP / recall / MPJPE, the paper's root-aligned MPJPE and PCP.
 
-All three work on the 15 Panoptic joints (the first 15 of coco19, metres, column 3 = validity or
-confidence): 0 neck, 1 nose, 2 mid-hip, 3 l-shoulder, 4 l-elbow, 5 l-wrist, 6 l-hip, 7 l-knee,
-8 l-ankle, 9 r-shoulder, 10 r-elbow, 11 r-wrist, 12 r-hip, 13 r-knee, 14 r-ankle. COCO-23 predictions
-are mapped with :func:`coco23_to_panoptic15`; the ground truth is best taken as stored (the loader keeps
-it in ``Sequence.protocol_inputs``), whose neck is within ~1.5 cm of the mid-shoulders.
-
-VoxelPose AP (Tu et al., ECCV 2020, ``lib/dataset/panoptic.py: evaluate``), reproduced here:
-- GT persons whose mid-hip (root) is invalid are not evaluated (VoxelPose skips them when loading);
-  frames without GT persons are skipped with their predictions.
-- Each prediction is assigned to the GT person of its frame with the smallest MPJPE over the
-  GT-valid joints (here: valid in both, as our predictions can miss joints; VoxelPose's never do).
-- Over the whole sequence, predictions sorted by score (descending): a true positive at threshold t
-  when its MPJPE < t and its GT person was not taken by a higher-scored one, else a false positive.
-- AP = area under the precision-recall curve with precision made monotone from the right (VOC):
-  sum over true positives of (1 / #GT) x interpolated precision there; t = 25, 50, ..., 150 mm.
-  VoxelPose adds 1e-5 to the denominators, so its perfect AP reads 99.999; ours reads 100.
-- recall@t: share of GT persons taken at t; recall@500 mm: share of GT persons that are the nearest
-  GT of some prediction within 500 mm (no score order, no one-to-one).
-- MPJPE: mean over the true positives at 500 mm (in score order) of their MPJPE.
-
-Root-aligned MPJPE (paper Table 4; the paper does not state the protocol, this is our reading): each GT
-person is paired one-to-one with a prediction by Hungarian matching on mean joint distance (pairs
-farther than ``max_dist_m`` unpaired); both poses are translated to put the mean of their two hips at
-the origin (not Panoptic's own mid-hip joint, which our COCO-23 predictions lack: up to centimetres
-apart, that offset would be added to every joint);
-13 joints compared: nose ("Head"), shoulders, elbows, wrists, hips, knees and ankles ("Foot": coco19
-has no feet). Reported per group, over the 13 joints, and as the mean of the 7 groups (the paper's
-"Average" 50.0 is 49.9 as the mean of its groups, 50.3 over 13 joints).
-
-PCP (paper Table 5) on the same pairs, absolute coordinates, alpha = 0.5: a part is correct when the
-mean of its two end-point errors is at most alpha x its GT length. Parts: head = neck -> nose (coco19
-has no head top), torso = neck -> mid-hip, upper arms = shoulder -> elbow, lower arms = elbow -> wrist,
-upper legs = hip -> knee, lower legs = knee -> ankle. Parts with an invalid GT end are not counted; a
-missing predicted end or an unpaired GT person makes the part wrong. The average is the mean of the 6
-part groups (the paper's 91.3 is exactly that).
+VoxelPose AP: predictions in score order are true positives at t when their MPJPE to their nearest unclaimed GT
+is under t (t = 25..150 mm, VOC-style AP, without VoxelPose's 1e-5, so perfect reads 100). Root-aligned MPJPE
+and PCP (paper Tables 4-5, our reading) pair persons one-to-one (Hungarian) and align at the mean of the hips,
+which COCO-23 predictions have (Panoptic's own mid-hip they lack).
 """
 
 from __future__ import annotations
@@ -44,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from data.keypoints import JOINT_INDEX
-from evaluation.association import match_to_ground_truth
+from evaluation.association import match_to_ground_truth, mean_joint_distance
 from evaluation.mpjpe import joint_errors
 from evaluation.report import format_table
 
@@ -52,22 +21,9 @@ if TYPE_CHECKING:
     from data.multiview import Frame
     from reconstruction.pipeline import FrameResult
 
-PANOPTIC15_NAMES: tuple[str, ...] = (
-    "neck",
-    "nose",
-    "mid_hip",
-    "left_shoulder",
-    "left_elbow",
-    "left_wrist",
-    "left_hip",
-    "left_knee",
-    "left_ankle",
-    "right_shoulder",
-    "right_elbow",
-    "right_wrist",
-    "right_hip",
-    "right_knee",
-    "right_ankle",
+PANOPTIC15_NAMES: tuple[str, ...] = tuple(
+    "neck nose mid_hip left_shoulder left_elbow left_wrist left_hip left_knee left_ankle "
+    "right_shoulder right_elbow right_wrist right_hip right_knee right_ankle".split()
 )
 NECK, NOSE, MID_HIP = 0, 1, 2
 ROOT = (6, 12)  # root-aligned MPJPE: mean of left and right hip, the same construction on both sides
@@ -95,11 +51,7 @@ PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {
 
 
 def coco23_to_panoptic15(poses: np.ndarray) -> np.ndarray:
-    """COCO-23 poses to the 15 Panoptic joints: (..., 23, 4) -> (..., 15, 4).
-
-    Joints other than neck and mid-hip are copied by name. Neck = mean of the two shoulders and
-    mid-hip = mean of the two hips, valid (column 3 = the lower of the two) only when both are.
-    """
+    """COCO-23 poses (..., 23, 4) -> (..., 15, 4); neck, mid-hip: the means of shoulders, hips."""
     poses = np.asarray(poses, dtype=np.float64)
     out = np.zeros(poses.shape[:-2] + (15, poses.shape[-1]))
     for j, name in enumerate(PANOPTIC15_NAMES):
@@ -113,25 +65,10 @@ def coco23_to_panoptic15(poses: np.ndarray) -> np.ndarray:
     return out
 
 
-def pairwise_mpjpe(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """MPJPE (m) of every prediction to every GT person over joints valid in both: (P, J, 4), (G, J, 4) -> (P, G).
-
-    inf where a pair shares no valid joint.
-    """
-    pred, gt = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
-    dist = np.linalg.norm(pred[:, None, :, :3] - gt[None, :, :, :3], axis=-1)
-    both = (pred[:, None, :, 3] > 0) & (gt[None, :, :, 3] > 0)
-    count = both.sum(-1)
-    return np.where(count > 0, np.where(both, dist, 0.0).sum(-1) / np.maximum(count, 1), np.inf)
-
-
 def average_precision(
     scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, num_gt: int, threshold: float
 ) -> tuple[float, float]:
-    """VoxelPose AP and recall (fractions) at one threshold: scores, errors, gt_index (N,) -> (ap, recall).
-
-    errors are each prediction's MPJPE to its nearest GT, whose sequence-wide index is gt_index.
-    """
+    """VoxelPose AP and recall (fractions) at one threshold: scores, errors, gt_index (N,) -> (ap, recall)."""
     if num_gt == 0:
         return float("nan"), float("nan")
     order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
@@ -170,7 +107,7 @@ class PanopticAPEvaluator:
             return
         self.num_pred += len(pred)
         if len(pred):
-            dist = pairwise_mpjpe(pred, gt)
+            dist = mean_joint_distance(pred, gt)
             nearest = np.argmin(dist, axis=1)
             self.errors += (1000.0 * dist[np.arange(len(pred)), nearest]).tolist()
             self.gt_index += (self.num_gt + nearest).tolist()
@@ -337,12 +274,7 @@ def format_panoptic_report(summary: dict[str, float]) -> str:
 
 
 class PanopticProtocol:
-    """The Panoptic protocols as a dataset protocol (evaluation/protocols/base.py) for eval.py.
-
-    ``gt15`` maps a frame index to its stored Panoptic-15 ground truth (G, 15, 4) (the loader's
-    ``Sequence.protocol_inputs``); frames without an entry are not scored. Each frame's predictions are
-    ``result.poses3d`` (P, 23, 4), scored by the mean confidence of their 15 mapped joints.
-    """
+    """The Panoptic protocols as a dataset protocol; gt15 {frame: (G, 15, 4)}, predictions scored by mean confidence."""
 
     name = "panoptic"
 

@@ -1,34 +1,8 @@
 """The paper's Table 1 metric: COCO keypoint AP/AR of reconstructed 3D poses reprojected into every view.
 
-Protocol (our reading of the paper's Sec. 4, which gives no more detail than "COCO AP of the
-reprojections"), for any sequence whose frames carry 3D ground truth:
-- One COCO image per (frame, camera). Only frames with ground truth are scored.
-- Ground truth of a view: the noise-free projections (with distortion, ``Camera.project``) of the
-  frame's GT 3D poses. A joint is labelled (v = 2) when it is valid in 3D, in front of the camera and
-  inside the image; joints hidden behind other bodies stay labelled, as COCO labels occluded joints
-  (COCO writes v = 1 for them; pycocotools only tests v > 0, so the two are the same to the metric).
-  A GT person is annotated in a view when at least ``min_joints`` of its joints are labelled there.
-- GT area (the OKS scale and the medium / large split): the area of the box around the person's
-  projected joints (valid, in front of the camera and inside its calibrated field of view), clipped
-  to the image: the visible part of the person's extent, as COCO's segment areas are. It is a box
-  area, not a segment area, so the OKS scale is somewhat looser than COCO's for the same person.
-  The GT bbox is the same box unclipped: pycocotools uses it only for a person without a labelled
-  joint in a subset (e.g. feet outside the image, in the foot subset), whom it ignores together with
-  the detection that falls on that box, so a truncated person is neither a hit nor a false positive.
-- Predictions of a view: every reconstructed person (``result.poses3d`` (P, 23, 4)) projected the same
-  way; a person is a detection in a view when at least ``min_joints`` of its joints (confidence > 0)
-  project inside the image. Keypoint x, y: the projection (0, 0 for a joint that is missing or outside
-  the camera's field of view); keypoint score: the 3D confidence where the joint falls inside the
-  image, else 0. The detection score is the mean confidence of its 23 joints; its area (used only to
-  ignore unmatched detections outside an area range) is the same clipped box area as the GT's.
-- In a subset, a detection without a scored joint (none of its subset joints inside the image) is
-  left out, as a GT person without a labelled joint there is ignored: a person whose feet are outside
-  the image is not a foot detection in that view.
-- pycocotools OKS AP/AR with the COCO-23 sigmas, on all 23 joints and on the body (17) and foot (6)
-  subsets (as data/pose2d/coco_eval.py: the subset's joints and sigmas as the whole skeleton, the
-  person's area kept). COCO keeps at most 20 detections per image; crowded views hold more people
-  (up to 40 in a view of the Wildtrack crowd), so ``max_dets`` (default 100) raises that limit; max_dets = 20
-  gives COCO's numbers exactly.
+One COCO image per (frame, camera); the GT is the projection of the 3D GT (occluded joints stay labelled, as
+COCO labels them); areas are the joints' boxes clipped to the image. ``max_dets`` (default 100) lifts COCO's 20
+detections per image, as crowded views hold up to 40 people; max_dets = 20 gives COCO's numbers exactly.
 """
 
 from __future__ import annotations
@@ -68,14 +42,7 @@ _STATS = {
 
 
 def project_poses(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Poses (P, 23, 4) (x, y, z m, confidence) in one camera -> keypoints (P, 23, 3), in_image (P, 23),
-    boxes (P, 4), areas (P,).
-
-    keypoints: distorted pixels of the joints that are valid, in front of the camera and inside its
-    field of view (else 0, 0), and their confidence where they fall inside the image (else 0);
-    in_image: the valid joints that fall inside the image; boxes: x, y, w, h around the projected
-    joints; areas: of that box clipped to the image (0 when no joint projects).
-    """
+    """Poses (P, 23, 4) in one camera -> keypoints (P, 23, 3), in_image (P, 23), boxes (P, 4), areas (P,)."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
     valid = (poses[..., 3] > 0) & np.all(np.isfinite(poses[..., :3]), axis=-1)
     xyz = np.where(valid[..., None], poses[..., :3], 0.0)
@@ -121,15 +88,7 @@ def view_predictions(camera: Camera, poses3d: np.ndarray, min_joints: int = 1) -
 def coco_keypoint_stats(
     image_ids: list[int], gt: list[dict], predictions: list[dict], subset: str = "all", max_dets: int = 100
 ) -> dict[str, float]:
-    """pycocotools OKS AP/AR (fractions, STAT_NAMES; -1 = nothing to average) with max_dets per image.
-
-    gt: {image_id, keypoints (23, 3), bbox (4,), area}; predictions: {image_id, keypoints (23, 3), score,
-    area}. The GT bbox is the region pycocotools compares detections with when a GT person has no
-    labelled joint in the subset (such a person is ignored, and so is a detection that matches it).
-    Same rules as data.pose2d.coco_eval.evaluate_keypoints (subset joints and sigmas as the skeleton),
-    except that the detections kept per image is a parameter (COCO: 20) and a detection without a
-    keypoint score > 0 in the subset is left out (as a GT person without a labelled joint is ignored).
-    """
+    """pycocotools OKS AP/AR (fractions, STAT_NAMES; -1: nothing to average) of gt and prediction dicts."""
     if subset not in SUBSET_JOINTS:
         raise ValueError(f"subset must be one of {sorted(SUBSET_JOINTS)}, got {subset!r}")
     joints = np.array(SUBSET_JOINTS[subset])

@@ -1,22 +1,7 @@
-"""The standard Shelf PCP protocol, and 4D Association's stored Shelf output scored by it.
+"""The standard Shelf PCP protocol (VoxelPose ``Shelf.evaluate``), and 4D Association's stored output scored by it.
 
-Protocol (VoxelPose ``Shelf.evaluate``, microsoft/voxelpose-pytorch lib/dataset/shelf.py, which
-mvpose-derived works share): Shelf frames 300..600, alpha = 0.5, the 10 parts of evaluation/pcp.py.
-In every frame, each annotated ground-truth actor takes the prediction with the smallest mean
-distance over the 14 Shelf joints; predictions are NOT matched one-to-one (two actors may take the
-same one). PCP of an actor = correct parts / scored parts over its frames; the headline number is
-the mean of the PCPs of Actors 1-3 (Actor 4 is reported, never averaged).
-
-- STRICT: an annotated actor with no prediction in its frame scores all 10 parts wrong.
-- LENIENT: such frames are skipped for that actor (some papers report this).
-
-Ground-truth ids are those of gt.txt and actorsGT.mat, 0..3; the papers' "Actor k" is id k - 1,
-and summaries are keyed by k. Missing predicted joints are NaN: a part with a NaN end is wrong, and
-the selection distance averages the joints present (VoxelPose's predictions never miss joints).
-On a subset of frames, the headline averages those of Actors 1-3 annotated in it.
-
-:class:`ShelfProtocol` is the dataset protocol (evaluation/protocols/base.py) that data/datasets/shelf.py
-attaches to the Shelf sequence: our COCO-23 poses beside 4D Association's stored output, same code.
+Each annotated actor takes the prediction with the smallest mean distance (not one-to-one); the headline is the
+mean PCP of Actors 1-3. STRICT: an actor without a prediction scores all parts wrong; LENIENT: the frame is skipped.
 """
 
 from __future__ import annotations
@@ -72,11 +57,7 @@ def coco23_predictions_to_shelf15(poses3d: np.ndarray) -> np.ndarray:
 
 
 def skel19_to_shelf15(skel: np.ndarray) -> np.ndarray:
-    """4D Association SKEL19 to Shelf-14 + mid-hip: (..., 19, 4) -> (..., 15, 3), NaN where invalid.
-
-    Joints 12, 13 are rebuilt as 4D Association's evaluation does; the mid-hip is the mean of the
-    hips as in VoxelPose's torso (4D Association used its pelvis joint: same PCP on Shelf).
-    """
+    """4D Association SKEL19 to Shelf-14 + mid-hip: (..., 19, 4) -> (..., 15, 3), NaN where invalid."""
     skel = np.asarray(skel, dtype=np.float64)
     points = np.where(skel[..., 3:] > 0, skel[..., :3], np.nan)
     out = points[..., SKEL19_TO_SHELF14, :]
@@ -99,10 +80,7 @@ def _skel19_head(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def select_prediction(pred: np.ndarray, gt: np.ndarray) -> tuple[int, float]:
-    """Index and mean 14-joint distance (m) of the closest prediction: (P, 15, 3), (15, 3) -> (i, d).
-
-    Returns (-1, nan) when no prediction has a finite joint among the 14.
-    """
+    """Index and mean 14-joint distance (m) of the closest prediction: (P, 15, 3), (15, 3) -> (i, d) or (-1, nan)."""
     dist = np.linalg.norm(pred[:, :14, :3] - gt[None, :14, :3], axis=-1)
     present = np.isfinite(dist)
     count = present.sum(-1)
@@ -246,13 +224,7 @@ def score_4dassoc_output(
     frames: list[int] | None = None,
     alpha: float = 0.5,
 ) -> dict:
-    """Score 4D Association's stored skel.txt (SKEL19) against gt.txt: files -> ShelfEvaluator.summary().
-
-    frames: the Shelf frame numbers to score (file frame i is first_frame + i); None = all of them.
-    Skeletons with no valid joint (4D Association stores inactive tracks as zeros) are not predictions.
-    Measured on the shipped files: 96.27 over Actors 1-3 (strict = lenient: a prediction always exists);
-    4D Association's own evaluator (one-to-one Hungarian on the 15-joint distance sum) scores the same.
-    """
+    """Score 4D Association's stored skel.txt (SKEL19) against gt.txt -> ShelfEvaluator.summary()."""
     skels = load_4dassoc_skeletons(skel_path)
     gts = load_4dassoc_skeletons(gt_path)
     if len(skels) != len(gts):
@@ -273,12 +245,7 @@ def score_4dassoc_output(
 
 
 class ShelfProtocol:
-    """The Shelf protocol as a dataset protocol (evaluation/protocols/base.py): ours beside 4D Association.
-
-    Holds the ground truth {Shelf frame: {actor id: (15, 4)}} and the path of 4D Association's stored
-    output; update() scores our COCO-23 poses of a frame, summary() adds the baseline scored by the same
-    code over the same frames, write(out_dir) saves the Shelf-15 predictions that were scored.
-    """
+    """The Shelf protocol as a dataset protocol: ours beside 4D Association's stored output, scored by the same code."""
 
     name = "shelf"
     predictions_file = "shelf_predictions.json"
@@ -395,10 +362,7 @@ def _headline(summary: dict) -> str:
 
 
 def load_actors_gt(mat_path: str | Path, frames: range = SHELF_TEST_FRAMES) -> list[dict[int, np.ndarray]]:
-    """TUM actorsGT.mat -> per frame {actor id 0..3: (15, 4)}, mid-hip appended, valid 1.
-
-    Row f of actor3D is Shelf frame f (0-based), as VoxelPose reads it; gt.txt frame i matches row 300 + i.
-    """
+    """TUM actorsGT.mat -> per frame {actor id 0..3: (15, 4)}, mid-hip appended; row f = Shelf frame f."""
     actors = scipy.io.loadmat(str(mat_path))["actor3D"].ravel()
     out = []
     for f in frames:

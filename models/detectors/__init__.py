@@ -1,10 +1,4 @@
-"""Person detectors (the stage before the SPPE): ``detector(images, frame) -> list[np.ndarray]``, per view an
-(N, 5) float64 array x, y, w, h, score in pixels of the image. ``needs_images`` says whether the
-detector looks at the pixels (the others take the images only for their size, or not at all).
-
-``gt`` (GroundTruthDetector): the frame's ground-truth boxes; ``file`` (FileDetector): a COCO
-detection-results file; ``torchvision`` (TorchvisionDetector): a torchvision detection model.
-"""
+"""Person detectors: ``detector(images, frame) -> list[np.ndarray]``, per view (N, 5) x, y, w, h, score in pixels."""
 
 from models.detectors.boxes import person_boxes
 from models.detectors.file import FileDetector

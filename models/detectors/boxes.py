@@ -41,11 +41,7 @@ def person_boxes(
     score_threshold: float,
     nms_iou: float,
 ) -> np.ndarray:
-    """A detector's (M, 4) x1 y1 x2 y2 boxes, (M,) labels and scores -> (N, 5) person boxes x, y, w, h, score.
-
-    Only label ``person_label`` with score >= ``score_threshold``, then torchvision.ops.nms at IoU ``nms_iou``
-    (over the persons alone, whatever the model did per class); highest score first.
-    """
+    """Boxes (M, 4) x1 y1 x2 y2, labels (M,), scores (M,) -> person boxes (N, 5) xywh, score, after NMS."""
     boxes_xyxy = np.asarray(boxes_xyxy, np.float64).reshape(-1, 4)
     keep = (np.asarray(labels) == person_label) & (np.asarray(scores) >= score_threshold)
     boxes, kept_scores = boxes_xyxy[keep], np.asarray(scores, np.float64)[keep]

@@ -10,13 +10,7 @@ from models.detectors.boxes import clip_xywh, with_scores
 
 
 class GroundTruthDetector:
-    """``frame.views[v].bboxes`` as person boxes, score 1, optionally jittered (to mimic a detector).
-
-    jitter: each box's centre moves by jitter * (w, h) * z and each side is scaled by exp(jitter * z), z a
-    standard Gaussian clipped to +-``jitter_clip``, drawn from (seed, frame index, view), so a frame always
-    gets the same boxes. min_joints: a person with fewer labelled joints (score > 0) in a view gets no box
-    there. Boxes are clipped to the image when the images are given; one left with no area is dropped.
-    """
+    """``frame.views[v].bboxes`` as person boxes, score 1, optionally jittered reproducibly per (seed, frame, view)."""
 
     needs_images = False
 

@@ -12,12 +12,7 @@ from models.tv_detection import build_detection_model, detect
 
 
 class TorchvisionDetector:
-    """torchvision detection model ``model`` (e.g. fasterrcnn_resnet50_fpn_v2) keeping persons only.
-
-    weights: ``coco`` (the model's DEFAULT COCO weights through torchvision's weights API), a state-dict file,
-    or None (random, for tests). person_label: the person class index (COCO: 1). Boxes with score >=
-    ``score_threshold`` go through torchvision.ops.nms at ``nms_iou``. ``model_kwargs`` go to the builder.
-    """
+    """A torchvision detection model (e.g. fasterrcnn_resnet50_fpn_v2), persons only; weights coco | file | None."""
 
     needs_images = True
 
