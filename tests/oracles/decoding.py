@@ -1,8 +1,7 @@
 """The numpy decoding that models/candidates.py and models/joint_association.py replaced, kept as the reference.
 
-tests/test_pose_decoding.py checks the batched decoding against it (same candidates, same association) and
-``python -m benchmarks.pose2d_speed`` times both in one run. It is the repository's earlier implementation,
-unchanged: float64 candidates with a max-pool suppression, then one cdist, connected-components and
+tests/test_pose_decoding.py checks the batched decoding against it (same candidates, same association). It is the
+repository's earlier implementation, unchanged: float64 candidates with a max-pool suppression, then one cdist, connected-components and
 Hungarian problem per joint type in a python loop. Nothing in the pipeline imports it.
 """
 
