@@ -2,15 +2,10 @@
 
     python -m benchmarks.frame_times [--only TEXT] [--repeats 3] [--cpu N] [--data DIR]
 
-It times the tree whose packages are imported: the working directory's (PYTHONPATH can point elsewhere). It
-imports nothing of the repository at its top, so it can time revisions older than benchmarks/speed.py, such as
-a9f9a65, the reference of issue 16: ``python -m benchmarks.paired_speed --driver frames`` runs it in a worktree
-of the baseline and in this tree, alternately. It composes that tree's
-``configs/eval.yaml`` with a setting's overrides, builds the pipeline from the matching, reconstruction and,
-where the tree has one, tracking groups, and prints one table in benchmarks.speed's format: per setting, the
-median over frames x repeats of matching, reconstruction, tracking and their sum, in ms on one core (BLAS and
-numba threads pinned to 1 before numpy is imported). Shelf's PAF grouping is not timed here (benchmarks.speed
-does that).
+It times the tree whose packages are imported (the working directory's, or PYTHONPATH's) and imports nothing of
+the repository at its top, so that ``benchmarks.paired_speed --driver frames`` can run it in an older revision's
+worktree. One table in benchmarks.speed's format: per setting, the median over frames x repeats of matching,
+reconstruction, tracking and their sum, ms on one core (Shelf's PAF grouping is timed by benchmarks.speed).
 """
 
 from __future__ import annotations
@@ -18,7 +13,7 @@ from __future__ import annotations
 import os
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_var] = "1"
+    os.environ[_var] = "1"  # before numpy loads; not benchmarks.common, which an older tree lacks
 
 import argparse  # noqa: E402
 import sys  # noqa: E402

@@ -1,24 +1,21 @@
 """Paired speed runs: this tree against a git revision, alternately, each run's stage medians compared.
 
-A machine whose speed drifts over minutes still resolves a change of a few percent this way (a 2-core machine of
-this project's drifted 20 % in an hour).
-
     python -m benchmarks.paired_speed --baseline REV [--pairs 8] [--only "100 people"] [--repeats 3] [--cpu 1]
                                       [--driver speed|frames|process]
 
-Each pair runs the driver first in a temporary git worktree of the baseline, then in this tree, each with a numba
-cache of its own kept over the pairs (the first pair compiles, before its timed frames). The drivers:
-``speed`` (default) runs each tree's own ``python -m benchmarks.speed --quick --skip-process --only TEXT``;
-``frames`` runs this tree's benchmarks/frame_times.py in both trees, which times any revision's pipeline, also
-one older than benchmarks/speed.py (``--baseline a9f9a65 --driver frames``: issue 16's reference); ``process``
-times the whole process ``python eval.py dataset=shelf progress=false`` in each tree (warm: each tree's cache is
-filled by an untimed run first; BLAS and numba threads 1, as the other drivers; the median of ``--repeats`` runs,
-in seconds; ``--only`` does not apply). From each run it reads every setting's stage medians (the process
-driver: one setting, its total), and prints every pair and, per setting and stage, the baseline's and this
-tree's medians over the pairs, their ratio (baseline / this tree), and the mean of the paired differences (this
-tree - baseline) with its standard error."""
+Alternating runs resolve a change of a few percent on a machine whose speed drifts over minutes. Each pair runs
+the driver in a temporary git worktree of the baseline, then in this tree, each tree with a numba cache of its own
+kept over the pairs. Drivers: ``speed`` runs each tree's own ``benchmarks.speed --quick --skip-process``;
+``frames`` runs this tree's benchmarks/frame_times.py in both trees (it times revisions older than
+benchmarks.speed too); ``process`` times the warm whole process ``python eval.py dataset=shelf`` in each tree
+(median of ``--repeats``, seconds; ``--only`` does not apply). Printed: every pair's totals, and per setting and
+stage the medians over the pairs, their ratio (baseline / this tree) and the mean paired difference (this tree -
+baseline) with its standard error.
+"""
 
 from __future__ import annotations
+
+from benchmarks import common  # isort: split
 
 import argparse
 import os
@@ -26,15 +23,13 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-from data.formats.atomic_io import atomic_write_text
 from evaluation.report import format_table
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = common.ROOT
 COLUMNS = ("matching", "reconstruction", "tracking", "total")
 DRIVERS = {
     "speed": "benchmarks.speed",
@@ -42,7 +37,6 @@ DRIVERS = {
     "process": "python eval.py dataset=shelf",
 }
 PROCESS_SETTING = "python eval.py dataset=shelf (warm), s"
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
 
 def stage_medians(text: str) -> dict[str, dict[str, float]]:
@@ -87,8 +81,8 @@ def worktree(rev: str) -> Iterator[Path]:
 def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
     """The driver's output of one run in tree (benchmarks.speed, or benchmarks/frame_times.py), numba's cache in cache."""
     if args.driver == "frames":
-        # run_path, not the script's path: that would put benchmarks/ first on sys.path, where benchmarks/reconstruction.py
-        # would hide the tree's reconstruction package
+        # run_path, not the script's path: that would put benchmarks/ first on sys.path, where
+        # benchmarks/reconstruction.py would hide the tree's reconstruction package
         driver = f"import runpy; runpy.run_path({str(ROOT / 'benchmarks' / 'frame_times.py')!r}, run_name='__main__')"
         command = [sys.executable, "-c", driver, "--only", args.only]
     else:
@@ -105,20 +99,19 @@ def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
 def run_process(
     tree: Path, cache: Path, args: argparse.Namespace, repeats: int | None = None
 ) -> dict[str, dict[str, float]]:
-    """The process driver: median wall seconds of ``repeats`` (default --repeats) runs of Shelf's ``python eval.py``
-    in tree, as a setting whose total is those seconds (its stages 0: a process has no stage table)."""
-    env = {**os.environ, **dict.fromkeys(THREAD_VARIABLES, "1"), "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
+    """Median wall seconds of ``repeats`` (default --repeats) Shelf ``python eval.py`` runs in tree, as a setting
+    whose total is those seconds (stages 0: a process has no stage table)."""
+    threads = dict.fromkeys(common.THREAD_VARIABLES, "1")
+    env = {**os.environ, **threads, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     pin = (lambda: os.sched_setaffinity(0, {args.cpu})) if args.cpu is not None else None
-    seconds = []
+    shelf = common.shelf(str(Path(args.data).resolve()))
     with tempfile.TemporaryDirectory(prefix="paired_speed_runs_") as runs:
-        for k in range(args.repeats if repeats is None else repeats):
-            command = [sys.executable, "eval.py", "dataset=shelf", f"dataset.root={Path(args.data).resolve()}/shelf"]
-            command += ["progress=false", f"hydra.run.dir={runs}/{k}"]
-            t0 = time.perf_counter()
-            done = subprocess.run(command, cwd=tree, env=env, capture_output=True, text=True, preexec_fn=pin)
-            seconds.append(time.perf_counter() - t0)
-            if done.returncode:
-                raise RuntimeError(f"python eval.py failed in {tree}:\n{done.stderr[-2000:]}")
+        seconds = [
+            common.process_seconds(
+                [sys.executable, "eval.py", *shelf, "progress=false", f"hydra.run.dir={runs}/{k}"], tree, env, pin
+            )
+            for k in range(args.repeats if repeats is None else repeats)
+        ]
     return {PROCESS_SETTING: {**dict.fromkeys(COLUMNS[:-1], 0.0), "total": statistics.median(seconds)}}
 
 
@@ -158,11 +151,7 @@ def main(argv: list[str] | None = None) -> str:
             for name, tree in trees:
                 runs[name].append(run_once(tree, Path(caches) / name.replace(" ", "_"), args))
             print(f"pair {k + 1}/{args.pairs} done", file=sys.stderr, flush=True)
-    text = report(runs, args.baseline, args.driver)
-    print(text)
-    if args.out:
-        atomic_write_text(args.out, text + "\n")
-    return text
+    return common.emit(report(runs, args.baseline, args.driver), args.out)
 
 
 def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, driver: str = "speed") -> str:
