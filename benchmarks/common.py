@@ -24,17 +24,12 @@ from data.formats.atomic_io import atomic_write_text  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG_DIR = ROOT / "configs"
 PIPELINE_STAGES = ("matching", "reconstruction", "tracking")
+WILDTRACK_AREA = (-3.0, 9.0, -9.0, 27.0)
 
 
 def shelf(data: str) -> list[str]:
     """eval.yaml overrides of Shelf 300-600 (real OpenPose BODY_25)."""
     return ["dataset=shelf", f"dataset.root={data}/shelf"]
-
-
-def panoptic(data: str, sequence: str, noise_px: float) -> list[str]:
-    """eval.yaml overrides of a sequence of panoptic_seq, 2D projected from the GT with noise_px."""
-    where = [f"dataset.root={data}/panoptic_seq", f"dataset.sequence={sequence}"]
-    return ["dataset=panoptic", *where, f"dataset.noise_px={noise_px}"]
 
 
 def crowd(persons: int, frames: int, views: int | None = None) -> list[str]:
@@ -47,6 +42,27 @@ def ring(persons: int, frames: int) -> list[str]:
     """eval.yaml overrides of the issues' speed setting: persons in 7 ring views at 0.5 per m^2."""
     sizes = [f"dataset.num_persons={persons}", "dataset.num_cameras=7", "dataset.density=0.5"]
     return ["dataset=synthetic", *sizes, f"dataset.num_frames={frames}"]
+
+
+def panoptic_sets(data: str, noises: tuple[float, ...]) -> dict[str, list[str]]:
+    """Label -> eval.yaml overrides of panoptic_seq's band1 and band2 at every noise level (px)."""
+    sets = {}
+    for sequence in ("160906_band1", "160906_band2"):
+        for noise in noises:
+            where = [f"dataset.root={data}/panoptic_seq", f"dataset.sequence={sequence}"]
+            sets[f"Panoptic {sequence[-5:]} {noise} px"] = ["dataset=panoptic", *where, f"dataset.noise_px={noise}"]
+    return sets
+
+
+def wildtrack_scene(root: Path, positions: list, noise: float, seed: int) -> Any:
+    """Synthetic bodies at annotated Wildtrack ground positions (one list per frame), seen by the real 7-camera rig
+    with noise px: a Sequence (min_spacing_m 0: the annotations come as close as 0.09 m)."""
+    from data.geometry.calibration import load_wildtrack
+    from data.synthetic import SyntheticConfig, generate_sequence
+
+    rig = dict(rig=str(root), rig_format="wildtrack")
+    cfg = SyntheticConfig(seed=seed, positions=positions, area=WILDTRACK_AREA, min_spacing_m=0.0, noise_px=noise, **rig)
+    return generate_sequence(cfg, rig=load_wildtrack(root))
 
 
 def evaluate(sequence: Any, cfg: Any, grouping: bool = False) -> tuple[Any, float]:
