@@ -1,30 +1,18 @@
 """Dev-set table: the default pipeline beside the paper's configuration and the baselines, same frames, same run.
 
-Run from the repository root:
+    python -m benchmarks.real_inputs [--sets shelf,panoptic,wildtrack,crowd,timing] [--rows default,paper,...]
+                                     [--match TEXT] [--crowd-frames 3] [--out FILE.md] [--data ../shared/data]
 
-    python -m benchmarks.real_inputs [--sets shelf,panoptic,wildtrack,crowd] [--rows default,paper,...]
-                                     [--crowd-frames 3] [--out FILE.md] [--data ../shared/data]
-
-Dev sets: Shelf as shipped (real OpenPose BODY_25, feet included) and with the 6 foot keypoints removed
-(``dataset.drop_feet=true``, ankles kept: what a COCO-17 detector gives); Panoptic band1 / band2 of
-``panoptic_seq`` (20 consecutive frames, 5 HD cameras, 2D projected from the GT with 0 / 2 / 5 px noise,
-no foot joints); Wildtrack (7 real cameras, synthetic bodies at the annotated positions, 5 px); the
-synthetic crowd sweep of 10-400 people on the surveillance rig of ``configs/dataset/crowd.yaml``; the
-speed setting of the issues, 100 people in 7 ring views (``timing``).
-
-Rows (Hydra overrides of ``configs/eval.yaml``): ``default`` (no override: tracking and its temporal
-evidence included), ``default, tracking off`` (every frame on its own), ``default + fix_sides`` (left / right labels settled
-across views, reconstruction/solver/side_labels.py; off by default), ``paper`` (the paper's exact
-method: feet-only matching and MLE -> MAP with the population bone table and the fixed 2D sigma model),
-``epipolar + vanilla``, ``epipolar + mle_map`` and ``oracle + vanilla`` (ground-truth identities group the
-detections: the upper bound; not on Shelf, whose detections carry no identities); every row but
-``default`` and ``default + fix_sides`` runs with ``tracking=off``.
-
-Columns: people found = GT persons matched by a prediction within ``evaluation.max_dist_m`` (%), and of
-those seen in >= 2 views (%); false positives = predictions matched to no GT person; matching pair
-precision / recall against GT identities; absolute MPJPE (mm, GT-matched, no root alignment, all joints
-valid in both); PCP (%, alpha 0.5; Shelf: the strict Shelf protocol averaged over actors 1-3);
-ms / frame = matching + reconstruction + tracking (Shelf: + PAF grouping), one BLAS thread.
+Dev sets: Shelf (real OpenPose BODY_25) as shipped and without its 6 foot keypoints (a COCO-17 detector's);
+Panoptic band1 / band2 (20 frames, 5 HD cameras, 2D projected from the GT with 0 / 2 / 5 px noise); Wildtrack
+(7 real cameras, synthetic bodies at the annotated positions, 5 px); the crowd sweep of 10-400 people; 100
+people in 7 ring views (``timing``). Rows (ROWS, overrides of ``configs/eval.yaml``): the default with tracking,
+without tracking and with fix_sides; the paper's exact method; epipolar matching with vanilla DLT or mle_map;
+oracle matching (GT identities: the upper bound; not on Shelf, whose detections carry none); every row but
+the default and fix_sides without tracking. Columns: GT persons found within ``evaluation.max_dist_m`` (%), and
+of those seen in >= 2 views (%); predictions matched to no GT person; matching pair precision / recall; absolute
+MPJPE (mm); PCP (%, alpha 0.5; Shelf: strict, actors 1-3); ms / frame of matching + reconstruction + tracking
+(Shelf: + PAF grouping) on one core.
 """
 
 from __future__ import annotations
@@ -62,9 +50,7 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
         sets["Shelf"] = common.shelf(data)
         sets["Shelf, feet removed"] = [*common.shelf(data), "dataset.drop_feet=true"]
     if "panoptic" in names:
-        for seq in ("160906_band1", "160906_band2"):
-            for noise in (0, 2, 5):
-                sets[f"Panoptic {seq[-5:]} {noise} px"] = common.panoptic(data, seq, noise)
+        sets.update(common.panoptic_sets(data, (0, 2, 5)))
     if "wildtrack" in names:
         sets["Wildtrack 5 px"] = ["dataset=wildtrack", f"dataset.root={data}/wildtrack"]
     if "timing" in names:

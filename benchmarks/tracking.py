@@ -2,14 +2,11 @@
 
     python -m benchmarks.tracking [--data ../shared/data] [--sets shelf,panoptic,crowd] [--crowd-frames 50]
 
-Sets: Shelf (frames 300-600, actors 1-3: the track id of the prediction each actor takes), Panoptic band1
-and band2 of ``panoptic_seq`` at 5 px (20 consecutive frames, persistent body ids), the synthetic walking
-crowd of ``configs/dataset/crowd.yaml`` (surveillance rig, 2 px) with 10 and 100 people. Columns: identity
-switches (per 100 GT person-frames), the share of GT person-frames whose prediction carries that person's
-most frequent track id (IDF1-like, %), fragmentations, MPJPE (mm; Shelf: strict PCP %) with tracking on
-and off, and the tracker's ms per frame, the whole pipeline's (matching + reconstruction + tracking)
-with tracking on and off, and what tracking adds (the tracker, the joints' variances and the skeleton
-look-up inside the MAP), one core; timings are medians of ``--repeats`` interleaved on / off runs.
+Sets: Shelf (actors 1-3), Panoptic band1 and band2 at 5 px (persistent body ids), the walking crowd of
+``configs/dataset/crowd.yaml`` with 10 and 100 people. Columns: identity switches (per 100 GT person-frames),
+the share of GT person-frames whose prediction carries the person's most frequent track id (IDF1-like, %),
+fragmentations, MPJPE (mm; Shelf: strict PCP %) with tracking on and off, and ms per frame on one core of the
+tracker and of the pipeline with tracking on and off (medians of ``--repeats`` interleaved on / off runs).
 """
 
 from __future__ import annotations
@@ -34,8 +31,7 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
     if "shelf" in names:
         sets["Shelf (PCP)"] = common.shelf(data)
     if "panoptic" in names:
-        for seq in ("160906_band1", "160906_band2"):
-            sets[f"Panoptic {seq[-5:]} 5 px"] = common.panoptic(data, seq, 5)
+        sets.update(common.panoptic_sets(data, (5,)))
     if "crowd" in names:
         for n in (10, 100):
             sets[f"crowd {n} people, {crowd_frames} frames"] = common.crowd(n, crowd_frames)
