@@ -104,13 +104,11 @@ def run_process(
     threads = dict.fromkeys(common.THREAD_VARIABLES, "1")
     env = {**os.environ, **threads, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     pin = (lambda: os.sched_setaffinity(0, {args.cpu})) if args.cpu is not None else None
-    shelf = common.shelf(str(Path(args.data).resolve()))
+    command = [sys.executable, "eval.py", *common.shelf(str(Path(args.data).resolve())), "progress=false"]
     with tempfile.TemporaryDirectory(prefix="paired_speed_runs_") as runs:
+        count = args.repeats if repeats is None else repeats
         seconds = [
-            common.process_seconds(
-                [sys.executable, "eval.py", *shelf, "progress=false", f"hydra.run.dir={runs}/{k}"], tree, env, pin
-            )
-            for k in range(args.repeats if repeats is None else repeats)
+            common.process_seconds([*command, f"hydra.run.dir={runs}/{k}"], tree, env, pin) for k in range(count)
         ]
     return {PROCESS_SETTING: {**dict.fromkeys(COLUMNS[:-1], 0.0), "total": statistics.median(seconds)}}
 
@@ -132,12 +130,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--cpu", type=int, default=None, help="pin each run to this CPU (Linux)")
     parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
     parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
-    parser.add_argument(
-        "--driver",
-        choices=tuple(DRIVERS),
-        default="speed",
-        help="each tree's benchmarks.speed, frame_times.py, or the whole Shelf process",
-    )
+    parser.add_argument("--driver", choices=tuple(DRIVERS), default="speed", help="what each run times (DRIVERS)")
     args = parser.parse_args(argv)
     if args.pairs < 1:
         parser.error("--pairs must be at least 1")
