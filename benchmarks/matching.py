@@ -77,9 +77,8 @@ def run_matcher(matcher: Callable, frames: Frames, rig: Rig) -> tuple[Correspond
     """Summed correspondence counts and per-frame matching times (ms) of one matcher over frames."""
     counts, times = CorrespondenceCounts(), []
     for views in frames:
-        t0 = time.perf_counter()
-        assignment = matcher(views, rig)
-        times.append(1e3 * (time.perf_counter() - t0))
+        ms, assignment = common.timed(lambda: matcher(views, rig))
+        times.append(ms)
         counts = counts + correspondence_counts(assignment, [v.person_ids for v in views])
     return counts, times
 
@@ -117,15 +116,8 @@ def density_table(args: argparse.Namespace) -> str:
     settings = [(n, noise, hidden) for n in (10, 20, 40, 80) for noise in (2.0, 5.0, 10.0) for hidden in (0.0, 0.3)]
     rows = []
     for n, noise, hidden in tqdm(settings, desc="density sweep"):
-        cfg = SyntheticConfig(
-            seed=args.seed + n,
-            num_frames=args.sweep_frames,
-            num_persons=n,
-            area=SWEEP_AREA,
-            num_cameras=5,
-            noise_px=noise,
-        )
-        seq = generate_sequence(cfg)
+        size = dict(num_frames=args.sweep_frames, num_persons=n, area=SWEEP_AREA, num_cameras=5)
+        seq = generate_sequence(SyntheticConfig(seed=args.seed + n, noise_px=noise, **size))
         rng = np.random.default_rng([args.seed, n, int(noise), int(100 * hidden)])
         frames = [hide_feet(fr.views, hidden, rng) for fr in seq.frames]
         skip = {"ransac": f"skipped (> {RANSAC_MAX_PEOPLE} people)"} if n > RANSAC_MAX_PEOPLE else {}
@@ -146,15 +138,8 @@ def timing_table(args: argparse.Namespace) -> str:
     ransac_max = 20 if args.quick else 50
     rows = []
     for n, v in tqdm(settings, desc="timing"):
-        cfg = SyntheticConfig(
-            seed=args.seed + 7 * n + v,
-            num_frames=args.timing_frames,
-            num_persons=n,
-            density=0.5,
-            num_cameras=v,
-            noise_px=2.0,
-        )
-        seq = generate_sequence(cfg)
+        size = dict(num_frames=args.timing_frames, num_persons=n, density=0.5, num_cameras=v)
+        seq = generate_sequence(SyntheticConfig(seed=args.seed + 7 * n + v, noise_px=2.0, **size))
         frames = [fr.views for fr in seq.frames]
         dets = np.mean([len(d) for views in frames for d in views])
         row: list = [n, v, f"{dets:.1f}"]
