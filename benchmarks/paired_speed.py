@@ -1,13 +1,12 @@
 """Paired speed runs: this tree against a git revision, alternately, each run's stage medians compared.
 
     python -m benchmarks.paired_speed --baseline REV [--pairs 8] [--only "100 people"] [--repeats 3] [--cpu 1]
-                                      [--driver speed|frames|process]
+                                      [--driver frames|process]
 
 Alternating runs resolve a change of a few percent on a machine whose speed drifts over minutes. Each pair runs
 the driver in a temporary git worktree of the baseline, then in this tree, each tree with a numba cache of its own
-kept over the pairs. Drivers: ``speed`` runs each tree's own ``benchmarks.speed --quick --skip-process``;
-``frames`` runs this tree's benchmarks/frame_times.py in both trees (it times revisions older than
-benchmarks.speed too); ``process`` times the warm whole process ``python eval.py dataset=shelf`` in each tree
+kept over the pairs. Drivers: ``frames`` runs this tree's benchmarks/frame_times.py in both trees (the same
+timing code, which runs on older revisions too); ``process`` times the warm whole process ``python eval.py dataset=shelf`` in each tree
 (median of ``--repeats``, seconds; ``--only`` does not apply). Printed: every pair's totals, and per setting and
 stage the medians over the pairs, their ratio (baseline / this tree) and the mean paired difference (this tree -
 baseline) with its standard error.
@@ -31,16 +30,12 @@ from evaluation.report import format_table
 
 ROOT = common.ROOT
 COLUMNS = ("matching", "reconstruction", "tracking", "total")
-DRIVERS = {
-    "speed": "benchmarks.speed",
-    "frames": "benchmarks/frame_times.py",
-    "process": "python eval.py dataset=shelf",
-}
+DRIVERS = {"frames": "benchmarks/frame_times.py", "process": "python eval.py dataset=shelf"}
 PROCESS_SETTING = "python eval.py dataset=shelf (warm), s"
 
 
 def stage_medians(text: str) -> dict[str, dict[str, float]]:
-    """The first table of benchmarks.speed's output -> setting -> {matching, reconstruction, tracking, total} ms."""
+    """The first table of frame_times.py's (or benchmarks.speed's) output -> setting -> stage column -> ms."""
     lines = [line for line in text.splitlines() if line.startswith("|")]
     if not lines:
         raise ValueError("no table in the benchmark's output")
@@ -78,21 +73,18 @@ def worktree(rev: str) -> Iterator[Path]:
         subprocess.run(["git", "worktree", "remove", "--force", str(path)], cwd=ROOT, capture_output=True)
 
 
-def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
-    """The driver's output of one run in tree (benchmarks.speed, or benchmarks/frame_times.py), numba's cache in cache."""
-    if args.driver == "frames":
-        # run_path, not the script's path: that would put benchmarks/ first on sys.path, where
-        # benchmarks/reconstruction.py would hide the tree's reconstruction package
-        driver = f"import runpy; runpy.run_path({str(ROOT / 'benchmarks' / 'frame_times.py')!r}, run_name='__main__')"
-        command = [sys.executable, "-c", driver, "--only", args.only]
-    else:
-        command = [sys.executable, "-m", "benchmarks.speed", "--quick", "--skip-process", "--only", args.only]
+def run_frames(tree: Path, cache: Path, args: argparse.Namespace) -> str:
+    """The output of this tree's benchmarks/frame_times.py run in tree, numba's cache in cache."""
+    # run_path, not the script's path: that would put benchmarks/ first on sys.path, where
+    # benchmarks/reconstruction.py would hide the tree's reconstruction package
+    driver = f"import runpy; runpy.run_path({str(ROOT / 'benchmarks' / 'frame_times.py')!r}, run_name='__main__')"
+    command = [sys.executable, "-c", driver, "--only", args.only]
     command += ["--repeats", str(args.repeats), "--data", str(Path(args.data).resolve())]
     command += ["--cpu", str(args.cpu)] if args.cpu is not None else []
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     done = subprocess.run(command, cwd=tree, env=env, capture_output=True, text=True)
     if done.returncode:
-        raise RuntimeError(f"the {args.driver} driver failed in {tree}:\n{done.stderr[-2000:]}")
+        raise RuntimeError(f"frame_times.py failed in {tree}:\n{done.stderr[-2000:]}")
     return done.stdout
 
 
@@ -117,7 +109,7 @@ def run_once(tree: Path, cache: Path, args: argparse.Namespace) -> dict[str, dic
     """One run of the driver in tree: setting -> stage -> ms per frame (seconds for the process driver)."""
     if args.driver == "process":
         return run_process(tree, cache, args)
-    return stage_medians(run_speed(tree, cache, args))
+    return stage_medians(run_frames(tree, cache, args))
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -130,7 +122,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--cpu", type=int, default=None, help="pin each run to this CPU (Linux)")
     parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
     parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
-    parser.add_argument("--driver", choices=tuple(DRIVERS), default="speed", help="what each run times (DRIVERS)")
+    parser.add_argument("--driver", choices=tuple(DRIVERS), default="frames", help="what each run times (DRIVERS)")
     args = parser.parse_args(argv)
     if args.pairs < 1:
         parser.error("--pairs must be at least 1")
@@ -147,7 +139,7 @@ def main(argv: list[str] | None = None) -> str:
     return common.emit(report(runs, args.baseline, args.driver), args.out)
 
 
-def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, driver: str = "speed") -> str:
+def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, driver: str = "frames") -> str:
     """The pairs' totals and, per setting and stage, the medians and the mean paired difference."""
     settings = [s for s in runs["baseline"][0] if all(s in r for rs in runs.values() for r in rs)]
     columns = ("total",) if driver == "process" else COLUMNS
