@@ -4,8 +4,6 @@ Importing it sets BLAS, OpenMP and numba to one thread, so it must come before n
 libraries read those variables when they load, and the speed targets are stated per core.
 """
 
-from __future__ import annotations
-
 import os
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")

@@ -9,8 +9,6 @@ bones without samples keep their default when the table is loaded (data.bone_len
 of every frame are pooled, so the SD mixes the spread between persons with annotation noise.
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 from pathlib import Path

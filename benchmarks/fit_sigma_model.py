@@ -11,8 +11,6 @@ sigma sqrt(2 ln 2)), so that left / right swaps and grouping mistakes do not inf
 fit and the configured model (configs/noise_model/fitted.yaml); ``--out`` writes the fit as such a file.
 """
 
-from __future__ import annotations
-
 import argparse
 from pathlib import Path
 

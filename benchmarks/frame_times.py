@@ -8,8 +8,6 @@ worktree. One table in benchmarks.speed's format: per setting, the median over f
 reconstruction, tracking and their sum, ms on one core (Shelf's PAF grouping is timed by benchmarks.speed).
 """
 
-from __future__ import annotations
-
 import os
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):

@@ -5,8 +5,6 @@ between runs (``<run>/.hydra/overrides.yaml``), then the ``--metrics``: keys of 
 ``<stage>_ms``, the stage's ms per frame from "timings_s" and ``dataset.num_frames``. A missing metric shows "-".
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 from dataclasses import dataclass, field

@@ -12,8 +12,6 @@ MPJPE (mm, all 23 joints, GT-matched within 0.5 m), PCP (%, alpha 0.5), GT perso
 the 2D stage (images + detector + SPPE) and of the rest (matching, MAP, tracking).
 """
 
-from __future__ import annotations
-
 import argparse
 import contextlib
 import io

@@ -13,8 +13,6 @@ Precision / recall are over cross-view detection pairs and "pure+complete" is th
 exactly (evaluation.correspondence); ms is the matcher call only, one core. 2D noise SD = px * (depth / 5 m).
 """
 
-from __future__ import annotations
-
 from benchmarks import common  # isort: split
 
 import argparse

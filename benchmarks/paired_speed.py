@@ -12,8 +12,6 @@ stage the medians over the pairs, their ratio (baseline / this tree) and the mea
 baseline) with its standard error.
 """
 
-from __future__ import annotations
-
 from benchmarks import common  # isort: split
 
 import argparse

@@ -11,8 +11,6 @@ noise (48x64 heatmaps), decoded by models/pose_decoding (3 candidates per joint,
 times on 1 thread: the median ms per person and its share of a FastPose-50 256x192 crop (batch 32, 1 thread).
 """
 
-from __future__ import annotations
-
 import argparse
 import time
 

@@ -15,8 +15,6 @@ MPJPE (mm); PCP (%, alpha 0.5; Shelf: strict, actors 1-3); ms / frame of matchin
 (Shelf: + PAF grouping) on one core.
 """
 
-from __future__ import annotations
-
 from benchmarks import common  # isort: split
 
 import argparse

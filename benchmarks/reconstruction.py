@@ -12,8 +12,6 @@
     with left and right swapped, ring, 5 px.
 """
 
-from __future__ import annotations
-
 from benchmarks import common  # isort: split
 
 import argparse

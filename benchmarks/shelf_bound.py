@@ -11,8 +11,6 @@ ground truth (mean limb error below ``--max-px``) in place of the matcher's choi
 reconstruction from these detections exceeds the second bound; tracking or a better 2D detector can.
 """
 
-from __future__ import annotations
-
 from benchmarks import common  # isort: split
 
 import argparse

@@ -11,8 +11,6 @@ ring views and the crowd sweep on the surveillance rig of ``configs/dataset/crow
 the first run of a fresh install (a new, empty ``NUMBA_CACHE_DIR``; on every core, as a user runs it).
 """
 
-from __future__ import annotations
-
 from benchmarks import common  # isort: split
 
 import argparse

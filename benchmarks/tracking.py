@@ -9,8 +9,6 @@ fragmentations, MPJPE (mm; Shelf: strict PCP %) with tracking on and off, and ms
 tracker and of the pipeline with tracking on and off (medians of ``--repeats`` interleaved on / off runs).
 """
 
-from __future__ import annotations
-
 from benchmarks import common  # isort: split
 
 import argparse
