@@ -6,9 +6,9 @@
 Alternating runs resolve a change of a few percent on a machine whose speed drifts over minutes. Each pair runs
 the driver in a temporary git worktree of the baseline, then in this tree, each tree with a numba cache of its own
 kept over the pairs. Drivers: ``frames`` runs this tree's benchmarks/frame_times.py in both trees (the same
-timing code, which runs on older revisions too); ``process`` times the warm whole process ``python eval.py dataset=shelf`` in each tree
-(median of ``--repeats``, seconds; ``--only`` does not apply). Printed: every pair's totals, and per setting and
-stage the medians over the pairs, their ratio (baseline / this tree) and the mean paired difference (this tree -
+timing code; it runs on older revisions too); ``process`` times the warm whole ``python eval.py dataset=shelf``
+in each tree (median of ``--repeats``, seconds; ``--only`` does not apply). Printed: every pair's totals, and per
+setting and stage the medians, their ratio (baseline / this tree) and the mean paired difference (this tree -
 baseline) with its standard error.
 """
 
@@ -160,7 +160,7 @@ def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, dr
         [
             f"Each pair: {DRIVERS[driver]} at {baseline}, then in this tree ({unit})",
             format_table(["pair", "setting", f"{baseline} total", "this tree total"], pairs, floatfmt=".2f"),
-            f"Over the {len(runs['baseline'])} pairs: medians, and this tree - {baseline} (mean of the pairs' differences)",
+            f"Over the {len(runs['baseline'])} pairs: medians, and this tree - {baseline} (mean paired difference)",
             format_table(
                 ["setting", "stage", f"{baseline} median", "this tree median", "ratio", "difference", "standard error"],
                 rows,

@@ -143,21 +143,12 @@ def accuracy_section(args: argparse.Namespace) -> tuple[str, str, list[str]]:
             if noise == 5.0:
                 stat_rows += reprojection_rows(scene, res)
                 gains.append(gain_line(scene, res))
-    a = (
-        f"### (a) MPJPE and PCP, oracle matching, occlusion on, {args.frames} frames per setting\n\n"
-        "MPJPE (protocol): Hungarian-matched, over joints valid in prediction and GT (vanilla outputs only "
-        "joints seen in >= 2 views, mle uses output_min_views=2, map / mle_map output every joint). "
-        "MPJPE (vanilla's joints): only joints vanilla outputs, through the oracle identities.\n\n"
-        + format_table((*A_HEADERS, "ms / frame"), rows)
-    )
-    b = (
-        "### (b) Reprojection error (px), the statistics of the paper's Table 3, 5 px noise\n\n"
-        "Each reconstructed joint projected into every view where its 2D joint has score > 0 (undistorted "
-        "pixels). 'detections': against the noisy 2D detections the solver fits; 'ground truth': against "
-        "the noise-free projection of the ground-truth joint (the meaningful one on synthetic data). "
-        "map = without the MLE step, mle_map = with it. var = population variance (px^2).\n\n"
-        + format_table(B_HEADERS, stat_rows)
-    )
+    a = f"### (a) MPJPE and PCP, oracle matching, occlusion on, {args.frames} frames per setting\n\n"
+    a += "MPJPE (protocol): joints valid in prediction and GT; MPJPE (vanilla's joints): the joints vanilla outputs."
+    b = "### (b) Reprojection error (px) of the paper's Table 3, 5 px noise, undistorted pixels, var = population\n\n"
+    b += "'detections': against the noisy 2D the solver fits; 'ground truth': against the GT's noise-free projection."
+    a += "\n\n" + format_table((*A_HEADERS, "ms / frame"), rows)
+    b += "\n\n" + format_table(B_HEADERS, stat_rows)
     return a, b, gains
 
 
@@ -188,13 +179,8 @@ def robust_section(args: argparse.Namespace) -> str:
         for name, ev in evals.items():
             m = ev.summary()
             rows.append([f"{100 * share:.0f}", name, m["mpjpe_mm"], m["pcp_average"]])
-    return (
-        "### (c) Robust losses against 2D outliers, ring (5 cams, 10 persons), 5 px, oracle matching, "
-        f"{args.frames} frames\n\nA share of the detections (view, person) has its left and right joints "
-        "swapped (data.keypoints.flip_permutation), the error OpenPose makes most; MPJPE (protocol) and PCP as "
-        "in (a). robust_scale = 3 sigma (the config default).\n\n"
-        + format_table(("swapped (%)", "stage", "MPJPE (mm)", "PCP (%)"), rows)
-    )
+    title = f"### (c) Robust losses against left / right swaps ring, 5 px, {args.frames} frames"
+    return f"{title}\n\n{format_table(('swapped (%)', 'stage', 'MPJPE (mm)', 'PCP (%)'), rows)}"
 
 
 def main(argv: list[str] | None = None) -> str:
