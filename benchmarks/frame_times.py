@@ -71,10 +71,37 @@ def stage_times(sequence: Any, cfg: Any, repeats: int) -> np.ndarray:
     return np.array(rows)
 
 
+def stage_rows(data: str, only: str, repeats: int, crowd_frames: int = 3, quick: bool = True, grouping=None) -> list:
+    """Rows setting, frames, grouping, matching, reconstruction, tracking, total (ms; NaN: not timed) of the settings
+    whose label contains only; grouping(label, cfg, sequence) -> grouping seconds per frame (repeats * F,) or None."""
+    from hydra import compose
+    from hydra.errors import HydraException
+    from hydra.utils import instantiate
+
+    rows = []
+    for label, overrides in settings(data, crowd_frames, quick).items():
+        if only not in label:
+            continue
+        try:
+            cfg = compose("eval", overrides=overrides)
+        except HydraException as err:  # an older tree without this dataset or key
+            print(f"{label}: skipped, this tree's configs do not compose it ({err})", file=sys.stderr)
+            continue
+        sequence = instantiate(cfg.dataset, _convert_="all")
+        per_frame = stage_times(sequence, cfg, repeats)
+        grouped = grouping(label, cfg, sequence) if grouping is not None else None
+        grouped = np.full(len(per_frame), np.nan) if grouped is None else grouped
+        total = np.nan_to_num(grouped) + per_frame.sum(axis=1)
+        medians = [np.median(grouped), *np.median(per_frame, axis=0), np.median(total)]
+        rows.append([label, len(sequence.frames), *(float(1e3 * m) for m in medians)])
+    return rows
+
+
 def markdown(header: list[str], rows: list[list]) -> str:
-    """A markdown table; floats with 2 decimals (not evaluation.report.format_table: an older tree may lack it)."""
-    cells = [[f"{v:.2f}" if isinstance(v, float) else str(v) for v in row] for row in [header, *rows]]
-    lines = ["| " + " | ".join(row) + " |" for row in cells]
+    """A markdown table, floats with 2 decimals, NaN as '-' (not evaluation.report.format_table: an older tree may
+    lack it)."""
+    cells = [[("-" if v != v else f"{v:.2f}") if isinstance(v, float) else str(v) for v in row] for row in rows]
+    lines = ["| " + " | ".join(row) + " |" for row in [header, *cells]]
     return "\n".join([lines[0], "|" + "|".join("---" for _ in header) + "|", *lines[1:]])
 
 
@@ -88,23 +115,10 @@ def main(argv: list[str] | None = None) -> str:
     args = parser.parse_args(argv)
     if args.cpu is not None:
         os.sched_setaffinity(0, {args.cpu})
-    from hydra import compose, initialize_config_dir
-    from hydra.errors import HydraException
-    from hydra.utils import instantiate
+    from hydra import initialize_config_dir
 
-    rows = []
     with initialize_config_dir(os.path.abspath("configs"), version_base=None):
-        for label, overrides in settings(args.data).items():
-            if args.only in label:
-                try:
-                    cfg = compose("eval", overrides=overrides)
-                except HydraException as err:  # an older tree without this dataset or key
-                    print(f"{label}: skipped, this tree's configs do not compose it ({err})", file=sys.stderr)
-                    continue
-                sequence = instantiate(cfg.dataset, _convert_="all")
-                per_frame = 1e3 * stage_times(sequence, cfg, args.repeats)
-                medians = [*np.median(per_frame, axis=0), np.median(per_frame.sum(axis=1))]
-                rows.append([label, len(sequence.frames), "-", *(float(m) for m in medians)])
+        rows = stage_rows(args.data, args.only, args.repeats)
     if not rows:
         parser.error(f"no setting that this tree composes has {args.only!r} in its label")
     text = markdown(["setting", "frames", *STAGES, "total"], rows)

@@ -21,17 +21,19 @@ import time
 from pathlib import Path
 
 import numpy as np
-from hydra import compose, initialize_config_dir
+from hydra import initialize_config_dir
 from hydra.utils import instantiate
 
-from benchmarks.frame_times import STAGES, settings, stage_times
+from benchmarks.frame_times import STAGES, markdown, stage_rows
 from data.formats.fourd_detections import load_4dassoc_detections
 from evaluation.report import format_table
 
 
-def shelf_grouping_times(cfg, rig, repeats: int) -> np.ndarray:
-    """Seconds per Shelf frame of the configured PAF grouping of every view: (repeats * F,)."""
-    folder = Path(cfg.dataset.root) / cfg.dataset.detections
+def shelf_grouping(label: str, cfg, sequence, repeats: int) -> np.ndarray | None:
+    """Seconds per Shelf frame of the configured PAF grouping of every view: (repeats * F,); None elsewhere."""
+    if not label.startswith("Shelf"):
+        return None
+    folder, rig = Path(cfg.dataset.root) / cfg.dataset.detections, sequence.rig
     views = [load_4dassoc_detections(folder / f"{name}.txt", rig.cameras[v].size) for v, name in enumerate(rig.names)]
     ds, grouper = cfg.dataset, instantiate(cfg.dataset.grouper)
     keys = dict(min_paf=ds.min_paf, min_joints=ds.min_joints, min_mean_score=ds.min_mean_score, margin=ds.bbox_margin)
@@ -45,24 +47,6 @@ def shelf_grouping_times(cfg, rig, repeats: int) -> np.ndarray:
                 grouper(view, **keys)
             out.append(time.perf_counter() - t0)
     return np.array(out)
-
-
-def stage_rows(data: str, crowd_frames: int, repeats: int, quick: bool, only: str | None = None) -> list[list]:
-    """Table 1's rows: setting, frames, grouping, matching, reconstruction, tracking, total (ms; NaN: none)."""
-    rows = []
-    for label, overrides in settings(data, crowd_frames, quick).items():
-        if only is not None and only not in label:
-            continue
-        cfg = compose("eval", overrides=overrides)
-        sequence = instantiate(cfg.dataset, _convert_="all")
-        per_frame = stage_times(sequence, cfg, repeats)
-        grouping = np.full(len(per_frame), np.nan)
-        if label.startswith("Shelf"):
-            grouping = shelf_grouping_times(cfg, sequence.rig, repeats)
-        total = np.nan_to_num(grouping) + per_frame.sum(axis=1)
-        medians = [np.median(grouping), *np.median(per_frame, axis=0), np.median(total)]
-        rows.append([label, len(sequence.frames), *(1e3 * m for m in medians)])
-    return rows
 
 
 def eval_seconds(args: list[str], env: dict[str, str], runs: str, all_cores: bool = False) -> float:
@@ -91,11 +75,6 @@ def process_rows(data: str, repeats: int) -> list[list]:
     return [[label, float(np.median(seconds))] for label, seconds in runs.items()]
 
 
-def dashes(rows: list[list]) -> list[list]:
-    """Rows with NaN cells shown as '-'."""
-    return [["-" if isinstance(c, float) and np.isnan(c) else c for c in row] for row in rows]
-
-
 def main(argv: list[str] | None = None) -> str:
     """Print (and with --out, write) the tables."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -110,11 +89,12 @@ def main(argv: list[str] | None = None) -> str:
     args = parser.parse_args(argv)
     if args.cpu is not None:
         os.sched_setaffinity(0, {args.cpu})
+    grouping = lambda label, cfg, sequence: shelf_grouping(label, cfg, sequence, args.repeats)
     with initialize_config_dir(str(common.CONFIG_DIR), version_base="1.3"):
-        stages = stage_rows(args.data, args.crowd_frames, args.repeats, args.quick, args.only)
+        stages = stage_rows(args.data, args.only or "", args.repeats, args.crowd_frames, args.quick, grouping)
     parts = [
         "Per frame by stage, ms (median over frames x repeats, one core; tracking on)",
-        format_table(["setting", "frames", *STAGES, "total"], dashes(stages), floatfmt=".2f"),
+        markdown(["setting", "frames", *STAGES, "total"], stages),
     ]
     if not args.skip_process:
         parts += [
