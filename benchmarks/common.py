@@ -30,16 +30,9 @@ def shelf(data: str) -> list[str]:
     return ["dataset=shelf", f"dataset.root={data}/shelf"]
 
 
-def crowd(persons: int, frames: int, views: int | None = None) -> list[str]:
+def crowd(persons: int, frames: int) -> list[str]:
     """eval.yaml overrides of the synthetic crowd on the surveillance rig of configs/dataset/crowd.yaml."""
-    cameras = [] if views is None else [f"dataset.num_cameras={views}"]
-    return ["dataset=crowd", f"dataset.num_persons={persons}", *cameras, f"dataset.num_frames={frames}"]
-
-
-def ring(persons: int, frames: int) -> list[str]:
-    """eval.yaml overrides of the issues' speed setting: persons in 7 ring views at 0.5 per m^2."""
-    sizes = [f"dataset.num_persons={persons}", "dataset.num_cameras=7", "dataset.density=0.5"]
-    return ["dataset=synthetic", *sizes, f"dataset.num_frames={frames}"]
+    return ["dataset=crowd", f"dataset.num_persons={persons}", f"dataset.num_frames={frames}"]
 
 
 def panoptic_sets(data: str, noises: tuple[float, ...]) -> dict[str, list[str]]:

@@ -65,14 +65,8 @@ def binned_sigmas(errors: np.ndarray, scores: np.ndarray, sizes: np.ndarray) -> 
         for b0, b1 in zip(SIZE_BINS[:-1], SIZE_BINS[1:]):
             hit = (scores >= s0) & (scores < s1) & (sizes >= b0) & (sizes < b1)
             if hit.sum() >= MIN_BIN:
-                out.append(
-                    (
-                        float(scores[hit].mean()),
-                        float(sizes[hit].mean()),
-                        float(np.median(errors[hit])) / RAYLEIGH_MEDIAN,
-                        int(hit.sum()),
-                    )
-                )
+                sigma = float(np.median(errors[hit])) / RAYLEIGH_MEDIAN
+                out.append((float(scores[hit].mean()), float(sizes[hit].mean()), sigma, int(hit.sum())))
     return out
 
 

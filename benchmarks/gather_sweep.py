@@ -113,13 +113,10 @@ def main(argv: Sequence[str] | None = None) -> str:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sweep_dir", type=Path, nargs="+", help="Hydra multirun folders (hydra.sweep.dir)")
     parser.add_argument("--out", type=Path, help="also write the table to this markdown file")
-    parser.add_argument(
-        "--metrics",
-        default=",".join(DEFAULT_METRICS),
-        help="comma-separated metrics.json keys or <stage>_ms (default: %(default)s)",
-    )
+    parser.add_argument("--metrics", default=",".join(DEFAULT_METRICS), help="metrics.json keys or <stage>_ms, commas")
     args = parser.parse_args(argv)
-    return common.emit(format_table(*sweep_table(args.sweep_dir, [m for m in args.metrics.split(",") if m])), args.out)
+    table = format_table(*sweep_table(args.sweep_dir, [m for m in args.metrics.split(",") if m]))
+    return common.emit(table, args.out)
 
 
 if __name__ == "__main__":

@@ -52,7 +52,8 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
     if "wildtrack" in names:
         sets["Wildtrack 5 px"] = ["dataset=wildtrack", f"dataset.root={data}/wildtrack"]
     if "timing" in names:
-        sets["ring 100 people x 7 views"] = common.ring(100, 3)
+        ring = ["dataset.num_persons=100", "dataset.num_cameras=7", "dataset.density=0.5", "dataset.num_frames=3"]
+        sets["ring 100 people x 7 views"] = ["dataset=synthetic", *ring]
     if "crowd" in names:
         for n in CROWD_SIZES:
             sets[f"crowd {n} people"] = common.crowd(n, crowd_frames)

@@ -127,12 +127,9 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", default="../shared/data")
     parser.add_argument("--max-px", type=float, default=40.0, help="a view's nearest detection must be this close")
-    parser.add_argument(
-        "overrides", nargs="*", help="Hydra overrides of configs/eval.yaml (e.g. dataset.drop_feet=true)"
-    )
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides of configs/eval.yaml")
     args = parser.parse_args(argv)
-    overrides = [*common.shelf(args.data), *args.overrides]
-    rows = run(overrides, args.max_px)
+    rows = run([*common.shelf(args.data), *args.overrides], args.max_px)
     table = []
     for method in METHODS:
         pcp = [100.0 * np.mean(rows[method][a]) for a in AVERAGED_ACTOR_IDS]
