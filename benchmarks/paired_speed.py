@@ -156,16 +156,13 @@ def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, dr
             both = min(statistics.median(a), statistics.median(b)) > 0  # a stage the baseline lacks has no ratio
             ratio = statistics.median(a) / statistics.median(b) if both else float("nan")
             rows.append([setting, column, statistics.median(a), statistics.median(b), ratio, mean, se])
+    headers = ["setting", "stage", f"{baseline} median", "this tree median", "ratio", "difference", "standard error"]
     return "\n\n".join(
         [
             f"Each pair: {DRIVERS[driver]} at {baseline}, then in this tree ({unit})",
             format_table(["pair", "setting", f"{baseline} total", "this tree total"], pairs, floatfmt=".2f"),
             f"Over the {len(runs['baseline'])} pairs: medians, and this tree - {baseline} (mean paired difference)",
-            format_table(
-                ["setting", "stage", f"{baseline} median", "this tree median", "ratio", "difference", "standard error"],
-                rows,
-                floatfmt=".2f",
-            ),
+            format_table(headers, rows, floatfmt=".2f"),
         ]
     )
 
