@@ -75,10 +75,8 @@ def main(argv: list[str] | None = None) -> None:
     print(f"{len(poses)} poses from {'; '.join(sources)}")
     print(format_table(["bone", "default cm", "SD", "estimated cm", "SD", "n"], table_rows(mean, std, count)))
     if args.output is not None:
-        keep = count >= args.min_count
-        doc = bone_table_dict(
-            np.where(keep, mean, np.nan), std, count, source="benchmarks/fit_bone_lengths.py from " + "; ".join(sources)
-        )
+        source = "benchmarks/fit_bone_lengths.py from " + "; ".join(sources)
+        doc = bone_table_dict(np.where(count >= args.min_count, mean, np.nan), std, count, source=source)
         atomic_write_text(args.output, json.dumps(doc, indent=2))
         print(f"wrote {len(doc['bones'])} bones to {args.output}")
 

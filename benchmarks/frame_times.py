@@ -24,24 +24,12 @@ STAGES = ("grouping", "matching", "reconstruction", "tracking")
 
 def settings(data: str, crowd_frames: int = 3, quick: bool = True) -> dict[str, list[str]]:
     """Setting label -> eval.yaml overrides: Shelf, 100 people in 7 ring views, the crowd sweep (5 and 10 views)."""
-    out = {
-        "Shelf 300-600": ["dataset=shelf", f"dataset.root={data}/shelf"],
-        "100 people x 7 ring views": [
-            "dataset.num_persons=100",
-            "dataset.num_cameras=7",
-            "dataset.density=0.5",
-            "dataset.num_frames=4",
-        ],
-    }
-    people = (10, 100, 400) if quick else (10, 50, 100, 200, 400)
+    ring = ["dataset.num_persons=100", "dataset.num_cameras=7", "dataset.density=0.5", "dataset.num_frames=4"]
+    out = {"Shelf 300-600": ["dataset=shelf", f"dataset.root={data}/shelf"], "100 people x 7 ring views": ring}
     for views in (5, 10):
-        for n in people:
-            out[f"crowd {n} x {views} views"] = [
-                "dataset=crowd",
-                f"dataset.num_persons={n}",
-                f"dataset.num_cameras={views}",
-                f"dataset.num_frames={crowd_frames}",
-            ]
+        for n in (10, 100, 400) if quick else (10, 50, 100, 200, 400):
+            sizes = [f"dataset.num_persons={n}", f"dataset.num_cameras={views}", f"dataset.num_frames={crowd_frames}"]
+            out[f"crowd {n} x {views} views"] = ["dataset=crowd", *sizes]
     return out
 
 

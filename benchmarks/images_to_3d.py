@@ -84,8 +84,11 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"unknown rows {unknown}; choose from {list(ROWS)}")
     if any(r.startswith("sppe") for r in rows) and not args.checkpoint:
         parser.error("the sppe rows need --checkpoint")
-    scene = [f"dataset.num_frames={args.frames}", f"dataset.num_persons={args.persons}"]
-    scene.append(f"dataset.num_cameras={args.cameras}")
+    scene = [
+        f"dataset.num_frames={args.frames}",
+        f"dataset.num_persons={args.persons}",
+        f"dataset.num_cameras={args.cameras}",
+    ]
     table = []
     for row in rows:
         name, overrides = ROWS[row]

@@ -70,9 +70,8 @@ def network_rows(
                 for batch in (1, 32):
                     for flip in (False, True):
                         rate = crops_per_second(model, device, size, batch, flip, min_time)
-                        rows.append(
-                            [f"FastPose-{depth}", name, batch, where, "on" if flip else "off", rate, 1e3 / rate]
-                        )
+                        setting = [f"FastPose-{depth}", name, batch, where, "on" if flip else "off"]
+                        rows.append([*setting, rate, 1e3 / rate])
         del model
     torch.set_num_threads(default_threads)
     return rows
