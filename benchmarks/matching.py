@@ -3,14 +3,11 @@ oracle on synthetic bodies, as markdown tables.
 
     python -m benchmarks.matching [--quick] [--frames N] [--sections abc] [--out FILE.md] [--data ../shared/data]
 
-(a) Wildtrack: the real 7-camera rig with synthetic bodies at the annotated ground positions of the first N
-    annotated frames (a one-frame sequence each).
-(b) Density sweep: a 5-camera ring around a fixed 9 x 9 m area (40 people = 0.49 per m^2), 10-80 people, 2D
-    noise 2/5/10 px, 0 or 30 % of the detections with their 6 foot joints hidden (ankles kept).
-(c) Timing: matching ms per frame vs people (7 views) and vs views (20 people), median over repeats.
-
-Precision / recall are over cross-view detection pairs and "pure+complete" is the share of persons recovered
-exactly (evaluation.correspondence); ms is the matcher call only, one core. 2D noise SD = px * (depth / 5 m).
+(a) Wildtrack: the real 7-camera rig, synthetic bodies at the annotated positions of the first N frames.
+(b) Density sweep: 5 ring cameras around a fixed 9 x 9 m area, 10-80 people, 2D noise 2/5/10 px (SD at 5 m, growing
+    with depth), 0 or 30 % of the detections without their 6 foot joints.
+(c) Matching ms per frame vs people (7 views) and vs views (20 people), median over repeats, one core.
+Precision / recall over cross-view detection pairs; "pure+complete": the share of persons recovered exactly.
 """
 
 from benchmarks import common  # isort: split
@@ -125,11 +122,6 @@ def density_table(args: argparse.Namespace) -> str:
     return f"{title}\n\n{format_table(HEADERS, rows)}"
 
 
-def median_ms(matcher: Callable, frames: Frames, rig: Rig, repeats: int) -> float:
-    """Median over frames of the median over repeats of one matcher call (ms)."""
-    return float(np.median([common.timed(lambda: matcher(views, rig), repeats)[0] for views in frames]))
-
-
 def timing_table(args: argparse.Namespace) -> str:
     """Section (c): ms per frame vs people (7 views) and vs views (20 people)."""
     settings = [(n, 7) for n in (5, 10, 20, 50, 100)] + [(20, v) for v in (2, 4, 6, 8)]
@@ -145,7 +137,8 @@ def timing_table(args: argparse.Namespace) -> str:
             if name == "ransac" and n > ransac_max:
                 row.append(f"skipped (> {ransac_max} people)")
                 continue
-            row.append(median_ms(matcher, frames, seq.rig, 1 if name == "ransac" else args.repeats))
+            repeats = 1 if name == "ransac" else args.repeats  # per frame: the median of repeats calls
+            row.append(float(np.median([common.timed(lambda: matcher(v, seq.rig), repeats)[0] for v in frames])))
         rows.append(row)
     headers = ("people", "views", "detections / view", *(f"{m} ms" for m in MATCHERS))
     return (

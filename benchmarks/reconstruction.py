@@ -113,25 +113,14 @@ def reprojection_rows(scene: str, res: dict[str, dict]) -> list[list]:
     return rows
 
 
-def gain_line(scene: str, res: dict[str, dict]) -> str:
-    """How much lower mle_map's MPJPE is than vanilla's, on vanilla's joints and on all output joints."""
-    van, ours = res["vanilla"]["mpjpe_common_mm"], res["mle_map"]["mpjpe_common_mm"]
-    van_all, ours_all = res["vanilla"]["mpjpe_mm"], res["mle_map"]["mpjpe_mm"]
-    return (
-        f"- {scene}, 5 px, occlusion: mle_map MPJPE {ours:.1f} mm vs vanilla {van:.1f} mm on vanilla's joints = "
-        f"{100 * (1 - ours / van):.1f} % lower; protocol MPJPE (all output joints) {ours_all:.1f} vs "
-        f"{van_all:.1f} mm = {100 * (1 - ours_all / van_all):.1f} % lower"
-    )
-
-
-def accuracy_section(args: argparse.Namespace) -> tuple[str, str, list[str]]:
-    """Sections (a) and (b), and the lines of mle_map's MPJPE gain over vanilla at 5 px."""
+def accuracy_section(args: argparse.Namespace) -> tuple[str, str]:
+    """Sections (a) and (b)."""
     root = Path(args.data) / "wildtrack"
     scenes = {
         "Wildtrack rig (7 cams)": lambda n: wildtrack_sequence(root, n, args.frames, args.seed),
         "ring (5 cams, 10 persons)": lambda n: ring_sequence(n, args.frames, args.seed),
     }
-    rows, stat_rows, gains = [], [], []
+    rows, stat_rows = [], []
     for scene, build in scenes.items():
         for noise in NOISES:
             seq = build(noise)
@@ -142,14 +131,13 @@ def accuracy_section(args: argparse.Namespace) -> tuple[str, str, list[str]]:
                 rows.append([scene, f"{noise:g}", people, name, *errors])
             if noise == 5.0:
                 stat_rows += reprojection_rows(scene, res)
-                gains.append(gain_line(scene, res))
     a = f"### (a) MPJPE and PCP, oracle matching, occlusion on, {args.frames} frames per setting\n\n"
     a += "MPJPE (protocol): joints valid in prediction and GT; MPJPE (vanilla's joints): the joints vanilla outputs."
     b = "### (b) Reprojection error (px) of the paper's Table 3, 5 px noise, undistorted pixels, var = population\n\n"
     b += "'detections': against the noisy 2D the solver fits; 'ground truth': against the GT's noise-free projection."
     a += "\n\n" + format_table((*A_HEADERS, "ms / frame"), rows)
     b += "\n\n" + format_table(B_HEADERS, stat_rows)
-    return a, b, gains
+    return a, b
 
 
 def swap_left_right(poses2d: np.ndarray, share: float, rng: np.random.Generator) -> np.ndarray:
@@ -193,9 +181,8 @@ def main(argv: list[str] | None = None) -> str:
     args = p.parse_args(argv)
     args.frames = 2 if args.quick else 10
     start = time.perf_counter()
-    a, b, gains = accuracy_section(args)
-    parts = [f"## Reconstruction benchmark (seed {args.seed}{', quick' if args.quick else ''})", a, b]
-    parts += [robust_section(args), "### mle_map against vanilla\n\n" + "\n".join(gains)]
+    parts = [f"## Reconstruction benchmark (seed {args.seed}{', quick' if args.quick else ''})"]
+    parts += [*accuracy_section(args), robust_section(args)]
     return common.emit("\n\n".join([*parts, f"Total wall time {time.perf_counter() - start:.0f} s."]), args.out)
 
 

@@ -3,12 +3,10 @@
     python -m benchmarks.speed [--repeats 3] [--crowd-frames 3] [--skip-process] [--quick] [--only TEXT]
                                [--cpu N] [--out FILE.md]
 
-Table 1, per frame by stage (median over frames x repeats, ms, one core, the default ``configs/eval.yaml`` with
-tracking): Shelf 300-600 (real OpenPose BODY_25: PAF grouping, then matching, MAP, tracking), 100 people in 7
-ring views and the crowd sweep on the surveillance rig of ``configs/dataset/crowd.yaml`` (10-400 people, 5 and
-10 views); settings and timing as benchmarks/frame_times.py. Table 2, whole process in fresh subprocesses:
-``python eval.py`` and the Shelf evaluation warm (numba cache filled; median of ``--repeats``; on ``--cpu``) and
-the first run of a fresh install (a new, empty ``NUMBA_CACHE_DIR``; on every core, as a user runs it).
+Table 1: benchmarks/frame_times.py's per-frame stage medians (ms, one core, default config with tracking) of Shelf
+300-600 (plus its PAF grouping), 100 people in 7 ring views and the crowd sweep (10-400 people, 5 and 10 views).
+Table 2: ``python eval.py`` and the Shelf evaluation as fresh processes, warm (median of ``--repeats``, on
+``--cpu``) and as a fresh install's first run (a new, empty ``NUMBA_CACHE_DIR``; on every core).
 """
 
 from benchmarks import common  # isort: split
