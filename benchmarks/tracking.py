@@ -25,9 +25,7 @@ HEADERS += ("tracker ms / frame", "pipeline ms / frame on", "off", "tracking add
 
 def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[str]]:
     """Set label -> dataset overrides."""
-    sets: dict[str, list[str]] = {}
-    if "shelf" in names:
-        sets["Shelf (PCP)"] = common.shelf(data)
+    sets = {"Shelf (PCP)": common.shelf(data)} if "shelf" in names else {}
     if "panoptic" in names:
         sets.update(common.panoptic_sets(data, (5,)))
     if "crowd" in names:
