@@ -59,7 +59,9 @@ def stage_times(sequence: Any, cfg: Any, repeats: int) -> np.ndarray:
     return np.array(rows)
 
 
-def stage_rows(data: str, only: str, repeats: int, crowd_frames: int = 3, quick: bool = True, grouping=None) -> list:
+def stage_rows(
+    data: str, only: str, repeats: int, crowd_frames: int = 3, quick: bool = True, grouping: Any = None
+) -> list:
     """Rows setting, frames, grouping, matching, reconstruction, tracking, total (ms; NaN: not timed) of the settings
     whose label contains only; grouping(label, cfg, sequence) -> grouping seconds per frame (repeats * F,) or None."""
     from hydra import compose

@@ -97,13 +97,10 @@ def main(argv: list[str] | None = None) -> None:
         metrics, timings = run_row(scene + overrides)
         table.append(table_row(name, metrics, timings, args.frames))
         print(f"{name}: done", flush=True)
-    header = ["2D source", "AP all", "AP body", "AP foot", "MPJPE mm", "PCP %", "found %", "2D ms/frame"]
-    text = (
-        f"Rendered synthetic scene: {args.persons} persons, {args.cameras} ring cameras 1280 x 720, "
-        f"{args.frames} frames; default matching + MAP + tracking; AP per view (COCO-23 OKS), MPJPE absolute "
-        f"(all 23 joints, GT-matched), PCP alpha 0.5\n\n"
-        + format_table([*header, "3D ms/frame"], table, floatfmt=".2f")
-    )
+    header = ["2D source", "AP all", "AP body", "AP foot", "MPJPE mm", "PCP %", "found %", "2D ms/frame", "3D ms/frame"]
+    scene = f"{args.persons} persons, {args.cameras} ring cameras 1280 x 720, {args.frames} frames"
+    text = f"Rendered synthetic scene: {scene}; default matching + MAP + tracking; AP per view (COCO-23 OKS), MPJPE "
+    text += f"absolute (all 23 joints, GT-matched), PCP alpha 0.5\n\n{format_table(header, table, floatfmt='.2f')}"
     print(text)
     if args.out:
         atomic_write_text(args.out, text + "\n")

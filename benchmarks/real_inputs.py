@@ -23,8 +23,10 @@ import time
 import numpy as np
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
+from omegaconf import DictConfig
 from tqdm import tqdm
 
+from data.multiview import Sequence
 from evaluation.report import format_table
 
 ROWS = {
@@ -60,7 +62,7 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
     return sets
 
 
-def detectable_persons(sequence) -> int:
+def detectable_persons(sequence: Sequence) -> int:
     """GT person-frames seen in >= 2 views of a sequence with identities."""
     seen = 0
     for frame in sequence.frames:
@@ -71,7 +73,7 @@ def detectable_persons(sequence) -> int:
     return seen
 
 
-def run_row(sequence, cfg) -> list:
+def run_row(sequence: Sequence, cfg: DictConfig) -> list:
     """One table row's values: the pipeline of cfg on a fresh copy of the sequence."""
     report, ms = common.evaluate(sequence, cfg, grouping=True)
     if "shelf" in report.protocols:

@@ -16,7 +16,9 @@ import argparse
 import numpy as np
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
+from omegaconf import DictConfig
 
+from data.multiview import Sequence
 from evaluation.report import format_table
 
 HEADERS = ("set", "ID switches (per 100)", "IDF1-like (%)", "fragmentations", "MPJPE / PCP on", "MPJPE / PCP off")
@@ -34,7 +36,7 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
     return sets
 
 
-def run(sequence, cfg) -> tuple[dict, dict, float, float]:
+def run(sequence: Sequence, cfg: DictConfig) -> tuple[dict, dict, float, float]:
     """Metrics, Shelf summary, tracker ms and pipeline (matching + reconstruction + tracking) ms per frame."""
     report, ms = common.evaluate(sequence, cfg)
     tracker_ms = 1e3 * report.timings.get("tracking", 0.0) / max(len(sequence.frames), 1)
