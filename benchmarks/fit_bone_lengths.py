@@ -1,18 +1,13 @@
 """Re-estimate the bone-length table of the MAP prior from 3D ground truth (Shelf and/or CMU Panoptic).
 
-Run from the repository root, as a module (so that ``data``, ``reconstruction`` ... import):
-
     python -m benchmarks.fit_bone_lengths                                   # Shelf gt.txt, print only
     python -m benchmarks.fit_bone_lengths --panoptic ../shared/data/panoptic/160906_band1/hdPose3d_stage1_coco19
     python -m benchmarks.fit_bone_lengths --output outputs/bones_shelf.json # then bone_table=<that path>
 
-Shelf ground truth has the 14 Shelf joints, so only the 12 limb and torso bones are estimable; CMU
-Panoptic (coco19) adds the face bones; neither has feet. Bones without samples keep their default when
-the written table is loaded (``data.bone_lengths.resolve_bone_table``). Samples from every frame are
-pooled, so the SD mixes the spread between persons with annotation noise.
+Shelf's 14 joints give the 12 limb and torso bones, Panoptic (coco19) adds the face bones, neither has feet;
+bones without samples keep their default when the table is loaded (data.bone_lengths.resolve_bone_table). Samples
+of every frame are pooled, so the SD mixes the spread between persons with annotation noise.
 """
-
-from __future__ import annotations
 
 import argparse
 import json
@@ -37,10 +32,8 @@ def shelf_poses(path: str | Path) -> np.ndarray:
 
 
 def panoptic_poses(folder: str | Path, min_confidence: float = 0.1) -> np.ndarray:
-    """Every body of the body3DScene_*.json files of a folder, in metres, z up, COCO-23: -> (N, 23, 4).
-
-    A joint is valid when its Panoptic confidence exceeds min_confidence (missing joints have -1).
-    """
+    """Every body of a folder's body3DScene_*.json files, metres, z up, COCO-23, valid where the Panoptic
+    confidence exceeds min_confidence (missing joints have -1): -> (N, 23, 4)."""
     bodies = []
     for path in sorted(Path(folder).glob("body3DScene_*.json")):
         for body in json.loads(path.read_text()).get("bodies", []):
@@ -60,27 +53,11 @@ def table_rows(mean: np.ndarray, std: np.ndarray, count: np.ndarray) -> list[lis
     ]
 
 
-def write_json(doc: dict, path: Path) -> None:
-    """Write JSON atomically (never a half-written table)."""
-    atomic_write_text(path, json.dumps(doc, indent=2))
-
-
 def main(argv: list[str] | None = None) -> None:
     """Parse arguments, estimate, print the table, optionally write the JSON."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument(
-        "--shelf",
-        type=Path,
-        default=None,
-        help=f"4D Association gt.txt (default {DEFAULT_SHELF} when no --panoptic is given)",
-    )
-    parser.add_argument(
-        "--panoptic",
-        type=Path,
-        nargs="*",
-        default=[],
-        help="folders of Panoptic hdPose3d_stage1_coco19 body3DScene_*.json files",
-    )
+    parser.add_argument("--shelf", type=Path, default=None, help=f"gt.txt (default {DEFAULT_SHELF} without --panoptic)")
+    parser.add_argument("--panoptic", type=Path, nargs="*", default=[], help="hdPose3d_stage1_coco19 folders")
     parser.add_argument("--panoptic-min-confidence", type=float, default=0.1)
     parser.add_argument("--min-count", type=int, default=10, help="bones with fewer samples are not written")
     parser.add_argument("--output", type=Path, default=None, help="write a bone_table JSON here")
@@ -98,11 +75,9 @@ def main(argv: list[str] | None = None) -> None:
     print(f"{len(poses)} poses from {'; '.join(sources)}")
     print(format_table(["bone", "default cm", "SD", "estimated cm", "SD", "n"], table_rows(mean, std, count)))
     if args.output is not None:
-        keep = count >= args.min_count
-        doc = bone_table_dict(
-            np.where(keep, mean, np.nan), std, count, source="benchmarks/fit_bone_lengths.py from " + "; ".join(sources)
-        )
-        write_json(doc, args.output)
+        source = "benchmarks/fit_bone_lengths.py from " + "; ".join(sources)
+        doc = bone_table_dict(np.where(count >= args.min_count, mean, np.nan), std, count, source=source)
+        atomic_write_text(args.output, json.dumps(doc, indent=2))
         print(f"wrote {len(doc['bones'])} bones to {args.output}")
 
 

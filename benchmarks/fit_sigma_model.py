@@ -1,25 +1,15 @@
-"""Fit the 2D sigma model of the matcher and the MAP to the real errors of Shelf's OpenPose detections.
+"""Fit the 2D noise model (``noise_model`` config group) to the real errors of Shelf's OpenPose detections.
 
-    python -m benchmarks.fit_sigma_model [--root ../shared/data/shelf] [--frames 0:301]
+    python -m benchmarks.fit_sigma_model [--root ../shared/data/shelf] [--frames 0:301] [--out FILE.yaml]
 
-The Shelf 2D ground truth is the projection of ``tum/actorsGT.mat`` through the Shelf cameras. Every
-PAF-grouped OpenPose detection (data/datasets/shelf.py) is paired with the actor whose projected joints
-lie closest (median distance over the 12 limb joints, below ``--max-px``); the pixel error of each of
-its 12 limb joints (the Shelf-14 joints that are COCO keypoints; the two head joints are not) is kept
-with the joint's score and the box size sqrt(w h). The model is
-
-    sigma = max(sigma_min, sqrt(sigma_px^2 + (c sqrt(w h))^2) / score ** k)   (px, per coordinate)
-
-(a part in image pixels, as a bottom-up detector's, and a part that grows with the person, as a
-top-down detector's, both less certain at a lower score)
-and a 2D error of SD sigma per coordinate has median sigma * sqrt(2 ln 2) (Rayleigh). c and k are fitted
-robustly (sigma_px, c, k), by least squares of log sigma on the median error of each (score, size) bin, so that left /
-right swaps and grouping mistakes (a few percent of the joints, errors of 50+ px) do not inflate it.
-The script prints the binned table, the fit, and the model of configs/matching/evidence.yaml and
-configs/reconstruction/mle_map.yaml beside it.
+Every PAF-grouped OpenPose detection is paired with the actor of ``tum/actorsGT.mat`` whose projected limb joints
+lie closest (median over the 12 Shelf-14 limb joints, below ``--max-px``); each scored limb joint's pixel error is
+kept with its score and box size sqrt(w h). reconstruction.noise_model.NoiseModel's
+sigma = max(sigma_min, sqrt(sigma_px^2 + (c sqrt(w h))^2) / score^score_power) is then fitted by least squares of
+log sigma on the median error of each (score, size) bin (an SD sigma per coordinate has median error
+sigma sqrt(2 ln 2)), so that left / right swaps and grouping mistakes do not inflate it. Printed: the bins, the
+fit and the configured model (configs/noise_model/fitted.yaml); ``--out`` writes the fit as such a file.
 """
-
-from __future__ import annotations
 
 import argparse
 from pathlib import Path
@@ -28,10 +18,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from data.datasets.shelf import load_shelf
+from data.formats.atomic_io import atomic_write_text
 from data.keypoints import COCO23_TO_SHELF14_LIMBS
 from evaluation.protocols.shelf import load_actors_gt
 from evaluation.report import format_table
 from models.paf_grouping import group_view
+from reconstruction.noise_model import NoiseModel
 
 RAYLEIGH_MEDIAN = float(np.sqrt(2 * np.log(2)))
 SCORE_BINS = (0.2, 0.4, 0.55, 0.7, 0.8, 0.9, 1.01)
@@ -73,14 +65,8 @@ def binned_sigmas(errors: np.ndarray, scores: np.ndarray, sizes: np.ndarray) -> 
         for b0, b1 in zip(SIZE_BINS[:-1], SIZE_BINS[1:]):
             hit = (scores >= s0) & (scores < s1) & (sizes >= b0) & (sizes < b1)
             if hit.sum() >= MIN_BIN:
-                out.append(
-                    (
-                        float(scores[hit].mean()),
-                        float(sizes[hit].mean()),
-                        float(np.median(errors[hit])) / RAYLEIGH_MEDIAN,
-                        int(hit.sum()),
-                    )
-                )
+                sigma = float(np.median(errors[hit])) / RAYLEIGH_MEDIAN
+                out.append((float(scores[hit].mean()), float(sizes[hit].mean()), sigma, int(hit.sum())))
     return out
 
 
@@ -104,42 +90,33 @@ def fit(bins: list[tuple[float, float, float, int]], sigma_min: float) -> tuple[
 
 
 def main(argv: list[str] | None = None) -> tuple[float, float, float]:
-    """Print the binned errors and the fitted (sigma_px, c, k)."""
+    """Print the binned errors and the fit (noise_model keys); -> (sigma_px, c, score_power)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--root", default="../shared/data/shelf", type=Path)
     parser.add_argument("--frames", default=None, help='"start:stop[:step]" positions (default: all 301)')
     parser.add_argument("--max-px", type=float, default=40.0, help="largest median joint distance of a match")
     parser.add_argument("--sigma-min", type=float, default=1.0)
+    parser.add_argument("--out", type=Path, default=None, help="write the fit as a configs/noise_model/*.yaml")
     args = parser.parse_args(argv)
     errors, scores, sizes = joint_errors(args.root, args.frames, args.max_px)
     bins = binned_sigmas(errors, scores, sizes)
     sigma_px, c, k = fit(bins, args.sigma_min)
-    rows = [
-        [
-            f"{s:.2f}",
-            f"{b:.0f}",
-            n,
-            sig,
-            float(model_sigma(s, b, sigma_px, c, k, args.sigma_min)),
-            max(1.0, 0.02 * b / s),
-        ]
-        for s, b, sig, n in bins
-    ]
+    models = (NoiseModel(c=c, sigma_px=sigma_px, score_power=k, sigma_min=args.sigma_min), NoiseModel())
+    at = lambda m, s, b: float(model_sigma(s, b, m.sigma_px, m.c, m.score_power, m.sigma_min))
+    rows = [[f"{s:.2f}", f"{b:.0f}", n, sig, *(at(m, s, b) for m in models)] for s, b, sig, n in bins]
     print(
         f"Shelf OpenPose limb joints matched to the projected actorsGT.mat: {len(errors)} joints; "
         f"median error {np.median(errors):.2f} px, {100 * np.mean(errors > 30):.1f} % beyond 30 px"
     )
-    print(
-        format_table(
-            ["score", "box size (px)", "joints", "sigma measured (px)", "fit", "c=0.02, k=1 (before)"],
-            rows,
-            floatfmt=".2f",
-        )
-    )
+    headers = ["score", "box size (px)", "joints", "sigma measured (px)", "fit", "configured"]
+    print(format_table(headers, rows, floatfmt=".2f"))
+    keys = f"c: {c:.4f}\nsigma_px: {sigma_px:.2f}\nscore_power: {k:.2f}\nsigma_min: {args.sigma_min:g}\n"
     print(
         f"\nfit: sigma = max({args.sigma_min:g}, sqrt({sigma_px:.2f}^2 + ({c:.4f} sqrt(w h))^2) / score ** {k:.2f}) px"
-        "  (keys sigma_px, c, score_power of configs/matching/evidence.yaml and configs/reconstruction/*.yaml)"
     )
+    print(f"noise_model keys (configs/noise_model/*.yaml):\n{keys}")
+    if args.out:
+        atomic_write_text(args.out, f"_target_: reconstruction.noise_model.NoiseModel\n{keys}")
     return sigma_px, c, k
 
 

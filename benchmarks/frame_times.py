@@ -2,23 +2,16 @@
 
     python -m benchmarks.frame_times [--only TEXT] [--repeats 3] [--cpu N] [--data DIR]
 
-It times the tree whose packages are imported: the working directory's (PYTHONPATH can point elsewhere). It
-imports nothing of the repository at its top, so it can time revisions older than benchmarks/speed.py, such as
-a9f9a65, the reference of issue 16: ``python -m benchmarks.paired_speed --driver frames`` runs it in a worktree
-of the baseline and in this tree, alternately. It composes that tree's
-``configs/eval.yaml`` with a setting's overrides, builds the pipeline from the matching, reconstruction and,
-where the tree has one, tracking groups, and prints one table in benchmarks.speed's format: per setting, the
-median over frames x repeats of matching, reconstruction, tracking and their sum, in ms on one core (BLAS and
-numba threads pinned to 1 before numpy is imported). Shelf's PAF grouping is not timed here (benchmarks.speed
-does that).
+It times the tree whose packages are imported (the working directory's, or PYTHONPATH's) and imports nothing of
+the repository at its top, so that ``benchmarks.paired_speed --driver frames`` can run it in an older revision's
+worktree. One table in benchmarks.speed's format: per setting, the median over frames x repeats of matching,
+reconstruction, tracking and their sum, ms on one core (Shelf's PAF grouping is timed by benchmarks.speed).
 """
-
-from __future__ import annotations
 
 import os
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_var] = "1"
+    os.environ[_var] = "1"  # before numpy loads; not benchmarks.common, which an older tree lacks
 
 import argparse  # noqa: E402
 import sys  # noqa: E402
@@ -31,24 +24,12 @@ STAGES = ("grouping", "matching", "reconstruction", "tracking")
 
 def settings(data: str, crowd_frames: int = 3, quick: bool = True) -> dict[str, list[str]]:
     """Setting label -> eval.yaml overrides: Shelf, 100 people in 7 ring views, the crowd sweep (5 and 10 views)."""
-    out = {
-        "Shelf 300-600": ["dataset=shelf", f"dataset.root={data}/shelf"],
-        "100 people x 7 ring views": [
-            "dataset.num_persons=100",
-            "dataset.num_cameras=7",
-            "dataset.density=0.5",
-            "dataset.num_frames=4",
-        ],
-    }
-    people = (10, 100, 400) if quick else (10, 50, 100, 200, 400)
+    ring = ["dataset.num_persons=100", "dataset.num_cameras=7", "dataset.density=0.5", "dataset.num_frames=4"]
+    out = {"Shelf 300-600": ["dataset=shelf", f"dataset.root={data}/shelf"], "100 people x 7 ring views": ring}
     for views in (5, 10):
-        for n in people:
-            out[f"crowd {n} x {views} views"] = [
-                "dataset=crowd",
-                f"dataset.num_persons={n}",
-                f"dataset.num_cameras={views}",
-                f"dataset.num_frames={crowd_frames}",
-            ]
+        for n in (10, 100, 400) if quick else (10, 50, 100, 200, 400):
+            sizes = [f"dataset.num_persons={n}", f"dataset.num_cameras={views}", f"dataset.num_frames={crowd_frames}"]
+            out[f"crowd {n} x {views} views"] = ["dataset=crowd", *sizes]
     return out
 
 
@@ -78,10 +59,39 @@ def stage_times(sequence: Any, cfg: Any, repeats: int) -> np.ndarray:
     return np.array(rows)
 
 
+def stage_rows(
+    data: str, only: str, repeats: int, crowd_frames: int = 3, quick: bool = True, grouping: Any = None
+) -> list:
+    """Rows setting, frames, grouping, matching, reconstruction, tracking, total (ms; NaN: not timed) of the settings
+    whose label contains only; grouping(label, cfg, sequence) -> grouping seconds per frame (repeats * F,) or None."""
+    from hydra import compose
+    from hydra.errors import HydraException
+    from hydra.utils import instantiate
+
+    rows = []
+    for label, overrides in settings(data, crowd_frames, quick).items():
+        if only not in label:
+            continue
+        try:
+            cfg = compose("eval", overrides=overrides)
+        except HydraException as err:  # an older tree without this dataset or key
+            print(f"{label}: skipped, this tree's configs do not compose it ({err})", file=sys.stderr)
+            continue
+        sequence = instantiate(cfg.dataset, _convert_="all")
+        per_frame = stage_times(sequence, cfg, repeats)
+        grouped = grouping(label, cfg, sequence) if grouping is not None else None
+        grouped = np.full(len(per_frame), np.nan) if grouped is None else grouped
+        total = np.nan_to_num(grouped) + per_frame.sum(axis=1)
+        medians = [np.median(grouped), *np.median(per_frame, axis=0), np.median(total)]
+        rows.append([label, len(sequence.frames), *(float(1e3 * m) for m in medians)])
+    return rows
+
+
 def markdown(header: list[str], rows: list[list]) -> str:
-    """A markdown table; floats with 2 decimals (not evaluation.report.format_table: an older tree may lack it)."""
-    cells = [[f"{v:.2f}" if isinstance(v, float) else str(v) for v in row] for row in [header, *rows]]
-    lines = ["| " + " | ".join(row) + " |" for row in cells]
+    """A markdown table, floats with 2 decimals, NaN as '-' (not evaluation.report.format_table: an older tree may
+    lack it)."""
+    cells = [[("-" if v != v else f"{v:.2f}") if isinstance(v, float) else str(v) for v in row] for row in rows]
+    lines = ["| " + " | ".join(row) + " |" for row in [header, *cells]]
     return "\n".join([lines[0], "|" + "|".join("---" for _ in header) + "|", *lines[1:]])
 
 
@@ -95,23 +105,10 @@ def main(argv: list[str] | None = None) -> str:
     args = parser.parse_args(argv)
     if args.cpu is not None:
         os.sched_setaffinity(0, {args.cpu})
-    from hydra import compose, initialize_config_dir
-    from hydra.errors import HydraException
-    from hydra.utils import instantiate
+    from hydra import initialize_config_dir
 
-    rows = []
     with initialize_config_dir(os.path.abspath("configs"), version_base=None):
-        for label, overrides in settings(args.data).items():
-            if args.only in label:
-                try:
-                    cfg = compose("eval", overrides=overrides)
-                except HydraException as err:  # an older tree without this dataset or key
-                    print(f"{label}: skipped, this tree's configs do not compose it ({err})", file=sys.stderr)
-                    continue
-                sequence = instantiate(cfg.dataset, _convert_="all")
-                per_frame = 1e3 * stage_times(sequence, cfg, args.repeats)
-                medians = [*np.median(per_frame, axis=0), np.median(per_frame.sum(axis=1))]
-                rows.append([label, len(sequence.frames), "-", *(float(m) for m in medians)])
+        rows = stage_rows(args.data, args.only, args.repeats)
     if not rows:
         parser.error(f"no setting that this tree composes has {args.only!r} in its label")
     text = markdown(["setting", "frames", *STAGES, "total"], rows)

@@ -1,14 +1,9 @@
 """One markdown table of Hydra multiruns: ``python -m benchmarks.gather_sweep DIR [DIR ...] [--out T.md]``.
 
-Run from the repository root. Every ``<sweep dir>/*/metrics.json`` (written by eval.py) is one row, of
-one or several sweep directories (e.g. a stage sweep and a prior-weight sweep in one table); the
-columns are the overrides that differ between runs (from ``<run>/.hydra/overrides.yaml``), then ``--metrics``
-metrics. A metric is a key of metrics.json's "metrics", or ``<stage>_ms``: the stage's time from
-"timings_s" per frame (frames = ``dataset.num_frames`` of ``<run>/.hydra/config.yaml``) in milliseconds.
-A run lacking a metric shows "-".
+Every ``<sweep dir>/*/metrics.json`` (written by eval.py) is a row; the columns are the overrides that differ
+between runs (``<run>/.hydra/overrides.yaml``), then the ``--metrics``: keys of metrics.json's "metrics", or
+``<stage>_ms``, the stage's ms per frame from "timings_s" and ``dataset.num_frames``. A missing metric shows "-".
 """
-
-from __future__ import annotations
 
 import argparse
 import json
@@ -18,7 +13,7 @@ from typing import Sequence
 
 from omegaconf import OmegaConf
 
-from data.formats.atomic_io import atomic_write_text
+from benchmarks import common
 from evaluation.report import format_table
 
 # name -> (column header, factor, format); fractions are shown as percentages
@@ -33,14 +28,8 @@ METRIC_COLUMNS = {
     "reprojection_max_px": ("reproj. max (px)", 1.0, ".1f"),
     "reprojection_var_px2": ("reproj. var (px^2)", 1.0, ".1f"),
 }
-DEFAULT_METRICS = [
-    "matching_precision",
-    "matching_recall",
-    "matching_recovered_share",
-    "mpjpe_mm",
-    "pcp_average",
-    "matching_ms",
-]
+DEFAULT_METRICS = ("matching_precision", "matching_recall", "matching_recovered_share", "mpjpe_mm", "pcp_average")
+DEFAULT_METRICS += ("matching_ms",)
 
 
 @dataclass
@@ -124,17 +113,10 @@ def main(argv: Sequence[str] | None = None) -> str:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sweep_dir", type=Path, nargs="+", help="Hydra multirun folders (hydra.sweep.dir)")
     parser.add_argument("--out", type=Path, help="also write the table to this markdown file")
-    parser.add_argument(
-        "--metrics",
-        default=",".join(DEFAULT_METRICS),
-        help="comma-separated metrics.json keys or <stage>_ms (default: %(default)s)",
-    )
+    parser.add_argument("--metrics", default=",".join(DEFAULT_METRICS), help="metrics.json keys or <stage>_ms, commas")
     args = parser.parse_args(argv)
     table = format_table(*sweep_table(args.sweep_dir, [m for m in args.metrics.split(",") if m]))
-    print(table)
-    if args.out:
-        atomic_write_text(args.out, table + "\n")
-    return table
+    return common.emit(table, args.out)
 
 
 if __name__ == "__main__":

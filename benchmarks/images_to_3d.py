@@ -1,24 +1,16 @@
 """Images to 3D on a rendered synthetic scene: the SPPE's 2D poses beside the render's ground-truth 2D.
 
-Run from the repository root (after training, e.g. ``python train.py +experiment=train_synthetic``):
-
     python -m benchmarks.images_to_3d --checkpoint <run>/checkpoints/best.pth [--frames 20] [--persons 10]
                                       [--cameras 5] [--out FILE.md] [--rows gt2d,sppe,...]
 
-Scene: ``dataset=synthetic dataset.render=true`` (the default ring of cameras, 1280 x 720, persons walking
-and standing); every row runs the same frames through ``eval.py``'s ``run`` with the default matching,
-MAP and tracking. Rows: ``gt2d`` (the 2D poses are the render's ground truth, exact: the upper bound of any
-2D stage), ``sppe`` (person boxes of the render, ``detector=gt``, then the SPPE with flip test),
-``sppe_sides`` (the same with ``pose2d.separate_pairs=true reconstruction.fix_sides=true``: a pair's two
-joints kept apart in 2D, their left / right labels settled in 3D), ``sppe_jitter`` (boxes moved and scaled by 10 % sd, a detector's error), ``sppe_noflip`` (no flip test) and
-``simulated`` (the simulated 2D detections of ``render=false``, 2 px noise: the reference of the
-synthetic benchmarks). Columns: per-view COCO OKS AP (COCO-23 sigmas, pycocotools, all 23 / body 17 /
-foot 6 joints, against the render's labels with hidden joints v=1); absolute MPJPE (mm, all 23 joints,
-GT-matched one-to-one within 0.5 m, no root alignment); PCP (%, alpha 0.5, 10 parts); GT persons found
-(%); time per frame of the 2D stage (images + detector + SPPE) and of the rest (matching, MAP, tracking).
+Scene: ``dataset=synthetic dataset.render=true`` (ring cameras, 1280 x 720); every row runs the same frames
+through eval.py's ``run`` with the default matching, MAP and tracking. Rows (ROWS): the render's exact 2D (the
+upper bound of any 2D stage), the SPPE on the render's boxes with flip test, with separate_pairs + fix_sides,
+with boxes jittered by 10 % (a detector's error), without flip test, and the simulated 2D detections of
+``render=false``. Columns: per-view COCO OKS AP (COCO-23 sigmas: all 23 / body 17 / foot 6 joints), absolute
+MPJPE (mm, all 23 joints, GT-matched within 0.5 m), PCP (%, alpha 0.5), GT persons found (%), ms per frame of
+the 2D stage (images + detector + SPPE) and of the rest (matching, MAP, tracking).
 """
-
-from __future__ import annotations
 
 import argparse
 import contextlib
@@ -33,27 +25,16 @@ from evaluation.report import format_table
 from run_folders import register_resolvers
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
+SPPE = ["dataset.render=true", "pose2d=sppe", "detector=gt"]
 ROWS = {
     "gt2d": ("2D = render's ground truth (upper bound)", ["dataset.render=true"]),
-    "sppe": ("SPPE, flip test, boxes of the render", ["dataset.render=true", "pose2d=sppe", "detector=gt"]),
+    "sppe": ("SPPE, flip test, boxes of the render", SPPE),
     "sppe_sides": (
         "SPPE + separate_pairs + fix_sides",
-        [
-            "dataset.render=true",
-            "pose2d=sppe",
-            "detector=gt",
-            "pose2d.separate_pairs=true",
-            "reconstruction.fix_sides=true",
-        ],
+        [*SPPE, "pose2d.separate_pairs=true", "reconstruction.fix_sides=true"],
     ),
-    "sppe_jitter": (
-        "SPPE, flip test, boxes jittered 10 %",
-        ["dataset.render=true", "pose2d=sppe", "detector=gt", "detector.jitter=0.1"],
-    ),
-    "sppe_noflip": (
-        "SPPE, no flip test, boxes of the render",
-        ["dataset.render=true", "pose2d=sppe", "detector=gt", "pose2d.flip_test=false"],
-    ),
+    "sppe_jitter": ("SPPE, flip test, boxes jittered 10 %", [*SPPE, "detector.jitter=0.1"]),
+    "sppe_noflip": ("SPPE, no flip test, boxes of the render", [*SPPE, "pose2d.flip_test=false"]),
     "simulated": ("simulated detections, 2 px (render=false)", []),
 }
 TWO_D_STAGES = ("images", "detector", "pose2d")
@@ -87,6 +68,7 @@ def table_row(name: str, metrics: dict, timings: dict, frames: int) -> list:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the chosen rows, print the table and write it to --out."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--checkpoint", help="a train.py checkpoint (.pth / .ckpt); needed by the sppe rows")
     parser.add_argument("--frames", type=int, default=20)
@@ -102,8 +84,11 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"unknown rows {unknown}; choose from {list(ROWS)}")
     if any(r.startswith("sppe") for r in rows) and not args.checkpoint:
         parser.error("the sppe rows need --checkpoint")
-    scene = [f"dataset.num_frames={args.frames}", f"dataset.num_persons={args.persons}"]
-    scene.append(f"dataset.num_cameras={args.cameras}")
+    scene = [
+        f"dataset.num_frames={args.frames}",
+        f"dataset.num_persons={args.persons}",
+        f"dataset.num_cameras={args.cameras}",
+    ]
     table = []
     for row in rows:
         name, overrides = ROWS[row]
@@ -112,13 +97,10 @@ def main(argv: list[str] | None = None) -> None:
         metrics, timings = run_row(scene + overrides)
         table.append(table_row(name, metrics, timings, args.frames))
         print(f"{name}: done", flush=True)
-    header = ["2D source", "AP all", "AP body", "AP foot", "MPJPE mm", "PCP %", "found %", "2D ms/frame"]
-    text = (
-        f"Rendered synthetic scene: {args.persons} persons, {args.cameras} ring cameras 1280 x 720, "
-        f"{args.frames} frames; default matching + MAP + tracking; AP per view (COCO-23 OKS), MPJPE absolute "
-        f"(all 23 joints, GT-matched), PCP alpha 0.5\n\n"
-        + format_table([*header, "3D ms/frame"], table, floatfmt=".2f")
-    )
+    header = ["2D source", "AP all", "AP body", "AP foot", "MPJPE mm", "PCP %", "found %", "2D ms/frame", "3D ms/frame"]
+    scene = f"{args.persons} persons, {args.cameras} ring cameras 1280 x 720, {args.frames} frames"
+    text = f"Rendered synthetic scene: {scene}; default matching + MAP + tracking; AP per view (COCO-23 OKS), MPJPE "
+    text += f"absolute (all 23 joints, GT-matched), PCP alpha 0.5\n\n{format_table(header, table, floatfmt='.2f')}"
     print(text)
     if args.out:
         atomic_write_text(args.out, text + "\n")

@@ -1,24 +1,18 @@
 """Paired speed runs: this tree against a git revision, alternately, each run's stage medians compared.
 
-A machine whose speed drifts over minutes still resolves a change of a few percent this way (a 2-core machine of
-this project's drifted 20 % in an hour).
-
     python -m benchmarks.paired_speed --baseline REV [--pairs 8] [--only "100 people"] [--repeats 3] [--cpu 1]
-                                      [--driver speed|frames|process]
+                                      [--driver frames|process]
 
-Each pair runs the driver first in a temporary git worktree of the baseline, then in this tree, each with a numba
-cache of its own kept over the pairs (the first pair compiles, before its timed frames). The drivers:
-``speed`` (default) runs each tree's own ``python -m benchmarks.speed --quick --skip-process --only TEXT``;
-``frames`` runs this tree's benchmarks/frame_times.py in both trees, which times any revision's pipeline, also
-one older than benchmarks/speed.py (``--baseline a9f9a65 --driver frames``: issue 16's reference); ``process``
-times the whole process ``python eval.py dataset=shelf progress=false`` in each tree (warm: each tree's cache is
-filled by an untimed run first; BLAS and numba threads 1, as the other drivers; the median of ``--repeats`` runs,
-in seconds; ``--only`` does not apply). From each run it reads every setting's stage medians (the process
-driver: one setting, its total), and prints every pair and, per setting and stage, the baseline's and this
-tree's medians over the pairs, their ratio (baseline / this tree), and the mean of the paired differences (this
-tree - baseline) with its standard error."""
+Alternating runs resolve a change of a few percent on a machine whose speed drifts over minutes. Each pair runs
+the driver in a temporary git worktree of the baseline, then in this tree, each tree with a numba cache of its own
+kept over the pairs. Drivers: ``frames`` runs this tree's benchmarks/frame_times.py in both trees (the same
+timing code; it runs on older revisions too); ``process`` times the warm whole ``python eval.py dataset=shelf``
+in each tree (median of ``--repeats``, seconds; ``--only`` does not apply). Printed: every pair's totals, and per
+setting and stage the medians, their ratio (baseline / this tree) and the mean paired difference (this tree -
+baseline) with its standard error.
+"""
 
-from __future__ import annotations
+from benchmarks import common  # isort: split
 
 import argparse
 import os
@@ -26,27 +20,20 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-from data.formats.atomic_io import atomic_write_text
 from evaluation.report import format_table
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = common.ROOT
 COLUMNS = ("matching", "reconstruction", "tracking", "total")
-DRIVERS = {
-    "speed": "benchmarks.speed",
-    "frames": "benchmarks/frame_times.py",
-    "process": "python eval.py dataset=shelf",
-}
+DRIVERS = {"frames": "benchmarks/frame_times.py", "process": "python eval.py dataset=shelf"}
 PROCESS_SETTING = "python eval.py dataset=shelf (warm), s"
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
 
 def stage_medians(text: str) -> dict[str, dict[str, float]]:
-    """The first table of benchmarks.speed's output -> setting -> {matching, reconstruction, tracking, total} ms."""
+    """The first table of frame_times.py's (or benchmarks.speed's) output -> setting -> stage column -> ms."""
     lines = [line for line in text.splitlines() if line.startswith("|")]
     if not lines:
         raise ValueError("no table in the benchmark's output")
@@ -84,41 +71,35 @@ def worktree(rev: str) -> Iterator[Path]:
         subprocess.run(["git", "worktree", "remove", "--force", str(path)], cwd=ROOT, capture_output=True)
 
 
-def run_speed(tree: Path, cache: Path, args: argparse.Namespace) -> str:
-    """The driver's output of one run in tree (benchmarks.speed, or benchmarks/frame_times.py), numba's cache in cache."""
-    if args.driver == "frames":
-        # run_path, not the script's path: that would put benchmarks/ first on sys.path, where benchmarks/reconstruction.py
-        # would hide the tree's reconstruction package
-        driver = f"import runpy; runpy.run_path({str(ROOT / 'benchmarks' / 'frame_times.py')!r}, run_name='__main__')"
-        command = [sys.executable, "-c", driver, "--only", args.only]
-    else:
-        command = [sys.executable, "-m", "benchmarks.speed", "--quick", "--skip-process", "--only", args.only]
+def run_frames(tree: Path, cache: Path, args: argparse.Namespace) -> str:
+    """The output of this tree's benchmarks/frame_times.py run in tree, numba's cache in cache."""
+    # run_path, not the script's path: that would put benchmarks/ first on sys.path, where
+    # benchmarks/reconstruction.py would hide the tree's reconstruction package
+    driver = f"import runpy; runpy.run_path({str(ROOT / 'benchmarks' / 'frame_times.py')!r}, run_name='__main__')"
+    command = [sys.executable, "-c", driver, "--only", args.only]
     command += ["--repeats", str(args.repeats), "--data", str(Path(args.data).resolve())]
     command += ["--cpu", str(args.cpu)] if args.cpu is not None else []
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     done = subprocess.run(command, cwd=tree, env=env, capture_output=True, text=True)
     if done.returncode:
-        raise RuntimeError(f"the {args.driver} driver failed in {tree}:\n{done.stderr[-2000:]}")
+        raise RuntimeError(f"frame_times.py failed in {tree}:\n{done.stderr[-2000:]}")
     return done.stdout
 
 
 def run_process(
     tree: Path, cache: Path, args: argparse.Namespace, repeats: int | None = None
 ) -> dict[str, dict[str, float]]:
-    """The process driver: median wall seconds of ``repeats`` (default --repeats) runs of Shelf's ``python eval.py``
-    in tree, as a setting whose total is those seconds (its stages 0: a process has no stage table)."""
-    env = {**os.environ, **dict.fromkeys(THREAD_VARIABLES, "1"), "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
+    """Median wall seconds of ``repeats`` (default --repeats) Shelf ``python eval.py`` runs in tree, as a setting
+    whose total is those seconds (stages 0: a process has no stage table)."""
+    threads = dict.fromkeys(common.THREAD_VARIABLES, "1")
+    env = {**os.environ, **threads, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     pin = (lambda: os.sched_setaffinity(0, {args.cpu})) if args.cpu is not None else None
-    seconds = []
+    command = [sys.executable, "eval.py", *common.shelf(str(Path(args.data).resolve())), "progress=false"]
     with tempfile.TemporaryDirectory(prefix="paired_speed_runs_") as runs:
-        for k in range(args.repeats if repeats is None else repeats):
-            command = [sys.executable, "eval.py", "dataset=shelf", f"dataset.root={Path(args.data).resolve()}/shelf"]
-            command += ["progress=false", f"hydra.run.dir={runs}/{k}"]
-            t0 = time.perf_counter()
-            done = subprocess.run(command, cwd=tree, env=env, capture_output=True, text=True, preexec_fn=pin)
-            seconds.append(time.perf_counter() - t0)
-            if done.returncode:
-                raise RuntimeError(f"python eval.py failed in {tree}:\n{done.stderr[-2000:]}")
+        count = args.repeats if repeats is None else repeats
+        seconds = [
+            common.process_seconds([*command, f"hydra.run.dir={runs}/{k}"], tree, env, pin) for k in range(count)
+        ]
     return {PROCESS_SETTING: {**dict.fromkeys(COLUMNS[:-1], 0.0), "total": statistics.median(seconds)}}
 
 
@@ -126,7 +107,7 @@ def run_once(tree: Path, cache: Path, args: argparse.Namespace) -> dict[str, dic
     """One run of the driver in tree: setting -> stage -> ms per frame (seconds for the process driver)."""
     if args.driver == "process":
         return run_process(tree, cache, args)
-    return stage_medians(run_speed(tree, cache, args))
+    return stage_medians(run_frames(tree, cache, args))
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -139,12 +120,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--cpu", type=int, default=None, help="pin each run to this CPU (Linux)")
     parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
     parser.add_argument("--out", default=None, help="also write the tables to this markdown file")
-    parser.add_argument(
-        "--driver",
-        choices=tuple(DRIVERS),
-        default="speed",
-        help="each tree's benchmarks.speed, frame_times.py, or the whole Shelf process",
-    )
+    parser.add_argument("--driver", choices=tuple(DRIVERS), default="frames", help="what each run times (DRIVERS)")
     args = parser.parse_args(argv)
     if args.pairs < 1:
         parser.error("--pairs must be at least 1")
@@ -158,14 +134,10 @@ def main(argv: list[str] | None = None) -> str:
             for name, tree in trees:
                 runs[name].append(run_once(tree, Path(caches) / name.replace(" ", "_"), args))
             print(f"pair {k + 1}/{args.pairs} done", file=sys.stderr, flush=True)
-    text = report(runs, args.baseline, args.driver)
-    print(text)
-    if args.out:
-        atomic_write_text(args.out, text + "\n")
-    return text
+    return common.emit(report(runs, args.baseline, args.driver), args.out)
 
 
-def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, driver: str = "speed") -> str:
+def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, driver: str = "frames") -> str:
     """The pairs' totals and, per setting and stage, the medians and the mean paired difference."""
     settings = [s for s in runs["baseline"][0] if all(s in r for rs in runs.values() for r in rs)]
     columns = ("total",) if driver == "process" else COLUMNS
@@ -184,16 +156,13 @@ def report(runs: dict[str, list[dict[str, dict[str, float]]]], baseline: str, dr
             both = min(statistics.median(a), statistics.median(b)) > 0  # a stage the baseline lacks has no ratio
             ratio = statistics.median(a) / statistics.median(b) if both else float("nan")
             rows.append([setting, column, statistics.median(a), statistics.median(b), ratio, mean, se])
+    headers = ["setting", "stage", f"{baseline} median", "this tree median", "ratio", "difference", "standard error"]
     return "\n\n".join(
         [
             f"Each pair: {DRIVERS[driver]} at {baseline}, then in this tree ({unit})",
             format_table(["pair", "setting", f"{baseline} total", "this tree total"], pairs, floatfmt=".2f"),
-            f"Over the {len(runs['baseline'])} pairs: medians, and this tree - {baseline} (mean of the pairs' differences)",
-            format_table(
-                ["setting", "stage", f"{baseline} median", "this tree median", "ratio", "difference", "standard error"],
-                rows,
-                floatfmt=".2f",
-            ),
+            f"Over the {len(runs['baseline'])} pairs: medians, and this tree - {baseline} (mean paired difference)",
+            format_table(headers, rows, floatfmt=".2f"),
         ]
     )
 

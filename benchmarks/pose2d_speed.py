@@ -2,24 +2,14 @@
 
     python -m benchmarks.pose2d_speed [--min-time 0.3] [--persons 10] [--repeats 10] [--devices cpu,cuda]
 
-Network: FastPose-18 and FastPose-50 with random weights (speed does not depend on them), inputs 256x192
-and 128x96 (h x w), batches of 1 and 32 crops, flip test off and on (twice the images), on this CPU with 1
-thread and with torch's default thread count, and on CUDA with float16 autocast when there is a GPU
-(models/heatmap_inference.predict_heatmaps, exactly what the stage runs; ``--devices`` picks among them). Each
-model, input and device gets one warm-up crop (with and without flip), and each setting one untimed pass of its
-own (a batch of 32 is a new shape: CUDA's first pass of it loads kernels); each setting then runs passes until
-``--min-time`` seconds have gone (at least one); crops/s = crops / mean pass time. The CPU rows are only as
-steady as the machine is idle: other processes on its cores show up most in the multi-thread rows.
-
-Decoding: real-ish heatmaps of one crowded image: ``--persons`` people 12 px apart with COCO-23 joints,
-each crop's multi-modal target (mu 0.5: the own joints plus the neighbours' in the crop) with uniform noise,
-48x64 heatmaps. The torch path (models/pose_decoding: candidates for all crops at once, vectorised
-association) and the numpy reference it replaced (benchmarks/reference_decoding.py) decode the same heatmaps
-(3 candidates per joint, threshold 0.1) ``--repeats`` times, interleaved, 1 thread; medians per person and
-their ratio, and the torch path's share of the FastPose-50 256x192 batch-32 crop time (1 thread, no flip).
+Network: FastPose-18 and -50 with random weights, inputs 256x192 and 128x96 (h x w), batches of 1 and 32 crops,
+flip test off and on, through models/heatmap_inference.predict_heatmaps on the CPU with 1 thread and torch's
+default thread count, and on CUDA with float16 autocast where there is a GPU. Each setting has untimed passes
+first (a new shape loads kernels), then passes until ``--min-time`` seconds have gone; crops/s = crops / mean
+pass time. Decoding: ``--persons`` people 12 px apart in one image, each crop's multi-modal target plus uniform
+noise (48x64 heatmaps), decoded by models/pose_decoding (3 candidates per joint, threshold 0.1) ``--repeats``
+times on 1 thread: the median ms per person and its share of a FastPose-50 256x192 crop (batch 32, 1 thread).
 """
-
-from __future__ import annotations
 
 import argparse
 import time
@@ -27,7 +17,6 @@ import time
 import numpy as np
 import torch
 
-from benchmarks import reference_decoding as reference
 from data.keypoints import NUM_JOINTS
 from data.pose2d.crop_transforms import box_to_center_scale, crop_affine
 from evaluation.report import format_table
@@ -81,9 +70,8 @@ def network_rows(
                 for batch in (1, 32):
                     for flip in (False, True):
                         rate = crops_per_second(model, device, size, batch, flip, min_time)
-                        rows.append(
-                            [f"FastPose-{depth}", name, batch, where, "on" if flip else "off", rate, 1e3 / rate]
-                        )
+                        setting = [f"FastPose-{depth}", name, batch, where, "on" if flip else "off"]
+                        rows.append([*setting, rate, 1e3 / rate])
         del model
     torch.set_num_threads(default_threads)
     return rows
@@ -107,31 +95,22 @@ def crowd_heatmaps(persons: int, seed: int = 0) -> tuple[torch.Tensor, np.ndarra
     return torch.from_numpy(np.stack(heatmaps)), np.stack(affines), boxes
 
 
-def decoding_times(persons: int, repeats: int) -> tuple[float, float, int]:
-    """Median ms per person of the numpy reference and the torch path on one crowded image, and the number of
-    joint types whose association had a shared node (work for the Hungarian step) in the reference output."""
+def decoding_ms(persons: int, repeats: int) -> float:
+    """Median ms per person of candidates + association on one crowded image."""
     heatmaps, affines, boxes = crowd_heatmaps(persons)
     codec = MultiModalHeatmapCodec((192, 256), (48, 64))
 
-    def numpy_path() -> np.ndarray:
-        xy, scores = reference.find_candidates(heatmaps, threshold=0.1, top_m=3)
-        return reference.associate_joints(reference.candidates_to_image(xy, affines, 4.0), scores, boxes)
-
-    def torch_path() -> np.ndarray:
+    def decode() -> np.ndarray:
         candidates = joint_candidates(codec, heatmaps, affines, threshold=0.1, top_m=3)
         return associate_by_image(candidates, boxes, np.zeros(persons, dtype=int))
 
-    if not np.allclose(numpy_path(), torch_path(), rtol=0, atol=1e-9):
-        raise AssertionError("the torch decoding differs from the numpy reference")
-    times: dict[str, list[float]] = {"numpy": [], "torch": []}
+    decode()
+    times = []
     for _ in range(repeats):
-        for name, fn in (("numpy", numpy_path), ("torch", torch_path)):
-            start = time.perf_counter()
-            fn()
-            times[name].append((time.perf_counter() - start) * 1e3 / persons)
-    xy, scores = reference.find_candidates(heatmaps, threshold=0.1, top_m=3)
-    lost = reference.associate_joints(reference.candidates_to_image(xy, affines, 4.0), scores, boxes)[..., 2] == 0
-    return float(np.median(times["numpy"])), float(np.median(times["torch"])), int(lost.any(0).sum())
+        start = time.perf_counter()
+        decode()
+        times.append((time.perf_counter() - start) * 1e3 / persons)
+    return float(np.median(times))
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -146,29 +125,13 @@ def main(argv: list[str] | None = None) -> str:
     rows = network_rows(args.min_time, default_threads, tuple(args.devices.split(",")))
     text = format_table(["network", "input h x w", "batch", "device", "flip test", "crops/s", "ms/crop"], rows, ".2f")
     torch.set_num_threads(1)
-    ref_ms, torch_ms, contested = decoding_times(args.persons, args.repeats)
+    ms = decoding_ms(args.persons, args.repeats)
     torch.set_num_threads(default_threads)
     crop = [r[6] for r in rows if r[:5] == ["FastPose-50", "256x192", 32, "CPU, 1 thread", "off"]]
-    text += "\n\n" + format_table(
-        [
-            "decoding + association, 1 thread",
-            "numpy reference ms/person",
-            "torch ms/person",
-            "numpy / torch",
-            "torch / FastPose-50 crop",
-        ],
-        [
-            [
-                f"{args.persons} people in one image, 3 candidates per joint",
-                ref_ms,
-                torch_ms,
-                ref_ms / torch_ms,
-                f"{100 * torch_ms / crop[0]:.1f} %" if crop else "- (no CPU rows)",
-            ]
-        ],
-        ".3f",
-    )
-    text += f"\n({contested} of 23 joint types had a person lose a joint to a neighbour; torch default threads: {default_threads})"
+    share = f"{100 * ms / crop[0]:.1f} %" if crop else "- (no CPU rows)"
+    headers = ["decoding + association, 1 thread", "ms/person", "share of a FastPose-50 crop"]
+    text += "\n\n" + format_table(headers, [[f"{args.persons} people in one image", ms, share]], ".3f")
+    text += f"\n(torch default threads: {default_threads})"
     print(text)
     return text
 

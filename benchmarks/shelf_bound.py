@@ -1,27 +1,20 @@
-"""How far can per-frame multi-view reconstruction go on Shelf's OpenPose detections? Oracle upper bounds.
+"""Oracle upper bounds of per-frame multi-view reconstruction on Shelf's OpenPose detections.
 
     python -m benchmarks.shelf_bound [--data ../shared/data] [overrides ...]   (e.g. dataset.drop_feet=true)
 
-For every annotated actor 1-3 of every Shelf frame (300-600), the pipeline's prediction chosen by the
-Shelf protocol is scored beside two oracles that use the ground truth to choose, not to move, the points:
-
-- view-subset oracle: the detections the matcher put in that person; every subset of >= 2 of its views
-  is triangulated (DLT) and, per Shelf-14 joint, the subset whose point is nearest the ground truth is
-  kept (the head: the subset whose head part, built from nose, ears and shoulders, is nearest); the
-  pipeline's own point is a candidate too, so the bound is never below the pipeline.
-- matching + view-subset oracle: the same, but in each view the detection nearest the projected ground
-  truth (mean limb-joint error below ``--max-px``) stands in for the matcher's choice.
-
-No reconstruction that picks among these detections frame by frame, however robust, can exceed the
-second bound; temporal evidence (tracking) or a better 2D detector can. Protocol: strict Shelf PCP,
-alpha 0.5, mean of actors 1-3 (evaluation/protocols/shelf.py).
+For every annotated actor 1-3 of every Shelf frame, strict Shelf PCP (alpha 0.5) of the pipeline's prediction
+beside two oracles that use the ground truth to choose, not to move, the points: the view-subset oracle
+triangulates every subset of >= 2 of the views the matcher put in the person and keeps, per joint, the point
+nearest the ground truth (the head as one part; the pipeline's own point is a candidate, so the bound is never
+below the pipeline); matching + view-subset oracle does the same with each view's detection nearest the projected
+ground truth (mean limb error below ``--max-px``) in place of the matcher's choice. No frame-by-frame
+reconstruction from these detections exceeds the second bound; tracking or a better 2D detector can.
 """
 
-from __future__ import annotations
+from benchmarks import common  # isort: split
 
 import argparse
 import itertools
-from pathlib import Path
 
 import numpy as np
 from hydra import compose, initialize_config_dir
@@ -37,7 +30,6 @@ from evaluation.protocols.shelf import AVERAGED_ACTOR_IDS, coco23_predictions_to
 from evaluation.report import format_table
 from reconstruction.pipeline import MultiViewPipeline
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 HEAD = (12, 13)  # Shelf-14 head bottom, head top
 METHODS = ("pipeline", "view-subset oracle", "matching + view-subset oracle")
 
@@ -100,7 +92,7 @@ def matched_detections(views: list, row: np.ndarray) -> np.ndarray:
 
 def run(overrides: list[str], max_px: float) -> dict[str, dict[int, list[np.ndarray]]]:
     """Rows of correct parts per method and actor: {method: {actor id: [(10,) bool per frame]}}."""
-    with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
+    with initialize_config_dir(str(common.CONFIG_DIR), version_base="1.3"):
         cfg = compose("eval", overrides=overrides)
     sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))
     rig, protocol = sequence.rig, sequence.protocols[0]
@@ -135,12 +127,9 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", default="../shared/data")
     parser.add_argument("--max-px", type=float, default=40.0, help="a view's nearest detection must be this close")
-    parser.add_argument(
-        "overrides", nargs="*", help="Hydra overrides of configs/eval.yaml (e.g. dataset.drop_feet=true)"
-    )
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides of configs/eval.yaml")
     args = parser.parse_args(argv)
-    overrides = ["dataset=shelf", f"dataset.root={args.data}/shelf", *args.overrides]
-    rows = run(overrides, args.max_px)
+    rows = run([*common.shelf(args.data), *args.overrides], args.max_px)
     table = []
     for method in METHODS:
         pcp = [100.0 * np.mean(rows[method][a]) for a in AVERAGED_ACTOR_IDS]

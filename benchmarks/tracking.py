@@ -2,88 +2,57 @@
 
     python -m benchmarks.tracking [--data ../shared/data] [--sets shelf,panoptic,crowd] [--crowd-frames 50]
 
-Sets: Shelf (frames 300-600, actors 1-3: the track id of the prediction each actor takes), Panoptic band1
-and band2 of ``panoptic_seq`` at 5 px (20 consecutive frames, persistent body ids), the synthetic walking
-crowd of ``configs/dataset/crowd.yaml`` (surveillance rig, 2 px) with 10 and 100 people. Columns: identity
-switches (per 100 GT person-frames), the share of GT person-frames whose prediction carries that person's
-most frequent track id (IDF1-like, %), fragmentations, MPJPE (mm; Shelf: strict PCP %) with tracking on
-and off, and the tracker's ms per frame, the whole pipeline's (matching + reconstruction + tracking)
-with tracking on and off, and what tracking adds (the tracker, the joints' variances and the skeleton
-look-up inside the MAP), one core; timings are medians of ``--repeats`` interleaved on / off runs.
+Sets: Shelf (actors 1-3), Panoptic band1 and band2 at 5 px (persistent body ids), the walking crowd of
+``configs/dataset/crowd.yaml`` with 10 and 100 people. Columns: identity switches (per 100 GT person-frames),
+the share of GT person-frames whose prediction carries the person's most frequent track id (IDF1-like, %),
+fragmentations, MPJPE (mm; Shelf: strict PCP %) with tracking on and off, and ms per frame on one core of the
+tracker and of the pipeline with tracking on and off (medians of ``--repeats`` interleaved on / off runs).
 """
 
-from __future__ import annotations
+from benchmarks import common  # isort: split
 
-import os
+import argparse
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ[_var] = "1"
+import numpy as np
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+from omegaconf import DictConfig
 
-import argparse  # noqa: E402
-import copy  # noqa: E402
-from pathlib import Path  # noqa: E402
+from data.multiview import Sequence
+from evaluation.report import format_table
 
-import numpy as np  # noqa: E402
-from hydra import compose, initialize_config_dir  # noqa: E402
-from hydra.utils import instantiate  # noqa: E402
-
-from evaluation.pose3d import Pose3DEvaluator  # noqa: E402
-from evaluation.report import format_table  # noqa: E402
-from evaluation.sequence_eval import evaluate_sequence  # noqa: E402
-from reconstruction.pipeline import MultiViewPipeline  # noqa: E402
-
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
-HEADERS = (
-    "set",
-    "ID switches (per 100)",
-    "IDF1-like (%)",
-    "fragmentations",
-    "MPJPE / PCP on",
-    "MPJPE / PCP off",
-    "tracker ms / frame",
-    "pipeline ms / frame on",
-    "off",
-    "tracking adds ms",
-)
+HEADERS = ("set", "ID switches (per 100)", "IDF1-like (%)", "fragmentations", "MPJPE / PCP on", "MPJPE / PCP off")
+HEADERS += ("tracker ms / frame", "pipeline ms / frame on", "off", "tracking adds ms")
 
 
 def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[str]]:
     """Set label -> dataset overrides."""
-    sets: dict[str, list[str]] = {}
-    if "shelf" in names:
-        sets["Shelf (PCP)"] = ["dataset=shelf", f"dataset.root={data}/shelf"]
+    sets = {"Shelf (PCP)": common.shelf(data)} if "shelf" in names else {}
     if "panoptic" in names:
-        for seq in ("160906_band1", "160906_band2"):
-            sets[f"Panoptic {seq[-5:]} 5 px"] = [
-                "dataset=panoptic",
-                f"dataset.root={data}/panoptic_seq",
-                f"dataset.sequence={seq}",
-                "dataset.noise_px=5",
-            ]
+        sets.update(common.panoptic_sets(data, (5,)))
     if "crowd" in names:
         for n in (10, 100):
-            sets[f"crowd {n} people, {crowd_frames} frames"] = [
-                "dataset=crowd",
-                f"dataset.num_persons={n}",
-                f"dataset.num_frames={crowd_frames}",
-            ]
+            sets[f"crowd {n} people, {crowd_frames} frames"] = common.crowd(n, crowd_frames)
     return sets
 
 
-def run(sequence, cfg) -> tuple[dict, dict, float, float]:
-    """Metrics, Shelf summary, tracker and whole-pipeline (matching + reconstruction + tracking) ms per frame
-    of one configuration."""
-    sequence = copy.deepcopy(sequence)
-    pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
-    report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), progress=False)
-    n = max(len(sequence.frames), 1)
-    total = sum(report.timings.get(k, 0.0) for k in ("matching", "reconstruction", "tracking"))
-    return (
-        report.metrics,
-        report.protocols.get("shelf", {}),
-        1e3 * report.timings.get("tracking", 0.0) / n,
-        1e3 * total / n,
-    )
+def run(sequence: Sequence, cfg: DictConfig) -> tuple[dict, dict, float, float]:
+    """Metrics, Shelf summary, tracker ms and pipeline (matching + reconstruction + tracking) ms per frame."""
+    report, ms = common.evaluate(sequence, cfg)
+    tracker_ms = 1e3 * report.timings.get("tracking", 0.0) / max(len(sequence.frames), 1)
+    return report.metrics, report.protocols.get("shelf", {}), tracker_ms, ms
+
+
+def table_row(label: str, on: dict, off: dict, shelf_on: dict, shelf_off: dict, ms: np.ndarray) -> list:
+    """One printed row: identity metrics, MPJPE (Shelf: PCP) on and off, ms of tracker, on, off, on - off."""
+    if shelf_on:
+        ident = shelf_on["tracking"]
+        quality = [shelf["ours"]["strict"]["average"]["average"] for shelf in (shelf_on, shelf_off)]
+    else:
+        ident = {k[len("tracking_") :]: v for k, v in on.items() if k.startswith("tracking_")}
+        quality = [on["mpjpe_mm"], off["mpjpe_mm"]]
+    switches = f"{ident['id_switches']} ({ident['id_switches_per_100']:.2f})"
+    return [label, switches, ident["idf1_like"], ident["fragmentations"], *quality, *ms, ms[1] - ms[2]]
 
 
 def main(argv: list[str] | None = None) -> list[list]:
@@ -95,7 +64,7 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser.add_argument("--repeats", type=int, default=3, help="on / off runs, interleaved, for the timing medians")
     args = parser.parse_args(argv)
     rows = []
-    with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
+    with initialize_config_dir(str(common.CONFIG_DIR), version_base="1.3"):
         for label, overrides in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items():
             sequence = instantiate(compose("eval", overrides=overrides).dataset, _convert_="all")
             cfg_on = compose("eval", overrides=[*overrides, "tracking=on"])
@@ -105,29 +74,7 @@ def main(argv: list[str] | None = None) -> list[list]:
                 on, shelf_on, ms_track, ms_on = run(sequence, cfg_on)
                 off, shelf_off, _, ms_off = run(sequence, cfg_off)
                 timings.append((ms_track, ms_on, ms_off))
-            ms_track, ms_on, ms_off = np.median(np.array(timings), axis=0)
-            if shelf_on:
-                ident = shelf_on["tracking"]
-                quality = [
-                    shelf_on["ours"]["strict"]["average"]["average"],
-                    shelf_off["ours"]["strict"]["average"]["average"],
-                ]
-            else:
-                ident = {k[len("tracking_") :]: v for k, v in on.items() if k.startswith("tracking_")}
-                quality = [on["mpjpe_mm"], off["mpjpe_mm"]]
-            rows.append(
-                [
-                    label,
-                    f"{ident['id_switches']} ({ident['id_switches_per_100']:.2f})",
-                    ident["idf1_like"],
-                    ident["fragmentations"],
-                    *quality,
-                    ms_track,
-                    ms_on,
-                    ms_off,
-                    ms_on - ms_off,
-                ]
-            )
+            rows.append(table_row(label, on, off, shelf_on, shelf_off, np.median(np.array(timings), axis=0)))
     print("Tracking (tracking=on) beside tracking=off; one core; identity metrics against persistent GT ids")
     print(format_table(HEADERS, rows, floatfmt=".2f"))
     return rows

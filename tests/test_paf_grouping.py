@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks import reference_grouping as reference
 from data.formats.fourd_detections import BODY25_PAF_LIMBS, FrameCandidates, load_4dassoc_detections
 from data.formats.openpose_json import keypoints_to_view_detections
 from models.paf_grouping import group_people, group_view, limb_connections, pack_candidates
+from tests.oracles import grouping as reference
 
 SHELF = Path("shelf") / "4d_association"
 

@@ -1,5 +1,5 @@
 """The batched decoding (torch candidates, vectorised association) against the numpy loop it replaced
-(benchmarks/reference_decoding.py), on random heatmaps and on real-ish ones (multi-modal targets of real
+(tests/oracles/decoding.py), on random heatmaps and on real-ish ones (multi-modal targets of real
 COCO-WholeBody crowds, plus noise)."""
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ import torch
 import torch.nn.functional as F
 from torch.utils.data import DataLoader
 
-from benchmarks import reference_decoding as reference
 from data.keypoints import NUM_JOINTS
 from data.pose2d.coco_keypoints import load_coco_wholebody
 from data.pose2d.topdown_dataset import TopDownDataset
@@ -18,6 +17,7 @@ from models.candidates import _neighbourhood_max, candidates_to_image, find_cand
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.joint_association import associate_joints
 from models.pose_decoding import associate_by_image, joint_candidates
+from tests.oracles import decoding as reference
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ from evaluation.protocols.panoptic import PanopticProtocol
 from evaluation.protocols.reprojection_coco import ReprojectionCOCOProtocol
 from evaluation.protocols.shelf import ShelfProtocol
 
-# protocol name in meta["protocol_inputs"] -> builder(sequence, **arguments)
+# protocol name in sequence.protocol_inputs -> builder(sequence, **arguments)
 BUILDERS: dict[str, Callable] = {
     "shelf": lambda sequence, **arguments: ShelfProtocol(**arguments),
     "panoptic": lambda sequence, **arguments: PanopticProtocol(**arguments),
@@ -24,7 +24,7 @@ BUILDERS: dict[str, Callable] = {
 def attach_protocols(sequence: Sequence) -> Sequence:
     """Build the protocols ``sequence.protocol_inputs`` asks for into ``sequence.protocols`` (once)."""
     if not sequence.protocols:
-        for spec in sequence.meta.get("protocol_inputs", ()):
+        for spec in sequence.protocol_inputs:
             arguments = {k: v for k, v in spec.items() if k != "name"}
             if spec["name"] not in BUILDERS:
                 raise ValueError(f"unknown dataset protocol {spec['name']!r}; known: {', '.join(BUILDERS)}")

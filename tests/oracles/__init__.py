@@ -1,1 +1,1 @@
-"""Independent implementations the tests compare the package against (not package code)."""
+"""Frozen reference implementations the tests compare the package against (test oracles, not package code)."""

@@ -66,25 +66,9 @@ class _Assembly:
 
 
 def group_people(
-    candidates: list[np.ndarray],
-    pafs: list[np.ndarray],
-    limbs: tuple[tuple[int, int], ...] = BODY25_PAF_LIMBS,
-    min_paf: float = 0.05,
-    min_joints: int = 8,
-    min_mean_score: float = 0.4,
+    candidates: list, pafs: list, limbs: tuple = BODY25_PAF_LIMBS, min_paf: float = 0.05, **keys
 ) -> np.ndarray:
-    """Group joint candidates (J arrays (n_j, 3) x, y, score) by limb PAFs (L arrays (n_a, n_b)) -> (N, J, 3).
-
-    min_paf: a connection needs a PAF score above this (OpenPose's inter-limb threshold, 0.05).
-    min_joints: persons with fewer joint slots filled (of the J input joints) are dropped; 8 sits in
-    the dip of the joint-count histogram of the groups on Shelf, between fragments (2-7 joints) and
-    bodies (10-25, mostly 19+), so arm and head fragments, false persons for the matching, go.
-    min_mean_score: persons whose mean joint (candidate) score is lower are dropped (0.4 as
-    OpenPose's minimum person score, which there also averages in the PAF scores).
-    Persons come out in order of creation; missing joints are all 0.
-    """
-    if len(pafs) != len(limbs):
-        raise ValueError(f"group_people: {len(pafs)} PAF matrices for {len(limbs)} limbs")
+    """The persons of models.paf_grouping.group_people: J arrays (n_j, 3), L arrays (n_a, n_b) -> (N, J, 3)."""
     cands = [np.asarray(c, dtype=np.float64).reshape(-1, 3) for c in candidates]
     assembly = _Assembly([len(c) for c in cands])
     for (a, b), paf in zip(limbs, pafs):
@@ -95,7 +79,7 @@ def group_people(
             )
         for i, j, _ in limb_connections(paf, min_paf):
             assembly.connect(a, int(i), b, int(j))
-    return _persons(assembly.slots, cands, min_joints, min_mean_score)
+    return _persons(assembly.slots, cands, keys.get("min_joints", 8), keys.get("min_mean_score", 0.4))
 
 
 def _persons(slots: list[np.ndarray], cands: list[np.ndarray], min_joints: int, min_mean_score: float) -> np.ndarray:

@@ -1,8 +1,7 @@
 """The numpy decoding that models/candidates.py and models/joint_association.py replaced, kept as the reference.
 
-tests/test_pose_decoding.py checks the batched decoding against it (same candidates, same association) and
-``python -m benchmarks.pose2d_speed`` times both in one run. It is the repository's earlier implementation,
-unchanged: float64 candidates with a max-pool suppression, then one cdist, connected-components and
+tests/test_pose_decoding.py checks the batched decoding against it (same candidates, same association). It is the
+repository's earlier implementation, unchanged: float64 candidates with a max-pool suppression, then one cdist, connected-components and
 Hungarian problem per joint type in a python loop. Nothing in the pipeline imports it.
 """
 
@@ -18,7 +17,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.distance import cdist
 
-from data.keypoints import NUM_JOINTS, OKS_SIGMAS
+from data.keypoints import OKS_SIGMAS
 
 _LOG_EPS = 1e-10
 
@@ -26,16 +25,7 @@ _LOG_EPS = 1e-10
 def find_candidates(
     heatmaps: torch.Tensor | np.ndarray, threshold: float = 0.1, top_m: int = 3, nms_kernel: int = 3
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Top-M local maxima per channel: heatmaps (B, J, h, w) -> xy (B, J, M, 2) heatmap px, scores (B, J, M).
-
-    A candidate is a pixel equal to the maximum of its ``nms_kernel`` neighbourhood and above
-    ``threshold``; candidates are sorted by score (the heatmap value at the peak pixel), best first.
-    Unused slots have score 0 and xy 0. Two equal adjacent maxima (a plateau) both survive.
-    """
-    if nms_kernel < 1 or nms_kernel % 2 == 0:
-        raise ValueError(f"nms_kernel must be a positive odd number, got {nms_kernel}")
-    if threshold < 0 or top_m < 1:
-        raise ValueError(f"need threshold >= 0 and top_m >= 1, got {threshold}, {top_m}")
+    """The candidates of models.candidates.find_candidates: (B, J, h, w) -> xy (B, J, M, 2), scores (B, J, M)."""
     hm = torch.as_tensor(heatmaps).detach().to(torch.float64)
     b, j, h, w = hm.shape
     pooled = F.max_pool2d(hm.reshape(b * j, 1, h, w), nms_kernel, stride=1, padding=nms_kernel // 2)
@@ -69,8 +59,8 @@ def _parabola_offset(
         flat = rows * w + p if along_x else p * w + cols
         return log_hm.gather(-1, flat)
 
-    lm, l0, lp = log_at(-1), log_at(0), log_at(1)
-    curvature = lm - 2 * l0 + lp
+    lm, lp = log_at(-1), log_at(1)
+    curvature = lm - 2 * log_at(0) + lp
     inside = (pos > 0) & (pos < axis_len - 1) & (curvature < 0)
     safe = torch.where(inside, curvature, -torch.ones_like(curvature))
     offset = (0.5 * (lm - lp) / safe).clamp(-0.5, 0.5)
@@ -94,23 +84,11 @@ def candidates_to_image(xy: np.ndarray, inverse_affines: np.ndarray, stride: flo
 def associate_joints(
     xy: np.ndarray, scores: np.ndarray, boxes: np.ndarray, dist_thresh: float = 1.0, sigmas: np.ndarray | None = None
 ) -> np.ndarray:
-    """Associate joint candidates to persons: xy (P, J, M, 2) image px, scores (P, J, M), boxes (P, 4) xywh
-    -> keypoints (P, J, 3) x, y, score.
-
-    ``sigmas`` (J,): per-joint OKS sigmas of the node radius; defaults to the COCO-23 ones (J must be 23).
-    Candidates with score <= 0 are absent.
-    """
-    xy = np.asarray(xy, dtype=np.float64)
-    scores = np.asarray(scores, dtype=np.float64)
+    """The keypoints of models.joint_association.associate_joints: (P, J, M, 2), (P, J, M), (P, 4) -> (P, J, 3)."""
+    xy, scores = np.asarray(xy, dtype=np.float64), np.asarray(scores, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     n_persons, n_joints, _ = scores.shape
-    if xy.shape != scores.shape + (2,) or len(boxes) != n_persons:
-        raise ValueError(f"shape mismatch: xy {xy.shape}, scores {scores.shape}, boxes {boxes.shape}")
-    if sigmas is None:
-        if n_joints != NUM_JOINTS:
-            raise ValueError(f"give sigmas for {n_joints} joints (defaults exist for {NUM_JOINTS})")
-        sigmas = OKS_SIGMAS
-    sigmas = np.asarray(sigmas, dtype=np.float64)
+    sigmas = np.asarray(OKS_SIGMAS if sigmas is None else sigmas, dtype=np.float64)
     box_scale = np.sqrt(np.clip(boxes[:, 2] * boxes[:, 3], 0.0, None))
     out = np.zeros((n_persons, n_joints, 3))
     for j in range(n_joints):
