@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
 from typing import Callable
 
-import numpy as np
 from numba.core.event import Event, Listener, install_listener
 
 NOTICE = (
@@ -13,30 +13,14 @@ NOTICE = (
 )
 
 
-def _group_people() -> None:
-    """The PAF grouping's kernels on one person with one detection per joint."""
-    from models.paf_grouping import BODY25_PAF_LIMBS, group_people
-
-    one = np.array([[10.0, 10.0, 0.9]])
-    group_people([one] * 25, [np.ones((1, 1))] * len(BODY25_PAF_LIMBS), min_joints=1)
-
-
 def warm_ups() -> list[Callable[[], None]]:
     """The stages' warm-ups, each calling its module's kernels on tiny inputs: edit this list with the kernels."""
-    from reconstruction import pipeline
+    from models import paf_grouping
     from reconstruction.matching import evidence
-    from reconstruction.matching.sparse_assignment import linear_sum_assignment
     from reconstruction.solver import map_solver
     from tracking import tracker
 
-    return [
-        evidence.warm_up,
-        pipeline.warm_up,
-        map_solver.warm_up,
-        tracker.warm_up,
-        lambda: linear_sum_assignment(np.ones((2, 3))),
-        _group_people,
-    ]
+    return [evidence.warm_up, map_solver.warm_up, tracker.warm_up, paf_grouping.warm_up]
 
 
 class CompileNotice(Listener):
@@ -64,4 +48,5 @@ def precompile() -> bool:
 
 
 if __name__ == "__main__":
+    argparse.ArgumentParser(description=__doc__).parse_args()
     print("numba kernels compiled and cached" if precompile() else "numba kernels loaded from the cache")

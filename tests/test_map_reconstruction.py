@@ -356,7 +356,7 @@ def test_mle_map_beats_vanilla_on_a_noisy_synthetic_crowd():
     errors = {"vanilla": [], "mle_map": []}
     stages = {"vanilla": VanillaTriangulation(), "mle_map": MLEMAPReconstruction()}
     for frame in seq.frames:
-        assignment = OracleMatcher()(frame.views, seq.rig)
+        assignment = OracleMatcher()(frame.views, seq.rig).assignment
         poses2d, boxes = gather_views(frame.views, assignment)
         ids = [
             frame.views[v].person_ids[assignment[p, v]]

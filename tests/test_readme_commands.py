@@ -338,7 +338,7 @@ FAST_COMMANDS = [
         ["progress=false", "hydra.run.dir={tmp}"],
         True,
     ),
-    ("python eval.py dataset=shelf dataset.root=../shared/data/shelf", ["progress=false", "hydra.run.dir={tmp}"], True),
+    ("python eval.py dataset=shelf", ["progress=false", "hydra.run.dir={tmp}"], True),
     ("python -m data.geometry.check_rig cameras.json poses2d.json", [], False),
 ]
 

@@ -218,8 +218,9 @@ def test_a_joint_hidden_in_every_view_for_three_frames_follows_the_motion():
         if f >= 20:
             poses2d[:, 0, hidden, 2] = 0.0
         boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
-        alone = rec(poses2d, boxes, rig)
-        out = _step(tracker, f, alone, rec.last_joint_variance).poses3d
+        result = rec(poses2d, boxes, rig)
+        alone = result.poses
+        out = _step(tracker, f, alone, result.joint_variance).poses3d
     tracked, by_prior = (np.linalg.norm(p[0, hidden, :3] - truth[hidden, :3]) for p in (out, alone))
     assert tracked < 0.05 and tracked < by_prior
     assert out[0, hidden, 3] == alone[0, hidden, 3] < 0.5  # the reconstruction's low score is kept
@@ -240,9 +241,7 @@ def test_the_map_reports_each_joints_variance_for_the_tracker():
         poses2d[1:, 0, 9, 2] = 0.0  # the left wrist seen in one view only
         poses2d[:, 0, 10, 2] = 0.0  # the right wrist in none
         boxes = np.stack([bbox_from_keypoints(p, cam.size) for p, cam in zip(poses2d, rig)])
-        rec = MLEMAPReconstruction()
-        rec(poses2d, boxes, rig)
-        out[noise] = rec.last_joint_variance
+        out[noise] = MLEMAPReconstruction()(poses2d, boxes, rig).joint_variance
     var = out[1.0][0]
     assert var.shape == (23,) and np.isinf(var[10])
     many = np.ones(23, bool)

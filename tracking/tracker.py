@@ -14,8 +14,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from data.bone_lengths import BONE_PAIRS, bone_lengths
 from data.assignment import solve_sparse_pairs
+from data.bone_lengths import BONE_PAIRS, bone_lengths
 from reconstruction.results import Reconstruction, SkeletonPrior
 from tracking import track_kernels as kernels
 from tracking.track_kernels import Bodies, Filters, Hits
