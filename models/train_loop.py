@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import random
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,6 @@ from models.training import (
     load_checkpoint,
     save_checkpoint,
     save_weights,
-    seed_everything,
     setup_distributed,
     train_one_epoch,
     validate,
@@ -46,10 +46,7 @@ def _reached(state: TrainState, max_steps: int | None) -> bool:
 
 
 def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None) -> dict:
-    """Train (or resume) per cfg into run_dir -> {"losses": {step: loss}, "metrics": last validation, "state"}.
-
-    choices (the config groups chosen) go into the checkpoints, so that a resume can tell what its overrides change.
-    """
+    """Train (or resume) into run_dir -> {"losses": {step: loss}, "metrics", "state"}; choices go into checkpoints."""
     check_train_config(cfg)
     if cfg.resume and checkpoint is None:
         checkpoint = read_checkpoint(cfg.resume, "resume")
@@ -57,7 +54,9 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     rank, world, device = setup_distributed(trainer.device)
     if trainer.threads:
         torch.set_num_threads(trainer.threads)
-    seed_everything(trainer.seed)
+    random.seed(trainer.seed)
+    np.random.seed(trainer.seed)
+    torch.manual_seed(trainer.seed)
     codec = build_codec(cfg)
     train_set, val_set = build_dataset(cfg, codec, "train"), build_dataset(cfg, codec, "val")
     if not len(train_set):
@@ -203,8 +202,7 @@ def _save(
     metrics: dict[str, float],
     choices: dict[str, str] | None,
 ) -> None:
-    """Write checkpoints/last.ckpt, and the weights to best.pth when the latest validation beat the best AP
-    (all joints)."""
+    """Write checkpoints/last.ckpt, and best.pth when the latest validation beat the best AP (all joints)."""
     folder = run_dir / cfg.checkpoint_dir
     improved = metrics.get("AP_all", -1.0) > state.best_ap
     if improved:
