@@ -36,7 +36,14 @@ class KeypointRCNN:
         device: str = "auto",
         model_kwargs: dict | None = None,
     ) -> None:
-        _check_keys(score_threshold, logit_center, logit_scale, batch_size)
+        if not is_number(score_threshold):
+            fail("pose2d.score_threshold", score_threshold, "must be a finite number")
+        if not is_number(logit_center):
+            fail("pose2d.logit_center", logit_center, "must be a finite number")
+        if not (is_number(logit_scale) and logit_scale > 0):
+            fail("pose2d.logit_scale", logit_scale, "must be a number > 0")
+        if not (is_int(batch_size) and batch_size >= 1):
+            fail("pose2d.batch_size", batch_size, "must be an integer >= 1")
         self.device = resolve_device(device, "pose2d.device")
         self.model, _ = build_detection_model(MODEL, weights, "pose2d", **dict(model_kwargs or {}))
         self.model.to(self.device)
@@ -56,15 +63,3 @@ class KeypointRCNN:
     def __call__(self, images: list[np.ndarray], boxes: list[np.ndarray] | None = None) -> list[ViewDetections]:
         """Images (H, W, 3) uint8 BGR per view -> ViewDetections (keypoints (N, 23, 3), feet 0); boxes ignored."""
         return [self.to_view(out) for out in detect(self.model, images, self.batch_size, self.device)]
-
-
-def _check_keys(score_threshold: float, logit_center: float, logit_scale: float, batch_size: int) -> None:
-    """ConfigError naming the first pose2d.* key out of range."""
-    if not is_number(score_threshold):
-        fail("pose2d.score_threshold", score_threshold, "must be a finite number")
-    if not is_number(logit_center):
-        fail("pose2d.logit_center", logit_center, "must be a finite number")
-    if not (is_number(logit_scale) and logit_scale > 0):
-        fail("pose2d.logit_scale", logit_scale, "must be a number > 0")
-    if not (is_int(batch_size) and batch_size >= 1):
-        fail("pose2d.batch_size", batch_size, "must be an integer >= 1")

@@ -14,7 +14,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from data.config_checks import ConfigError, is_int, is_number
+from data.config_checks import fail, is_int, is_number
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from data.pose2d.box_crops import crop_boxes, normalize_crops
@@ -31,8 +31,6 @@ from models.pose_decoding import (
 )
 from models.pose_nms import find_duplicates, merge_joints
 from models.training import build_codec
-
-KEY = "pose2d"  # the config group, named in error messages
 
 
 @dataclass(frozen=True)
@@ -52,23 +50,18 @@ class SppeOptions:
     def __post_init__(self) -> None:
         for key in ("flip_test", "amp", "separate_pairs"):
             if not isinstance(getattr(self, key), bool):
-                _fail(key, getattr(self, key), "must be true or false")
+                fail(f"pose2d.{key}", getattr(self, key), "must be true or false")
         if self.decode not in DECODERS:
-            _fail("decode", self.decode, f"must be one of {', '.join(DECODERS)}")
+            fail("pose2d.decode", self.decode, f"must be one of {', '.join(DECODERS)}")
         for key, minimum in (("threshold", 0.0), ("dist_thresh", 0.0)):
             if not is_number(getattr(self, key)) or getattr(self, key) < minimum:
-                _fail(key, getattr(self, key), f"must be a number >= {minimum:g}")
+                fail(f"pose2d.{key}", getattr(self, key), f"must be a number >= {minimum:g}")
         for key in ("top_m", "batch_size"):
             if not is_int(getattr(self, key)) or getattr(self, key) < 1:
-                _fail(key, getattr(self, key), "must be an integer >= 1")
+                fail(f"pose2d.{key}", getattr(self, key), "must be an integer >= 1")
         oks = self.pose_nms_oks
         if oks is not None and not (is_number(oks) and 0 < oks < 1):
-            _fail("pose_nms.oks", oks, "must be a number in (0, 1)")
-
-
-def _fail(key: str, value: Any, what: str) -> None:
-    """Raise ConfigError 'pose2d.key=value: what'."""
-    raise ConfigError(f"{KEY}.{key}={value!r}: {what}")
+            fail("pose2d.pose_nms.oks", oks, "must be a number in (0, 1)")
 
 
 def nms_threshold(pose_nms_cfg: Mapping | None) -> float | None:
@@ -77,7 +70,7 @@ def nms_threshold(pose_nms_cfg: Mapping | None) -> float | None:
         return SppeOptions.pose_nms_oks
     enabled = pose_nms_cfg.get("enabled", True)
     if not isinstance(enabled, bool):
-        _fail("pose_nms.enabled", enabled, "must be true or false")
+        fail("pose2d.pose_nms.enabled", enabled, "must be true or false")
     return pose_nms_cfg.get("oks", SppeOptions.pose_nms_oks) if enabled else None
 
 
@@ -91,7 +84,7 @@ class SppeStage:
     ) -> None:
         """options: the fields of SppeOptions but pose_nms_oks, which the pose_nms block {enabled, oks} gives."""
         self.options = SppeOptions(**options, pose_nms_oks=nms_threshold(pose_nms))
-        self.device = resolve_device(device, f"{KEY}.device")
+        self.device = resolve_device(device, "pose2d.device")
         self.model, train_cfg = load_trained_model(checkpoint, self.device)
         self.codec, self.padding = build_codec(train_cfg), float(train_cfg.data.padding)
         self.last_timings: dict[str, float] = {}  # seconds of the last call: crop, network, decode

@@ -74,21 +74,12 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     net = DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None) if world > 1 else model
     writer = SummaryWriter(str(run_dir)) if rank == 0 else None
     config = OmegaConf.to_container(cfg, resolve=True)
-    log.info(
-        "%d training crops, %d validation crops, device %s x %d, from epoch %d step %d",
-        len(train_set),
-        len(val_set),
-        device,
-        world,
-        state.epoch,
-        state.global_step,
-    )
+    sizes = (len(train_set), len(val_set), device, world, state.epoch, state.global_step)
+    log.info("%d training crops, %d validation crops, device %s x %d, from epoch %d step %d", *sizes)
     losses: dict[int, float] = {}
     metrics: dict[str, float] = {}
     while state.epoch < trainer.epochs and not _reached(state, trainer.max_steps):
-        finished = _epoch(
-            trainer, net, train_set, sampler, train_loader, loss_fn, optimizer, device, state, writer, losses, rank
-        )
+        finished = _epoch(trainer, net, train_loader, loss_fn, optimizer, device, state, writer, losses, rank)
         if finished:
             scheduler.step()
         last = state.epoch >= trainer.epochs or _reached(state, trainer.max_steps)
@@ -108,8 +99,6 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
 def _epoch(
     trainer: DictConfig,
     net: nn.Module,
-    train_set: Any,
-    sampler: EpochSampler,
     loader: DataLoader,
     loss_fn: nn.Module,
     optimizer: torch.optim.Optimizer,
@@ -120,33 +109,18 @@ def _epoch(
     rank: int,
 ) -> bool:
     """Train the rest of the current epoch (or up to max_steps), adding {global step: loss} to losses -> finished."""
-    train_set.set_epoch(state.epoch)
-    sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
-    remaining, first_step = len(loader), state.global_step + 1
+    loader.dataset.set_epoch(state.epoch)
+    loader.sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
+    remaining, first_step, progress = len(loader), state.global_step + 1, trainer.progress and rank == 0
     epoch_losses = train_one_epoch(
-        net,
-        loader,
-        loss_fn,
-        optimizer,
-        device,
-        state,
-        trainer.max_steps,
-        writer,
-        trainer.log_every,
-        trainer.progress and rank == 0,
+        net, loader, loss_fn, optimizer, device, state, trainer.max_steps, writer, trainer.log_every, progress
     )
     losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
     finished = len(epoch_losses) == remaining
     if finished:
         state.epoch, state.step_in_epoch = state.epoch + 1, 0
-    log.info(
-        "epoch %d%s: mean loss %.6g over %d steps (global step %d)",
-        state.epoch - finished,
-        "" if finished else " (stopped)",
-        np.mean(epoch_losses) if epoch_losses else np.nan,
-        len(epoch_losses),
-        state.global_step,
-    )
+    args = (state.epoch - finished, "" if finished else " (stopped)", np.mean(epoch_losses) if epoch_losses else np.nan)
+    log.info("epoch %d%s: mean loss %.6g over %d steps (global step %d)", *args, len(epoch_losses), state.global_step)
     return finished
 
 
@@ -162,32 +136,19 @@ def _validate(
 ) -> dict[str, float]:
     """Validate, log to TensorBoard, write the predictions JSON -> the metrics."""
     dataset = loader.dataset
-    result = validate(
-        model,
-        loader,
-        dataset.codec,
-        dataset.records,
-        loss_fn,
-        device,
-        cfg.trainer.grid_images,
-        cfg.trainer.progress,
-        cfg.trainer.get("val_flip_test", False),  # False for a resumed run stored before the key existed
-    )
+    t = cfg.trainer  # val_flip_test: absent from a resumed run stored before the key existed
+    flip = t.get("val_flip_test", False)
+    result = validate(model, loader, dataset.codec, dataset.records, loss_fn, device, t.grid_images, t.progress, flip)
     for key, value in result.metrics.items():
         writer.add_scalar(f"val/{key}", value, state.global_step)
     if result.grid is not None:
         writer.add_image("val/heatmaps", result.grid, state.global_step, dataformats="HWC")
     writer.flush()
     write_coco_results(run_dir / cfg.predictions_file, result.predictions)
-    atomic_write_text(
-        run_dir / "metrics.json",
-        json.dumps(  # the latest validation, for sweep tables
-            {"metrics": result.metrics, "step": state.global_step, "epoch": state.epoch}, indent=2
-        ),
-    )
-    log.info(
-        "validation at step %d: %s", state.global_step, ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items())
-    )
+    latest = {"metrics": result.metrics, "step": state.global_step, "epoch": state.epoch}  # for sweep tables
+    atomic_write_text(run_dir / "metrics.json", json.dumps(latest, indent=2))
+    shown = ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items())
+    log.info("validation at step %d: %s", state.global_step, shown)
     return result.metrics
 
 
