@@ -65,8 +65,7 @@ def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
         payload = outer["payload"].numpy().tobytes() if isinstance(outer["payload"], torch.Tensor) else None
         if payload is None or hashlib.sha256(payload).hexdigest() != outer["sha256"]:
             raise CheckpointError(f"{path}: checksum mismatch, the file is corrupted")
-        state = _load(io.BytesIO(payload), path, "the checked payload")
-        return state, outer["kind"]
+        return _load(io.BytesIO(payload), path, "the checked payload"), outer["kind"]
     if isinstance(outer, dict) and "model" in outer and "config" in outer:
         log.warning(
             "%s: checkpoint written before format version %d: no checksum to verify, loaded unchecked", path, VERSION

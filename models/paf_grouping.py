@@ -99,9 +99,7 @@ def group_people(
 ) -> np.ndarray:
     """Candidates (J arrays (n_j, 3) x, y, score), limb PAFs (L arrays (n_a, n_b)) -> persons (N, J, 3), missing 0.
 
-    Persons with fewer than min_joints joints (8: the dip between fragments and bodies on Shelf) or a lower mean
-    joint score than min_mean_score are dropped.
-    """
+    Drops persons with fewer than min_joints joints (8: the dip between fragments and bodies on Shelf)."""
     packed = pack_candidates(candidates, pafs, limbs)
     return group_packed(packed, np.array(limbs).reshape(-1, 2), min_paf, min_joints, min_mean_score)
 

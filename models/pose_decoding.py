@@ -61,10 +61,8 @@ def associate_by_image(
 def separate_pairs(
     keypoints: np.ndarray, candidates: np.ndarray, boxes: np.ndarray, min_sep: float = 0.05, min_ratio: float = 0.3
 ) -> np.ndarray:
-    """Keypoints (B, 23, 3), candidates (B, 23, M, 3), boxes (B, 4) xywh -> (B, 23, 3) with left/right joints apart.
-
-    A network unsure of a person's sides gives both channels one arm; the side with the better other one moves.
-    """
+    """Keypoints (B, 23, 3), candidates (B, 23, M, 3), boxes (B, 4) xywh -> (B, 23, 3) with left/right joints apart."""
+    # a network unsure of a person's sides gives both channels one arm: the side with the better other one moves
     out = np.array(keypoints, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     for b in range(len(out)):

@@ -109,15 +109,8 @@ def build_dataset(cfg: DictConfig, codec: MultiModalHeatmapCodec, split: str) ->
 def build_loader(
     dataset: TopDownDataset, batch_size: int, num_workers: int, sampler: Sampler, device: torch.device
 ) -> DataLoader:
-    """A DataLoader in the sampler's order; workers are not persistent, so each epoch's copy draws its augmentation."""
-    return DataLoader(
-        dataset,
-        batch_size=batch_size,
-        sampler=sampler,
-        num_workers=num_workers,
-        pin_memory=device.type == "cuda",
-        persistent_workers=False,
-    )
+    """A DataLoader in the sampler's order; workers not persistent (the default): each epoch draws its augmentation."""
+    return DataLoader(dataset, batch_size, sampler=sampler, num_workers=num_workers, pin_memory=device.type == "cuda")
 
 
 def train_one_epoch(
@@ -164,15 +157,8 @@ def decode_predictions(codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, ba
     """Heatmaps (B, 23, h, w) of a batch -> B dicts {image_id, keypoints (23, 3) image px, score, bbox (4,)}."""
     keypoints = single_peaks(codec, heatmaps, batch["affine_inv"])
     scores = person_scores(batch["score"].numpy(), keypoints)
-    return [
-        {
-            "image_id": int(batch["image_id"][i]),
-            "keypoints": keypoints[i],
-            "score": float(scores[i]),
-            "bbox": batch["box"][i].numpy(),
-        }
-        for i in range(len(keypoints))
-    ]
+    rows = zip(batch["image_id"], keypoints, scores, batch["box"])
+    return [{"image_id": int(i), "keypoints": k, "score": float(s), "bbox": b.numpy()} for i, k, s, b in rows]
 
 
 def heatmap_grid(
@@ -215,8 +201,7 @@ def validate(
         scored = 0.5 * (heatmaps + flip_back(model(images.flip(-1)))) if flip_test else heatmaps
         predictions += decode_predictions(codec, scored, batch)
         if grid is None and grid_images > 0:
-            n = grid_images
-            grid = heatmap_grid(batch["image"][:n], batch["target"][:n], heatmaps[:n])
+            grid = heatmap_grid(batch["image"][:grid_images], batch["target"][:grid_images], heatmaps[:grid_images])
     metrics = {"loss": total / max(count, 1)}
     for subset in AP_SUBSETS:
         stats = evaluate_keypoints(records, predictions, subset) if predictions else {"AP": -1.0, "AR": -1.0}
