@@ -1,8 +1,4 @@
-"""Multi-peak heatmap decoding: several joint candidates per joint channel (CrowdPose's joint-candidate SPPE), in torch.
-
-Candidates are in heatmap pixels (pixel centres at integers; input pixel = (x_hm + 0.5) * stride - 0.5); the
-sub-pixel step is DARK's Newton step on the log heatmap per axis, exact for a Gaussian peak, at most half a pixel.
-"""
+"""Joint candidates: the top-M local maxima per heatmap channel (CrowdPose's SPPE), DARK sub-pixel step, in torch."""
 
 from __future__ import annotations
 
@@ -28,7 +24,8 @@ def find_candidates(
     b, j, h, w = hm.shape
     # a peak equals its neighbourhood maximum and exceeds threshold: hm >= max(neighbourhood max, next value above it)
     floor = _next_above(threshold, hm.dtype)
-    flat = torch.where(hm >= _neighbourhood_max(hm, nms_kernel).clamp_(min=floor), hm, 0.0).reshape(b, j, h * w)
+    peak = hm >= F.max_pool2d(hm, nms_kernel, 1, nms_kernel // 2).clamp_(min=floor)
+    flat = torch.where(peak, hm, 0.0).reshape(b, j, h * w)
     vals, idx = flat.topk(min(top_m, h * w), dim=-1)
     rows, cols = idx // w, idx % w
     dx = _parabola_offset(hm.reshape(b, j, h * w), rows, cols, w, axis_len=w, along_x=True)
@@ -49,25 +46,10 @@ def _next_above(threshold: float, dtype: torch.dtype) -> float:
     return float(value if value > threshold else np.nextafter(value, info.dtype.type(np.inf)))
 
 
-def _neighbourhood_max(hm: torch.Tensor, kernel: int) -> torch.Tensor:
-    """Maximum over each pixel's kernel x kernel neighbourhood (B, J, h, w), outside -inf (max_pool2d, faster)."""
-    r = kernel // 2
-    h, w = hm.shape[-2:]
-    padded = F.pad(hm, (r, r, r, r), value=float("-inf"))
-    rows = padded[..., 0:w].clone()
-    for s in range(1, kernel):
-        torch.maximum(rows, padded[..., s : s + w], out=rows)
-    out = rows[..., 0:h, :].clone()
-    for s in range(1, kernel):
-        torch.maximum(out, rows[..., s : s + h, :], out=out)
-    return out
-
-
 def _parabola_offset(
     hm: torch.Tensor, rows: torch.Tensor, cols: torch.Tensor, w: int, axis_len: int, along_x: bool
 ) -> torch.Tensor:
-    """Vertex offset (B, J, K) float64 of the log-parabola through a peak and its two neighbours along one
-    axis; hm (B, J, h * w), rows and cols (B, J, K)."""
+    """Log-parabola vertex offsets (B, J, K) float64 along one axis at rows, cols (B, J, K) of hm (B, J, h * w)."""
     pos = cols if along_x else rows
 
     def log_at(shift: int) -> torch.Tensor:

@@ -1,7 +1,6 @@
 """Checkpoint files of train.py: a versioned envelope (format, version, kind, sha256, payload) around the state.
 
-A damaged file, or a weights file given where a resume checkpoint is needed, stops with one CheckpointError
-naming the file; pre-envelope files are read with a warning. The payload is unpickled: load only trusted files.
+The payload is unpickled: load only trusted files.
 """
 
 from __future__ import annotations
@@ -31,27 +30,14 @@ KEYS = {
 ENVELOPE_KEYS = ("format", "version", "kind", "sha256", "payload")
 
 
-def atomic_torch_save(obj: Any, path: str | Path) -> None:
-    """torch.save obj to a temporary file beside path, fsync it, then rename it over path."""
-    with atomic_open(path, binary=True, fsync=True) as f:
-        torch.save(obj, f)
-
-
 def write_checkpoint(state: dict, path: str | Path, kind: str) -> None:
     """Write state (a dict holding KEYS[kind]) to path atomically, in the envelope with its sha256."""
     buffer = io.BytesIO()
     torch.save(state, buffer)
     payload = buffer.getvalue()
-    atomic_torch_save(
-        {
-            "format": FORMAT,
-            "version": VERSION,
-            "kind": kind,
-            "sha256": hashlib.sha256(payload).hexdigest(),
-            "payload": torch.frombuffer(bytearray(payload), dtype=torch.uint8),
-        },
-        path,
-    )
+    envelope = {"format": FORMAT, "version": VERSION, "kind": kind, "sha256": hashlib.sha256(payload).hexdigest()}
+    with atomic_open(path, binary=True, fsync=True) as f:  # a temporary file beside path, renamed over it
+        torch.save({**envelope, "payload": torch.frombuffer(bytearray(payload), dtype=torch.uint8)}, f)
 
 
 def _load(source: str | Path | io.BytesIO, path: Path, what: str) -> Any:
@@ -79,8 +65,7 @@ def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
         payload = outer["payload"].numpy().tobytes() if isinstance(outer["payload"], torch.Tensor) else None
         if payload is None or hashlib.sha256(payload).hexdigest() != outer["sha256"]:
             raise CheckpointError(f"{path}: checksum mismatch, the file is corrupted")
-        state = _load(io.BytesIO(payload), path, "the checked payload")
-        return state, outer["kind"]
+        return _load(io.BytesIO(payload), path, "the checked payload"), outer["kind"]
     if isinstance(outer, dict) and "model" in outer and "config" in outer:
         log.warning(
             "%s: checkpoint written before format version %d: no checksum to verify, loaded unchecked", path, VERSION

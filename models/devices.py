@@ -8,8 +8,7 @@ from data.config_checks import fail
 
 
 def resolve_device(name: str, key: str, local_rank: int = 0) -> torch.device:
-    """'auto' -> cuda:local_rank when CUDA is available, else cpu; 'cpu', 'cuda', 'cuda:N' checked against this
-    machine (a ConfigError naming ``key`` otherwise)."""
+    """'auto' (cuda:local_rank if CUDA is available, else cpu), 'cpu', 'cuda', 'cuda:N' -> device; or ConfigError."""
     if name == "auto":
         return torch.device("cuda", local_rank) if torch.cuda.is_available() else torch.device("cpu")
     try:

@@ -29,9 +29,8 @@ class Pose2DFrontEnd:
         if pose2d.needs_boxes and detector is None:
             raise ValueError(f"{type(pose2d).__name__} needs person boxes: give it a detector")
         self.pose2d, self.detector = pose2d, detector if pose2d.needs_boxes else None
-        self.timings: dict[str, float] = {"images": 0.0, "pose2d": 0.0}
-        if self.detector is not None:
-            self.timings["detector"] = 0.0
+        stages = ("images", "pose2d", "detector") if self.detector is not None else ("images", "pose2d")
+        self.timings = dict.fromkeys(stages, 0.0)
 
     def __call__(self, frame: Frame) -> list[ViewDetections]:
         """The 2D poses of every view of ``frame`` (rig order); the frame must carry images."""

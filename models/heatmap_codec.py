@@ -1,7 +1,6 @@
-"""Multi-modal heatmap targets of the paper's Eq. 1 (``T + mu C``) and their decoding.
+"""Multi-modal heatmap targets of the paper's Eq. 1 (T + mu C) and their decoding.
 
-Pixel centres at integers in crop and heatmap: x_hm = (x_in + 0.5) * w / W - 0.5, so a flip of the input is
-exactly a flip of the heatmap.
+Pixel centres at integers: x_hm = (x_in + 0.5) * w / W - 0.5, so a flip of the input is exactly a flip of the heatmap.
 """
 
 from __future__ import annotations
@@ -32,10 +31,6 @@ class MultiModalHeatmapCodec:
         self.mu = float(mu)
         self._ratio = np.array(self.heatmap_size, dtype=np.float64) / np.array(self.input_size)
 
-    def input_to_heatmap(self, points: np.ndarray) -> np.ndarray:
-        """Crop-input pixels (..., 2) -> heatmap pixels (..., 2)."""
-        return (np.asarray(points, dtype=np.float64) + 0.5) * self._ratio - 0.5
-
     def heatmap_to_input(self, points: np.ndarray) -> np.ndarray:
         """Heatmap pixels (..., 2) -> crop-input pixels (..., 2)."""
         return (np.asarray(points, dtype=np.float64) + 0.5) / self._ratio - 0.5
@@ -48,7 +43,7 @@ class MultiModalHeatmapCodec:
 
     def gaussians(self, points: np.ndarray) -> np.ndarray:
         """Unit-peak Gaussians at sub-pixel crop-input points (..., 2) -> (..., h, w) float64."""
-        centres = self.input_to_heatmap(points)
+        centres = (np.asarray(points, dtype=np.float64) + 0.5) * self._ratio - 0.5
         w, h = self.heatmap_size
         xs, ys = np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)
         gx = np.exp(-((xs - centres[..., 0:1]) ** 2) / (2 * self.sigma**2))
@@ -56,10 +51,7 @@ class MultiModalHeatmapCodec:
         return gy[..., :, None] * gx[..., None, :]
 
     def encode(self, own: np.ndarray, others: np.ndarray, labelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Target (23, h, w) = T + mu C, weight (23,) of own (23, 3), others (M, 23, 3) x, y, v, labelled (23,).
-
-        Not clipped: clipping would flatten the own peak where two people's joints meet, the case the term is for.
-        """
+        """Own (23, 3), others (M, 23, 3) x, y, v, labelled (23,) -> target T + mu C (23, h, w), weight (23,)."""
         own = np.asarray(own, dtype=np.float64).reshape(NUM_JOINTS, 3)
         others = np.asarray(others, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
         labelled = np.asarray(labelled, dtype=bool).reshape(NUM_JOINTS)
@@ -69,24 +61,20 @@ class MultiModalHeatmapCodec:
         if len(others) and self.mu != 0:
             crowd = self.gaussians(others[..., :2]) * others_present[..., None, None]
             target = target + self.mu * crowd.max(axis=0)
-        weight = own_present | others_present.any(axis=0)
+        weight = own_present | others_present.any(axis=0)  # not clipped: it would flatten peaks where people meet
         return target.astype(np.float32), weight.astype(np.float32)
 
     def encode_crop(
         self, keypoints_all: np.ndarray, own_index: int, affine: np.ndarray, labelled: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Encode person ``own_index`` of an image: keypoints_all (N, 23, 3) in image pixels, affine (2, 3)
-        image -> crop input (data.pose2d.crop_transforms.crop_affine) -> target (23, h, w), weight (23,)."""
+        """Person own_index of keypoints_all (N, 23, 3) image px, image-to-crop affine (2, 3) -> target, weight."""
         keypoints = np.array(keypoints_all, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
         keypoints[..., :2] = transform_points(keypoints[..., :2], affine)
         others = np.delete(keypoints, own_index, axis=0)
         return self.encode(keypoints[own_index], others, labelled)
 
     def decode(self, heatmaps: np.ndarray | torch.Tensor, modulate: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """Heatmaps (..., 23, h, w) -> keypoints (..., 23, 2) crop-input px, scores (..., 23): argmax + DARK step.
-
-        ``modulate`` blurs first, except within 2 sigma of the border, where the zero-padded blur drags peaks inward.
-        """
+        """Heatmaps (..., 23, h, w) -> keypoints (..., 23, 2) crop-input px, scores (..., 23): argmax + DARK step."""
         if isinstance(heatmaps, torch.Tensor):
             heatmaps = heatmaps.detach().cpu().numpy()
         heatmaps = np.asarray(heatmaps, dtype=np.float64)
@@ -96,7 +84,7 @@ class MultiModalHeatmapCodec:
         px, py = index % w, index // w
         scores = flat[np.arange(len(flat)), py, px]
         offsets = _newton_offsets(np.log(np.maximum(flat, _LOG_EPS)), px, py)
-        if modulate:
+        if modulate:  # blur first, except within 2 sigma of the border, where the zero-padded blur drags peaks inward
             margin = int(np.ceil(2 * self.sigma))
             far = (px >= margin) & (px < w - margin) & (py >= margin) & (py < h - margin)
             blurred = _newton_offsets(np.log(np.maximum(_modulate(flat, self.sigma), _LOG_EPS)), px, py)

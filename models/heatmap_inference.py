@@ -1,8 +1,4 @@
-"""Heatmaps of a batch of person crops: the network in chunks, optional flip test, float16 autocast on CUDA.
-
-No one-pixel shift after the flip (unlike SimpleBaseline): heatmap pixel i is the centre of input pixels
-stride * i .. stride * (i + 1) - 1, so the input mirror is exactly the heatmap mirror.
-"""
+"""Heatmaps of a batch of person crops: the network in chunks, optional flip test, float16 autocast on CUDA."""
 
 from __future__ import annotations
 
@@ -13,8 +9,7 @@ from data.keypoints import NUM_JOINTS, flip_permutation
 
 
 def flip_back(heatmaps: torch.Tensor) -> torch.Tensor:
-    """Heatmaps (B, 23, h, w) of mirrored crops -> those of the crops: mirrored x -> w - 1 - x, left and right
-    channels swapped."""
+    """Heatmaps (B, 23, h, w) of mirrored crops -> those of the crops (no one-pixel shift: models/heatmap_codec.py)."""
     if heatmaps.shape[1] != NUM_JOINTS:
         raise ValueError(f"flip test needs {NUM_JOINTS} COCO-23 channels, the network gives {heatmaps.shape[1]}")
     perm = torch.as_tensor(flip_permutation(), device=heatmaps.device)

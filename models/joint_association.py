@@ -1,9 +1,7 @@
 """CrowdPose's global maximum joints association (Li et al. CVPR 2019) over the boxes of one image.
 
-Per joint type, candidates from different boxes closer than dist_thresh * sigma_j * (s_p + s_q) / 2 (s = sqrt of
-box area) form nodes (connected components); persons x nodes is a maximum-weight matching (weight: the person's
-best candidate score in the node). An unmatched person keeps its best candidate's position with score 0, because
-COCO's OKS uses every predicted coordinate. Only joint types with a node shared by two persons need the matching.
+Per joint type, candidates of different boxes closer than dist_thresh * sigma_j * (s_p + s_q) / 2 (s = sqrt of box
+area) form nodes; persons x nodes is a maximum-weight matching. An unmatched person keeps its position with score 0.
 """
 
 from __future__ import annotations
@@ -50,8 +48,7 @@ def associate_joints(
 
 
 def _match(w: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
-    """Maximum-weight matching of persons to the nodes start:stop of one joint type: weights w (P, nodes) ->
-    persons (K,) and their global node indices (K,), zero-weight pairs dropped."""
+    """Match persons to nodes start:stop of one joint by weights w (P, nodes) -> persons (K,), node indices (K,)."""
     rows, cols = linear_sum_assignment(w[:, start:stop], maximize=True)
     keep = w[rows, start + cols] > 0
     return rows[keep], start + cols[keep]
@@ -65,8 +62,7 @@ def _apply_matches(
     joint_of_node: np.ndarray,
     matched: list[tuple[np.ndarray, np.ndarray]],
 ) -> np.ndarray:
-    """The persons' own best candidates (P, J, 3) with the matched joint types replaced: unmatched persons keep
-    their position with score 0, matched ones take their best candidate in the node and its score -> (P, J, 3)."""
+    """Own best candidates (P, J, 3) with the matched joint types replaced by the matches -> (P, J, 3)."""
     if not matched:
         return own
     out = own.copy()
@@ -80,8 +76,7 @@ def _apply_matches(
 
 
 def own_best(xy: np.ndarray, scores: np.ndarray) -> np.ndarray:
-    """Each person's best candidate per joint: xy (P, J, M, 2), scores (P, J, M) -> (P, J, 3); (0, 0, 0) where
-    a person has no candidate of a joint."""
+    """Each person's best candidate per joint: xy (P, J, M, 2), scores (P, J, M) -> (P, J, 3), 0 where none."""
     best = scores.argmax(axis=-1)[..., None]
     out = np.concatenate(
         [np.take_along_axis(xy, best[..., None], axis=2)[:, :, 0], np.take_along_axis(scores, best, axis=2)], -1
@@ -113,8 +108,7 @@ def joint_nodes(xy: np.ndarray, scores: np.ndarray, radii: np.ndarray) -> np.nda
 
 
 def best_per_node(nodes: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Each person's best candidate in each node it has one in: nodes and scores (P, J, M) -> person, node,
-    weight (its score), slot, each (K,) over the K (person, node) pairs; ties go to the lower slot."""
+    """Each person's best candidate per node: nodes, scores (P, J, M) -> person, node, weight, slot, each (K,)."""
     p, _, m = np.nonzero(nodes >= 0)
     node, s = nodes[nodes >= 0], scores[nodes >= 0]
     order = np.lexsort((m, -s, node, p))

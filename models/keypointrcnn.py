@@ -1,8 +1,4 @@
-"""Baseline 2D source: torchvision's Keypoint R-CNN (COCO-17) as COCO-23 poses, the 6 foot joints missing.
-
-Its keypoint scores are heatmap logits; sigmoid((logit - logit_center) / logit_scale) maps them to [0, 1] (the
-default centre 2 gives 0.5 where Detectron draws a keypoint) and keeps their order.
-"""
+"""Baseline 2D source: torchvision's Keypoint R-CNN (COCO-17) as COCO-23 poses, the 6 foot joints missing."""
 
 from __future__ import annotations
 
@@ -21,7 +17,7 @@ PERSON_LABEL = 1  # torchvision's Keypoint R-CNN has two classes: background, pe
 
 
 def keypoint_scores(logits: np.ndarray, center: float, scale: float) -> np.ndarray:
-    """(...) raw keypoint logits -> (...) scores in [0, 1]: sigmoid((logit - center) / scale)."""
+    """(...) raw keypoint logits -> (...) scores in [0, 1]; center 2 gives 0.5 where Detectron draws a keypoint."""
     return expit((np.asarray(logits, np.float64) - center) / scale)
 
 
@@ -40,7 +36,14 @@ class KeypointRCNN:
         device: str = "auto",
         model_kwargs: dict | None = None,
     ) -> None:
-        _check_keys(score_threshold, logit_center, logit_scale, batch_size)
+        if not is_number(score_threshold):
+            fail("pose2d.score_threshold", score_threshold, "must be a finite number")
+        if not is_number(logit_center):
+            fail("pose2d.logit_center", logit_center, "must be a finite number")
+        if not (is_number(logit_scale) and logit_scale > 0):
+            fail("pose2d.logit_scale", logit_scale, "must be a number > 0")
+        if not (is_int(batch_size) and batch_size >= 1):
+            fail("pose2d.batch_size", batch_size, "must be an integer >= 1")
         self.device = resolve_device(device, "pose2d.device")
         self.model, _ = build_detection_model(MODEL, weights, "pose2d", **dict(model_kwargs or {}))
         self.model.to(self.device)
@@ -48,8 +51,7 @@ class KeypointRCNN:
         self.logit_center, self.logit_scale = logit_center, logit_scale
 
     def to_view(self, output: dict) -> ViewDetections:
-        """One image's torchvision output (boxes (M, 4) xyxy, labels, scores, keypoints (M, 17, 3),
-        keypoints_scores (M, 17)) -> ViewDetections of the N kept persons, keypoints (N, 23, 3)."""
+        """One image's torchvision output (boxes (M, 4) xyxy, keypoints (M, 17, 3), ...) -> ViewDetections."""
         keep = (output["labels"].numpy() == PERSON_LABEL) & (output["scores"].numpy() >= self.score_threshold)
         xy = output["keypoints"].double().numpy()[keep][:, :, :2]
         score = keypoint_scores(output["keypoints_scores"].double().numpy()[keep], self.logit_center, self.logit_scale)
@@ -59,18 +61,5 @@ class KeypointRCNN:
         return ViewDetections(keypoints, boxes, output["scores"].double().numpy()[keep], np.full(n, -1))
 
     def __call__(self, images: list[np.ndarray], boxes: list[np.ndarray] | None = None) -> list[ViewDetections]:
-        """Per view the persons found in (H, W, 3) uint8 BGR ``images``: keypoints (N, 23, 3) x, y, score in
-        [0, 1] (feet 0), bboxes (N, 4) x, y, w, h, scores (N,), person_ids -1. ``boxes`` is ignored."""
+        """Images (H, W, 3) uint8 BGR per view -> ViewDetections (keypoints (N, 23, 3), feet 0); boxes ignored."""
         return [self.to_view(out) for out in detect(self.model, images, self.batch_size, self.device)]
-
-
-def _check_keys(score_threshold: float, logit_center: float, logit_scale: float, batch_size: int) -> None:
-    """ConfigError naming the first pose2d.* key out of range."""
-    if not is_number(score_threshold):
-        fail("pose2d.score_threshold", score_threshold, "must be a finite number")
-    if not is_number(logit_center):
-        fail("pose2d.logit_center", logit_center, "must be a finite number")
-    if not (is_number(logit_scale) and logit_scale > 0):
-        fail("pose2d.logit_scale", logit_scale, "must be a number > 0")
-    if not (is_int(batch_size) and batch_size >= 1):
-        fail("pose2d.batch_size", batch_size, "must be an integer >= 1")

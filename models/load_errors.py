@@ -1,5 +1,4 @@
-"""The errors of reading a training checkpoint or pretrained weights, in a module without torch, so that
-train.py can catch them before it imports torch (a bad config value stops in about a second)."""
+"""Errors of reading checkpoints or pretrained weights, without torch: train.py catches them before importing it."""
 
 from __future__ import annotations
 

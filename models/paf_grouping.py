@@ -1,7 +1,4 @@
-"""Greedy part-affinity grouping of BODY_25 joint candidates into persons, as OpenPose does.
-
-The greedy loops are two numba kernels: in Python they dominate the Shelf grouping stage (warm_up() compiles them).
-"""
+"""Greedy part-affinity grouping of BODY_25 joint candidates into persons, as OpenPose does (numba kernels)."""
 
 from __future__ import annotations
 
@@ -31,10 +28,7 @@ def limb_connections(paf: np.ndarray, min_paf: float) -> np.ndarray:
 
 @numba.njit(cache=True)
 def _greedy_pairs(flat: np.ndarray, start: int, n_a: int, n_b: int, min_paf: float, out: np.ndarray) -> int:
-    """Greedy one-to-one pairs of the (n_a, n_b) PAF block flat[start:], best first, into out (C, 2) -> C.
-
-    A tie goes to the first in row-major order, as a stable sort by decreasing score would.
-    """
+    """Greedy one-to-one pairs of the (n_a, n_b) block flat[start:], best first (ties row-major) -> out (C, 2), C."""
     used_a = np.zeros(n_a, dtype=np.bool_)
     used_b = np.zeros(n_b, dtype=np.bool_)
     count = 0
@@ -62,8 +56,8 @@ def _assemble(
 ) -> np.ndarray:
     """Fold every limb's greedy connections into persons -> slots (P, J): candidate index per joint or -1.
 
-    A connection extends the person holding one end (a filled slot keeps its earlier, stronger link), joins
-    two persons whose slots do not overlap, or starts a person; merged-away persons stay as empty rows.
+    A connection extends the person holding one end (a filled slot keeps its stronger link), joins two persons
+    whose slots do not overlap, or starts a person.
     """
     num_joints = len(cand_start) - 1
     owner = np.full(cand_start[-1], -1, dtype=np.int64)
@@ -103,11 +97,9 @@ def group_people(
     min_joints: int = 8,
     min_mean_score: float = 0.4,
 ) -> np.ndarray:
-    """Group joint candidates (J arrays (n_j, 3) x, y, score) by limb PAFs (L arrays (n_a, n_b)) -> (N, J, 3).
+    """Candidates (J arrays (n_j, 3) x, y, score), limb PAFs (L arrays (n_a, n_b)) -> persons (N, J, 3), missing 0.
 
-    Persons with fewer than min_joints joints (8: the dip between fragments and bodies on Shelf) or a mean
-    joint score under min_mean_score are dropped; persons come out in order of creation, missing joints 0.
-    """
+    Drops persons with fewer than min_joints joints (8: the dip between fragments and bodies on Shelf)."""
     packed = pack_candidates(candidates, pafs, limbs)
     return group_packed(packed, np.array(limbs).reshape(-1, 2), min_paf, min_joints, min_mean_score)
 
@@ -115,8 +107,7 @@ def group_people(
 def pack_candidates(
     candidates: list[np.ndarray], pafs: list[np.ndarray], limbs: tuple[tuple[int, int], ...] = BODY25_PAF_LIMBS
 ) -> PackedCandidates:
-    """J candidate arrays (n_j, 3) and L PAF matrices (n_a, n_b) -> PackedCandidates; a PAF shape that does not
-    fit its limb's candidates stops with the limb named."""
+    """J candidate arrays (n_j, 3) and L PAF matrices (n_a, n_b) -> PackedCandidates; ValueError for a bad shape."""
     if len(pafs) != len(limbs):
         raise ValueError(f"group_people: {len(pafs)} PAF matrices for {len(limbs)} limbs")
     cands = [np.asarray(c, dtype=np.float64).reshape(-1, 3) for c in candidates]

@@ -1,6 +1,5 @@
-"""Heatmaps of person crops -> keypoints in image pixels (``single``: one peak per joint; ``association``: candidates
-then the global joint association), shared by the SPPE stage and evaluation/pose2d_eval.py.
-"""
+"""Heatmaps of person crops -> keypoints in image px (single: one peak per joint; association: candidates, then
+the global joint association), shared by the SPPE stage and evaluation/pose2d_eval.py."""
 
 from __future__ import annotations
 
@@ -47,8 +46,7 @@ def joint_candidates(
 def associate_by_image(
     candidates: np.ndarray, boxes: np.ndarray, image_keys: Sequence, dist_thresh: float = 1.0
 ) -> np.ndarray:
-    """Candidates (B, 23, M, 3) of B crops, their boxes (B, 4) x, y, w, h and the image each crop is from (B,)
-    -> keypoints (B, 23, 3): the global joint association over the crops of each image; order kept."""
+    """Candidates (B, 23, M, 3), boxes (B, 4) xywh, image of each crop (B,) -> keypoints (B, 23, 3), per image."""
     by_image: dict = defaultdict(list)
     for i, key in enumerate(image_keys):
         by_image[key].append(i)
@@ -63,10 +61,8 @@ def associate_by_image(
 def separate_pairs(
     keypoints: np.ndarray, candidates: np.ndarray, boxes: np.ndarray, min_sep: float = 0.05, min_ratio: float = 0.3
 ) -> np.ndarray:
-    """Keypoints (B, 23, 3), candidates (B, 23, M, 3), boxes (B, 4) xywh -> (B, 23, 3) with left/right joints apart.
-
-    A network unsure of a person's sides gives both channels the same arm; the side with the better other one moves.
-    """
+    """Keypoints (B, 23, 3), candidates (B, 23, M, 3), boxes (B, 4) xywh -> (B, 23, 3) with left/right joints apart."""
+    # a network unsure of a person's sides gives both channels one arm: the side with the better other one moves
     out = np.array(keypoints, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     for b in range(len(out)):
@@ -90,6 +86,5 @@ def separate_pairs(
 
 
 def person_scores(box_scores: np.ndarray, keypoints: np.ndarray) -> np.ndarray:
-    """The person score: box score (B,) x mean joint score of keypoints (B, 23, 3) -> (B,) (0 for a joint
-    another box claimed, so a box that lost its joints ranks low)."""
+    """Box scores (B,) x mean joint score of keypoints (B, 23, 3) -> (B,); a box that lost its joints ranks low."""
     return np.asarray(box_scores, dtype=np.float64).reshape(-1) * np.asarray(keypoints)[..., 2].mean(axis=-1)

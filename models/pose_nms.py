@@ -20,8 +20,7 @@ def joint_similarity(reference: np.ndarray, others: np.ndarray, area: float, sig
 def find_duplicates(
     keypoints: np.ndarray, boxes: np.ndarray, scores: np.ndarray, oks: float = 0.7, sigmas: np.ndarray | None = None
 ) -> list[tuple[int, np.ndarray]]:
-    """Greedy grouping: keypoints (N, J, 3), boxes (N, 4) x, y, w, h, scores (N,) -> (kept index, its duplicates'
-    indices (D,)) per kept person, in input order."""
+    """Keypoints (N, J, 3), boxes (N, 4) xywh, scores (N,) -> (kept index, its duplicates (D,)) in input order."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     scores = np.asarray(scores, dtype=np.float64).reshape(-1)
@@ -45,8 +44,7 @@ def find_duplicates(
 def merge_joints(
     reference: np.ndarray, duplicates: np.ndarray, area: float, oks: float = 0.7, sigmas: np.ndarray | None = None
 ) -> np.ndarray:
-    """Merge duplicates (K, J, 3) into reference (J, 3) of box area ``area``: where the reference sees a joint,
-    the score-weighted mean position of the agreeing joints and their best score -> (J, 3)."""
+    """Merge duplicates (K, J, 3) into reference (J, 3) of box area ``area`` -> (J, 3)."""
     if len(duplicates) == 0:
         return reference.copy()
     sigmas = OKS_SIGMAS if sigmas is None else np.asarray(sigmas, dtype=np.float64)
@@ -63,8 +61,7 @@ def merge_joints(
 def pose_nms(
     keypoints: np.ndarray, boxes: np.ndarray, scores: np.ndarray, oks: float = 0.7, sigmas: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Merge duplicate persons: keypoints (N, J, 3) x, y, score, boxes (N, 4) x, y, w, h, scores (N,) ->
-    kept indices (K,) in input order and their merged keypoints (K, J, 3); the inputs are not modified."""
+    """Keypoints (N, J, 3), boxes (N, 4) xywh, scores (N,) -> kept indices (K,) in order, merged keypoints (K, J, 3)."""
     groups = find_duplicates(keypoints, boxes, scores, oks, sigmas)
     keypoints, boxes = np.asarray(keypoints, dtype=np.float64), np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     merged = [merge_joints(keypoints[a], keypoints[dup], boxes[a, 2] * boxes[a, 3], oks, sigmas) for a, dup in groups]

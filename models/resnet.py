@@ -71,15 +71,11 @@ class ResNet(nn.Module):
         return self.layer4(self.layer3(self.layer2(self.layer1(x))))
 
 
-def _is_se_key(name: str) -> bool:
-    return ".se." in name
-
-
 def load_trunk_state(model: ResNet, state: dict[str, Tensor], source: str) -> list[str]:
     """Load a torchvision ImageNet state dict into model -> the SE keys left new; ValueError naming source."""
     state = {k: v for k, v in state.items() if not k.startswith("fc.")}
     own = model.state_dict()
-    check_state_fits(own, state, source, f"a ResNet-{model.depth} trunk", may_miss=_is_se_key)
+    check_state_fits(own, state, source, f"a ResNet-{model.depth} trunk", may_miss=lambda k: ".se." in k)
     model.load_state_dict(state, strict=False)
     new_keys = sorted(k for k in own if k not in state)
     if new_keys:
@@ -93,7 +89,6 @@ def load_pretrained(model: ResNet, path: str | Path) -> list[str]:
 
 
 def load_imagenet(model: ResNet, key: str = "model.pretrained") -> list[str]:
-    """Load torchvision's default ImageNet weights of the trunk's depth (e.g. ResNet50_Weights.IMAGENET1K_V2)
-    through the weights API; offline, one ``WeightsUnavailable`` line naming ``key``."""
+    """Load torchvision's default ImageNet weights of the trunk's depth; offline, WeightsUnavailable naming key."""
     weights = torchvision.models.get_model_weights(f"resnet{model.depth}").DEFAULT
     return load_trunk_state(model, download_state_dict(weights, key), str(weights))

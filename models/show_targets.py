@@ -37,11 +37,8 @@ def tile_grid(tiles: Sequence[np.ndarray], columns: int, gap: int = 2) -> np.nda
     h, w = tiles[0].shape[:2]
     blank = np.zeros((h, w, 3), np.uint8)
     tiles = list(tiles) + [blank] * (-len(tiles) % columns)
-    rows = []
-    for r in range(0, len(tiles), columns):
-        row = [np.pad(t, ((gap, gap), (gap, gap), (0, 0))) for t in tiles[r : r + columns]]
-        rows.append(np.hstack(row))
-    return np.vstack(rows)
+    padded = [np.pad(t, ((gap, gap), (gap, gap), (0, 0))) for t in tiles]
+    return np.vstack([np.hstack(padded[r : r + columns]) for r in range(0, len(padded), columns)])
 
 
 def target_parts(

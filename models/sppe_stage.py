@@ -1,7 +1,7 @@
 """The joint-candidate SPPE as the 2D stage of the multi-view pipeline (configs/pose2d/sppe.yaml).
 
 Pose-NMS runs per view BEFORE the joint association: a duplicate box would otherwise collect the runner-up
-candidates (neighbours' joints) and look like another person; duplicates' agreeing joints are merged afterwards.
+candidates (neighbours' joints) and look like another person.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from data.config_checks import ConfigError, is_int, is_number
+from data.config_checks import fail, is_int, is_number
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from data.pose2d.box_crops import crop_boxes, normalize_crops
@@ -31,8 +31,6 @@ from models.pose_decoding import (
 )
 from models.pose_nms import find_duplicates, merge_joints
 from models.training import build_codec
-
-KEY = "pose2d"  # the config group, named in error messages
 
 
 @dataclass(frozen=True)
@@ -52,23 +50,18 @@ class SppeOptions:
     def __post_init__(self) -> None:
         for key in ("flip_test", "amp", "separate_pairs"):
             if not isinstance(getattr(self, key), bool):
-                _fail(key, getattr(self, key), "must be true or false")
+                fail(f"pose2d.{key}", getattr(self, key), "must be true or false")
         if self.decode not in DECODERS:
-            _fail("decode", self.decode, f"must be one of {', '.join(DECODERS)}")
+            fail("pose2d.decode", self.decode, f"must be one of {', '.join(DECODERS)}")
         for key, minimum in (("threshold", 0.0), ("dist_thresh", 0.0)):
             if not is_number(getattr(self, key)) or getattr(self, key) < minimum:
-                _fail(key, getattr(self, key), f"must be a number >= {minimum:g}")
+                fail(f"pose2d.{key}", getattr(self, key), f"must be a number >= {minimum:g}")
         for key in ("top_m", "batch_size"):
             if not is_int(getattr(self, key)) or getattr(self, key) < 1:
-                _fail(key, getattr(self, key), "must be an integer >= 1")
+                fail(f"pose2d.{key}", getattr(self, key), "must be an integer >= 1")
         oks = self.pose_nms_oks
         if oks is not None and not (is_number(oks) and 0 < oks < 1):
-            _fail("pose_nms.oks", oks, "must be a number in (0, 1)")
-
-
-def _fail(key: str, value: Any, what: str) -> None:
-    """Raise ConfigError 'pose2d.key=value: what'."""
-    raise ConfigError(f"{KEY}.{key}={value!r}: {what}")
+            fail("pose2d.pose_nms.oks", oks, "must be a number in (0, 1)")
 
 
 def nms_threshold(pose_nms_cfg: Mapping | None) -> float | None:
@@ -77,7 +70,7 @@ def nms_threshold(pose_nms_cfg: Mapping | None) -> float | None:
         return SppeOptions.pose_nms_oks
     enabled = pose_nms_cfg.get("enabled", True)
     if not isinstance(enabled, bool):
-        _fail("pose_nms.enabled", enabled, "must be true or false")
+        fail("pose2d.pose_nms.enabled", enabled, "must be true or false")
     return pose_nms_cfg.get("oks", SppeOptions.pose_nms_oks) if enabled else None
 
 
@@ -87,30 +80,17 @@ class SppeStage:
     needs_boxes = True
 
     def __init__(
-        self,
-        checkpoint: str | Path,
-        flip_test: bool = True,
-        decode: str = "association",
-        threshold: float = 0.1,
-        top_m: int = 3,
-        dist_thresh: float = 1.0,
-        batch_size: int = 32,
-        device: str = "auto",
-        amp: bool = True,
-        pose_nms: Mapping | None = None,
-        separate_pairs: bool = False,
+        self, checkpoint: str | Path, device: str = "auto", pose_nms: Mapping | None = None, **options: Any
     ) -> None:
-        options = SppeOptions(
-            flip_test, decode, threshold, top_m, dist_thresh, batch_size, amp, nms_threshold(pose_nms), separate_pairs
-        )
-        self.device = _device(device)
+        """options: the fields of SppeOptions but pose_nms_oks, which the pose_nms block {enabled, oks} gives."""
+        self.options = SppeOptions(**options, pose_nms_oks=nms_threshold(pose_nms))
+        self.device = resolve_device(device, "pose2d.device")
         self.model, train_cfg = load_trained_model(checkpoint, self.device)
-        self.codec, self.padding, self.options = build_codec(train_cfg), float(train_cfg.data.padding), options
+        self.codec, self.padding = build_codec(train_cfg), float(train_cfg.data.padding)
         self.last_timings: dict[str, float] = {}  # seconds of the last call: crop, network, decode
 
     def __call__(self, images: list[np.ndarray], boxes: list[np.ndarray]) -> list[ViewDetections]:
-        """Images per view (H, W, 3) uint8 BGR and boxes per view (N_v, 5) x, y, w, h, score -> ViewDetections
-        per view (N_v' <= N_v persons after pose-NMS)."""
+        """Images (H, W, 3) uint8 BGR and boxes (N_v, 5) x, y, w, h, score per view -> ViewDetections per view."""
         if len(images) != len(boxes):
             raise ValueError(f"SPPE stage: {len(images)} images but {len(boxes)} box arrays (one of each per view)")
         boxes = [_checked_boxes(b, v) for v, b in enumerate(boxes)]
@@ -131,8 +111,7 @@ class SppeStage:
         return out
 
     def _crops(self, images: list[np.ndarray], boxes: list[np.ndarray]) -> tuple[torch.Tensor, np.ndarray]:
-        """RGB uint8 crops (B, h, w, 3) of every box of every view, on the device, and their crop-to-image
-        affines (B, 2, 3), views in order."""
+        """RGB uint8 crops (B, h, w, 3) of every box of every view on the device, crop-to-image affines (B, 2, 3)."""
         crops = [
             crop_boxes(_checked_image(image, v), b[:, :4], self.codec.input_size, self.padding)
             for v, (image, b) in enumerate(zip(images, boxes))
@@ -143,8 +122,7 @@ class SppeStage:
     def decode(
         self, heatmaps: torch.Tensor, affines: np.ndarray, boxes: np.ndarray, views: np.ndarray, n_views: int
     ) -> list[ViewDetections]:
-        """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3), boxes (B, 5), the view of each crop (B,)
-        -> ViewDetections per view: pose-NMS, then the association of the kept boxes, then the merge."""
+        """Heatmaps (B, 23, h, w), affines (B, 2, 3), boxes (B, 5), views (B,) -> ViewDetections per view."""
         o = self.options
         if o.decode == "single":
             candidates, poses = None, single_peaks(self.codec, heatmaps, affines)
@@ -166,8 +144,7 @@ class SppeStage:
         return [_view(final[views[kept] == v], boxes[kept][views[kept] == v]) for v in range(n_views)]
 
     def _duplicates(self, poses: np.ndarray, boxes: np.ndarray, views: np.ndarray) -> list[tuple[int, np.ndarray]]:
-        """(kept crop, its duplicate crops) in crop order: pose-NMS within each view on poses (B, 23, 3) with
-        boxes (B, 5), or every crop kept alone when pose-NMS is off."""
+        """Per-view pose-NMS of poses (B, 23, 3), boxes (B, 5) -> (kept crop, its duplicates (D,)) in crop order."""
         oks = self.options.pose_nms_oks
         if oks is None:
             return [(i, np.zeros(0, dtype=int)) for i in range(len(poses))]
@@ -182,17 +159,6 @@ class SppeStage:
 def _view(keypoints: np.ndarray, boxes: np.ndarray) -> ViewDetections:
     """One view's final keypoints (N, 23, 3) and boxes (N, 5) -> ViewDetections with the person scores."""
     return ViewDetections(keypoints, boxes[:, :4], person_scores(boxes[:, 4], keypoints), np.full(len(boxes), -1))
-
-
-def _device(name: str) -> torch.device:
-    """'auto' (CUDA when available), 'cpu', 'cuda', 'cuda:N' -> torch.device; anything else one ConfigError."""
-    try:
-        device = resolve_device(name, "pose2d.device")
-    except (RuntimeError, TypeError):
-        _fail("device", name, "must be auto, cpu, cuda or cuda:N")
-    if device.type == "cuda" and not torch.cuda.is_available():
-        _fail("device", name, "CUDA is not available on this machine (use auto or cpu)")
-    return device
 
 
 def _checked_boxes(boxes: np.ndarray, view: int) -> np.ndarray:

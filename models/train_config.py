@@ -1,9 +1,6 @@
-"""Checks of train.py's config, without torch: a wrong type or range stops with one ConfigError naming the
-key before torch, the data or the model are loaded."""
+"""Checks of train.py's config, without torch: a wrong value stops with one ConfigError naming the key."""
 
 from __future__ import annotations
-
-from typing import Any
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
@@ -25,38 +22,22 @@ TRAINER_INTS = (  # (key, minimum, may be null)
 )
 
 
-def _plain(value: Any) -> Any:
-    """Containers as plain python."""
-    return OmegaConf.to_container(value) if isinstance(value, (DictConfig, ListConfig)) else value
-
-
-def check_device(cfg: DictConfig, key: str) -> None:
-    """cfg[key] names a device this machine has: auto, cpu, cuda, cuda:N (N < the CUDA device count)."""
-    name = value_of(cfg, key)
-    if name in ("auto", "cpu"):  # always available: no need to import torch to say so
-        return
-    from models.devices import resolve_device
-
-    resolve_device(name, key)
-
-
-def check_input_size(cfg: DictConfig, key: str = "data.input_size") -> None:
-    """cfg[key] is [w, h], positive multiples of INPUT_MULTIPLE (what FastPose's strides need)."""
-    size = _plain(value_of(cfg, key))
-    if not (isinstance(size, list) and len(size) == 2 and all(is_int(v) and v > 0 for v in size)):
-        fail(key, size, "must be [width, height] in pixels")
-    if any(v % INPUT_MULTIPLE for v in size):
-        fail(key, size, f"width and height must be multiples of {INPUT_MULTIPLE} (FastPose's stride)")
-
-
 def check_train_config(cfg: DictConfig) -> None:
-    """Stop with one ConfigError naming the key when a trainer, data, loss or optimizer value is of the wrong
-    type or range (before any data is read)."""
+    """One ConfigError naming the key for a trainer, data, loss or optimizer value of the wrong type or range."""
     for key, minimum, nullable in TRAINER_INTS:
         check_int(cfg, key, minimum, nullable)
     check_bool(cfg, "trainer.progress")
-    check_device(cfg, "trainer.device")
-    check_input_size(cfg)
+    device = value_of(cfg, "trainer.device")
+    if device not in ("auto", "cpu"):  # always available: no need to import torch to say so
+        from models.devices import resolve_device
+
+        resolve_device(device, "trainer.device")
+    size = value_of(cfg, "data.input_size")
+    size = OmegaConf.to_container(size) if isinstance(size, ListConfig) else size
+    if not (isinstance(size, list) and len(size) == 2 and all(is_int(v) and v > 0 for v in size)):
+        fail("data.input_size", size, "must be [width, height] in pixels")
+    if any(v % INPUT_MULTIPLE for v in size):
+        fail("data.input_size", size, f"width and height must be multiples of {INPUT_MULTIPLE} (FastPose's stride)")
     check_number(cfg, "data.sigma")
     check_number(cfg, "optimizer.lr")
     check_number(cfg, "loss.mu", strict=False)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import random
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,6 @@ from models.training import (
     load_checkpoint,
     save_checkpoint,
     save_weights,
-    seed_everything,
     setup_distributed,
     train_one_epoch,
     validate,
@@ -46,10 +46,7 @@ def _reached(state: TrainState, max_steps: int | None) -> bool:
 
 
 def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None) -> dict:
-    """Train (or resume) per cfg into run_dir -> {"losses": {step: loss}, "metrics": last validation, "state"}.
-
-    choices (the config groups chosen) go into the checkpoints, so that a resume can tell what its overrides change.
-    """
+    """Train (or resume) into run_dir -> {"losses": {step: loss}, "metrics", "state"}; choices go into checkpoints."""
     check_train_config(cfg)
     if cfg.resume and checkpoint is None:
         checkpoint = read_checkpoint(cfg.resume, "resume")
@@ -57,7 +54,9 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     rank, world, device = setup_distributed(trainer.device)
     if trainer.threads:
         torch.set_num_threads(trainer.threads)
-    seed_everything(trainer.seed)
+    random.seed(trainer.seed)
+    np.random.seed(trainer.seed)
+    torch.manual_seed(trainer.seed)
     codec = build_codec(cfg)
     train_set, val_set = build_dataset(cfg, codec, "train"), build_dataset(cfg, codec, "val")
     if not len(train_set):
@@ -75,21 +74,12 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     net = DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None) if world > 1 else model
     writer = SummaryWriter(str(run_dir)) if rank == 0 else None
     config = OmegaConf.to_container(cfg, resolve=True)
-    log.info(
-        "%d training crops, %d validation crops, device %s x %d, from epoch %d step %d",
-        len(train_set),
-        len(val_set),
-        device,
-        world,
-        state.epoch,
-        state.global_step,
-    )
+    sizes = (len(train_set), len(val_set), device, world, state.epoch, state.global_step)
+    log.info("%d training crops, %d validation crops, device %s x %d, from epoch %d step %d", *sizes)
     losses: dict[int, float] = {}
     metrics: dict[str, float] = {}
     while state.epoch < trainer.epochs and not _reached(state, trainer.max_steps):
-        finished = _epoch(
-            trainer, net, train_set, sampler, train_loader, loss_fn, optimizer, device, state, writer, losses, rank
-        )
+        finished = _epoch(trainer, net, train_loader, loss_fn, optimizer, device, state, writer, losses, rank)
         if finished:
             scheduler.step()
         last = state.epoch >= trainer.epochs or _reached(state, trainer.max_steps)
@@ -109,8 +99,6 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
 def _epoch(
     trainer: DictConfig,
     net: nn.Module,
-    train_set: Any,
-    sampler: EpochSampler,
     loader: DataLoader,
     loss_fn: nn.Module,
     optimizer: torch.optim.Optimizer,
@@ -121,33 +109,18 @@ def _epoch(
     rank: int,
 ) -> bool:
     """Train the rest of the current epoch (or up to max_steps), adding {global step: loss} to losses -> finished."""
-    train_set.set_epoch(state.epoch)
-    sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
-    remaining, first_step = len(loader), state.global_step + 1
+    loader.dataset.set_epoch(state.epoch)
+    loader.sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
+    remaining, first_step, progress = len(loader), state.global_step + 1, trainer.progress and rank == 0
     epoch_losses = train_one_epoch(
-        net,
-        loader,
-        loss_fn,
-        optimizer,
-        device,
-        state,
-        trainer.max_steps,
-        writer,
-        trainer.log_every,
-        trainer.progress and rank == 0,
+        net, loader, loss_fn, optimizer, device, state, trainer.max_steps, writer, trainer.log_every, progress
     )
     losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
     finished = len(epoch_losses) == remaining
     if finished:
         state.epoch, state.step_in_epoch = state.epoch + 1, 0
-    log.info(
-        "epoch %d%s: mean loss %.6g over %d steps (global step %d)",
-        state.epoch - finished,
-        "" if finished else " (stopped)",
-        np.mean(epoch_losses) if epoch_losses else np.nan,
-        len(epoch_losses),
-        state.global_step,
-    )
+    args = (state.epoch - finished, "" if finished else " (stopped)", np.mean(epoch_losses) if epoch_losses else np.nan)
+    log.info("epoch %d%s: mean loss %.6g over %d steps (global step %d)", *args, len(epoch_losses), state.global_step)
     return finished
 
 
@@ -163,32 +136,19 @@ def _validate(
 ) -> dict[str, float]:
     """Validate, log to TensorBoard, write the predictions JSON -> the metrics."""
     dataset = loader.dataset
-    result = validate(
-        model,
-        loader,
-        dataset.codec,
-        dataset.records,
-        loss_fn,
-        device,
-        cfg.trainer.grid_images,
-        cfg.trainer.progress,
-        cfg.trainer.get("val_flip_test", False),  # False for a resumed run stored before the key existed
-    )
+    t = cfg.trainer  # val_flip_test: absent from a resumed run stored before the key existed
+    flip = t.get("val_flip_test", False)
+    result = validate(model, loader, dataset.codec, dataset.records, loss_fn, device, t.grid_images, t.progress, flip)
     for key, value in result.metrics.items():
         writer.add_scalar(f"val/{key}", value, state.global_step)
     if result.grid is not None:
         writer.add_image("val/heatmaps", result.grid, state.global_step, dataformats="HWC")
     writer.flush()
     write_coco_results(run_dir / cfg.predictions_file, result.predictions)
-    atomic_write_text(
-        run_dir / "metrics.json",
-        json.dumps(  # the latest validation, for sweep tables
-            {"metrics": result.metrics, "step": state.global_step, "epoch": state.epoch}, indent=2
-        ),
-    )
-    log.info(
-        "validation at step %d: %s", state.global_step, ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items())
-    )
+    latest = {"metrics": result.metrics, "step": state.global_step, "epoch": state.epoch}  # for sweep tables
+    atomic_write_text(run_dir / "metrics.json", json.dumps(latest, indent=2))
+    shown = ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items())
+    log.info("validation at step %d: %s", state.global_step, shown)
     return result.metrics
 
 
@@ -203,8 +163,7 @@ def _save(
     metrics: dict[str, float],
     choices: dict[str, str] | None,
 ) -> None:
-    """Write checkpoints/last.ckpt, and the weights to best.pth when the latest validation beat the best AP
-    (all joints)."""
+    """Write checkpoints/last.ckpt, and best.pth when the latest validation beat the best AP (all joints)."""
     folder = run_dir / cfg.checkpoint_dir
     improved = metrics.get("AP_all", -1.0) > state.best_ap
     if improved:

@@ -1,7 +1,6 @@
 """Training pieces of the top-down SPPE used by train.py: builders, one epoch, validation, checkpoints, distributed.
 
-Exact resumption: seeded per-epoch sample order, augmentation seeded per (epoch, sample), and checkpoints with
-model, optimizer, scheduler, position and the torch / numpy / python RNG states.
+Exact resumption: seeded per-epoch sample order and augmentation, checkpoints with position and RNG states.
 """
 
 from __future__ import annotations
@@ -61,13 +60,6 @@ class Validation:
     grid: np.ndarray | None
 
 
-def seed_everything(seed: int) -> None:
-    """Seed python, numpy and torch (all devices)."""
-    random.seed(seed)
-    np.random.seed(seed)
-    torch.manual_seed(seed)
-
-
 def setup_distributed(device_name: str) -> tuple[int, int, torch.device]:
     """(rank, world size, device); initialises the process group when torchrun set WORLD_SIZE > 1."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
@@ -89,25 +81,19 @@ def build_codec(cfg: DictConfig) -> MultiModalHeatmapCodec:
     return MultiModalHeatmapCodec((w, h), (w // HEATMAP_STRIDE, h // HEATMAP_STRIDE), cfg.data.sigma, cfg.loss.mu)
 
 
-def build_records(data_cfg: DictConfig, split: str) -> list[ImageRecord]:
-    """The ImageRecords of split 'train' or 'val' of a data config; a missing file names itself."""
-    part = data_cfg[split]
-    det_file = part.get("det_file") if split == "val" else None
+def build_dataset(cfg: DictConfig, codec: MultiModalHeatmapCodec, split: str) -> TopDownDataset:
+    """The TopDownDataset of split 'train' (augmented) or 'val' (plain, det boxes if configured)."""
+    data, train, part = cfg.data, split == "train", cfg.data[split]
+    det_file = None if train else part.get("det_file")
     for path in (part.ann_file, part.image_dir, det_file):
         if path is not None and not Path(path).exists():
             raise FileNotFoundError(f"data.{split}: {path} does not exist (configs/data/ says how to get it)")
     # evaluation on detector boxes keeps every image (detections where nobody is annotated are false
     # positives, as in COCO's protocol); on ground-truth boxes images without a labelled person add nothing
-    min_keypoints = data_cfg.min_keypoints if split == "train" else int(not data_cfg.use_det_boxes)
-    return load_keypoint_dataset(data_cfg.kind, part.ann_file, part.image_dir, det_file, min_keypoints=min_keypoints)
-
-
-def build_dataset(cfg: DictConfig, codec: MultiModalHeatmapCodec, split: str) -> TopDownDataset:
-    """The TopDownDataset of split 'train' (augmented) or 'val' (plain, det boxes if configured)."""
-    data, train = cfg.data, split == "train"
+    min_keypoints = data.min_keypoints if train else int(not data.use_det_boxes)
     augment = CropAugmentation(**data.augment) if train and data.get("augment") else None
     return TopDownDataset(
-        build_records(data, split),
+        load_keypoint_dataset(data.kind, part.ann_file, part.image_dir, det_file, min_keypoints=min_keypoints),
         codec,
         tuple(data.input_size),
         augment,
@@ -123,15 +109,8 @@ def build_dataset(cfg: DictConfig, codec: MultiModalHeatmapCodec, split: str) ->
 def build_loader(
     dataset: TopDownDataset, batch_size: int, num_workers: int, sampler: Sampler, device: torch.device
 ) -> DataLoader:
-    """A DataLoader in the sampler's order; workers are not persistent, so each epoch's copy draws its augmentation."""
-    return DataLoader(
-        dataset,
-        batch_size=batch_size,
-        sampler=sampler,
-        num_workers=num_workers,
-        pin_memory=device.type == "cuda",
-        persistent_workers=False,
-    )
+    """A DataLoader in the sampler's order; workers not persistent (the default): each epoch draws its augmentation."""
+    return DataLoader(dataset, batch_size, sampler=sampler, num_workers=num_workers, pin_memory=device.type == "cuda")
 
 
 def train_one_epoch(
@@ -178,15 +157,8 @@ def decode_predictions(codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, ba
     """Heatmaps (B, 23, h, w) of a batch -> B dicts {image_id, keypoints (23, 3) image px, score, bbox (4,)}."""
     keypoints = single_peaks(codec, heatmaps, batch["affine_inv"])
     scores = person_scores(batch["score"].numpy(), keypoints)
-    return [
-        {
-            "image_id": int(batch["image_id"][i]),
-            "keypoints": keypoints[i],
-            "score": float(scores[i]),
-            "bbox": batch["box"][i].numpy(),
-        }
-        for i in range(len(keypoints))
-    ]
+    rows = zip(batch["image_id"], keypoints, scores, batch["box"])
+    return [{"image_id": int(i), "keypoints": k, "score": float(s), "bbox": b.numpy()} for i, k, s, b in rows]
 
 
 def heatmap_grid(
@@ -215,10 +187,7 @@ def validate(
     progress: bool = False,
     flip_test: bool = False,
 ) -> Validation:
-    """Loss, COCO OKS AP/AR (all, body, foot) and AP50/AP75/APm/APl on an unshuffled loader -> Validation.
-
-    With ``flip_test`` the scored poses come from the flip-tested heatmaps, the loss and picture from the plain ones.
-    """
+    """Loss, COCO OKS AP/AR (all, body, foot), AP50/AP75/APm/APl on an unshuffled loader -> Validation."""
     model.eval()
     predictions: list[dict] = []
     total, count, grid = 0.0, 0, None
@@ -228,11 +197,11 @@ def validate(
         target, weight = batch["target"].to(device), batch["weight"].to(device)
         total += float(loss_fn(heatmaps, target, weight)["loss"].item()) * len(heatmaps)
         count += len(heatmaps)
+        # with flip_test the scored poses come from the flip-tested heatmaps, the loss and picture from the plain ones
         scored = 0.5 * (heatmaps + flip_back(model(images.flip(-1)))) if flip_test else heatmaps
         predictions += decode_predictions(codec, scored, batch)
         if grid is None and grid_images > 0:
-            n = grid_images
-            grid = heatmap_grid(batch["image"][:n], batch["target"][:n], heatmaps[:n])
+            grid = heatmap_grid(batch["image"][:grid_images], batch["target"][:grid_images], heatmaps[:grid_images])
     metrics = {"loss": total / max(count, 1)}
     for subset in AP_SUBSETS:
         stats = evaluate_keypoints(records, predictions, subset) if predictions else {"AP": -1.0, "AR": -1.0}
@@ -240,23 +209,6 @@ def validate(
         if subset == "all":  # the COCO breakdown of the headline number: OKS 0.5 / 0.75, medium / large persons
             metrics.update({f"{k}_all": stats.get(k, -1.0) for k in ("AP50", "AP75", "APm", "APl")})
     return Validation(metrics, predictions, grid)
-
-
-def rng_states() -> dict:
-    """The torch (CPU and CUDA), numpy and python RNG states."""
-    states = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
-    if torch.cuda.is_available():
-        states["cuda"] = torch.cuda.get_rng_state_all()
-    return states
-
-
-def set_rng_states(states: dict) -> None:
-    """Restore what :func:`rng_states` returned."""
-    torch.set_rng_state(states["torch"])
-    np.random.set_state(states["numpy"])
-    random.setstate(states["python"])
-    if "cuda" in states and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(states["cuda"])
 
 
 def save_checkpoint(
@@ -268,15 +220,17 @@ def save_checkpoint(
     config: dict,
     choices: dict[str, str] | None = None,
 ) -> None:
-    """Write model, optimizer, scheduler, position, RNG states, config and the config groups chosen (choices,
-    None if unknown) to path atomically, checksummed (models/checkpoint_io.py)."""
+    """Write model, optimizer, scheduler, position, RNG states, config and chosen config groups to path atomically."""
+    rng = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    if torch.cuda.is_available():
+        rng["cuda"] = torch.cuda.get_rng_state_all()
     write_checkpoint(
         {
             "model": model.state_dict(),
             "optimizer": optimizer.state_dict(),
             "scheduler": scheduler.state_dict(),
             **asdict(state),
-            "rng": rng_states(),
+            "rng": rng,
             "config": config,
             "choices": choices,
         },
@@ -310,5 +264,10 @@ def load_checkpoint(
     if scheduler is not None:
         scheduler.load_state_dict(checkpoint["scheduler"])
     if restore_rng:
-        set_rng_states(checkpoint["rng"])
+        rng = checkpoint["rng"]
+        torch.set_rng_state(rng["torch"])
+        np.random.set_state(rng["numpy"])
+        random.setstate(rng["python"])
+        if "cuda" in rng and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(rng["cuda"])
     return TrainState(**{k: checkpoint[k] for k in ("epoch", "step_in_epoch", "global_step", "best_ap")})

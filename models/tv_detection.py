@@ -1,10 +1,6 @@
-"""torchvision detection models (Faster R-CNN, RetinaNet, SSD, FCOS, Keypoint R-CNN) built by name with
-weights ``coco | <state-dict file> | null``, and run on the cameras' BGR uint8 images."""
+"""torchvision detection models built by name, weights coco | <state-dict file> | null, run on BGR uint8 images."""
 
 from __future__ import annotations
-
-from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
@@ -17,34 +13,23 @@ from models.tv_weights import check_state_fits, read_state_dict, with_download
 COCO = "coco"  # weights value: the model's DEFAULT weights through torchvision's weights API
 
 
-def detection_builder(name: str, key: str) -> Callable[..., nn.Module]:
-    """torchvision's builder of detection model ``name``; a ConfigError naming ``key`` and the known names."""
-    known = torchvision.models.list_models(module=torchvision.models.detection)
-    if name not in known:
-        fail(key, name, f"not a torchvision detection model (known: {', '.join(sorted(known))})")
-    return torchvision.models.get_model_builder(name)
-
-
-def load_detection_state(model: nn.Module, path: str | Path) -> None:
-    """Load a state-dict file into a detection model built with weights=None; ValueError naming it."""
-    state = read_state_dict(path)
-    what = f"torchvision's {type(model).__name__}"
-    check_state_fits(model.state_dict(), state, str(path), what, may_miss=lambda k: k.endswith("num_batches_tracked"))
-    model.load_state_dict(state, strict=False)
-
-
 def build_detection_model(
     name: str, weights: str | None, group: str, **kwargs: object
 ) -> tuple[nn.Module, list[str] | None]:
     """(model in eval mode, its category names) for weights ``coco`` | a state-dict file | None."""
-    builder = detection_builder(name, f"{group}.model")
+    known = torchvision.models.list_models(module=torchvision.models.detection)
+    if name not in known:
+        fail(f"{group}.model", name, f"not a torchvision detection model (known: {', '.join(sorted(known))})")
+    builder = torchvision.models.get_model_builder(name)
     if weights == COCO:
         default = torchvision.models.get_model_weights(name).DEFAULT
         model = with_download(lambda: builder(weights=default, **kwargs), default, f"{group}.weights")
         return model.eval(), list(default.meta["categories"])
     model = builder(weights=None, weights_backbone=None, **kwargs)
     if weights is not None:
-        load_detection_state(model, weights)
+        state, what = read_state_dict(weights), f"torchvision's {type(model).__name__}"
+        check_state_fits(model.state_dict(), state, str(weights), what, lambda k: k.endswith("num_batches_tracked"))
+        model.load_state_dict(state, strict=False)
     return model.eval(), None
 
 

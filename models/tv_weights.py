@@ -1,6 +1,4 @@
-"""Pretrained weights for the torchvision models of this repository: torchvision's weights API (a download
-into torch's cache) or a local state-dict file. A failure is one ``WeightsUnavailable`` line naming the
-config key, what was asked and what to do instead (e.g. on a machine that cannot download)."""
+"""Pretrained weights of torchvision models: a weights API download or a state-dict file; WeightsUnavailable."""
 
 from __future__ import annotations
 
@@ -19,26 +17,17 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 
 
-def cache_path(weights: WeightsEnum) -> Path:
-    """Where torchvision's API looks for ``weights`` before downloading them: <torch hub dir>/checkpoints/<file>."""
-    return Path(torch.hub.get_dir()) / "checkpoints" / weights.url.rsplit("/", 1)[-1]
-
-
-def offline_message(weights: WeightsEnum, key: str, exc: BaseException) -> str:
-    """The one line for a failed download of ``weights`` asked for by config key ``key``."""
-    reason = getattr(exc, "reason", None) or exc.strerror or exc  # URLError.reason, else the OSError text
-    return (
-        f"{key}: cannot download {weights} from {weights.url} ({reason}); this machine cannot download: fetch "
-        f"that file elsewhere and put it at {cache_path(weights)}, or give its path ({key}=/path/to/file.pth)"
-    )
-
-
 def with_download(load: Callable[[], T], weights: WeightsEnum, key: str) -> T:
     """load(), which may download ``weights`` through torchvision's API; a failed download -> WeightsUnavailable."""
     try:
         return load()
     except OSError as exc:  # URLError, socket errors, an unwritable cache: all OSErrors
-        raise WeightsUnavailable(offline_message(weights, key, exc)) from None
+        reason = getattr(exc, "reason", None) or exc.strerror or exc  # URLError.reason, else the OSError text
+        cache = Path(torch.hub.get_dir()) / "checkpoints" / weights.url.rsplit("/", 1)[-1]  # where the API looks
+        raise WeightsUnavailable(
+            f"{key}: cannot download {weights} from {weights.url} ({reason}); this machine cannot download: fetch "
+            f"that file elsewhere and put it at {cache}, or give its path ({key}=/path/to/file.pth)"
+        ) from None
 
 
 def download_state_dict(weights: WeightsEnum, key: str) -> dict[str, Tensor]:
@@ -66,8 +55,7 @@ def _listed(names: list[str], shown: int = 8) -> str:
 def check_state_fits(
     own: dict[str, Tensor], state: dict[str, Tensor], source: str, what: str, may_miss: Callable[[str], bool]
 ) -> None:
-    """ValueError naming ``source`` unless ``state`` has every key of ``own`` (except those ``may_miss``), no
-    other key, and the same shapes."""
+    """ValueError naming source unless state has own's keys (but may_miss ones), no other, and the same shapes."""
     missing = sorted(k for k in own if k not in state and not may_miss(k))
     unexpected = sorted(k for k in state if k not in own)
     wrong_shape = sorted(

@@ -7,13 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-import torch.nn.functional as F
 from torch.utils.data import DataLoader
 
 from data.keypoints import NUM_JOINTS
 from data.pose2d.coco_keypoints import load_coco_wholebody
 from data.pose2d.topdown_dataset import TopDownDataset
-from models.candidates import _neighbourhood_max, candidates_to_image, find_candidates
+from models.candidates import candidates_to_image, find_candidates
 from models.heatmap_codec import MultiModalHeatmapCodec
 from models.joint_association import associate_joints
 from models.pose_decoding import associate_by_image, joint_candidates
@@ -30,13 +29,6 @@ def realish(shared_data) -> tuple[torch.Tensor, dict]:
     batch = next(iter(DataLoader(TopDownDataset(records, codec, (192, 256), train=False), batch_size=64)))
     noise = torch.from_numpy(np.random.default_rng(0).uniform(0, 0.05, batch["target"].shape).astype(np.float32))
     return batch["target"] + noise, batch
-
-
-@pytest.mark.parametrize("kernel", [3, 5])
-def test_neighbourhood_max_is_max_pool(kernel):
-    hm = torch.rand(2, 3, 9, 7)
-    expected = F.max_pool2d(hm.reshape(6, 1, 9, 7), kernel, stride=1, padding=kernel // 2).reshape(hm.shape)
-    assert torch.equal(_neighbourhood_max(hm, kernel), expected)
 
 
 def test_candidates_equal_the_reference_on_random_heatmaps():

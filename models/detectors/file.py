@@ -13,8 +13,7 @@ from models.detectors.boxes import no_boxes, with_scores
 
 
 class FileDetector:
-    """The boxes of ``path`` whose category is ``category_id`` and score >= ``score_threshold``, per view by
-    ``frame.image_ids[v]``; an image without entries has no persons. The file is read and checked once."""
+    """The boxes of ``path`` of category_id with score >= score_threshold, per view by ``frame.image_ids[v]``."""
 
     needs_images = False
 
@@ -33,8 +32,7 @@ class FileDetector:
         self._file_sizes: dict[int, tuple[int, int]] = {}
 
     def set_file_sizes(self, sizes: dict[int, tuple[int, int]]) -> None:
-        """The (w, h) of the image files the detections were made on, by image id: their boxes are rescaled to
-        the images the pipeline sees (a dataset that resizes frames to the calibration size)."""
+        """Image id -> (w, h) of the file the detections were made on; boxes are rescaled to the images seen."""
         self._file_sizes = {int(k): (int(w), int(h)) for k, (w, h) in sizes.items()}
 
     def check_image_ids(self, known: set[int]) -> None:
@@ -51,8 +49,7 @@ class FileDetector:
         return self._boxes.get(int(image_id), no_boxes()).copy()
 
     def __call__(self, images: list[np.ndarray] | None, frame: Frame) -> list[np.ndarray]:
-        """Per view (N, 5) x, y, w, h, score for ``frame.image_ids``; the images (V of (H, W, 3)) only give the
-        size the boxes are rescaled to, from the file sizes of :meth:`set_file_sizes`."""
+        """Per view (N, 5) x, y, w, h, score for ``frame.image_ids``; images (H, W, 3) only give sizes to rescale to."""
         if frame.image_ids is None:
             raise ValueError(
                 f"{self.path}: frame {frame.index} has no image ids; detector=file needs a dataset that numbers "

@@ -27,7 +27,14 @@ class TorchvisionDetector:
         person_label: int = 1,
         model_kwargs: dict | None = None,
     ) -> None:
-        _check_keys(score_threshold, nms_iou, batch_size, person_label)
+        if not is_number(score_threshold):
+            fail("detector.score_threshold", score_threshold, "must be a finite number")
+        if not (is_number(nms_iou) and 0 < nms_iou <= 1):
+            fail("detector.nms_iou", nms_iou, "must be in (0, 1] (1: no suppression)")
+        if not (is_int(batch_size) and batch_size >= 1):
+            fail("detector.batch_size", batch_size, "must be an integer >= 1")
+        if not (is_int(person_label) and person_label >= 0):
+            fail("detector.person_label", person_label, "must be an integer >= 0")
         self.device = resolve_device(device, "detector.device")
         self.model, categories = build_detection_model(model, weights, "detector", **dict(model_kwargs or {}))
         if categories is not None and (person_label >= len(categories) or categories[person_label] != "person"):
@@ -49,15 +56,3 @@ class TorchvisionDetector:
             )
             for out in detect(self.model, images, self.batch_size, self.device)
         ]
-
-
-def _check_keys(score_threshold: float, nms_iou: float, batch_size: int, person_label: int) -> None:
-    """ConfigError naming the first detector.* key out of range."""
-    if not is_number(score_threshold):
-        fail("detector.score_threshold", score_threshold, "must be a finite number")
-    if not (is_number(nms_iou) and 0 < nms_iou <= 1):
-        fail("detector.nms_iou", nms_iou, "must be in (0, 1] (1: no suppression)")
-    if not (is_int(batch_size) and batch_size >= 1):
-        fail("detector.batch_size", batch_size, "must be an integer >= 1")
-    if not (is_int(person_label) and person_label >= 0):
-        fail("detector.person_label", person_label, "must be an integer >= 0")
