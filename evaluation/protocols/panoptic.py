@@ -1,9 +1,7 @@
 """CMU Panoptic protocols on 15 joints: VoxelPose's AP / recall / MPJPE, the paper's root-aligned MPJPE and PCP.
 
-VoxelPose AP: predictions in score order are true positives at t when their MPJPE to their nearest unclaimed GT
-is under t (t = 25..150 mm, VOC-style AP, without VoxelPose's 1e-5, so perfect reads 100). Root-aligned MPJPE
-and PCP (paper Tables 4-5, our reading) pair persons one-to-one (Hungarian) and align at the mean of the hips,
-which COCO-23 predictions have (Panoptic's own mid-hip they lack).
+VoxelPose AP: VOC-style, without VoxelPose's 1e-5 (perfect reads 100). Tables 4-5 (our reading): Hungarian pairs,
+root = mean of the hips, which COCO-23 predictions have (Panoptic's own mid-hip they lack).
 """
 
 from __future__ import annotations
@@ -13,8 +11,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from data.keypoints import JOINT_INDEX
-from evaluation.association import match_to_ground_truth, mean_joint_distance
-from evaluation.mpjpe import joint_errors
+from evaluation.association import PairedEvaluator, mean_joint_distance, mpjpe
+from evaluation.pcp import correct_parts
 from evaluation.report import format_table
 
 if TYPE_CHECKING:
@@ -29,24 +27,14 @@ NECK, NOSE, MID_HIP = 0, 1, 2
 ROOT = (6, 12)  # root-aligned MPJPE: mean of left and right hip, the same construction on both sides
 AP_THRESHOLDS_MM: tuple[int, ...] = (25, 50, 75, 100, 125, 150)
 RECALL_THRESHOLD_MM = 500
-# Table 4 joint groups (Panoptic-15 indices); "foot" is the ankle.
-MPJPE_GROUPS: dict[str, tuple[int, ...]] = {
-    "head": (1,),
-    "shoulder": (3, 9),
-    "elbow": (4, 10),
-    "wrist": (5, 11),
-    "hip": (6, 12),
-    "knee": (7, 13),
-    "foot": (8, 14),
+# Table 4 joint groups (Panoptic-15 indices: the head is the nose, the left and right joints of each other group).
+MPJPE_GROUPS: dict[str, tuple[int, ...]] = {"head": (NOSE,)} | {
+    name: (j, j + 6) for j, name in enumerate(("shoulder", "elbow", "wrist", "hip", "knee", "foot"), start=3)
 }
-# Table 5 parts (Panoptic-15 joint pairs).
-PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {
-    "head": ((0, 1),),
-    "torso": ((0, 2),),
-    "upper_arms": ((3, 4), (9, 10)),
-    "lower_arms": ((4, 5), (10, 11)),
-    "upper_legs": ((6, 7), (12, 13)),
-    "lower_legs": ((7, 8), (13, 14)),
+# Table 5 parts (Panoptic-15 joint pairs): head = neck -> nose, torso = neck -> mid-hip, then left and right limbs.
+PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {"head": ((NECK, NOSE),), "torso": ((NECK, MID_HIP),)} | {
+    name: ((j, j + 1), (j + 6, j + 7))
+    for j, name in zip((3, 4, 6, 7), ("upper_arms", "lower_arms", "upper_legs", "lower_legs"))
 }
 
 
@@ -140,24 +128,13 @@ def _true_positive_mpjpe(scores: np.ndarray, errors: np.ndarray, gt_index: np.nd
     return float(np.mean(kept)) if kept else float("nan")
 
 
-class PanopticPoseEvaluator:
+class PanopticPoseEvaluator(PairedEvaluator):
     """Root-aligned 13-joint MPJPE and PCP by part on Hungarian-paired persons (module docstring)."""
-
-    def __init__(self, max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
-        self.max_dist_m = max_dist_m
-        self.alpha = alpha
-        self.errors: list[np.ndarray] = []
-        self.parts: list[np.ndarray] = []
-        self.num_gt = 0
-        self.num_matched = 0
 
     def update(self, pred: np.ndarray, gt: np.ndarray) -> None:
         """Add a frame: pred (P, 15, 4), gt (G, 15, 4)."""
         pred, gt = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
-        pairs = match_to_ground_truth(pred, gt, self.max_dist_m)
-        self.num_gt += len(gt)
-        self.num_matched += len(pairs)
-        self.errors.append(joint_errors(pred[pairs[:, 0]], gt[pairs[:, 1]], root=ROOT))
+        pairs = self.pair(pred, gt, root=ROOT)
         # NaN = part not evaluable (invalid GT end); unpaired GT persons keep their parts wrong.
         parts = part_correct(np.zeros_like(gt), gt, self.alpha)
         parts[pairs[:, 1]] = part_correct(pred[pairs[:, 0]], gt[pairs[:, 1]], self.alpha)
@@ -168,12 +145,12 @@ class PanopticPoseEvaluator:
         err = 1000.0 * np.concatenate(self.errors) if self.errors else np.zeros((0, 15))
         out: dict[str, float] = {}
         for name, cols in MPJPE_GROUPS.items():
-            out[f"root_mpjpe_{name}_mm"] = _nanmean(err[:, list(cols)])
-        out["root_mpjpe_13_mm"] = _nanmean(err[:, [j for cols in MPJPE_GROUPS.values() for j in cols]])
+            out[f"root_mpjpe_{name}_mm"] = mpjpe(err[:, list(cols)])
+        out["root_mpjpe_13_mm"] = mpjpe(err[:, [j for cols in MPJPE_GROUPS.values() for j in cols]])
         out["root_mpjpe_average_mm"] = float(np.mean([out[f"root_mpjpe_{g}_mm"] for g in MPJPE_GROUPS]))
         parts = np.concatenate(self.parts) if self.parts else np.zeros((0, _NUM_PARTS))
         for i, name in enumerate(PCP_PARTS):
-            out[f"pcp_{name}"] = 100.0 * _nanmean(parts[:, _PART_GROUP == i])
+            out[f"pcp_{name}"] = 100.0 * mpjpe(parts[:, _PART_GROUP == i])
         out["pcp_average"] = float(np.mean([out[f"pcp_{p}"] for p in PCP_PARTS]))
         out.update(num_gt=self.num_gt, num_matched=self.num_matched)
         return out
@@ -187,18 +164,8 @@ _NUM_PARTS = len(_PART_PAIRS)
 def part_correct(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.ndarray:
     """PCP of the 10 parts of paired poses: (K, 15, 4), (K, 15, 4) -> (K, 10) of 1 / 0 / NaN (not evaluable)."""
     a, b = _PART_PAIRS[:, 0], _PART_PAIRS[:, 1]
-    err = (
-        np.linalg.norm(pred[:, a, :3] - gt[:, a, :3], axis=-1) + np.linalg.norm(pred[:, b, :3] - gt[:, b, :3], axis=-1)
-    ) / 2
-    length = np.linalg.norm(gt[:, a, :3] - gt[:, b, :3], axis=-1)
-    correct = (err <= alpha * length) & (pred[:, a, 3] > 0) & (pred[:, b, 3] > 0)
+    correct = correct_parts(pred, gt, alpha, _PART_PAIRS) & (pred[:, a, 3] > 0) & (pred[:, b, 3] > 0)
     return np.where((gt[:, a, 3] > 0) & (gt[:, b, 3] > 0), correct.astype(np.float64), np.nan)
-
-
-def _nanmean(values: np.ndarray) -> float:
-    """Mean of the finite values, NaN when there is none."""
-    values = np.asarray(values, dtype=np.float64)
-    return float(np.nanmean(values)) if np.any(np.isfinite(values)) else float("nan")
 
 
 class PanopticEvaluator:

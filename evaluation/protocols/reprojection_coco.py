@@ -12,12 +12,11 @@ import io
 from typing import TYPE_CHECKING
 
 import numpy as np
-from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
 from data.geometry.camera import Camera, Rig
 from data.keypoints import NUM_JOINTS, OKS_SIGMAS
-from data.pose2d.coco_eval import STAT_NAMES, SUBSET_JOINTS
+from data.pose2d.coco_eval import _CATEGORIES, STAT_NAMES, SUBSET_JOINTS, _coco
 from evaluation.report import format_table
 
 if TYPE_CHECKING:
@@ -25,20 +24,6 @@ if TYPE_CHECKING:
     from reconstruction.pipeline import FrameResult
 
 COCO_MAX_DETS = 20
-_CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
-# Stat name -> (AP or AR, OKS threshold or None = mean over .50:.05:.95, area range label).
-_STATS = {
-    "AP": ("AP", None, "all"),
-    "AP50": ("AP", 0.5, "all"),
-    "AP75": ("AP", 0.75, "all"),
-    "APm": ("AP", None, "medium"),
-    "APl": ("AP", None, "large"),
-    "AR": ("AR", None, "all"),
-    "AR50": ("AR", 0.5, "all"),
-    "AR75": ("AR", 0.75, "all"),
-    "ARm": ("AR", None, "medium"),
-    "ARl": ("AR", None, "large"),
-}
 
 
 def project_poses(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -97,7 +82,10 @@ def coco_keypoint_stats(
     dt_anns = [{**_annotation(k, d, joints), "score": float(d["score"])} for k, d in enumerate(predictions)]
     dt_anns = [d for d in dt_anns if d["num_keypoints"] > 0]
     with contextlib.redirect_stdout(io.StringIO()):
-        evaluator = COCOeval(_coco(images, gt_anns), _coco(images, dt_anns), "keypoints")
+        coco_gt, coco_dt = (
+            _coco({"images": images, "annotations": a, "categories": _CATEGORIES}) for a in (gt_anns, dt_anns)
+        )
+        evaluator = COCOeval(coco_gt, coco_dt, "keypoints")
         evaluator.params.kpt_oks_sigmas = OKS_SIGMAS[joints]
         evaluator.params.imgIds = [img["id"] for img in images]
         evaluator.params.maxDets = [int(max_dets)]
@@ -122,23 +110,18 @@ def _annotation(k: int, entry: dict, joints: np.ndarray) -> dict:
     }
 
 
-def _coco(images: list[dict], annotations: list[dict]) -> COCO:
-    """An in-memory pycocotools COCO object."""
-    coco = COCO()
-    coco.dataset = {"images": images, "annotations": annotations, "categories": _CATEGORIES}
-    coco.createIndex()
-    return coco
-
-
 def _stats(evaluator: COCOeval) -> dict[str, float]:
-    """The ten keypoint stats of an accumulated COCOeval with one maxDets value, as pycocotools' summarize."""
+    """The ten keypoint stats of an accumulated COCOeval with one maxDets value, as pycocotools' summarize.
+
+    A stat name is AP or AR, then 50 / 75 for one OKS threshold (else the mean over .50:.05:.95), m / l for an area.
+    """
     p = evaluator.params
     out = {}
     for name in STAT_NAMES:
-        kind, threshold, area = _STATS[name]
-        values = evaluator.eval["precision" if kind == "AP" else "recall"]  # (T, R, K, A, M) / (T, K, A, M)
-        if threshold is not None:
-            values = values[np.flatnonzero(np.isclose(p.iouThrs, threshold))]
+        values = evaluator.eval["precision" if name.startswith("AP") else "recall"]  # (T, R, K, A, M) / (T, K, A, M)
+        if name[2:] in ("50", "75"):
+            values = values[np.flatnonzero(np.isclose(p.iouThrs, int(name[2:]) / 100))]
+        area = {"m": "medium", "l": "large"}.get(name[2:], "all")
         values = values[..., p.areaRngLbl.index(area), 0]
         out[name] = float(np.mean(values[values > -1])) if np.any(values > -1) else -1.0
     return out
