@@ -12,18 +12,9 @@ from typing import Sequence
 from data.formats.poses_io import read_poses3d_frames
 from data.geometry.calibration import CalibrationError, load_rig
 from data.geometry.camera import Rig
-from evaluation.pictures.sequence_html import DEFAULT_MAX_MB, sequence_html, write_sequence_html
-from evaluation.pictures.vis_trajectories import plot_trajectories, trajectories_figure
+from evaluation.pictures.sequence_html import DEFAULT_MAX_MB, write_sequence_html
+from evaluation.pictures.vis_trajectories import plot_trajectories
 from reconstruction.pipeline import FrameResult
-
-__all__ = [
-    "write_sequence_html",
-    "sequence_html",
-    "plot_trajectories",
-    "trajectories_figure",
-    "save_sequence_pictures",
-    "main",
-]
 
 HTML_NAME = "sequence.html"
 PNG_NAME = "trajectories.png"
