@@ -168,26 +168,6 @@ def part_correct(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.nda
     return np.where((gt[:, a, 3] > 0) & (gt[:, b, 3] > 0), correct.astype(np.float64), np.nan)
 
 
-class PanopticEvaluator:
-    """Both Panoptic protocols at once on COCO-23 predictions; update per frame, then summary()."""
-
-    def __init__(self, max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
-        self.ap = PanopticAPEvaluator()
-        self.pose = PanopticPoseEvaluator(max_dist_m, alpha)
-
-    def update(self, pred23: np.ndarray, gt15: np.ndarray, scores: np.ndarray | None = None) -> None:
-        """Add a frame: pred23 (P, 23, 4) COCO-23 predictions, gt15 (G, 15, 4), scores (P,) or None."""
-        pred15 = coco23_to_panoptic15(pred23)
-        self.ap.update(pred15, gt15, scores)
-        self.pose.update(pred15, gt15)
-
-    def summary(self) -> dict[str, float]:
-        """The keys of PanopticAPEvaluator.summary, and of PanopticPoseEvaluator.summary under 'pose_' counts."""
-        pose = self.pose.summary()
-        pose["pose_num_gt"], pose["pose_num_matched"] = pose.pop("num_gt"), pose.pop("num_matched")
-        return {**self.ap.summary(), **pose}
-
-
 def format_panoptic_report(summary: dict[str, float]) -> str:
     """Console tables of a summary (either evaluator's keys, or both), each metric under its protocol name."""
     lines = []
@@ -241,13 +221,13 @@ def format_panoptic_report(summary: dict[str, float]) -> str:
 
 
 class PanopticProtocol:
-    """The Panoptic protocols as a dataset protocol; gt15 {frame: (G, 15, 4)}, predictions scored by mean confidence."""
+    """Both Panoptic protocols as a dataset protocol; gt15 {frame: (G, 15, 4)}, predictions scored by mean confidence."""
 
     name = "panoptic"
 
     def __init__(self, gt15: dict[int, np.ndarray], max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
         self.gt15 = gt15
-        self.evaluator = PanopticEvaluator(max_dist_m, alpha)
+        self.ap, self.pose = PanopticAPEvaluator(), PanopticPoseEvaluator(max_dist_m, alpha)
         self.frames = 0
 
     def update(self, frame: Frame, result: FrameResult) -> None:
@@ -255,12 +235,16 @@ class PanopticProtocol:
         gt = self.gt15.get(frame.index)
         if gt is None:
             return
-        self.evaluator.update(result.poses3d, gt)
+        pred15 = coco23_to_panoptic15(result.poses3d)
+        self.ap.update(pred15, gt)
+        self.pose.update(pred15, gt)
         self.frames += 1
 
     def summary(self) -> dict[str, float]:
-        """PanopticEvaluator.summary() plus the number of frames scored."""
-        return {**self.evaluator.summary(), "frames": self.frames}
+        """PanopticAPEvaluator's summary, PanopticPoseEvaluator's (its counts as pose_*) and the frames scored."""
+        pose = self.pose.summary()
+        pose["pose_num_gt"], pose["pose_num_matched"] = pose.pop("num_gt"), pose.pop("num_matched")
+        return {**self.ap.summary(), **pose, "frames": self.frames}
 
     def report(self) -> str:
         """The console tables of :func:`format_panoptic_report`."""
