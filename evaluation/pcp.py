@@ -23,8 +23,7 @@ def correct_parts(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5, parts: n
 
 
 def pcp_by_part(correct: np.ndarray, valid: np.ndarray | None = None) -> dict[str, float]:
-    """PCP (%) of each named part and the average over the ``valid`` parts (default all): (K, 10) bool
-    [, (K, 10) bool] -> {part: %, 'average': %}."""
+    """PCP (%) of each part and their average over the valid parts: (K, 10) bool [, (K, 10) bool] -> {part: %}."""
     correct = np.asarray(correct, dtype=bool).reshape(-1, len(PART_JOINTS))
     valid = np.ones_like(correct) if valid is None else np.asarray(valid, dtype=bool).reshape(correct.shape)
     out = {}

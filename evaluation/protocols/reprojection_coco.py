@@ -1,8 +1,6 @@
 """The paper's Table 1 metric: COCO keypoint AP/AR of reconstructed 3D poses reprojected into every view.
 
-One COCO image per (frame, camera); the GT is the projection of the 3D GT (occluded joints stay labelled, as
-COCO labels them); areas are the joints' boxes clipped to the image. ``max_dets`` (default 100) lifts COCO's 20
-detections per image, as crowded views hold up to 40 people; max_dets = 20 gives COCO's numbers exactly.
+``max_dets`` (default 100) lifts COCO's 20 detections per image, as crowded views hold up to 40 people.
 """
 
 from __future__ import annotations
@@ -111,10 +109,7 @@ def _annotation(k: int, entry: dict, joints: np.ndarray) -> dict:
 
 
 def _stats(evaluator: COCOeval) -> dict[str, float]:
-    """The ten keypoint stats of an accumulated COCOeval with one maxDets value, as pycocotools' summarize.
-
-    A stat name is AP or AR, then 50 / 75 for one OKS threshold (else the mean over .50:.05:.95), m / l for an area.
-    """
+    """The ten keypoint stats (AP|AR, then 50|75: one OKS threshold, m|l: area) of a COCOeval with one maxDets."""
     p = evaluator.params
     out = {}
     for name in STAT_NAMES:
@@ -194,6 +189,8 @@ def format_reprojection_report(summary: dict) -> str:
     subsets = [s for s in SUBSET_JOINTS if s in summary]
     rows = [[s, *("-" if summary[s][k] is None else summary[s][k] for k in STAT_NAMES)] for s in subsets]
     capped = summary["max_gt_per_image"] > summary["max_dets"]
+    warning = f"; WARNING: more GT persons in an image than max_dets={summary['max_dets']}, recall is capped"
+    warning = warning if capped else ""
     return "\n".join(
         [
             "reprojection_coco (paper Table 1 protocol): COCO keypoint AP/AR (%) of the 3D poses reprojected into every view "
@@ -205,11 +202,6 @@ def format_reprojection_report(summary: dict) -> str:
             format_table(["subset", *STAT_NAMES], rows),
             "",
             f"{summary['images']} images, {summary['gt_persons']} GT persons (at most {summary['max_gt_per_image']} "
-            f"in one image), {summary['predictions']} reprojected predictions"
-            + (
-                f"; WARNING: more GT persons in an image than max_dets={summary['max_dets']}, recall is capped"
-                if capped
-                else ""
-            ),
+            f"in one image), {summary['predictions']} reprojected predictions{warning}",
         ]
     )
