@@ -59,13 +59,8 @@ def average_precision(
     """VoxelPose AP and recall (fractions) at one threshold: scores, errors, gt_index (N,) -> (ap, recall)."""
     if num_gt == 0:
         return float("nan"), float("nan")
-    order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
-    taken: set[int] = set()
-    tp = np.zeros(len(order))
-    for rank, i in enumerate(order):
-        if errors[i] < threshold and int(gt_index[i]) not in taken:
-            tp[rank] = 1.0
-            taken.add(int(gt_index[i]))
+    order, hits = _true_positives(scores, errors, gt_index, threshold)
+    tp = hits.astype(np.float64)
     cum_tp = np.cumsum(tp)
     precision = cum_tp / np.arange(1, len(order) + 1)
     envelope = np.maximum.accumulate(precision[::-1])[::-1]
@@ -113,19 +108,24 @@ class PanopticAPEvaluator:
         out["mAR"] = float(np.mean([out[f"recall@{t}"] for t in AP_THRESHOLDS_MM]))
         near = np.unique(gt_index[errors < RECALL_THRESHOLD_MM]) if len(errors) else []
         out[f"recall@{RECALL_THRESHOLD_MM}"] = 100.0 * len(near) / self.num_gt if self.num_gt else float("nan")
-        out["mpjpe_mm"] = _true_positive_mpjpe(scores, errors, gt_index, RECALL_THRESHOLD_MM)
+        order, hits = _true_positives(scores, errors, gt_index, RECALL_THRESHOLD_MM)  # MPJPE of the TPs at 500 mm
+        out["mpjpe_mm"] = float(np.mean(errors[order][hits])) if hits.any() else float("nan")
         out.update(num_gt=self.num_gt, num_pred=self.num_pred)
         return out
 
 
-def _true_positive_mpjpe(scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, threshold: float) -> float:
-    """Mean MPJPE (mm) of the true positives at ``threshold`` in score order: (N,) x 3 -> scalar, NaN if none."""
-    taken, kept = set(), []
-    for i in np.argsort(-scores, kind="stable"):
+def _true_positives(
+    scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Score order (N,) and which predictions in it are TPs (N,) bool: error < threshold, their GT not yet taken."""
+    order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
+    taken: set[int] = set()
+    hits = np.zeros(len(order), dtype=bool)
+    for rank, i in enumerate(order):
         if errors[i] < threshold and int(gt_index[i]) not in taken:
+            hits[rank] = True
             taken.add(int(gt_index[i]))
-            kept.append(errors[i])
-    return float(np.mean(kept)) if kept else float("nan")
+    return order, hits
 
 
 class PanopticPoseEvaluator(PairedEvaluator):
