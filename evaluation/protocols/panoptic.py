@@ -168,56 +168,39 @@ def part_correct(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.nda
     return np.where((gt[:, a, 3] > 0) & (gt[:, b, 3] > 0), correct.astype(np.float64), np.nan)
 
 
-def format_panoptic_report(summary: dict[str, float]) -> str:
-    """Console tables of a summary (either evaluator's keys, or both), each metric under its protocol name."""
-    lines = []
-    if "mAP" in summary:
-        lines += [
+def format_panoptic_report(s: dict[str, float]) -> str:
+    """Console tables of a PanopticProtocol summary, each metric under its protocol name."""
+    ts, groups = AP_THRESHOLDS_MM, list(MPJPE_GROUPS)
+    ap_rows = [
+        ["AP (%)", *(s[f"ap@{t}"] for t in ts), s["mAP"]],
+        ["recall (%)", *(s[f"recall@{t}"] for t in ts), s["mAR"]],
+    ]
+    counts = [
+        [f"recall@{RECALL_THRESHOLD_MM}mm (%)", s[f"recall@{RECALL_THRESHOLD_MM}"]],
+        [f"MPJPE of TPs at {RECALL_THRESHOLD_MM}mm, absolute (mm)", s["mpjpe_mm"]],
+        ["GT persons / predictions", f"{s['num_gt']} / {s['num_pred']}"],
+    ]
+    root_mpjpe = [s["root_mpjpe_average_mm"], s["root_mpjpe_13_mm"], *(s[f"root_mpjpe_{g}_mm"] for g in groups)]
+    pcp = [s["pcp_average"], *(s[f"pcp_{p}"] for p in PCP_PARTS)]
+    return "\n".join(
+        [
             "VoxelPose Panoptic protocol (15 joints; AP/recall over the sequence, prediction -> nearest "
             "GT by MPJPE, score-ordered, TP if MPJPE < t and GT not yet taken)",
             "",
-            format_table(
-                ["", *(f"@{t}mm" for t in AP_THRESHOLDS_MM), "mean"],
-                [
-                    ["AP (%)", *(summary[f"ap@{t}"] for t in AP_THRESHOLDS_MM), summary["mAP"]],
-                    ["recall (%)", *(summary[f"recall@{t}"] for t in AP_THRESHOLDS_MM), summary["mAR"]],
-                ],
-            ),
+            format_table(["", *(f"@{t}mm" for t in ts), "mean"], ap_rows),
             "",
-            format_table(
-                ["metric", "value"],
-                [
-                    [f"recall@{RECALL_THRESHOLD_MM}mm (%)", summary[f"recall@{RECALL_THRESHOLD_MM}"]],
-                    [f"MPJPE of TPs at {RECALL_THRESHOLD_MM}mm, absolute (mm)", summary["mpjpe_mm"]],
-                    ["GT persons / predictions", f"{summary['num_gt']} / {summary['num_pred']}"],
-                ],
-            ),
+            format_table(["metric", "value"], counts),
             "",
-        ]
-    if "root_mpjpe_13_mm" in summary:
-        groups = list(MPJPE_GROUPS)
-        lines += [
             "Paper Table 4 protocol: root-aligned MPJPE (mm, root = mean of the hips, Hungarian-paired persons; "
             "head = nose, foot = ankle)",
             "",
-            format_table(
-                ["average of groups", "13 joints", *groups],
-                [
-                    [
-                        summary["root_mpjpe_average_mm"],
-                        summary["root_mpjpe_13_mm"],
-                        *(summary[f"root_mpjpe_{g}_mm"] for g in groups),
-                    ]
-                ],
-            ),
+            format_table(["average of groups", "13 joints", *groups], [root_mpjpe]),
             "",
             "Paper Table 5 protocol: PCP (%), alpha 0.5, absolute; head = neck->nose, torso = neck->mid-hip",
             "",
-            format_table(
-                ["average", *PCP_PARTS], [[summary["pcp_average"], *(summary[f"pcp_{p}"] for p in PCP_PARTS)]]
-            ),
+            format_table(["average", *PCP_PARTS], [pcp]),
         ]
-    return "\n".join(lines)
+    )
 
 
 class PanopticProtocol:
