@@ -163,19 +163,7 @@ def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
         metrics[f"AP_{subset}"], metrics[f"AR_{subset}"] = stats["AP"], stats["AR"]
     write_coco_results(out_dir / pose2d.results_file, predictions)
     cameras = write_predictions_poses2d(out_dir / pose2d.output, predictions, image_views(ann_file))
-    atomic_write_text(
-        out_dir / cfg.metrics_file,
-        json.dumps(
-            {
-                "metrics": metrics,
-                "checkpoint": str(cfg.checkpoint),
-                "ann_file": str(ann_file),
-                "crops": len(dataset),
-                "decode": pose2d.decode,
-                "flip_test": pose2d.flip_test,
-                "cameras": cameras,
-            },
-            indent=2,
-        ),
-    )
+    run = dict(checkpoint=str(cfg.checkpoint), ann_file=str(ann_file), crops=len(dataset), decode=pose2d.decode)
+    run.update(flip_test=pose2d.flip_test, cameras=cameras)
+    atomic_write_text(out_dir / cfg.metrics_file, json.dumps({"metrics": metrics, **run}, indent=2))
     return metrics
