@@ -43,28 +43,20 @@ def project_poses(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.nda
     return keypoints, in_image, boxes, np.prod(clipped, axis=1)
 
 
-def view_ground_truth(camera: Camera, gt_poses: np.ndarray, min_joints: int = 1) -> list[dict]:
-    """COCO annotations of GT poses (G, 23, 4) in one view: keypoints (23, 3) (v = 2 where labelled), bbox, area."""
-    keypoints, in_image, boxes, areas = project_poses(camera, gt_poses)
-    labels = np.where(
-        in_image[..., None], np.concatenate([keypoints[..., :2], np.full(in_image.shape + (1,), 2.0)], axis=-1), 0.0
-    )
+def view_annotations(
+    camera: Camera, poses: np.ndarray, image_id: int, min_joints: int = 1, gt: bool = False
+) -> list[dict]:
+    """COCO dicts of the poses (P, 23, 4) seen in one view: keypoints (23, 3), bbox, area, score (GT: v = 2 instead)."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
+    keypoints, in_image, boxes, areas = project_poses(camera, poses)
+    if gt:
+        keypoints[..., 2] = 2.0
+        keypoints = np.where(in_image[..., None], keypoints, 0.0)
+    scores = np.where(poses[..., 3] > 0, poses[..., 3], 0.0).mean(axis=1)  # a detection's: its mean confidence
     return [
-        {"keypoints": kp, "bbox": box, "area": float(a)}
-        for kp, labelled, box, a in zip(labels, in_image, boxes, areas)
-        if labelled.sum() >= min_joints
-    ]
-
-
-def view_predictions(camera: Camera, poses3d: np.ndarray, min_joints: int = 1) -> list[dict]:
-    """COCO detections of 3D poses (P, 23, 4) in one view: keypoints (23, 3), score (mean confidence), bbox, area."""
-    poses3d = np.asarray(poses3d, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
-    keypoints, in_image, boxes, areas = project_poses(camera, poses3d)
-    scores = np.where(poses3d[..., 3] > 0, poses3d[..., 3], 0.0).mean(axis=1)
-    return [
-        {"keypoints": kp, "score": float(s), "bbox": box, "area": float(a)}
-        for kp, visible, s, box, a in zip(keypoints, in_image, scores, boxes, areas)
-        if visible.sum() >= min_joints
+        {"image_id": image_id, "keypoints": kp, "bbox": box, "area": float(a)} | ({} if gt else {"score": float(s)})
+        for kp, seen, s, box, a in zip(keypoints, in_image, scores, boxes, areas)
+        if seen.sum() >= min_joints
     ]
 
 
@@ -153,10 +145,8 @@ class ReprojectionCOCOProtocol:
         for camera in self.rig:
             image_id = len(self.image_ids) + 1
             self.image_ids.append(image_id)
-            self.gt += [{**a, "image_id": image_id} for a in view_ground_truth(camera, frame.gt_poses, self.min_joints)]
-            self.predictions += [
-                {**d, "image_id": image_id} for d in view_predictions(camera, result.poses3d, self.min_joints)
-            ]
+            self.gt += view_annotations(camera, frame.gt_poses, image_id, self.min_joints, gt=True)
+            self.predictions += view_annotations(camera, result.poses3d, image_id, self.min_joints)
 
     def summary(self) -> dict:
         """{subset: {stat: % or None}} for every subset, and the counts and settings."""
