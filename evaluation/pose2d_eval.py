@@ -44,16 +44,8 @@ def build_eval_dataset(
         if p is not None and not Path(p).exists():
             raise FileNotFoundError(f"{p} does not exist")
     records = load_keypoint_dataset(kind, ann_file, image_dir, det_file, min_keypoints=int(det_file is None))
-    dataset = TopDownDataset(
-        records,
-        codec,
-        tuple(data.input_size),
-        augment=None,
-        train=False,
-        use_det_boxes=det_file is not None,
-        padding=data.padding,
-        cache_size=0,
-    )
+    crops = dict(augment=None, train=False, use_det_boxes=det_file is not None, padding=data.padding, cache_size=0)
+    dataset = TopDownDataset(records, codec, tuple(data.input_size), **crops)
     return dataset, ann_file
 
 
@@ -150,12 +142,8 @@ def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
     model, train_cfg = load_trained_model(cfg.checkpoint, device)
     codec = build_codec(train_cfg)
     dataset, ann_file = build_eval_dataset(pose2d, train_cfg, codec)
-    loader = DataLoader(
-        dataset,
-        batch_size=pose2d.batch_size,
-        sampler=EpochSampler(len(dataset), shuffle=False),
-        num_workers=pose2d.num_workers,
-    )
+    sampler = EpochSampler(len(dataset), shuffle=False)
+    loader = DataLoader(dataset, batch_size=pose2d.batch_size, sampler=sampler, num_workers=pose2d.num_workers)
     predictions = predict(model, loader, codec, device, pose2d.decode, pose2d.threshold, pose2d.top_m, pose2d.flip_test)
     metrics: dict[str, Any] = {}
     for subset in AP_SUBSETS:

@@ -109,10 +109,9 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
     if "reprojection_mean_px" in m:
         lines += [
             "Reprojection error of the reconstructed joints against the 2D detections (undistorted px, "
-            "every joint with score > 0 in every view; paper Table 3): mean {:.2f}, min {:.3f}, max {:.1f}, "
-            "variance {:.2f} px^2".format(
-                m["reprojection_mean_px"], m["reprojection_min_px"], m["reprojection_max_px"], m["reprojection_var_px2"]
-            ),
+            "every joint with score > 0 in every view; paper Table 3): mean {reprojection_mean_px:.2f}, "
+            "min {reprojection_min_px:.3f}, max {reprojection_max_px:.1f}, "
+            "variance {reprojection_var_px2:.2f} px^2".format(**m),
             "",
         ]
     for text in report.protocol_reports:

@@ -148,14 +148,9 @@ def plot_feet_on_ground(
             color = colors[owner[n]] if owner[n] >= 0 else UNMATCHED_COLOR
             if feats.has_stride[n]:
                 ax.plot(*np.stack([feats.left[n], feats.right[n]]).T, color=color, linewidth=0.6, alpha=0.6)
-            ax.plot(
-                *feats.p[n],
-                marker="x" if owner[n] < 0 else marker,
-                color=color,
-                markersize=7,
-                markerfacecolor="none" if owner[n] >= 0 else color,
-                linestyle="none",
-            )
+            matched = owner[n] >= 0
+            style = dict(marker=marker, markerfacecolor="none") if matched else dict(marker="x", markerfacecolor=color)
+            ax.plot(*feats.p[n], color=color, markersize=7, linestyle="none", **style)
     _camera_centres(ax, rig, 2)
     markers = [CAMERA_MARKERS[v % len(CAMERA_MARKERS)] for v in range(len(rig))]
     handles = [_marker(m, "black", f"camera {name}", markerfacecolor="none") for m, name in zip(markers, rig.names)]
