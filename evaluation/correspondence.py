@@ -89,8 +89,3 @@ def correspondence_counts(assignment: np.ndarray, person_ids: list[np.ndarray]) 
         if n and np.all(vals == vals[0]) and vals[0] in persons and total_of[int(vals[0])] == n:
             recovered += 1
     return CorrespondenceCounts(predicted, correct, true_pairs, len(persons), recovered)
-
-
-def correspondence_metrics(assignment: np.ndarray, person_ids: list[np.ndarray]) -> dict[str, float]:
-    """Precision, recall, recovered share and their counts: (P, V), V arrays (N_v,) -> dict."""
-    return correspondence_counts(assignment, person_ids).as_dict()

@@ -157,15 +157,9 @@ class ReprojectionCOCOProtocol:
             stats = coco_keypoint_stats(self.image_ids, self.gt, self.predictions, subset, self.max_dets)
             out[subset] = {k: (100.0 * v if v >= 0 else None) for k, v in stats.items()}
         per_image = np.bincount([a["image_id"] for a in self.gt], minlength=len(self.image_ids) + 1)
-        out.update(
-            images=len(self.image_ids),
-            gt_persons=len(self.gt),
-            predictions=len(self.predictions),
-            max_gt_per_image=int(per_image.max()),
-            max_dets=self.max_dets,
-            min_joints=self.min_joints,
-            frames_without_gt=self.frames_without_gt,
-        )
+        out.update(images=len(self.image_ids), gt_persons=len(self.gt), predictions=len(self.predictions))
+        out.update(max_gt_per_image=int(per_image.max()), max_dets=self.max_dets, min_joints=self.min_joints)
+        out["frames_without_gt"] = self.frames_without_gt
         self._summary = out
         return out
 

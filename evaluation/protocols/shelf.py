@@ -287,17 +287,15 @@ class ShelfProtocol:
         """{"ours": ShelfEvaluator summary, "4d_association": the same for skel.txt (when given)}."""
         out = {"ours": self.evaluator.summary()}
         if self.identities.history:
-            out["tracking"] = {
-                **self.identities.summary(AVERAGED_ACTOR_IDS),
-                "actors": [a + 1 for a in AVERAGED_ACTOR_IDS],
-            }
+            actors = [a + 1 for a in AVERAGED_ACTOR_IDS]
+            out["tracking"] = {**self.identities.summary(AVERAGED_ACTOR_IDS), "actors": actors}
         if self.baseline_path is not None and self.gt_path is not None and self.predictions:
             frames = tuple(sorted(self.predictions))
             if self._baseline is None or self._baseline[0] != frames:
-                self._baseline = (
-                    frames,
-                    score_4dassoc_output(self.baseline_path, self.gt_path, self.first_frame, list(frames), self.alpha),
+                baseline = score_4dassoc_output(
+                    self.baseline_path, self.gt_path, self.first_frame, list(frames), self.alpha
                 )
+                self._baseline = (frames, baseline)
             out["4d_association"] = self._baseline[1]
         return out
 
