@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, astuple, dataclass
 
 import numpy as np
 
@@ -18,10 +18,7 @@ class CorrespondenceCounts:
     persons_recovered: int = 0
 
     def __add__(self, other: "CorrespondenceCounts") -> "CorrespondenceCounts":
-        return CorrespondenceCounts(*(a + b for a, b in zip(self._values(), other._values())))
-
-    def _values(self) -> tuple[int, ...]:
-        return (self.predicted_pairs, self.correct_pairs, self.true_pairs, self.persons, self.persons_recovered)
+        return CorrespondenceCounts(*(a + b for a, b in zip(astuple(self), astuple(other))))
 
     @property
     def precision(self) -> float:
@@ -40,16 +37,7 @@ class CorrespondenceCounts:
 
     def as_dict(self) -> dict[str, float]:
         """Counts and ratios, for reports."""
-        return {
-            "predicted_pairs": self.predicted_pairs,
-            "correct_pairs": self.correct_pairs,
-            "true_pairs": self.true_pairs,
-            "persons": self.persons,
-            "persons_recovered": self.persons_recovered,
-            "precision": self.precision,
-            "recall": self.recall,
-            "recovered_share": self.recovered_share,
-        }
+        return {**asdict(self), **{k: getattr(self, k) for k in ("precision", "recall", "recovered_share")}}
 
 
 def _validate(assignment: np.ndarray, person_ids: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -85,13 +73,11 @@ def correspondence_counts(assignment: np.ndarray, person_ids: list[np.ndarray]) 
         _, c = np.unique(row[row >= 0], return_counts=True)
         correct += int(_pairs(c).sum())
 
-    all_ids = np.concatenate(ids) if V else np.zeros(0, np.int64)
+    all_ids = np.concatenate([np.zeros(0, np.int64), *ids])
     gt = np.unique(all_ids[all_ids >= 0])
-    per_view = (
-        np.stack([np.sum(ids[v][None, :] == gt[:, None], axis=1) for v in range(V)], 1)
-        if V
-        else np.zeros((0, 0), np.int64)
-    )
+    per_view = np.zeros((len(gt), V), dtype=np.int64)  # (G, V): detections of each GT person in each view
+    for v in range(V):
+        per_view[:, v] = np.sum(ids[v][None, :] == gt[:, None], axis=1)
     total = per_view.sum(axis=1)
     true_pairs = int(((total**2 - np.sum(per_view**2, axis=1)) // 2).sum())
     persons = gt[np.sum(per_view > 0, axis=1) >= 2]
@@ -103,8 +89,3 @@ def correspondence_counts(assignment: np.ndarray, person_ids: list[np.ndarray]) 
         if n and np.all(vals == vals[0]) and vals[0] in persons and total_of[int(vals[0])] == n:
             recovered += 1
     return CorrespondenceCounts(predicted, correct, true_pairs, len(persons), recovered)
-
-
-def correspondence_metrics(assignment: np.ndarray, person_ids: list[np.ndarray]) -> dict[str, float]:
-    """Precision, recall, recovered share and their counts: (P, V), V arrays (N_v,) -> dict."""
-    return correspondence_counts(assignment, person_ids).as_dict()

@@ -12,19 +12,18 @@ PART_JOINTS = np.array([pair for pairs in SHELF_PCP_PARTS.values() for pair in p
 PART_GROUP = np.array([i for i, pairs in enumerate(SHELF_PCP_PARTS.values()) for _ in pairs])
 
 
-def correct_parts(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.ndarray:
-    """Which of the 10 parts are correct: (K, 15, 3), (K, 15, 3) -> (K, 10) bool (mean end error <= alpha x length)."""
+def correct_parts(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5, parts: np.ndarray = PART_JOINTS) -> np.ndarray:
+    """Which parts (N, 2) are correct: (K, J, 3), (K, J, 3) -> (K, N) bool (mean end error <= alpha x length)."""
     pred = np.asarray(pred, dtype=np.float64)[..., :3]
     gt = np.asarray(gt, dtype=np.float64)[..., :3]
-    a, b = PART_JOINTS[:, 0], PART_JOINTS[:, 1]
+    a, b = parts[:, 0], parts[:, 1]
     err = (np.linalg.norm(pred[:, a] - gt[:, a], axis=-1) + np.linalg.norm(pred[:, b] - gt[:, b], axis=-1)) / 2
     length = np.linalg.norm(gt[:, a] - gt[:, b], axis=-1)
     return err <= alpha * length
 
 
 def pcp_by_part(correct: np.ndarray, valid: np.ndarray | None = None) -> dict[str, float]:
-    """PCP (%) of each named part and the average over the ``valid`` parts (default all): (K, 10) bool
-    [, (K, 10) bool] -> {part: %, 'average': %}."""
+    """PCP (%) of each part and their average over the valid parts: (K, 10) bool [, (K, 10) bool] -> {part: %}."""
     correct = np.asarray(correct, dtype=bool).reshape(-1, len(PART_JOINTS))
     valid = np.ones_like(correct) if valid is None else np.asarray(valid, dtype=bool).reshape(correct.shape)
     out = {}

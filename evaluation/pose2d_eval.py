@@ -1,7 +1,6 @@
 """2D evaluation of a train.py checkpoint on a COCO-format keypoint set (``python eval.py checkpoint=...``).
 
-Decoding, flip test and joint association are the SPPE stage's own code; outputs: COCO OKS AP/AR (all, body,
-foot), the COCO results file and poses2d.json (frame and camera from the image entry, else image id and "0").
+Decoding, flip test and joint association are the SPPE stage's own; writes COCO OKS AP/AR, COCO results, poses2d.json.
 """
 
 from __future__ import annotations
@@ -45,24 +44,15 @@ def build_eval_dataset(
         if p is not None and not Path(p).exists():
             raise FileNotFoundError(f"{p} does not exist")
     records = load_keypoint_dataset(kind, ann_file, image_dir, det_file, min_keypoints=int(det_file is None))
-    dataset = TopDownDataset(
-        records,
-        codec,
-        tuple(data.input_size),
-        augment=None,
-        train=False,
-        use_det_boxes=det_file is not None,
-        padding=data.padding,
-        cache_size=0,
-    )
+    crops = dict(augment=None, train=False, use_det_boxes=det_file is not None, padding=data.padding, cache_size=0)
+    dataset = TopDownDataset(records, codec, tuple(data.input_size), **crops)
     return dataset, ann_file
 
 
 def decode_candidates(
     codec: MultiModalHeatmapCodec, heatmaps: torch.Tensor, batch: dict, threshold: float, top_m: int
 ) -> list[dict]:
-    """Heatmaps (B, 23, h, w) of a batch -> B crops {image_id, box (4,), score, candidates (23, M, 3) x, y,
-    score in image pixels}: the top-M local maxima of each joint channel."""
+    """Heatmaps (B, 23, h, w) -> B crops {image_id, box (4,), score, candidates (23, M, 3) top-M maxima in pixels}."""
     candidates = joint_candidates(codec, heatmaps, batch["affine_inv"], threshold, top_m)
     return [
         {
@@ -76,8 +66,7 @@ def decode_candidates(
 
 
 def associate_crops(crops: list[dict]) -> list[dict]:
-    """Crops of :func:`decode_candidates` -> one prediction per crop {image_id, keypoints (23, 3), score, bbox},
-    joints assigned by the global joint association over the crops of each image; order kept."""
+    """Crops of decode_candidates -> per crop {image_id, keypoints (23, 3), score, bbox}, associated per image."""
     if not crops:
         return []
     boxes = np.stack([c["box"] for c in crops])
@@ -100,8 +89,7 @@ def predict(
     top_m: int = 3,
     flip_test: bool = True,
 ) -> list[dict]:
-    """Predictions {image_id, keypoints (23, 3), score, bbox (4,)} for every crop of the loader, in its order;
-    flip_test averages in the mirrored crops' heatmaps (models/heatmap_inference.py)."""
+    """Predictions {image_id, keypoints (23, 3), score, bbox (4,)} for every crop of the loader, in its order."""
     if decode not in DECODERS:
         raise ValueError(f"decode must be one of {DECODERS}, got {decode!r}")
     predictions, crops = [], []
@@ -116,8 +104,7 @@ def predict(
 
 
 def image_views(ann_file: Path) -> dict[int, tuple[int, str]]:
-    """{image id: (frame, camera)} of an annotation file's images: their 'frame' and 'camera' keys, else
-    (image id, "0")."""
+    """{image id: (frame, camera)} of an annotation file's images, from their keys, else (image id, "0")."""
     doc = json.loads(Path(ann_file).read_text())
     return {int(img["id"]): (int(img.get("frame", img["id"])), str(img.get("camera", "0"))) for img in doc["images"]}
 
@@ -149,19 +136,14 @@ def _view(dets: list[dict]) -> ViewDetections:
 
 
 def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
-    """Evaluate cfg.checkpoint on cfg.coco2d's set; write the COCO results, poses2d.json and metrics.json
-    into out_dir -> {"AP_all", "AR_all", "AP_body", ...} (-1 where the set has no such joint)."""
+    """Evaluate cfg.checkpoint on cfg.coco2d's set, writing its outputs into out_dir -> {"AP_all", "AR_all", ...}."""
     pose2d, out_dir = cfg.coco2d, Path(out_dir)
     device = resolve_device(pose2d.device, "coco2d.device")
     model, train_cfg = load_trained_model(cfg.checkpoint, device)
     codec = build_codec(train_cfg)
     dataset, ann_file = build_eval_dataset(pose2d, train_cfg, codec)
-    loader = DataLoader(
-        dataset,
-        batch_size=pose2d.batch_size,
-        sampler=EpochSampler(len(dataset), shuffle=False),
-        num_workers=pose2d.num_workers,
-    )
+    sampler = EpochSampler(len(dataset), shuffle=False)
+    loader = DataLoader(dataset, batch_size=pose2d.batch_size, sampler=sampler, num_workers=pose2d.num_workers)
     predictions = predict(model, loader, codec, device, pose2d.decode, pose2d.threshold, pose2d.top_m, pose2d.flip_test)
     metrics: dict[str, Any] = {}
     for subset in AP_SUBSETS:
@@ -169,19 +151,7 @@ def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
         metrics[f"AP_{subset}"], metrics[f"AR_{subset}"] = stats["AP"], stats["AR"]
     write_coco_results(out_dir / pose2d.results_file, predictions)
     cameras = write_predictions_poses2d(out_dir / pose2d.output, predictions, image_views(ann_file))
-    atomic_write_text(
-        out_dir / cfg.metrics_file,
-        json.dumps(
-            {
-                "metrics": metrics,
-                "checkpoint": str(cfg.checkpoint),
-                "ann_file": str(ann_file),
-                "crops": len(dataset),
-                "decode": pose2d.decode,
-                "flip_test": pose2d.flip_test,
-                "cameras": cameras,
-            },
-            indent=2,
-        ),
-    )
+    run = dict(checkpoint=str(cfg.checkpoint), ann_file=str(ann_file), crops=len(dataset), decode=pose2d.decode)
+    run.update(flip_test=pose2d.flip_test, cameras=cameras)
+    atomic_write_text(out_dir / cfg.metrics_file, json.dumps({"metrics": metrics, **run}, indent=2))
     return metrics

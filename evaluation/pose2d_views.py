@@ -1,7 +1,6 @@
 """The 2D stage of a run on images, scored per view with COCO OKS AP/AR against the render's ground truth.
 
-A predicted person takes the id of the GT person it overlaps most by OKS (>= ``min_oks``, one-to-one), so that
-the cross-view matching can be scored as with simulated detections.
+Predictions take the ids of GT persons (one-to-one, OKS >= min_oks) so that the matching is scored as on simulations.
 """
 
 from __future__ import annotations
@@ -47,8 +46,7 @@ def label_with_gt_ids(pred: ViewDetections, gt: ViewDetections, min_oks: float =
 def estimate_2d(
     sequence: Sequence, front_end: Pose2DFrontEnd, progress: bool = True
 ) -> tuple[Sequence, list[list[ViewDetections]] | None]:
-    """Run the 2D stage on every frame -> (a new Sequence whose views are the predictions, the ground-truth
-    views per frame (V each) when the frames carry them, else None). The input sequence is not modified."""
+    """Run the 2D stage on every frame -> (a new Sequence of predicted views, the GT views per frame (V each) or None)."""
     has_gt = sequence.views_are_ground_truth
     frames, gt_views = [], []
     for frame in tqdm(sequence.frames, desc="2D poses", unit="frame", disable=not progress):

@@ -11,19 +11,11 @@ from reconstruction.pipeline import gather_views
 
 
 def reprojection_stats(errors: np.ndarray) -> dict[str, float]:
-    """Mean, min, max, variance (population) and count of the finite errors: (...) px -> dict."""
+    """Mean, min, max, variance (population) and count of the finite errors: (...) px -> dict (NaN when none)."""
     err = np.asarray(errors, dtype=np.float64).ravel()
     err = err[np.isfinite(err)]
-    if err.size == 0:
-        nan = float("nan")
-        return {"mean": nan, "min": nan, "max": nan, "var": nan, "count": 0}
-    return {
-        "mean": float(err.mean()),
-        "min": float(err.min()),
-        "max": float(err.max()),
-        "var": float(err.var()),
-        "count": int(err.size),
-    }
+    stats = {k: float(getattr(err, k)()) if err.size else float("nan") for k in ("mean", "min", "max", "var")}
+    return {**stats, "count": int(err.size)}
 
 
 def frame_reprojection_errors(

@@ -23,8 +23,7 @@ from reconstruction.pipeline import FrameResult, MultiViewPipeline
 
 @dataclass
 class SequenceReport:
-    """Per-frame results, metrics (empty without ground truth), skipped frames by reason, seconds by stage, detections
-    left out of every person by reason, and the summaries and console reports of the sequence's benchmark protocols."""
+    """Per-frame results, metrics, skipped frames and unmatched detections by reason, timings, protocol summaries."""
 
     results: list[FrameResult]
     metrics: dict[str, float]
@@ -38,8 +37,7 @@ class SequenceReport:
 def evaluate_sequence(
     sequence: Sequence, pipeline: MultiViewPipeline, evaluator: Pose3DEvaluator, progress: bool = True
 ) -> SequenceReport:
-    """Reconstruct every frame, score it against ground truth where there is some, and against the 2D detections the
-    joints were fitted to (the reprojection error of the paper's Table 3: ``reprojection_*`` metrics)."""
+    """Reconstruct every frame; score it against the GT where there is some and against its 2D detections (Table 3)."""
     attach_protocols(sequence)  # the dataset's own protocols (protocol_inputs), unless attached already
     results, skipped, pairs, reprojection = [], Counter(), CorrespondenceCounts(), []
     has_ids = any(np.any(v.person_ids >= 0) for f in sequence.frames for v in f.views)
@@ -111,10 +109,9 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
     if "reprojection_mean_px" in m:
         lines += [
             "Reprojection error of the reconstructed joints against the 2D detections (undistorted px, "
-            "every joint with score > 0 in every view; paper Table 3): mean {:.2f}, min {:.3f}, max {:.1f}, "
-            "variance {:.2f} px^2".format(
-                m["reprojection_mean_px"], m["reprojection_min_px"], m["reprojection_max_px"], m["reprojection_var_px2"]
-            ),
+            "every joint with score > 0 in every view; paper Table 3): mean {reprojection_mean_px:.2f}, "
+            "min {reprojection_min_px:.3f}, max {reprojection_max_px:.1f}, "
+            "variance {reprojection_var_px2:.2f} px^2".format(**m),
             "",
         ]
     for text in report.protocol_reports:

@@ -10,7 +10,7 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from data.keypoints import FLIP_PAIRS, NUM_JOINTS
-from evaluation.correspondence import correspondence_metrics
+from evaluation.correspondence import correspondence_counts
 from reconstruction.matching import EpipolarMatcher, FeetEpipolarMatcher, RansacMatcher
 from reconstruction.matching.epipolar import (
     NO_COUNTERPART,
@@ -83,7 +83,7 @@ def test_noise_free_scene_is_matched_perfectly(name, dist):
     views = scene(rig, crowd())
     matcher = MATCHERS[name]()
     assignment, reasons = matcher(views, rig)
-    m = correspondence_metrics(assignment, ids_of(views))
+    m = correspondence_counts(assignment, ids_of(views)).as_dict()
     assert m["precision"] == 1.0 and m["recall"] == 1.0
     assert m["persons"] == 7 and m["recovered_share"] == 1.0
     assert not reasons

@@ -1,7 +1,6 @@
 import numpy as np
 
-from evaluation.association import match_to_ground_truth
-from evaluation.mpjpe import joint_errors, mpjpe
+from evaluation.association import joint_errors, match_to_ground_truth, mpjpe
 from evaluation.pcp import PART_NAMES, correct_parts, pcp_by_part
 from evaluation.pose3d import Pose3DEvaluator
 

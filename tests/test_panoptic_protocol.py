@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,11 +13,10 @@ from data.keypoints import FOOT_JOINTS, JOINT_INDEX
 from evaluation.protocols.panoptic import (
     AP_THRESHOLDS_MM,
     PanopticAPEvaluator,
-    PanopticEvaluator,
     PanopticPoseEvaluator,
+    PanopticProtocol,
     average_precision,
     coco23_to_panoptic15,
-    format_panoptic_report,
 )
 
 BODIES = {"160906_band1": {168: 3, 169: 3}, "160906_band2": {139: 3, 140: 3}}
@@ -205,14 +205,15 @@ def test_poses2d_input_round_trip(band1, panoptic: Path, tmp_path: Path) -> None
     assert read.meta["frames_without_2d"] == 0
 
 
-def test_combined_evaluator_and_report(band1) -> None:
-    ev = PanopticEvaluator()
+def test_combined_protocol_and_report(band1) -> None:
+    protocol = PanopticProtocol(band1.protocol_inputs[0]["gt15"])
     for frame in band1.frames:
-        ev.update(frame.gt_poses, band1.protocol_inputs[0]["gt15"][frame.index])
-    s = ev.summary()
+        protocol.update(frame, SimpleNamespace(poses3d=frame.gt_poses))
+    s = protocol.summary()
+    assert s["frames"] == len(band1.frames)
     # COCO-23 GT against the stored Panoptic-15: the synthesised neck is < 1.5 cm off; body 2 has no
     # right hip, so its synthesised mid-hip is missing and its torso (neck -> mid-hip) counts wrong.
     assert s["ap@25"] == pytest.approx(100.0) and s["pcp_upper_arms"] == pytest.approx(100.0)
     assert s["pcp_torso"] == pytest.approx(200.0 / 3)
-    text = format_panoptic_report(s)
+    text = protocol.report()
     assert "VoxelPose Panoptic protocol" in text and "root-aligned" in text and "PCP" in text

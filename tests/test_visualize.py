@@ -16,12 +16,11 @@ from data.geometry.calibration import load_4dassoc  # noqa: E402
 from data.geometry.camera import Camera, Rig  # noqa: E402
 from data.keypoints import LIMBS, SHELF14_TO_COCO23, to_coco23  # noqa: E402
 from data.synthetic import SyntheticConfig, generate_sequence  # noqa: E402
-from evaluation.pictures.vis_draw import CANVAS_GREY, UNMATCHED_COLOR, image_grid  # noqa: E402
+from evaluation.pictures.vis_draw import CANVAS_GREY, UNMATCHED_COLOR, image_grid, person_colors  # noqa: E402
 from evaluation.pictures.visualize import (  # noqa: E402
     draw_reprojections,
     image_png,
     load_view_images,
-    person_colors,
     plot_feet_on_ground,
     plot_scene_3d,
     plot_top_view,

@@ -28,8 +28,7 @@ class SequenceFrame:
 
 
 def sequence_frames(frames: Iterable[tuple]) -> tuple[list[SequenceFrame], bool]:
-    """(frame, poses (P, 23, 4), ids (P,) or None) tuples -> frames, tracked; a frame without ids
-    (tracking off) numbers its persons by their index, and the sequence then counts as untracked."""
+    """(frame, poses (P, 23, 4), ids (P,) or None) tuples -> frames, tracked (no ids: persons by index, untracked)."""
     out, tracked = [], True
     for frame, poses, ids in frames:
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
@@ -50,8 +49,7 @@ def valid_joints(poses: np.ndarray) -> np.ndarray:
 
 
 def pose_roots(poses: np.ndarray) -> np.ndarray:
-    """Each pose's root: the mid-hip, else the mean of its valid hips and shoulders, else NaN:
-    poses (P, 23, 4) -> (P, 3)."""
+    """Each pose's root, the mid-hip, else the mean of its valid hips and shoulders, else NaN: (P, 23, 4) -> (P, 3)."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
     ok = valid_joints(poses)
     xyz = np.where(ok[..., None], poses[..., :3], 0.0)
@@ -64,8 +62,7 @@ def pose_roots(poses: np.ndarray) -> np.ndarray:
 
 
 def id_colors(ids: Iterable[int]) -> dict[int, np.ndarray]:
-    """A colour per id that depends on the id alone (person_colors' palette, then golden-ratio hues):
-    ids -> {id: (3,) RGB in [0, 1]}."""
+    """A colour per id that depends on the id alone: ids -> {id: (3,) RGB in [0, 1]}."""
     ids = sorted({int(i) for i in ids})
     if ids and ids[0] < 0:
         raise ValueError(f"ids must be >= 0, got {ids[0]}")

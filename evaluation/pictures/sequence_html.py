@@ -1,7 +1,4 @@
-"""A self-contained HTML viewer of a sequence (sequence_view.html with the data as JSON; no network needed).
-
-A sequence whose data would exceed ``max_mb`` is shown every k-th frame, k the smallest that fits.
-"""
+"""A self-contained HTML viewer of a sequence (sequence_view.html with the data as JSON; no network needed)."""
 
 from __future__ import annotations
 
@@ -124,8 +121,7 @@ def sequence_html(
     max_mb: float = DEFAULT_MAX_MB,
     id_note: str | None = None,
 ) -> str:
-    """The page of (frame, poses (P, 23, 4), ids (P,) or None) tuples, every k-th frame when the data
-    would exceed max_mb megabytes (at least one frame is kept)."""
+    """The page of (frame, poses (P, 23, 4), ids (P,) or None) tuples; every k-th frame (smallest k) within max_mb."""
     seq, tracked = sequence_frames(frames)
     if not seq:
         raise ValueError("no frames to show")

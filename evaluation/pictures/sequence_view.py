@@ -12,18 +12,9 @@ from typing import Sequence
 from data.formats.poses_io import read_poses3d_frames
 from data.geometry.calibration import CalibrationError, load_rig
 from data.geometry.camera import Rig
-from evaluation.pictures.sequence_html import DEFAULT_MAX_MB, sequence_html, write_sequence_html
-from evaluation.pictures.vis_trajectories import plot_trajectories, trajectories_figure
+from evaluation.pictures.sequence_html import DEFAULT_MAX_MB, write_sequence_html
+from evaluation.pictures.vis_trajectories import plot_trajectories
 from reconstruction.pipeline import FrameResult
-
-__all__ = [
-    "write_sequence_html",
-    "sequence_html",
-    "plot_trajectories",
-    "trajectories_figure",
-    "save_sequence_pictures",
-    "main",
-]
 
 HTML_NAME = "sequence.html"
 PNG_NAME = "trajectories.png"
@@ -44,19 +35,14 @@ def save_sequence_pictures(
 
 def main(argv: list[str] | None = None) -> list[Path]:
     """Command line: the viewer (and with --png the trajectories) of a poses3d.json -> the written paths."""
-    parser = argparse.ArgumentParser(
-        prog="python -m evaluation.pictures.sequence_view", description=__doc__.split("\n")[0]
-    )
+    prog = "python -m evaluation.pictures.sequence_view"
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n")[0])
     parser.add_argument("poses3d", type=Path, help="poses3d.json of an eval.py run")
     parser.add_argument("cameras", type=Path, help="the calibration (cameras.json or any format load_rig reads)")
     parser.add_argument("-o", "--output", type=Path, help=f"HTML file (default: {HTML_NAME} beside poses3d)")
     parser.add_argument("--png", type=Path, help="also write the ground trajectories to this PNG")
-    parser.add_argument(
-        "--max-mb",
-        type=float,
-        default=DEFAULT_MAX_MB,
-        help="above this page size, show every k-th frame (default %(default)s)",
-    )
+    every = "above this page size, show every k-th frame (default %(default)s)"
+    parser.add_argument("--max-mb", type=float, default=DEFAULT_MAX_MB, help=every)
     parser.add_argument("--title", help="page title (default: the poses3d path)")
     args = parser.parse_args(argv)
     if not args.max_mb > 0:

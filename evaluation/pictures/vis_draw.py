@@ -52,17 +52,9 @@ def _fixed(uv: np.ndarray) -> tuple[int, int]:
     return int(round(uv[0] * (1 << _SHIFT))), int(round(uv[1] * (1 << _SHIFT)))
 
 
-def draw_skeleton(
-    image: np.ndarray,
-    uv: np.ndarray,
-    ok: np.ndarray,
-    color: tuple[int, int, int],
-    thickness: int,
-    radius: int,
-    limbs=LIMBS,
-) -> None:
-    """Draw limbs and joint dots of one 2D skeleton in place: image (H, W, 3), uv (J, 2), ok (J,)."""
-    for a, b in limbs:
+def draw_skeleton(image: np.ndarray, uv: np.ndarray, ok: np.ndarray, color: tuple, thickness: int, radius: int) -> None:
+    """Draw the limbs and joint dots of one 2D skeleton in place: image (H, W, 3), uv (J, 2), ok (J,)."""
+    for a, b in LIMBS:
         if ok[a] and ok[b]:
             cv2.line(image, _fixed(uv[a]), _fixed(uv[b]), color, thickness, cv2.LINE_AA, _SHIFT)
     for j in np.flatnonzero(ok):

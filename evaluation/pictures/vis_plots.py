@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -43,6 +45,11 @@ def _camera_centres(ax, rig: Rig | None, dims: int) -> None:
         ax.text(*c[:dims], f" {cam.name}", fontsize=7)
 
 
+def _marker(marker: str, color, label: str, **style) -> Line2D:
+    """A legend entry of a marker without a line."""
+    return Line2D([], [], marker=marker, color=color, linestyle="none", label=label, **style)
+
+
 def _legend_handles(num: int, gt: bool) -> list[Line2D]:
     """Legend entries: one per estimated person, one for the ground truth."""
     handles = [Line2D([], [], color=c, linewidth=2, label=f"person {p}") for p, c in enumerate(person_colors(num))]
@@ -72,15 +79,28 @@ def _scene_points(poses3d, gt_poses, rig) -> np.ndarray:
     return np.concatenate(pts)
 
 
+def _poses_figure(poses3d: np.ndarray, gt_poses: np.ndarray | None, rig: Rig | None, dims: int) -> tuple[Figure, Any]:
+    """A figure whose 3D (dims 3) or top-view (dims 2) axis shows estimates (P, J, 4), GT (G, J, 4) and cameras."""
+    fig = Figure(figsize=(9, 8), dpi=100)
+    ax = fig.add_subplot(projection="3d" if dims == 3 else None)
+    _draw_poses(ax, gt_poses, dims, style=GT_STYLE)
+    _draw_poses(ax, poses3d, dims, colors=person_colors(len(poses3d)))
+    _camera_centres(ax, rig, dims)
+    return fig, ax
+
+
+def _ground_axes(ax: Any) -> None:
+    """Equal x-y scale, a light grid and the metre labels of a top view."""
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
+
+
 def plot_scene_3d(
     poses3d: np.ndarray, gt_poses: np.ndarray | None = None, rig: Rig | None = None, title: str = ""
 ) -> Figure:
     """Estimates (P, J, 4) solid per person beside ground truth (G, J, 4) dashed, cameras as markers."""
-    fig = Figure(figsize=(9, 8), dpi=100)
-    ax = fig.add_subplot(projection="3d")
-    _draw_poses(ax, gt_poses, 3, style=GT_STYLE)
-    _draw_poses(ax, poses3d, 3, colors=person_colors(len(poses3d)))
-    _camera_centres(ax, rig, 3)
+    fig, ax = _poses_figure(poses3d, gt_poses, rig, 3)
     _equal_3d(ax, _scene_points(poses3d, gt_poses, rig))
     ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)"), ax.set_zlabel("z (m)")
     ax.view_init(elev=25, azim=-60)
@@ -93,14 +113,8 @@ def plot_top_view(
     poses3d: np.ndarray, gt_poses: np.ndarray | None = None, rig: Rig | None = None, title: str = ""
 ) -> Figure:
     """The x-y ground plane seen from above: estimates (P, J, 4), ground truth (G, J, 4), cameras."""
-    fig = Figure(figsize=(9, 8), dpi=100)
-    ax = fig.add_subplot()
-    _draw_poses(ax, gt_poses, 2, style=GT_STYLE)
-    _draw_poses(ax, poses3d, 2, colors=person_colors(len(poses3d)))
-    _camera_centres(ax, rig, 2)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
+    fig, ax = _poses_figure(poses3d, gt_poses, rig, 2)
+    _ground_axes(ax)
     ax.set_title(title or f"top view: {len(poses3d)} estimated persons")
     ax.legend(handles=_legend_handles(len(poses3d), gt_poses is not None), fontsize=7, loc="best")
     return fig
@@ -134,34 +148,15 @@ def plot_feet_on_ground(
             color = colors[owner[n]] if owner[n] >= 0 else UNMATCHED_COLOR
             if feats.has_stride[n]:
                 ax.plot(*np.stack([feats.left[n], feats.right[n]]).T, color=color, linewidth=0.6, alpha=0.6)
-            ax.plot(
-                *feats.p[n],
-                marker="x" if owner[n] < 0 else marker,
-                color=color,
-                markersize=7,
-                markerfacecolor="none" if owner[n] >= 0 else color,
-                linestyle="none",
-            )
+            matched = owner[n] >= 0
+            style = dict(marker=marker, markerfacecolor="none") if matched else dict(marker="x", markerfacecolor=color)
+            ax.plot(*feats.p[n], color=color, markersize=7, linestyle="none", **style)
     _camera_centres(ax, rig, 2)
-    handles = [
-        Line2D(
-            [],
-            [],
-            marker=CAMERA_MARKERS[v % len(CAMERA_MARKERS)],
-            color="black",
-            linestyle="none",
-            markerfacecolor="none",
-            label=f"camera {name}",
-        )
-        for v, name in enumerate(rig.names)
-    ]
-    handles += [
-        Line2D([], [], marker="s", color=c, linestyle="none", label=f"person {p}") for p, c in enumerate(colors)
-    ]
-    handles.append(Line2D([], [], marker="x", color=UNMATCHED_COLOR, linestyle="none", label="unmatched"))
+    markers = [CAMERA_MARKERS[v % len(CAMERA_MARKERS)] for v in range(len(rig))]
+    handles = [_marker(m, "black", f"camera {name}", markerfacecolor="none") for m, name in zip(markers, rig.names)]
+    handles += [_marker("s", c, f"person {p}") for p, c in enumerate(colors)]
+    handles.append(_marker("x", UNMATCHED_COLOR, "unmatched"))
     ax.legend(handles=handles, fontsize=7, loc="best", ncol=2)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
+    _ground_axes(ax)
     ax.set_title((title or "feet on the ground plane") + (f" ({missing} detections without feet)" if missing else ""))
     return fig

@@ -34,8 +34,7 @@ def ground_tracks(frames: list[SequenceFrame]) -> dict[int, np.ndarray]:
 
 
 def trajectories_figure(frames: Iterable[tuple], rig: Rig, title: str = "") -> Figure:
-    """The top view of (frame, poses (P, 23, 4), ids (P,) or None) tuples: a path per id (dots without tracking),
-    start (ring) and end (square) marked, the cameras with their viewing direction."""
+    """Top view of (frame, poses (P, 23, 4), ids (P,) or None) tuples: a path per id, its start and end, cameras."""
     seq, tracked = sequence_frames(frames)
     tracks = ground_tracks(seq)
     colors = id_colors(tracks)
@@ -77,20 +76,15 @@ def _draw_cameras(ax: Any, rig: Rig, tracks: dict[int, np.ndarray]) -> None:
 
 def _legend(fig: Figure, tracks: dict[int, np.ndarray], colors: dict) -> None:
     """The legend right of the plot: start, end, camera, then one entry per id."""
+    black = dict(color="black", linestyle="none")
     handles = [
-        Line2D([], [], color="black", linestyle="none", label="start", **START),
-        Line2D([], [], marker=END_MARKER, color="black", markersize=END_SIZE, linestyle="none", label="end"),
-        Line2D([], [], marker="^", color="black", linestyle="none", label="camera"),
+        Line2D([], [], label="start", **black, **START),
+        Line2D([], [], marker=END_MARKER, markersize=END_SIZE, label="end", **black),
+        Line2D([], [], marker="^", label="camera", **black),
     ]
     handles += [Line2D([], [], color=colors[i], linewidth=2, label=f"id {i}") for i in tracks]
-    fig.legend(
-        handles=handles,
-        loc="upper left",
-        bbox_to_anchor=(0.82, 0.92),
-        fontsize=7,
-        ncol=math.ceil(len(handles) / LEGEND_ROWS),
-        frameon=False,
-    )
+    columns = math.ceil(len(handles) / LEGEND_ROWS)
+    fig.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.82, 0.92), fontsize=7, ncol=columns, frameon=False)
 
 
 def plot_trajectories(path: str | Path, frames: Iterable[tuple], rig: Rig, title: str = "") -> Path:

@@ -11,24 +11,10 @@ from matplotlib.figure import Figure
 
 from data.formats.atomic_io import atomic_write_bytes
 from data.multiview import Frame, Sequence
-from evaluation.pictures.vis_draw import draw_reprojections, image_grid, load_view_images, person_colors
+from evaluation.pictures.vis_draw import draw_reprojections, image_grid, load_view_images
 from evaluation.pictures.vis_plots import plot_feet_on_ground, plot_scene_3d, plot_top_view
 from reconstruction.matching.feet import FeetMatcher
 from reconstruction.pipeline import FrameResult
-
-__all__ = [
-    "draw_reprojections",
-    "plot_scene_3d",
-    "plot_top_view",
-    "plot_feet_on_ground",
-    "load_view_images",
-    "person_colors",
-    "save_frame_pictures",
-    "save_run_pictures",
-    "write_png",
-    "figure_png",
-    "image_png",
-]
 
 
 def write_png(path: str | Path, data: bytes) -> Path:

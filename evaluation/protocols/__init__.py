@@ -6,12 +6,31 @@ and :func:`attach_protocols` builds them (idempotent, so a sequence built in cod
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Callable, Protocol
 
-from data.multiview import Sequence
+from data.multiview import Frame, Sequence
 from evaluation.protocols.panoptic import PanopticProtocol
 from evaluation.protocols.reprojection_coco import ReprojectionCOCOProtocol
 from evaluation.protocols.shelf import ShelfProtocol
+
+if TYPE_CHECKING:
+    from reconstruction.pipeline import FrameResult
+
+
+class DatasetProtocol(Protocol):
+    """A benchmark's own metrics: ``name``, ``update(frame, result)``, ``summary()``, ``report()``."""
+
+    name: str
+
+    def update(self, frame: Frame, result: FrameResult) -> None:
+        """Score one reconstructed frame."""
+
+    def summary(self) -> dict:
+        """The metrics (JSON-serialisable) after the last frame."""
+
+    def report(self) -> str:
+        """The console tables, each labelled with its protocol."""
+
 
 # protocol name in sequence.protocol_inputs -> builder(sequence, **arguments)
 BUILDERS: dict[str, Callable] = {
@@ -32,4 +51,11 @@ def attach_protocols(sequence: Sequence) -> Sequence:
     return sequence
 
 
-__all__ = ["BUILDERS", "PanopticProtocol", "ReprojectionCOCOProtocol", "ShelfProtocol", "attach_protocols"]
+__all__ = [
+    "BUILDERS",
+    "DatasetProtocol",
+    "PanopticProtocol",
+    "ReprojectionCOCOProtocol",
+    "ShelfProtocol",
+    "attach_protocols",
+]

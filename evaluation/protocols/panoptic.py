@@ -1,9 +1,7 @@
 """CMU Panoptic protocols on 15 joints: VoxelPose's AP / recall / MPJPE, the paper's root-aligned MPJPE and PCP.
 
-VoxelPose AP: predictions in score order are true positives at t when their MPJPE to their nearest unclaimed GT
-is under t (t = 25..150 mm, VOC-style AP, without VoxelPose's 1e-5, so perfect reads 100). Root-aligned MPJPE
-and PCP (paper Tables 4-5, our reading) pair persons one-to-one (Hungarian) and align at the mean of the hips,
-which COCO-23 predictions have (Panoptic's own mid-hip they lack).
+VoxelPose AP: VOC-style, without VoxelPose's 1e-5 (perfect reads 100). Tables 4-5 (our reading): Hungarian pairs,
+root = mean of the hips, which COCO-23 predictions have (Panoptic's own mid-hip they lack).
 """
 
 from __future__ import annotations
@@ -13,8 +11,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from data.keypoints import JOINT_INDEX
-from evaluation.association import match_to_ground_truth, mean_joint_distance
-from evaluation.mpjpe import joint_errors
+from evaluation.association import PairedEvaluator, mean_joint_distance, mpjpe
+from evaluation.pcp import correct_parts
 from evaluation.report import format_table
 
 if TYPE_CHECKING:
@@ -29,24 +27,14 @@ NECK, NOSE, MID_HIP = 0, 1, 2
 ROOT = (6, 12)  # root-aligned MPJPE: mean of left and right hip, the same construction on both sides
 AP_THRESHOLDS_MM: tuple[int, ...] = (25, 50, 75, 100, 125, 150)
 RECALL_THRESHOLD_MM = 500
-# Table 4 joint groups (Panoptic-15 indices); "foot" is the ankle.
-MPJPE_GROUPS: dict[str, tuple[int, ...]] = {
-    "head": (1,),
-    "shoulder": (3, 9),
-    "elbow": (4, 10),
-    "wrist": (5, 11),
-    "hip": (6, 12),
-    "knee": (7, 13),
-    "foot": (8, 14),
+# Table 4 joint groups (Panoptic-15 indices: the head is the nose, the left and right joints of each other group).
+MPJPE_GROUPS: dict[str, tuple[int, ...]] = {"head": (NOSE,)} | {
+    name: (j, j + 6) for j, name in enumerate(("shoulder", "elbow", "wrist", "hip", "knee", "foot"), start=3)
 }
-# Table 5 parts (Panoptic-15 joint pairs).
-PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {
-    "head": ((0, 1),),
-    "torso": ((0, 2),),
-    "upper_arms": ((3, 4), (9, 10)),
-    "lower_arms": ((4, 5), (10, 11)),
-    "upper_legs": ((6, 7), (12, 13)),
-    "lower_legs": ((7, 8), (13, 14)),
+# Table 5 parts (Panoptic-15 joint pairs): head = neck -> nose, torso = neck -> mid-hip, then left and right limbs.
+PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {"head": ((NECK, NOSE),), "torso": ((NECK, MID_HIP),)} | {
+    name: ((j, j + 1), (j + 6, j + 7))
+    for j, name in zip((3, 4, 6, 7), ("upper_arms", "lower_arms", "upper_legs", "lower_legs"))
 }
 
 
@@ -71,13 +59,8 @@ def average_precision(
     """VoxelPose AP and recall (fractions) at one threshold: scores, errors, gt_index (N,) -> (ap, recall)."""
     if num_gt == 0:
         return float("nan"), float("nan")
-    order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
-    taken: set[int] = set()
-    tp = np.zeros(len(order))
-    for rank, i in enumerate(order):
-        if errors[i] < threshold and int(gt_index[i]) not in taken:
-            tp[rank] = 1.0
-            taken.add(int(gt_index[i]))
+    order, hits = _true_positives(scores, errors, gt_index, threshold)
+    tp = hits.astype(np.float64)
     cum_tp = np.cumsum(tp)
     precision = cum_tp / np.arange(1, len(order) + 1)
     envelope = np.maximum.accumulate(precision[::-1])[::-1]
@@ -125,39 +108,33 @@ class PanopticAPEvaluator:
         out["mAR"] = float(np.mean([out[f"recall@{t}"] for t in AP_THRESHOLDS_MM]))
         near = np.unique(gt_index[errors < RECALL_THRESHOLD_MM]) if len(errors) else []
         out[f"recall@{RECALL_THRESHOLD_MM}"] = 100.0 * len(near) / self.num_gt if self.num_gt else float("nan")
-        out["mpjpe_mm"] = _true_positive_mpjpe(scores, errors, gt_index, RECALL_THRESHOLD_MM)
+        order, hits = _true_positives(scores, errors, gt_index, RECALL_THRESHOLD_MM)  # MPJPE of the TPs at 500 mm
+        out["mpjpe_mm"] = float(np.mean(errors[order][hits])) if hits.any() else float("nan")
         out.update(num_gt=self.num_gt, num_pred=self.num_pred)
         return out
 
 
-def _true_positive_mpjpe(scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, threshold: float) -> float:
-    """Mean MPJPE (mm) of the true positives at ``threshold`` in score order: (N,) x 3 -> scalar, NaN if none."""
-    taken, kept = set(), []
-    for i in np.argsort(-scores, kind="stable"):
+def _true_positives(
+    scores: np.ndarray, errors: np.ndarray, gt_index: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Score order (N,) and which predictions in it are TPs (N,) bool: error < threshold, their GT not yet taken."""
+    order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
+    taken: set[int] = set()
+    hits = np.zeros(len(order), dtype=bool)
+    for rank, i in enumerate(order):
         if errors[i] < threshold and int(gt_index[i]) not in taken:
+            hits[rank] = True
             taken.add(int(gt_index[i]))
-            kept.append(errors[i])
-    return float(np.mean(kept)) if kept else float("nan")
+    return order, hits
 
 
-class PanopticPoseEvaluator:
+class PanopticPoseEvaluator(PairedEvaluator):
     """Root-aligned 13-joint MPJPE and PCP by part on Hungarian-paired persons (module docstring)."""
-
-    def __init__(self, max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
-        self.max_dist_m = max_dist_m
-        self.alpha = alpha
-        self.errors: list[np.ndarray] = []
-        self.parts: list[np.ndarray] = []
-        self.num_gt = 0
-        self.num_matched = 0
 
     def update(self, pred: np.ndarray, gt: np.ndarray) -> None:
         """Add a frame: pred (P, 15, 4), gt (G, 15, 4)."""
         pred, gt = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
-        pairs = match_to_ground_truth(pred, gt, self.max_dist_m)
-        self.num_gt += len(gt)
-        self.num_matched += len(pairs)
-        self.errors.append(joint_errors(pred[pairs[:, 0]], gt[pairs[:, 1]], root=ROOT))
+        pairs = self.pair(pred, gt, root=ROOT)
         # NaN = part not evaluable (invalid GT end); unpaired GT persons keep their parts wrong.
         parts = part_correct(np.zeros_like(gt), gt, self.alpha)
         parts[pairs[:, 1]] = part_correct(pred[pairs[:, 0]], gt[pairs[:, 1]], self.alpha)
@@ -168,12 +145,12 @@ class PanopticPoseEvaluator:
         err = 1000.0 * np.concatenate(self.errors) if self.errors else np.zeros((0, 15))
         out: dict[str, float] = {}
         for name, cols in MPJPE_GROUPS.items():
-            out[f"root_mpjpe_{name}_mm"] = _nanmean(err[:, list(cols)])
-        out["root_mpjpe_13_mm"] = _nanmean(err[:, [j for cols in MPJPE_GROUPS.values() for j in cols]])
+            out[f"root_mpjpe_{name}_mm"] = mpjpe(err[:, list(cols)])
+        out["root_mpjpe_13_mm"] = mpjpe(err[:, [j for cols in MPJPE_GROUPS.values() for j in cols]])
         out["root_mpjpe_average_mm"] = float(np.mean([out[f"root_mpjpe_{g}_mm"] for g in MPJPE_GROUPS]))
         parts = np.concatenate(self.parts) if self.parts else np.zeros((0, _NUM_PARTS))
         for i, name in enumerate(PCP_PARTS):
-            out[f"pcp_{name}"] = 100.0 * _nanmean(parts[:, _PART_GROUP == i])
+            out[f"pcp_{name}"] = 100.0 * mpjpe(parts[:, _PART_GROUP == i])
         out["pcp_average"] = float(np.mean([out[f"pcp_{p}"] for p in PCP_PARTS]))
         out.update(num_gt=self.num_gt, num_matched=self.num_matched)
         return out
@@ -187,100 +164,53 @@ _NUM_PARTS = len(_PART_PAIRS)
 def part_correct(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5) -> np.ndarray:
     """PCP of the 10 parts of paired poses: (K, 15, 4), (K, 15, 4) -> (K, 10) of 1 / 0 / NaN (not evaluable)."""
     a, b = _PART_PAIRS[:, 0], _PART_PAIRS[:, 1]
-    err = (
-        np.linalg.norm(pred[:, a, :3] - gt[:, a, :3], axis=-1) + np.linalg.norm(pred[:, b, :3] - gt[:, b, :3], axis=-1)
-    ) / 2
-    length = np.linalg.norm(gt[:, a, :3] - gt[:, b, :3], axis=-1)
-    correct = (err <= alpha * length) & (pred[:, a, 3] > 0) & (pred[:, b, 3] > 0)
+    correct = correct_parts(pred, gt, alpha, _PART_PAIRS) & (pred[:, a, 3] > 0) & (pred[:, b, 3] > 0)
     return np.where((gt[:, a, 3] > 0) & (gt[:, b, 3] > 0), correct.astype(np.float64), np.nan)
 
 
-def _nanmean(values: np.ndarray) -> float:
-    """Mean of the finite values, NaN when there is none."""
-    values = np.asarray(values, dtype=np.float64)
-    return float(np.nanmean(values)) if np.any(np.isfinite(values)) else float("nan")
-
-
-class PanopticEvaluator:
-    """Both Panoptic protocols at once on COCO-23 predictions; update per frame, then summary()."""
-
-    def __init__(self, max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
-        self.ap = PanopticAPEvaluator()
-        self.pose = PanopticPoseEvaluator(max_dist_m, alpha)
-
-    def update(self, pred23: np.ndarray, gt15: np.ndarray, scores: np.ndarray | None = None) -> None:
-        """Add a frame: pred23 (P, 23, 4) COCO-23 predictions, gt15 (G, 15, 4), scores (P,) or None."""
-        pred15 = coco23_to_panoptic15(pred23)
-        self.ap.update(pred15, gt15, scores)
-        self.pose.update(pred15, gt15)
-
-    def summary(self) -> dict[str, float]:
-        """The keys of PanopticAPEvaluator.summary, and of PanopticPoseEvaluator.summary under 'pose_' counts."""
-        pose = self.pose.summary()
-        pose["pose_num_gt"], pose["pose_num_matched"] = pose.pop("num_gt"), pose.pop("num_matched")
-        return {**self.ap.summary(), **pose}
-
-
-def format_panoptic_report(summary: dict[str, float]) -> str:
-    """Console tables of a summary (either evaluator's keys, or both), each metric under its protocol name."""
-    lines = []
-    if "mAP" in summary:
-        lines += [
+def format_panoptic_report(s: dict[str, float]) -> str:
+    """Console tables of a PanopticProtocol summary, each metric under its protocol name."""
+    ts, groups = AP_THRESHOLDS_MM, list(MPJPE_GROUPS)
+    ap_rows = [
+        ["AP (%)", *(s[f"ap@{t}"] for t in ts), s["mAP"]],
+        ["recall (%)", *(s[f"recall@{t}"] for t in ts), s["mAR"]],
+    ]
+    counts = [
+        [f"recall@{RECALL_THRESHOLD_MM}mm (%)", s[f"recall@{RECALL_THRESHOLD_MM}"]],
+        [f"MPJPE of TPs at {RECALL_THRESHOLD_MM}mm, absolute (mm)", s["mpjpe_mm"]],
+        ["GT persons / predictions", f"{s['num_gt']} / {s['num_pred']}"],
+    ]
+    root_mpjpe = [s["root_mpjpe_average_mm"], s["root_mpjpe_13_mm"], *(s[f"root_mpjpe_{g}_mm"] for g in groups)]
+    pcp = [s["pcp_average"], *(s[f"pcp_{p}"] for p in PCP_PARTS)]
+    return "\n".join(
+        [
             "VoxelPose Panoptic protocol (15 joints; AP/recall over the sequence, prediction -> nearest "
             "GT by MPJPE, score-ordered, TP if MPJPE < t and GT not yet taken)",
             "",
-            format_table(
-                ["", *(f"@{t}mm" for t in AP_THRESHOLDS_MM), "mean"],
-                [
-                    ["AP (%)", *(summary[f"ap@{t}"] for t in AP_THRESHOLDS_MM), summary["mAP"]],
-                    ["recall (%)", *(summary[f"recall@{t}"] for t in AP_THRESHOLDS_MM), summary["mAR"]],
-                ],
-            ),
+            format_table(["", *(f"@{t}mm" for t in ts), "mean"], ap_rows),
             "",
-            format_table(
-                ["metric", "value"],
-                [
-                    [f"recall@{RECALL_THRESHOLD_MM}mm (%)", summary[f"recall@{RECALL_THRESHOLD_MM}"]],
-                    [f"MPJPE of TPs at {RECALL_THRESHOLD_MM}mm, absolute (mm)", summary["mpjpe_mm"]],
-                    ["GT persons / predictions", f"{summary['num_gt']} / {summary['num_pred']}"],
-                ],
-            ),
+            format_table(["metric", "value"], counts),
             "",
-        ]
-    if "root_mpjpe_13_mm" in summary:
-        groups = list(MPJPE_GROUPS)
-        lines += [
             "Paper Table 4 protocol: root-aligned MPJPE (mm, root = mean of the hips, Hungarian-paired persons; "
             "head = nose, foot = ankle)",
             "",
-            format_table(
-                ["average of groups", "13 joints", *groups],
-                [
-                    [
-                        summary["root_mpjpe_average_mm"],
-                        summary["root_mpjpe_13_mm"],
-                        *(summary[f"root_mpjpe_{g}_mm"] for g in groups),
-                    ]
-                ],
-            ),
+            format_table(["average of groups", "13 joints", *groups], [root_mpjpe]),
             "",
             "Paper Table 5 protocol: PCP (%), alpha 0.5, absolute; head = neck->nose, torso = neck->mid-hip",
             "",
-            format_table(
-                ["average", *PCP_PARTS], [[summary["pcp_average"], *(summary[f"pcp_{p}"] for p in PCP_PARTS)]]
-            ),
+            format_table(["average", *PCP_PARTS], [pcp]),
         ]
-    return "\n".join(lines)
+    )
 
 
 class PanopticProtocol:
-    """The Panoptic protocols as a dataset protocol; gt15 {frame: (G, 15, 4)}, predictions scored by mean confidence."""
+    """Both Panoptic protocols as a dataset protocol; gt15 {frame: (G, 15, 4)}, predictions scored by mean confidence."""
 
     name = "panoptic"
 
     def __init__(self, gt15: dict[int, np.ndarray], max_dist_m: float = 0.5, alpha: float = 0.5) -> None:
         self.gt15 = gt15
-        self.evaluator = PanopticEvaluator(max_dist_m, alpha)
+        self.ap, self.pose = PanopticAPEvaluator(), PanopticPoseEvaluator(max_dist_m, alpha)
         self.frames = 0
 
     def update(self, frame: Frame, result: FrameResult) -> None:
@@ -288,12 +218,16 @@ class PanopticProtocol:
         gt = self.gt15.get(frame.index)
         if gt is None:
             return
-        self.evaluator.update(result.poses3d, gt)
+        pred15 = coco23_to_panoptic15(result.poses3d)
+        self.ap.update(pred15, gt)
+        self.pose.update(pred15, gt)
         self.frames += 1
 
     def summary(self) -> dict[str, float]:
-        """PanopticEvaluator.summary() plus the number of frames scored."""
-        return {**self.evaluator.summary(), "frames": self.frames}
+        """PanopticAPEvaluator's summary, PanopticPoseEvaluator's (its counts as pose_*) and the frames scored."""
+        pose = self.pose.summary()
+        pose["pose_num_gt"], pose["pose_num_matched"] = pose.pop("num_gt"), pose.pop("num_matched")
+        return {**self.ap.summary(), **pose, "frames": self.frames}
 
     def report(self) -> str:
         """The console tables of :func:`format_panoptic_report`."""

@@ -1,8 +1,6 @@
 """The paper's Table 1 metric: COCO keypoint AP/AR of reconstructed 3D poses reprojected into every view.
 
-One COCO image per (frame, camera); the GT is the projection of the 3D GT (occluded joints stay labelled, as
-COCO labels them); areas are the joints' boxes clipped to the image. ``max_dets`` (default 100) lifts COCO's 20
-detections per image, as crowded views hold up to 40 people; max_dets = 20 gives COCO's numbers exactly.
+``max_dets`` (default 100) lifts COCO's 20 detections per image, as crowded views hold up to 40 people.
 """
 
 from __future__ import annotations
@@ -12,12 +10,11 @@ import io
 from typing import TYPE_CHECKING
 
 import numpy as np
-from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
 from data.geometry.camera import Camera, Rig
 from data.keypoints import NUM_JOINTS, OKS_SIGMAS
-from data.pose2d.coco_eval import STAT_NAMES, SUBSET_JOINTS
+from data.pose2d.coco_eval import _CATEGORIES, STAT_NAMES, SUBSET_JOINTS, _coco
 from evaluation.report import format_table
 
 if TYPE_CHECKING:
@@ -25,20 +22,6 @@ if TYPE_CHECKING:
     from reconstruction.pipeline import FrameResult
 
 COCO_MAX_DETS = 20
-_CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
-# Stat name -> (AP or AR, OKS threshold or None = mean over .50:.05:.95, area range label).
-_STATS = {
-    "AP": ("AP", None, "all"),
-    "AP50": ("AP", 0.5, "all"),
-    "AP75": ("AP", 0.75, "all"),
-    "APm": ("AP", None, "medium"),
-    "APl": ("AP", None, "large"),
-    "AR": ("AR", None, "all"),
-    "AR50": ("AR", 0.5, "all"),
-    "AR75": ("AR", 0.75, "all"),
-    "ARm": ("AR", None, "medium"),
-    "ARl": ("AR", None, "large"),
-}
 
 
 def project_poses(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -60,28 +43,20 @@ def project_poses(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.nda
     return keypoints, in_image, boxes, np.prod(clipped, axis=1)
 
 
-def view_ground_truth(camera: Camera, gt_poses: np.ndarray, min_joints: int = 1) -> list[dict]:
-    """COCO annotations of GT poses (G, 23, 4) in one view: keypoints (23, 3) (v = 2 where labelled), bbox, area."""
-    keypoints, in_image, boxes, areas = project_poses(camera, gt_poses)
-    labels = np.where(
-        in_image[..., None], np.concatenate([keypoints[..., :2], np.full(in_image.shape + (1,), 2.0)], axis=-1), 0.0
-    )
+def view_annotations(
+    camera: Camera, poses: np.ndarray, image_id: int, min_joints: int = 1, gt: bool = False
+) -> list[dict]:
+    """COCO dicts of the poses (P, 23, 4) seen in one view: keypoints (23, 3), bbox, area, score (GT: v = 2 instead)."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
+    keypoints, in_image, boxes, areas = project_poses(camera, poses)
+    if gt:
+        keypoints[..., 2] = 2.0
+        keypoints = np.where(in_image[..., None], keypoints, 0.0)
+    scores = np.where(poses[..., 3] > 0, poses[..., 3], 0.0).mean(axis=1)  # a detection's: its mean confidence
     return [
-        {"keypoints": kp, "bbox": box, "area": float(a)}
-        for kp, labelled, box, a in zip(labels, in_image, boxes, areas)
-        if labelled.sum() >= min_joints
-    ]
-
-
-def view_predictions(camera: Camera, poses3d: np.ndarray, min_joints: int = 1) -> list[dict]:
-    """COCO detections of 3D poses (P, 23, 4) in one view: keypoints (23, 3), score (mean confidence), bbox, area."""
-    poses3d = np.asarray(poses3d, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
-    keypoints, in_image, boxes, areas = project_poses(camera, poses3d)
-    scores = np.where(poses3d[..., 3] > 0, poses3d[..., 3], 0.0).mean(axis=1)
-    return [
-        {"keypoints": kp, "score": float(s), "bbox": box, "area": float(a)}
-        for kp, visible, s, box, a in zip(keypoints, in_image, scores, boxes, areas)
-        if visible.sum() >= min_joints
+        {"image_id": image_id, "keypoints": kp, "bbox": box, "area": float(a)} | ({} if gt else {"score": float(s)})
+        for kp, seen, s, box, a in zip(keypoints, in_image, scores, boxes, areas)
+        if seen.sum() >= min_joints
     ]
 
 
@@ -97,7 +72,10 @@ def coco_keypoint_stats(
     dt_anns = [{**_annotation(k, d, joints), "score": float(d["score"])} for k, d in enumerate(predictions)]
     dt_anns = [d for d in dt_anns if d["num_keypoints"] > 0]
     with contextlib.redirect_stdout(io.StringIO()):
-        evaluator = COCOeval(_coco(images, gt_anns), _coco(images, dt_anns), "keypoints")
+        coco_gt, coco_dt = (
+            _coco({"images": images, "annotations": a, "categories": _CATEGORIES}) for a in (gt_anns, dt_anns)
+        )
+        evaluator = COCOeval(coco_gt, coco_dt, "keypoints")
         evaluator.params.kpt_oks_sigmas = OKS_SIGMAS[joints]
         evaluator.params.imgIds = [img["id"] for img in images]
         evaluator.params.maxDets = [int(max_dets)]
@@ -122,23 +100,15 @@ def _annotation(k: int, entry: dict, joints: np.ndarray) -> dict:
     }
 
 
-def _coco(images: list[dict], annotations: list[dict]) -> COCO:
-    """An in-memory pycocotools COCO object."""
-    coco = COCO()
-    coco.dataset = {"images": images, "annotations": annotations, "categories": _CATEGORIES}
-    coco.createIndex()
-    return coco
-
-
 def _stats(evaluator: COCOeval) -> dict[str, float]:
-    """The ten keypoint stats of an accumulated COCOeval with one maxDets value, as pycocotools' summarize."""
+    """The ten keypoint stats (AP|AR, then 50|75: one OKS threshold, m|l: area) of a COCOeval with one maxDets."""
     p = evaluator.params
     out = {}
     for name in STAT_NAMES:
-        kind, threshold, area = _STATS[name]
-        values = evaluator.eval["precision" if kind == "AP" else "recall"]  # (T, R, K, A, M) / (T, K, A, M)
-        if threshold is not None:
-            values = values[np.flatnonzero(np.isclose(p.iouThrs, threshold))]
+        values = evaluator.eval["precision" if name.startswith("AP") else "recall"]  # (T, R, K, A, M) / (T, K, A, M)
+        if name[2:] in ("50", "75"):
+            values = values[np.flatnonzero(np.isclose(p.iouThrs, int(name[2:]) / 100))]
+        area = {"m": "medium", "l": "large"}.get(name[2:], "all")
         values = values[..., p.areaRngLbl.index(area), 0]
         out[name] = float(np.mean(values[values > -1])) if np.any(values > -1) else -1.0
     return out
@@ -175,10 +145,8 @@ class ReprojectionCOCOProtocol:
         for camera in self.rig:
             image_id = len(self.image_ids) + 1
             self.image_ids.append(image_id)
-            self.gt += [{**a, "image_id": image_id} for a in view_ground_truth(camera, frame.gt_poses, self.min_joints)]
-            self.predictions += [
-                {**d, "image_id": image_id} for d in view_predictions(camera, result.poses3d, self.min_joints)
-            ]
+            self.gt += view_annotations(camera, frame.gt_poses, image_id, self.min_joints, gt=True)
+            self.predictions += view_annotations(camera, result.poses3d, image_id, self.min_joints)
 
     def summary(self) -> dict:
         """{subset: {stat: % or None}} for every subset, and the counts and settings."""
@@ -189,15 +157,9 @@ class ReprojectionCOCOProtocol:
             stats = coco_keypoint_stats(self.image_ids, self.gt, self.predictions, subset, self.max_dets)
             out[subset] = {k: (100.0 * v if v >= 0 else None) for k, v in stats.items()}
         per_image = np.bincount([a["image_id"] for a in self.gt], minlength=len(self.image_ids) + 1)
-        out.update(
-            images=len(self.image_ids),
-            gt_persons=len(self.gt),
-            predictions=len(self.predictions),
-            max_gt_per_image=int(per_image.max()),
-            max_dets=self.max_dets,
-            min_joints=self.min_joints,
-            frames_without_gt=self.frames_without_gt,
-        )
+        out.update(images=len(self.image_ids), gt_persons=len(self.gt), predictions=len(self.predictions))
+        out.update(max_gt_per_image=int(per_image.max()), max_dets=self.max_dets, min_joints=self.min_joints)
+        out["frames_without_gt"] = self.frames_without_gt
         self._summary = out
         return out
 
@@ -211,6 +173,8 @@ def format_reprojection_report(summary: dict) -> str:
     subsets = [s for s in SUBSET_JOINTS if s in summary]
     rows = [[s, *("-" if summary[s][k] is None else summary[s][k] for k in STAT_NAMES)] for s in subsets]
     capped = summary["max_gt_per_image"] > summary["max_dets"]
+    warning = f"; WARNING: more GT persons in an image than max_dets={summary['max_dets']}, recall is capped"
+    warning = warning if capped else ""
     return "\n".join(
         [
             "reprojection_coco (paper Table 1 protocol): COCO keypoint AP/AR (%) of the 3D poses reprojected into every view "
@@ -222,11 +186,6 @@ def format_reprojection_report(summary: dict) -> str:
             format_table(["subset", *STAT_NAMES], rows),
             "",
             f"{summary['images']} images, {summary['gt_persons']} GT persons (at most {summary['max_gt_per_image']} "
-            f"in one image), {summary['predictions']} reprojected predictions"
-            + (
-                f"; WARNING: more GT persons in an image than max_dets={summary['max_dets']}, recall is capped"
-                if capped
-                else ""
-            ),
+            f"in one image), {summary['predictions']} reprojected predictions{warning}",
         ]
     )

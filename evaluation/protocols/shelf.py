@@ -156,8 +156,7 @@ class ShelfEvaluator:
         return out
 
     def _averaged_present(self) -> tuple[int, ...]:
-        """The averaged GT ids annotated in at least one scored frame (all of them on frames 300..600);
-        all averaged ids when none is, so that the mean is NaN rather than over nobody."""
+        """The averaged GT ids annotated in a scored frame; all of them when none is (a NaN mean, not one over nobody)."""
         present = tuple(a for a in self.averaged_ids if self._rows["strict"].get(a))
         return present or self.averaged_ids
 
@@ -268,8 +267,7 @@ class ShelfProtocol:
         self._baseline: tuple[tuple[int, ...], dict] | None = None  # (frames, summary) of the last scoring
 
     def update(self, frame: Frame, result: FrameResult) -> None:
-        """Score one frame's poses3d (P, 23, 4) against the GT of frame.index; with track ids, record the id of
-        the prediction each annotated actor takes (identity switches of actors 1-3 in the summary)."""
+        """Score one frame's poses3d (P, 23, 4); with track ids, record the id of the pose each annotated actor takes."""
         pred = coco23_predictions_to_shelf15(result.poses3d)
         self.update_shelf15(frame.index, pred)
         if result.ids is not None:
@@ -289,17 +287,15 @@ class ShelfProtocol:
         """{"ours": ShelfEvaluator summary, "4d_association": the same for skel.txt (when given)}."""
         out = {"ours": self.evaluator.summary()}
         if self.identities.history:
-            out["tracking"] = {
-                **self.identities.summary(AVERAGED_ACTOR_IDS),
-                "actors": [a + 1 for a in AVERAGED_ACTOR_IDS],
-            }
+            actors = [a + 1 for a in AVERAGED_ACTOR_IDS]
+            out["tracking"] = {**self.identities.summary(AVERAGED_ACTOR_IDS), "actors": actors}
         if self.baseline_path is not None and self.gt_path is not None and self.predictions:
             frames = tuple(sorted(self.predictions))
             if self._baseline is None or self._baseline[0] != frames:
-                self._baseline = (
-                    frames,
-                    score_4dassoc_output(self.baseline_path, self.gt_path, self.first_frame, list(frames), self.alpha),
+                baseline = score_4dassoc_output(
+                    self.baseline_path, self.gt_path, self.first_frame, list(frames), self.alpha
                 )
+                self._baseline = (frames, baseline)
             out["4d_association"] = self._baseline[1]
         return out
 
