@@ -23,9 +23,6 @@ CROWDPOSE_JOINTS = len(CROWDPOSE14_TO_COCO23[CROWDPOSE14_TO_COCO23 >= 0]) + 2  #
 Converter = Callable[[dict], np.ndarray]
 
 
-# --- reading ----------------------------------------------------------------------------------------
-
-
 def _read_json(path: Path, what: str) -> Any:
     """The parsed JSON of a file, or a ValueError naming the file."""
     try:
@@ -231,9 +228,6 @@ def load_keypoint_dataset(
     if det_file is not None:
         records = load_detections(det_file, records, score_threshold=det_score_threshold)
     return records
-
-
-# --- writing ----------------------------------------------------------------------------------------
 
 
 def coco23_categories() -> list[dict]:

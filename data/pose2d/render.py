@@ -73,9 +73,6 @@ PART_GROUPS.flags.writeable = False
 OWNS.flags.writeable = False
 
 
-# --- looks ------------------------------------------------------------------------------------------
-
-
 @dataclass(frozen=True)
 class PersonLook:
     """How one person is painted: colours (7, 3) BGR of the part groups (shirt, sleeve, trousers, shin,
@@ -96,9 +93,6 @@ def sample_look(rng: np.random.Generator) -> PersonLook:
     hair = HAIR_TONES[rng.integers(len(HAIR_TONES))] * rng.uniform(0.8, 1.2)
     colours = np.clip(np.array([shirt, sleeve, trousers, shin, shoes, skin, hair]), 0, 255)
     return PersonLook(colours, rng.uniform(0.92, 1.08, len(PART_GROUPS)))
-
-
-# --- background pieces ------------------------------------------------------------------------------
 
 
 def smooth_field(rng: np.random.Generator, size: tuple[int, int], cells: int, low: float, high: float) -> np.ndarray:
@@ -142,6 +136,14 @@ def draw_ground_lines(image: np.ndarray, camera: Camera, ends: np.ndarray, colou
     uv = np.round(np.clip(camera.project(world), -1e5, 1e5))
     for (u0, v0), (u1, v1) in uv.astype(np.int64).tolist():
         cv2.line(image, (u0, v0), (u1, v1), colour, 1, cv2.LINE_AA)
+
+
+def grid_lines(xs: np.ndarray, ys: np.ndarray, extent: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Ground segments (S, 2, 2) of the lines x = xs over [ymin, ymax], and of y = ys over [xmin, xmax]."""
+    xmin, xmax, ymin, ymax = extent
+    along_y = np.stack([np.stack([xs, np.full_like(xs, ymin)], 1), np.stack([xs, np.full_like(xs, ymax)], 1)], 1)
+    along_x = np.stack([np.stack([np.full_like(ys, xmin), ys], 1), np.stack([np.full_like(ys, xmax), ys], 1)], 1)
+    return along_y, along_x
 
 
 def _draw_distorted_lines(image: np.ndarray, camera: Camera, world: np.ndarray, colour: tuple[float, ...]) -> None:
@@ -189,9 +191,6 @@ def draw_shadows(image: np.ndarray, camera: Camera, poses: np.ndarray) -> None:
             cv2.fillConvexPoly(mask, _fixed(camera.project(ring)), 1, cv2.LINE_8, SUBPIXEL_SHIFT)
     shade = mask > 0
     image[shade] = (image[shade] * 0.6).astype(np.uint8)
-
-
-# --- bodies -----------------------------------------------------------------------------------------
 
 
 def capsule_outlines(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray, n: int = 7) -> np.ndarray:
@@ -318,9 +317,6 @@ def _draw_face(image: np.ndarray, view: PersonView, skin: np.ndarray) -> None:
                 cv2.LINE_AA,
                 SUBPIXEL_SHIFT,
             )
-
-
-# --- labels -----------------------------------------------------------------------------------------
 
 
 def person_labels(

@@ -26,6 +26,7 @@ from data.pose2d.render import (
     draw_shadows,
     finish,
     grain_field,
+    grid_lines,
     paint_persons,
     person_labels,
     random_colour,
@@ -151,9 +152,7 @@ def _tile_lines(extent: tuple[float, float, float, float], tile: float) -> np.nd
     xmin, xmax, ymin, ymax = extent
     xs = tile * np.arange(math.ceil(xmin / tile), math.floor(xmax / tile) + 1)
     ys = tile * np.arange(math.ceil(ymin / tile), math.floor(ymax / tile) + 1)
-    along_y = np.stack([np.stack([xs, np.full_like(xs, ymin)], 1), np.stack([xs, np.full_like(xs, ymax)], 1)], 1)
-    along_x = np.stack([np.stack([np.full_like(ys, xmin), ys], 1), np.stack([np.full_like(ys, xmax), ys], 1)], 1)
-    return np.concatenate([along_y, along_x])
+    return np.concatenate(grid_lines(xs, ys, extent))
 
 
 def _ground_points(camera: Camera) -> tuple[np.ndarray, np.ndarray]:

@@ -30,6 +30,7 @@ from data.pose2d.render import (
     draw_shadows,
     finish,
     grain_field,
+    grid_lines,
     ipt,
     paint_persons,
     painting_order,
@@ -88,9 +89,6 @@ class SyntheticImage:
     background: np.ndarray | None = None
 
 
-# --- scene ------------------------------------------------------------------------------------------
-
-
 def sample_camera(rng: np.random.Generator, size: tuple[int, int]) -> Camera:
     """A low camera at (0, 0, h) looking along +x, focal 0.75..1.1 x width: people hide each other."""
     w, _ = size
@@ -144,9 +142,6 @@ def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions
     return poses
 
 
-# --- background -------------------------------------------------------------------------------------
-
-
 def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
     """A textured background (H, W, 3) uint8: a backdrop, and a tiled floor below the horizon."""
     w, h = camera.size
@@ -164,18 +159,8 @@ def _draw_floor_grid(image: np.ndarray, camera: Camera, rng: np.random.Generator
     tile = rng.uniform(0.4, 2.0)
     colour = random_colour(rng)
     near, far, side = 1.0, 30.0, 30.0
-    ys = np.arange(-side, side, tile)
-    xs = np.arange(near, far, tile)
-    ends = np.concatenate(
-        [
-            np.stack([np.stack([np.full_like(ys, near), ys], 1), np.stack([np.full_like(ys, far), ys], 1)], 1),
-            np.stack([np.stack([xs, np.full_like(xs, -side)], 1), np.stack([xs, np.full_like(xs, side)], 1)], 1),
-        ]
-    )
-    draw_ground_lines(image, camera, ends, colour)
-
-
-# --- images -----------------------------------------------------------------------------------------
+    along_y, along_x = grid_lines(np.arange(near, far, tile), np.arange(-side, side, tile), (near, far, -side, side))
+    draw_ground_lines(image, camera, np.concatenate([along_x, along_y]), colour)
 
 
 def synthetic_image(
@@ -236,9 +221,6 @@ def generate_dataset(
     return ann_path
 
 
-# --- preview ----------------------------------------------------------------------------------------
-
-
 def draw_annotations(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     """A copy of image (H, W, 3) with boxes (N, 4), limbs and joints (N, 23, 3): green seen, red hidden."""
     out = image.copy()
@@ -283,9 +265,6 @@ def save_preview(
     if not cv2.imwrite(str(out_png), grid):
         raise ValueError(f"{out_png}: cannot write the preview")
     return out_png
-
-
-# --- CLI --------------------------------------------------------------------------------------------
 
 
 def parse_size(text: str) -> tuple[int, int]:
