@@ -14,8 +14,7 @@ from data.keypoints import flip_permutation
 
 
 def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.25) -> tuple[np.ndarray, np.ndarray]:
-    """Box (4,) x, y, w, h -> crop centre (2,) and extent (2,) px: grown (never shrunk) to ``aspect`` = w / h,
-    then times ``padding``."""
+    """Box (4,) xywh -> crop centre (2,), extent (2,) px: grown to aspect w / h, then times padding."""
     x, y, w, h = np.asarray(box_xywh, dtype=np.float64).reshape(4)
     center = np.array([x + w / 2, y + h / 2])
     if w > aspect * h:
@@ -63,8 +62,7 @@ def flip_points(points: np.ndarray, image_width: int) -> np.ndarray:
 
 
 def flip_keypoints(keypoints: np.ndarray, image_width: int) -> np.ndarray:
-    """Keypoints (N, 23, 3) of every person in a horizontally flipped image -> (N, 23, 3): labelled x -> W - 1 - x,
-    left and right joints swapped."""
+    """Keypoints (N, 23, 3) of a horizontally flipped image: labelled x -> W - 1 - x, left and right swapped."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     out = keypoints[..., flip_permutation(), :].copy()
     labelled = out[..., 2] > 0

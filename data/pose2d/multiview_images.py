@@ -31,8 +31,7 @@ def generate_multiview_dataset(
     jpeg_quality: int = 92,
     progress: bool = True,
 ) -> Path:
-    """Write every camera's image of every frame of the scene of cfg (F x V JPEGs) and their COCO-23
-    annotations (the render's ground truth); returns the annotation path."""
+    """Write the F x V JPEGs of cfg's scene and their COCO-23 ground truth; returns the annotation path."""
     if not 1 <= jpeg_quality <= 100:
         raise ValueError(f"jpeg_quality={jpeg_quality!r} must be in 1..100")
     out_dir = Path(out_dir)

@@ -14,8 +14,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class JitterDraw:
-    """One crop's draw: centre shift as a fraction of the box (w, h), brightness, contrast and saturation
-    factors, hue shift in degrees."""
+    """One crop's draw: centre shift (fraction of box w, h), brightness, contrast, saturation, hue shift (deg)."""
 
     shift: tuple[float, float] = (0.0, 0.0)
     brightness: float = 1.0

@@ -75,8 +75,7 @@ OWNS.flags.writeable = False
 
 @dataclass(frozen=True)
 class PersonLook:
-    """How one person is painted: colours (7, 3) BGR of the part groups (shirt, sleeve, trousers, shin,
-    shoes, skin, hair) and a brightness tint (K,) per drawn part."""
+    """How one person is painted: colours (7, 3) BGR of the part groups, brightness tint (K,) per drawn part."""
 
     colours: np.ndarray
     tint: np.ndarray
@@ -119,8 +118,7 @@ def backdrop(rng: np.random.Generator, size: tuple[int, int]) -> np.ndarray:
 
 
 def draw_ground_lines(image: np.ndarray, camera: Camera, ends: np.ndarray, colour: tuple[float, ...]) -> None:
-    """Draw ground segments ends (S, 2, 2) (x, y on z = 0, m) in place on (H, W, 3), clipped in front of
-    the camera; under lens distortion in short pieces, those outside the calibrated view left out."""
+    """Draw ground segments (S, 2, 2) (x, y on z = 0, m) in place on (H, W, 3), clipped in front of the camera."""
     world = np.concatenate([ends, np.zeros(ends.shape[:2] + (1,))], axis=-1)
     depth = camera.depth(world)
     world = world[np.any(depth > NEAR_M, axis=1)]
@@ -194,8 +192,7 @@ def draw_shadows(image: np.ndarray, camera: Camera, poses: np.ndarray) -> None:
 
 
 def capsule_outlines(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray, n: int = 7) -> np.ndarray:
-    """Outlines of tapered 2D capsules (a circle when a = b) from a (..., 2) radius ra (...) to b (..., 2) radius
-    rb: (..., 2n, 2)."""
+    """Outlines (..., 2n, 2) of tapered 2D capsules from a (..., 2) radius ra (...) to b (..., 2) radius rb."""
     d = b - a
     length = np.linalg.norm(d, axis=-1, keepdims=True)
     unit = np.where(length > 1e-6, d / np.maximum(length, 1e-6), [1.0, 0.0])
@@ -228,8 +225,7 @@ class PersonView:
 
 
 def view_person(camera: Camera, joints: np.ndarray, light: np.ndarray) -> PersonView:
-    """Project one person's (23, 3) capsules plus a hair sphere, and its joints, into the camera; light (2,)
-    is the image direction the highlights move towards."""
+    """Project one person's (23, 3) capsules, hair and joints; light (2,) is the image direction of highlights."""
     ends_a, ends_b = (e[0] for e in body_capsules(joints[None]))
     head = ends_a[_HEAD]
     to_cam = camera.center - head
@@ -273,8 +269,7 @@ def painting_order(views: list[PersonView]) -> np.ndarray:
 def paint_persons(
     image: np.ndarray | None, views: list[PersonView], looks: list[PersonLook], size: tuple[int, int]
 ) -> np.ndarray:
-    """Paint persons far to near in place on image (H, W, 3) (None: only the owner map); returns the owner
-    map (H, W) uint16 of an image of size (w, h)."""
+    """Paint persons far to near in place on image (H, W, 3) or None; returns the owner map (H, W) uint16."""
     w, h = size
     owner = np.zeros((h, w), np.uint16)
     for p in painting_order(views):

@@ -47,8 +47,7 @@ MIN_DEPTH_M = 0.1  # a person with a joint closer to the camera plane than this 
 
 @dataclass(frozen=True)
 class Scene:
-    """What the renderer needs besides the persons: the rig, a seed, and the persons' area
-    (xmin, xmax, ymin, ymax) in metres, around which the floor is laid."""
+    """The rig, a seed, and the persons' area (xmin, xmax, ymin, ymax) m around which the floor is laid."""
 
     rig: Rig
     seed: int
@@ -75,8 +74,7 @@ def person_look(seed: int, person_id: int) -> PersonLook:
 def render_view(
     scene: Scene, view: int, frame: int, poses: np.ndarray, ids: np.ndarray, paint: bool = True
 ) -> RenderedView:
-    """Render view ``view`` of frame number ``frame`` with persons (P, 23, 3) (world, m) of ids (P,);
-    paint=False computes only the owner map and the labels (no pixels)."""
+    """Render one view of a frame with persons (P, 23, 3) (world, m) of ids (P,); paint=False: labels only."""
     camera = scene.rig[view]
     poses = np.asarray(poses, dtype=np.float64)
     shown = np.flatnonzero([_paintable(camera, joints) for joints in poses])

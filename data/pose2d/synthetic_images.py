@@ -78,10 +78,7 @@ class ImageOptions:
 
 @dataclass
 class SyntheticImage:
-    """One rendered image (H, W, 3) uint8 BGR, its keypoints (N, 23, 3) x, y, v and boxes (N, 4) x, y, w, h.
-
-    background (H, W, 3) uint8 is the same image with no person drawn, when asked for (else None).
-    """
+    """Image (H, W, 3) uint8 BGR, keypoints (N, 23, 3) x, y, v, boxes (N, 4) xywh, background or None."""
 
     image: np.ndarray
     keypoints: np.ndarray

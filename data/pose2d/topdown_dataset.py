@@ -178,8 +178,7 @@ class TopDownDataset(Dataset):
 
 
 class EpochSampler(Sampler[int]):
-    """A seeded permutation of range(size) per epoch (identity without shuffle), sharded as DistributedSampler
-    shards it, that can start part-way through an epoch (exact resumption)."""
+    """A seeded per-epoch permutation (identity without shuffle), sharded like DistributedSampler, resumable."""
 
     def __init__(self, size: int, seed: int = 0, shuffle: bool = True, rank: int = 0, world_size: int = 1) -> None:
         self.size, self.seed, self.shuffle = int(size), int(seed), bool(shuffle)

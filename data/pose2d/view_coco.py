@@ -36,8 +36,7 @@ def ground_truth_records(frames: Sequence[Frame], rig: Rig) -> list[ImageRecord]
 
 
 def ground_truth_document(frames: Sequence[Frame], rig: Rig) -> dict:
-    """The COCO-23 keypoint document (images with frame and camera, annotations, categories) of
-    :func:`ground_truth_records`."""
+    """The COCO-23 keypoint document (images with frame and camera) of :func:`ground_truth_records`."""
     doc = coco23_document(ground_truth_records(frames, rig))
     where = [(int(frame.index), cam.name) for frame in frames for cam in rig]
     for image, (frame, camera) in zip(doc["images"], where):
