@@ -1,8 +1,4 @@
-"""COCO OKS keypoint AP/AR through pycocotools, on COCO-23 or its body (COCO-17) or foot (6 joints) subset.
-
-A subset is handed to pycocotools as the whole skeleton, as COCO-WholeBody evaluates its parts: areas stay the
-person's, a person with no labelled joint in the subset is ignored, a detection's area spans all 23 keypoints.
-"""
+"""COCO OKS keypoint AP/AR through pycocotools, on COCO-23 or its body (COCO-17) or foot (6 joints) subset."""
 
 from __future__ import annotations
 

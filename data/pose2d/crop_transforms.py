@@ -1,8 +1,4 @@
-"""Top-down crop geometry and augmentation: box -> crop, crop affine, horizontal flip.
-
-Pixel centres at integers (``cv2.warpAffine``'s and ``cv2.flip``'s convention, also models/heatmap_codec.py's):
-a flip maps x -> W - 1 - x, so flipping twice is the identity; a crop's centre goes to ((w - 1) / 2, (h - 1) / 2).
-"""
+"""Top-down crop geometry and augmentation, pixel centres at integers (cv2's convention: flip x -> W - 1 - x)."""
 
 from __future__ import annotations
 
@@ -27,11 +23,7 @@ def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.
 def crop_affine(
     center: np.ndarray, scale: np.ndarray, rotation_deg: float, out_size: tuple[int, int], inverse: bool = False
 ) -> np.ndarray:
-    """(2, 3) affine from image pixels to crop pixels of out_size (w, h) (or back with ``inverse``).
-
-    ``out = S R (p - center) + ((w - 1) / 2, (h - 1) / 2)``, S = diag(w / scale_w, h / scale_h), R turning the
-    content counter-clockwise by ``rotation_deg`` as ``cv2.getRotationMatrix2D``; center (2,), scale (2,) px.
-    """
+    """(2, 3) affine image -> crop of out_size (w, h) (or back): S R (p - center) + crop centre, R as cv2's."""
     center = np.asarray(center, dtype=np.float64).reshape(2)
     scale = np.asarray(scale, dtype=np.float64).reshape(2)
     out_w, out_h = out_size

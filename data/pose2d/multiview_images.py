@@ -1,11 +1,4 @@
-"""Synthetic multi-view crowd images with COCO-23 labels, the distribution dataset=synthetic render=true uses.
-
-The 3D scene of :mod:`data.synthetic` as every camera sees it (:mod:`data.pose2d.scene_render`).
-
-CLI: ``python -m data.pose2d.multiview_images --out DIR --num-frames N --seed S [--persons 10] [--cameras 5]
-[--size 1280x720] [--focal PX] [--rig ring|CALIBRATION [--area XMIN XMAX YMIN YMAX]] [--density 0.3]
-[--render-seed R]`` writes ``DIR/images/<frame:06d>_<camera>.jpg`` and ``DIR/annotations.json`` (COCO-23).
-"""
+"""Synthetic multi-view crowd images with COCO-23 labels (dataset=synthetic render=true), CLI ``--help``."""
 
 from __future__ import annotations
 

@@ -1,8 +1,4 @@
-"""Training-time jitter beyond the crop geometry: person-box shift (detector error) and colour.
-
-Both are drawn from their own random stream (seeded like the geometric draws, plus a stream tag), so
-turning them on leaves the scale, rotation and flip of every sample unchanged.
-"""
+"""Training-time box shift and colour jitter, from their own random stream (geometric draws unchanged)."""
 
 from __future__ import annotations
 

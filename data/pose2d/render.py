@@ -1,8 +1,7 @@
 """The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels.
 
-Persons are painted far to near into an owner map (H, W) uint16 (0 = no body, else 1 + person x parts + part).
-A joint is v = 2 when the pixel under it belongs to its own person's part that carries it and no other body is
-in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image; a box is that of the painted pixels.
+Owner map (H, W) uint16: 0 = no body, else 1 + person x parts + part. A joint is v = 2 when its own part is on
+top there and no body is in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image.
 """
 
 from __future__ import annotations
@@ -56,10 +55,7 @@ def _part_groups() -> np.ndarray:
 
 
 def _owns(groups: np.ndarray) -> np.ndarray:
-    """Which joints each drawn part of (K,) groups carries: (K, 23) bool.
-
-    A limb capsule carries its two ends, the torso its corners, the head the face, the hair the ears.
-    """
+    """Which joints (K, 23) bool each drawn part carries: limb ends, torso corners, the face, the ears (hair)."""
     owned = [(a, b) for a, b in LIMBS] + [(5, 6, 11, 12), (0, 1, 2, 3, 4), (3, 4)]
     owns = np.zeros((len(groups), NUM_JOINTS), dtype=bool)
     for k, joints in enumerate(owned):
@@ -211,9 +207,7 @@ def _fixed(points: np.ndarray) -> np.ndarray:
 
 @dataclass
 class PersonView:
-    """One person as the camera sees it: shading layer outlines (K, L, 2n, 2) fixed point, part depths
-    (K,), joint pixels uv (23, 2), face joints seen (23,), facing the camera, eye dot radius (px), mean
-    joint depth (m)."""
+    """A person in a camera: outlines (K, L, 2n, 2), part depths (K,), uv (23, 2), face_seen (23,), dot size."""
 
     outlines: np.ndarray
     depth: np.ndarray

@@ -1,8 +1,6 @@
-"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies, and its ground-truth 2D.
+"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies and its ground-truth 2D.
 
-A static scene (textured floor on z = 0, a backdrop per camera, a sun); a person's look depends only on
-(seed, person id) and every image only on (seed, frame, view). A person is painted only when all its joints are
-in front of the camera (and inside the calibrated field of view under distortion).
+A person's look depends only on (seed, person id), an image only on (seed, frame, view).
 """
 
 from __future__ import annotations
@@ -56,9 +54,7 @@ class Scene:
 
 @dataclass
 class RenderedView:
-    """One camera's render of P persons: image (H, W, 3) uint8 BGR (None when only labels were asked
-    for), owner map (H, W) uint16 (0 = no body, else 1 + person row x parts + part, render.paint_persons),
-    keypoints (P, 23, 3) x, y, v, boxes (P, 4)."""
+    """One camera's render of P persons: image or None, owner (H, W) by person row, keypoints (P, 23, 3), boxes."""
 
     image: np.ndarray | None
     owner: np.ndarray

@@ -1,11 +1,4 @@
-"""Synthetic crowded images with COCO-23 keypoints, for training the 2D model on a CPU.
-
-A crowd of :mod:`data.synthetic` seen by one low camera over a random background, drawn by
-:mod:`data.pose2d.render`.
-
-CLI: ``python -m data.pose2d.synthetic_images --out DIR --num-images N --seed S [--size 640x480]`` writes
-``DIR/images/NNNNNN.jpg`` and ``DIR/annotations.json`` (read with ``coco_keypoints.load_coco23``).
-"""
+"""Synthetic crowded images with COCO-23 keypoints for training the 2D model on a CPU (CLI: ``--help``)."""
 
 from __future__ import annotations
 
@@ -49,9 +42,7 @@ MIN_SPACING_M = 0.5
 
 @dataclass(frozen=True)
 class ImageOptions:
-    """Options of the synthetic images: size (w, h) px, persons (min, max) per image, person
-    height_px (min, max) for a stature of 1.7 m (None: 1/6 to 5/8 of the image height, 80-300 px at
-    480), JPEG quality."""
+    """Image size (w, h), persons (min, max), height_px (min, max) at 1.7 m (None: H/6..5H/8), JPEG quality."""
 
     size: tuple[int, int] = (640, 480)
     persons: tuple[int, int] = (4, 12)
