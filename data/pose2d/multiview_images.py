@@ -1,4 +1,4 @@
-"""Synthetic multi-view crowd images with COCO-23 labels (dataset=synthetic render=true), CLI ``--help``."""
+"""Synthetic multi-view crowd images with COCO-23 labels (dataset=synthetic render=true)."""
 
 from __future__ import annotations
 
@@ -67,13 +67,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--focal", type=float, help="focal length of the ring (px; default 1000 x width / 1280)")
     parser.add_argument("--rig", default="ring", help="'ring', or a calibration file/folder (its sizes are used)")
-    parser.add_argument(
-        "--area",
-        type=float,
-        nargs=4,
-        metavar=("XMIN", "XMAX", "YMIN", "YMAX"),
-        help="persons' area (m), for a real rig",
-    )
+    area = ("XMIN", "XMAX", "YMIN", "YMAX")
+    parser.add_argument("--area", type=float, nargs=4, metavar=area, help="persons' area (m), for a real rig")
     parser.add_argument("--jpeg-quality", type=int, default=92)
     parser.add_argument("--preview", type=Path, help="also save a PNG grid of the first 6 images here")
     args = parser.parse_args(argv)

@@ -296,16 +296,8 @@ def _draw_face(image: np.ndarray, view: PersonView, skin: np.ndarray) -> None:
     """Eyes and nose dots on a head that faces the camera, in place."""
     for j, colour, size in ((1, (30, 30, 30), 1.0), (2, (30, 30, 30), 1.0), (0, (skin * 0.7).tolist(), 1.4)):
         if view.face_seen[j]:
-            centre = _fixed(view.uv[j])
-            cv2.circle(
-                image,
-                (int(centre[0]), int(centre[1])),
-                int(round(view.dot_px * size * (1 << SUBPIXEL_SHIFT))),
-                colour,
-                -1,
-                cv2.LINE_AA,
-                SUBPIXEL_SHIFT,
-            )
+            centre, radius = _fixed(view.uv[j]).tolist(), int(round(view.dot_px * size * (1 << SUBPIXEL_SHIFT)))
+            cv2.circle(image, tuple(centre), radius, colour, -1, cv2.LINE_AA, SUBPIXEL_SHIFT)
 
 
 def person_labels(

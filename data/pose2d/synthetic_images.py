@@ -1,4 +1,4 @@
-"""Synthetic crowded images with COCO-23 keypoints for training the 2D model on a CPU (CLI: ``--help``)."""
+"""Synthetic crowded images with COCO-23 keypoints for training the 2D model on a CPU."""
 
 from __future__ import annotations
 
@@ -220,13 +220,9 @@ def draw_annotations(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray
                 cv2.line(out, ipt(kps[a, :2]), ipt(kps[b, :2]), (0, 255, 255), 1, cv2.LINE_AA)
         for x, y, v in kps:
             if v > 0:
+                seen = v >= 2
                 cv2.circle(
-                    out,
-                    ipt(np.array([x, y])),
-                    3,
-                    (0, 220, 0) if v >= 2 else (0, 0, 255),
-                    -1 if v >= 2 else 1,
-                    cv2.LINE_AA,
+                    out, ipt(np.array([x, y])), 3, (0, 220, 0) if seen else (0, 0, 255), -1 if seen else 1, cv2.LINE_AA
                 )
     return out
 
@@ -272,13 +268,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--size", type=parse_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
     parser.add_argument("--persons", type=int, nargs=2, default=(4, 12), metavar=("MIN", "MAX"))
-    parser.add_argument(
-        "--height-px",
-        type=float,
-        nargs=2,
-        metavar=("MIN", "MAX"),
-        help="person height range in pixels (default: 1/6 to 5/8 of the image height)",
-    )
+    what = "person height range in pixels (default: 1/6 to 5/8 of the image height)"
+    parser.add_argument("--height-px", type=float, nargs=2, metavar=("MIN", "MAX"), help=what)
     parser.add_argument("--preview", type=Path, help="also save a PNG grid of the first 6 images here")
     args = parser.parse_args(argv)
     if args.num_images < 1:

@@ -141,14 +141,7 @@ class TopDownDataset(Dataset):
             center = flip_points(center, image.shape[1])
         scale = scale * scale_mult
         affine = crop_affine(center, scale, rotation, self.input_size)
-        crop = cv2.warpAffine(
-            image,
-            affine,
-            self.input_size,
-            flags=cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_CONSTANT,
-            borderValue=(0, 0, 0),
-        )
+        crop = cv2.warpAffine(image, affine, self.input_size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         if jitter is not None:
             crop = jitter_colour(crop, jitter)
         if own >= 0:
