@@ -1,8 +1,4 @@
-"""COCO OKS keypoint AP/AR through pycocotools, on COCO-23 or its body (COCO-17) or foot (6 joints) subset.
-
-A subset is handed to pycocotools as the whole skeleton, as COCO-WholeBody evaluates its parts: areas stay the
-person's, a person with no labelled joint in the subset is ignored, a detection's area spans all 23 keypoints.
-"""
+"""COCO OKS keypoint AP/AR through pycocotools, on COCO-23 or its body (COCO-17) or foot (6 joints) subset."""
 
 from __future__ import annotations
 
@@ -29,8 +25,7 @@ _CATEGORIES = [{"id": 1, "name": "person", "supercategory": "person"}]
 def evaluate_keypoints(
     gt: Sequence[ImageRecord] | dict, predictions: Iterable[dict], subset: str = "all"
 ) -> dict[str, float]:
-    """COCO OKS AP/AR of predictions ({image_id, keypoints (23, 3) or 69 numbers, score}) on one subset -> the ten
-    STAT_NAMES stats (-1 where empty); ``gt``: ImageRecords or a COCO dict (COCO-23, or COCO-17 + ``foot_kpts``)."""
+    """COCO OKS AP/AR (10 STAT_NAMES, -1 where empty) of predictions on one subset; gt: records or a COCO dict."""
     if subset not in SUBSET_JOINTS:
         raise ValueError(f"subset must be one of {sorted(SUBSET_JOINTS)}, got {subset!r}")
     joints = np.array(SUBSET_JOINTS[subset])

@@ -23,9 +23,6 @@ CROWDPOSE_JOINTS = len(CROWDPOSE14_TO_COCO23[CROWDPOSE14_TO_COCO23 >= 0]) + 2  #
 Converter = Callable[[dict], np.ndarray]
 
 
-# --- reading ----------------------------------------------------------------------------------------
-
-
 def _read_json(path: Path, what: str) -> Any:
     """The parsed JSON of a file, or a ValueError naming the file."""
     try:
@@ -183,8 +180,7 @@ def load_crowdpose(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool
 def load_detections(
     det_file: str | Path, records: list[ImageRecord], score_threshold: float = 0.0, category_id: int = 1
 ) -> list[ImageRecord]:
-    """New records with det_boxes (M, 4) / det_scores (M,) from a COCO detection-results file: other categories,
-    scores below score_threshold and unknown images dropped."""
+    """Records with det_boxes (M, 4) / det_scores (M,) of a COCO detection file's category_id >= score_threshold."""
     dets = read_coco_detections(det_file)  # every entry checked; a bad one is named
     keep = (dets.category_ids == category_id) & (dets.scores >= score_threshold)
     found: dict[int, list[tuple[np.ndarray, float]]] = {r.image_id: [] for r in records}
@@ -231,9 +227,6 @@ def load_keypoint_dataset(
     if det_file is not None:
         records = load_detections(det_file, records, score_threshold=det_score_threshold)
     return records
-
-
-# --- writing ----------------------------------------------------------------------------------------
 
 
 def coco23_categories() -> list[dict]:
@@ -285,6 +278,5 @@ def _file_name(record: ImageRecord, image_root: str | Path | None) -> str:
 def write_coco_keypoints(
     path: str | Path, records: list[ImageRecord], image_root: str | Path | None = None, info: dict | None = None
 ) -> None:
-    """Write records as a COCO-23 annotation file (atomic, ids 1..N), readable by :func:`load_coco23`; the
-    ``labelled`` mask is not stored."""
+    """Write records as a COCO-23 annotation file (atomic, ids 1..N; ``labelled`` not stored)."""
     atomic_write_text(path, json.dumps(coco23_document(records, image_root, info)))

@@ -1,8 +1,4 @@
-"""Top-down crop geometry and augmentation: box -> crop, crop affine, horizontal flip.
-
-Pixel centres at integers (``cv2.warpAffine``'s and ``cv2.flip``'s convention, also models/heatmap_codec.py's):
-a flip maps x -> W - 1 - x, so flipping twice is the identity; a crop's centre goes to ((w - 1) / 2, (h - 1) / 2).
-"""
+"""Top-down crop geometry and augmentation, pixel centres at integers (cv2's convention: flip x -> W - 1 - x)."""
 
 from __future__ import annotations
 
@@ -14,8 +10,7 @@ from data.keypoints import flip_permutation
 
 
 def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.25) -> tuple[np.ndarray, np.ndarray]:
-    """Box (4,) x, y, w, h -> crop centre (2,) and extent (2,) px: grown (never shrunk) to ``aspect`` = w / h,
-    then times ``padding``."""
+    """Box (4,) xywh -> crop centre (2,), extent (2,) px: grown to aspect w / h, then times padding."""
     x, y, w, h = np.asarray(box_xywh, dtype=np.float64).reshape(4)
     center = np.array([x + w / 2, y + h / 2])
     if w > aspect * h:
@@ -28,11 +23,7 @@ def box_to_center_scale(box_xywh: np.ndarray, aspect: float, padding: float = 1.
 def crop_affine(
     center: np.ndarray, scale: np.ndarray, rotation_deg: float, out_size: tuple[int, int], inverse: bool = False
 ) -> np.ndarray:
-    """(2, 3) affine from image pixels to crop pixels of out_size (w, h) (or back with ``inverse``).
-
-    ``out = S R (p - center) + ((w - 1) / 2, (h - 1) / 2)``, S = diag(w / scale_w, h / scale_h), R turning the
-    content counter-clockwise by ``rotation_deg`` as ``cv2.getRotationMatrix2D``; center (2,), scale (2,) px.
-    """
+    """(2, 3) affine image -> crop of out_size (w, h) (or back): S R (p - center) + crop centre, R as cv2's."""
     center = np.asarray(center, dtype=np.float64).reshape(2)
     scale = np.asarray(scale, dtype=np.float64).reshape(2)
     out_w, out_h = out_size
@@ -63,8 +54,7 @@ def flip_points(points: np.ndarray, image_width: int) -> np.ndarray:
 
 
 def flip_keypoints(keypoints: np.ndarray, image_width: int) -> np.ndarray:
-    """Keypoints (N, 23, 3) of every person in a horizontally flipped image -> (N, 23, 3): labelled x -> W - 1 - x,
-    left and right joints swapped."""
+    """Keypoints (N, 23, 3) of a horizontally flipped image: labelled x -> W - 1 - x, left and right swapped."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     out = keypoints[..., flip_permutation(), :].copy()
     labelled = out[..., 2] > 0

@@ -1,11 +1,4 @@
-"""Synthetic multi-view crowd images with COCO-23 labels, the distribution dataset=synthetic render=true uses.
-
-The 3D scene of :mod:`data.synthetic` as every camera sees it (:mod:`data.pose2d.scene_render`).
-
-CLI: ``python -m data.pose2d.multiview_images --out DIR --num-frames N --seed S [--persons 10] [--cameras 5]
-[--size 1280x720] [--focal PX] [--rig ring|CALIBRATION [--area XMIN XMAX YMIN YMAX]] [--density 0.3]
-[--render-seed R]`` writes ``DIR/images/<frame:06d>_<camera>.jpg`` and ``DIR/annotations.json`` (COCO-23).
-"""
+"""Synthetic multi-view crowd images with COCO-23 labels (dataset=synthetic render=true)."""
 
 from __future__ import annotations
 
@@ -31,8 +24,7 @@ def generate_multiview_dataset(
     jpeg_quality: int = 92,
     progress: bool = True,
 ) -> Path:
-    """Write every camera's image of every frame of the scene of cfg (F x V JPEGs) and their COCO-23
-    annotations (the render's ground truth); returns the annotation path."""
+    """Write the F x V JPEGs of cfg's scene and their COCO-23 ground truth; returns the annotation path."""
     if not 1 <= jpeg_quality <= 100:
         raise ValueError(f"jpeg_quality={jpeg_quality!r} must be in 1..100")
     out_dir = Path(out_dir)
@@ -75,13 +67,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--focal", type=float, help="focal length of the ring (px; default 1000 x width / 1280)")
     parser.add_argument("--rig", default="ring", help="'ring', or a calibration file/folder (its sizes are used)")
-    parser.add_argument(
-        "--area",
-        type=float,
-        nargs=4,
-        metavar=("XMIN", "XMAX", "YMIN", "YMAX"),
-        help="persons' area (m), for a real rig",
-    )
+    area = ("XMIN", "XMAX", "YMIN", "YMAX")
+    parser.add_argument("--area", type=float, nargs=4, metavar=area, help="persons' area (m), for a real rig")
     parser.add_argument("--jpeg-quality", type=int, default=92)
     parser.add_argument("--preview", type=Path, help="also save a PNG grid of the first 6 images here")
     args = parser.parse_args(argv)

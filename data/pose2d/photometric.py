@@ -1,8 +1,4 @@
-"""Training-time jitter beyond the crop geometry: person-box shift (detector error) and colour.
-
-Both are drawn from their own random stream (seeded like the geometric draws, plus a stream tag), so
-turning them on leaves the scale, rotation and flip of every sample unchanged.
-"""
+"""Training-time box shift and colour jitter, from their own random stream (geometric draws unchanged)."""
 
 from __future__ import annotations
 
@@ -14,8 +10,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class JitterDraw:
-    """One crop's draw: centre shift as a fraction of the box (w, h), brightness, contrast and saturation
-    factors, hue shift in degrees."""
+    """One crop's draw: centre shift (fraction of box w, h), brightness, contrast, saturation, hue shift (deg)."""
 
     shift: tuple[float, float] = (0.0, 0.0)
     brightness: float = 1.0

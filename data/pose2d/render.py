@@ -1,8 +1,7 @@
 """The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels.
 
-Persons are painted far to near into an owner map (H, W) uint16 (0 = no body, else 1 + person x parts + part).
-A joint is v = 2 when the pixel under it belongs to its own person's part that carries it and no other body is
-in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image; a box is that of the painted pixels.
+Owner map (H, W) uint16: 0 = no body, else 1 + person x parts + part. A joint is v = 2 when its own part is on
+top there and no body is in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image.
 """
 
 from __future__ import annotations
@@ -56,10 +55,7 @@ def _part_groups() -> np.ndarray:
 
 
 def _owns(groups: np.ndarray) -> np.ndarray:
-    """Which joints each drawn part of (K,) groups carries: (K, 23) bool.
-
-    A limb capsule carries its two ends, the torso its corners, the head the face, the hair the ears.
-    """
+    """Which joints (K, 23) bool each drawn part carries: limb ends, torso corners, the face, the ears (hair)."""
     owned = [(a, b) for a, b in LIMBS] + [(5, 6, 11, 12), (0, 1, 2, 3, 4), (3, 4)]
     owns = np.zeros((len(groups), NUM_JOINTS), dtype=bool)
     for k, joints in enumerate(owned):
@@ -73,13 +69,9 @@ PART_GROUPS.flags.writeable = False
 OWNS.flags.writeable = False
 
 
-# --- looks ------------------------------------------------------------------------------------------
-
-
 @dataclass(frozen=True)
 class PersonLook:
-    """How one person is painted: colours (7, 3) BGR of the part groups (shirt, sleeve, trousers, shin,
-    shoes, skin, hair) and a brightness tint (K,) per drawn part."""
+    """How one person is painted: colours (7, 3) BGR of the part groups, brightness tint (K,) per drawn part."""
 
     colours: np.ndarray
     tint: np.ndarray
@@ -96,9 +88,6 @@ def sample_look(rng: np.random.Generator) -> PersonLook:
     hair = HAIR_TONES[rng.integers(len(HAIR_TONES))] * rng.uniform(0.8, 1.2)
     colours = np.clip(np.array([shirt, sleeve, trousers, shin, shoes, skin, hair]), 0, 255)
     return PersonLook(colours, rng.uniform(0.92, 1.08, len(PART_GROUPS)))
-
-
-# --- background pieces ------------------------------------------------------------------------------
 
 
 def smooth_field(rng: np.random.Generator, size: tuple[int, int], cells: int, low: float, high: float) -> np.ndarray:
@@ -125,8 +114,7 @@ def backdrop(rng: np.random.Generator, size: tuple[int, int]) -> np.ndarray:
 
 
 def draw_ground_lines(image: np.ndarray, camera: Camera, ends: np.ndarray, colour: tuple[float, ...]) -> None:
-    """Draw ground segments ends (S, 2, 2) (x, y on z = 0, m) in place on (H, W, 3), clipped in front of
-    the camera; under lens distortion in short pieces, those outside the calibrated view left out."""
+    """Draw ground segments (S, 2, 2) (x, y on z = 0, m) in place on (H, W, 3), clipped in front of the camera."""
     world = np.concatenate([ends, np.zeros(ends.shape[:2] + (1,))], axis=-1)
     depth = camera.depth(world)
     world = world[np.any(depth > NEAR_M, axis=1)]
@@ -142,6 +130,14 @@ def draw_ground_lines(image: np.ndarray, camera: Camera, ends: np.ndarray, colou
     uv = np.round(np.clip(camera.project(world), -1e5, 1e5))
     for (u0, v0), (u1, v1) in uv.astype(np.int64).tolist():
         cv2.line(image, (u0, v0), (u1, v1), colour, 1, cv2.LINE_AA)
+
+
+def grid_lines(xs: np.ndarray, ys: np.ndarray, extent: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Ground segments (S, 2, 2) of the lines x = xs over [ymin, ymax], and of y = ys over [xmin, xmax]."""
+    xmin, xmax, ymin, ymax = extent
+    along_y = np.stack([np.stack([xs, np.full_like(xs, ymin)], 1), np.stack([xs, np.full_like(xs, ymax)], 1)], 1)
+    along_x = np.stack([np.stack([np.full_like(ys, xmin), ys], 1), np.stack([np.full_like(ys, xmax), ys], 1)], 1)
+    return along_y, along_x
 
 
 def _draw_distorted_lines(image: np.ndarray, camera: Camera, world: np.ndarray, colour: tuple[float, ...]) -> None:
@@ -191,12 +187,8 @@ def draw_shadows(image: np.ndarray, camera: Camera, poses: np.ndarray) -> None:
     image[shade] = (image[shade] * 0.6).astype(np.uint8)
 
 
-# --- bodies -----------------------------------------------------------------------------------------
-
-
 def capsule_outlines(a: np.ndarray, b: np.ndarray, ra: np.ndarray, rb: np.ndarray, n: int = 7) -> np.ndarray:
-    """Outlines of tapered 2D capsules (a circle when a = b) from a (..., 2) radius ra (...) to b (..., 2) radius
-    rb: (..., 2n, 2)."""
+    """Outlines (..., 2n, 2) of tapered 2D capsules from a (..., 2) radius ra (...) to b (..., 2) radius rb."""
     d = b - a
     length = np.linalg.norm(d, axis=-1, keepdims=True)
     unit = np.where(length > 1e-6, d / np.maximum(length, 1e-6), [1.0, 0.0])
@@ -215,9 +207,7 @@ def _fixed(points: np.ndarray) -> np.ndarray:
 
 @dataclass
 class PersonView:
-    """One person as the camera sees it: shading layer outlines (K, L, 2n, 2) fixed point, part depths
-    (K,), joint pixels uv (23, 2), face joints seen (23,), facing the camera, eye dot radius (px), mean
-    joint depth (m)."""
+    """A person in a camera: outlines (K, L, 2n, 2), part depths (K,), uv (23, 2), face_seen (23,), dot size."""
 
     outlines: np.ndarray
     depth: np.ndarray
@@ -229,8 +219,7 @@ class PersonView:
 
 
 def view_person(camera: Camera, joints: np.ndarray, light: np.ndarray) -> PersonView:
-    """Project one person's (23, 3) capsules plus a hair sphere, and its joints, into the camera; light (2,)
-    is the image direction the highlights move towards."""
+    """Project one person's (23, 3) capsules, hair and joints; light (2,) is the image direction of highlights."""
     ends_a, ends_b = (e[0] for e in body_capsules(joints[None]))
     head = ends_a[_HEAD]
     to_cam = camera.center - head
@@ -274,8 +263,7 @@ def painting_order(views: list[PersonView]) -> np.ndarray:
 def paint_persons(
     image: np.ndarray | None, views: list[PersonView], looks: list[PersonLook], size: tuple[int, int]
 ) -> np.ndarray:
-    """Paint persons far to near in place on image (H, W, 3) (None: only the owner map); returns the owner
-    map (H, W) uint16 of an image of size (w, h)."""
+    """Paint persons far to near in place on image (H, W, 3) or None; returns the owner map (H, W) uint16."""
     w, h = size
     owner = np.zeros((h, w), np.uint16)
     for p in painting_order(views):
@@ -308,19 +296,8 @@ def _draw_face(image: np.ndarray, view: PersonView, skin: np.ndarray) -> None:
     """Eyes and nose dots on a head that faces the camera, in place."""
     for j, colour, size in ((1, (30, 30, 30), 1.0), (2, (30, 30, 30), 1.0), (0, (skin * 0.7).tolist(), 1.4)):
         if view.face_seen[j]:
-            centre = _fixed(view.uv[j])
-            cv2.circle(
-                image,
-                (int(centre[0]), int(centre[1])),
-                int(round(view.dot_px * size * (1 << SUBPIXEL_SHIFT))),
-                colour,
-                -1,
-                cv2.LINE_AA,
-                SUBPIXEL_SHIFT,
-            )
-
-
-# --- labels -----------------------------------------------------------------------------------------
+            centre, radius = _fixed(view.uv[j]).tolist(), int(round(view.dot_px * size * (1 << SUBPIXEL_SHIFT)))
+            cv2.circle(image, tuple(centre), radius, colour, -1, cv2.LINE_AA, SUBPIXEL_SHIFT)
 
 
 def person_labels(

@@ -1,8 +1,6 @@
-"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies, and its ground-truth 2D.
+"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies and its ground-truth 2D.
 
-A static scene (textured floor on z = 0, a backdrop per camera, a sun); a person's look depends only on
-(seed, person id) and every image only on (seed, frame, view). A person is painted only when all its joints are
-in front of the camera (and inside the calibrated field of view under distortion).
+A person's look depends only on (seed, person id), an image only on (seed, frame, view).
 """
 
 from __future__ import annotations
@@ -26,6 +24,7 @@ from data.pose2d.render import (
     draw_shadows,
     finish,
     grain_field,
+    grid_lines,
     paint_persons,
     person_labels,
     random_colour,
@@ -46,8 +45,7 @@ MIN_DEPTH_M = 0.1  # a person with a joint closer to the camera plane than this 
 
 @dataclass(frozen=True)
 class Scene:
-    """What the renderer needs besides the persons: the rig, a seed, and the persons' area
-    (xmin, xmax, ymin, ymax) in metres, around which the floor is laid."""
+    """The rig, a seed, and the persons' area (xmin, xmax, ymin, ymax) m around which the floor is laid."""
 
     rig: Rig
     seed: int
@@ -56,9 +54,7 @@ class Scene:
 
 @dataclass
 class RenderedView:
-    """One camera's render of P persons: image (H, W, 3) uint8 BGR (None when only labels were asked
-    for), owner map (H, W) uint16 (0 = no body, else 1 + person row x parts + part, render.paint_persons),
-    keypoints (P, 23, 3) x, y, v, boxes (P, 4)."""
+    """One camera's render of P persons: image or None, owner (H, W) by person row, keypoints (P, 23, 3), boxes."""
 
     image: np.ndarray | None
     owner: np.ndarray
@@ -74,8 +70,7 @@ def person_look(seed: int, person_id: int) -> PersonLook:
 def render_view(
     scene: Scene, view: int, frame: int, poses: np.ndarray, ids: np.ndarray, paint: bool = True
 ) -> RenderedView:
-    """Render view ``view`` of frame number ``frame`` with persons (P, 23, 3) (world, m) of ids (P,);
-    paint=False computes only the owner map and the labels (no pixels)."""
+    """Render one view of a frame with persons (P, 23, 3) (world, m) of ids (P,); paint=False: labels only."""
     camera = scene.rig[view]
     poses = np.asarray(poses, dtype=np.float64)
     shown = np.flatnonzero([_paintable(camera, joints) for joints in poses])
@@ -151,9 +146,7 @@ def _tile_lines(extent: tuple[float, float, float, float], tile: float) -> np.nd
     xmin, xmax, ymin, ymax = extent
     xs = tile * np.arange(math.ceil(xmin / tile), math.floor(xmax / tile) + 1)
     ys = tile * np.arange(math.ceil(ymin / tile), math.floor(ymax / tile) + 1)
-    along_y = np.stack([np.stack([xs, np.full_like(xs, ymin)], 1), np.stack([xs, np.full_like(xs, ymax)], 1)], 1)
-    along_x = np.stack([np.stack([np.full_like(ys, xmin), ys], 1), np.stack([np.full_like(ys, xmax), ys], 1)], 1)
-    return np.concatenate([along_y, along_x])
+    return np.concatenate(grid_lines(xs, ys, extent))
 
 
 def _ground_points(camera: Camera) -> tuple[np.ndarray, np.ndarray]:

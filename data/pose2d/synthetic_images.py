@@ -1,11 +1,4 @@
-"""Synthetic crowded images with COCO-23 keypoints, for training the 2D model on a CPU.
-
-A crowd of :mod:`data.synthetic` seen by one low camera over a random background, drawn by
-:mod:`data.pose2d.render`.
-
-CLI: ``python -m data.pose2d.synthetic_images --out DIR --num-images N --seed S [--size 640x480]`` writes
-``DIR/images/NNNNNN.jpg`` and ``DIR/annotations.json`` (read with ``coco_keypoints.load_coco23``).
-"""
+"""Synthetic crowded images with COCO-23 keypoints for training the 2D model on a CPU."""
 
 from __future__ import annotations
 
@@ -30,6 +23,7 @@ from data.pose2d.render import (
     draw_shadows,
     finish,
     grain_field,
+    grid_lines,
     ipt,
     paint_persons,
     painting_order,
@@ -48,9 +42,7 @@ MIN_SPACING_M = 0.5
 
 @dataclass(frozen=True)
 class ImageOptions:
-    """Options of the synthetic images: size (w, h) px, persons (min, max) per image, person
-    height_px (min, max) for a stature of 1.7 m (None: 1/6 to 5/8 of the image height, 80-300 px at
-    480), JPEG quality."""
+    """Image size (w, h), persons (min, max), height_px (min, max) at 1.7 m (None: H/6..5H/8), JPEG quality."""
 
     size: tuple[int, int] = (640, 480)
     persons: tuple[int, int] = (4, 12)
@@ -77,18 +69,12 @@ class ImageOptions:
 
 @dataclass
 class SyntheticImage:
-    """One rendered image (H, W, 3) uint8 BGR, its keypoints (N, 23, 3) x, y, v and boxes (N, 4) x, y, w, h.
-
-    background (H, W, 3) uint8 is the same image with no person drawn, when asked for (else None).
-    """
+    """Image (H, W, 3) uint8 BGR, keypoints (N, 23, 3) x, y, v, boxes (N, 4) xywh, background or None."""
 
     image: np.ndarray
     keypoints: np.ndarray
     boxes: np.ndarray
     background: np.ndarray | None = None
-
-
-# --- scene ------------------------------------------------------------------------------------------
 
 
 def sample_camera(rng: np.random.Generator, size: tuple[int, int]) -> Camera:
@@ -144,9 +130,6 @@ def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions
     return poses
 
 
-# --- background -------------------------------------------------------------------------------------
-
-
 def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
     """A textured background (H, W, 3) uint8: a backdrop, and a tiled floor below the horizon."""
     w, h = camera.size
@@ -164,18 +147,8 @@ def _draw_floor_grid(image: np.ndarray, camera: Camera, rng: np.random.Generator
     tile = rng.uniform(0.4, 2.0)
     colour = random_colour(rng)
     near, far, side = 1.0, 30.0, 30.0
-    ys = np.arange(-side, side, tile)
-    xs = np.arange(near, far, tile)
-    ends = np.concatenate(
-        [
-            np.stack([np.stack([np.full_like(ys, near), ys], 1), np.stack([np.full_like(ys, far), ys], 1)], 1),
-            np.stack([np.stack([xs, np.full_like(xs, -side)], 1), np.stack([xs, np.full_like(xs, side)], 1)], 1),
-        ]
-    )
-    draw_ground_lines(image, camera, ends, colour)
-
-
-# --- images -----------------------------------------------------------------------------------------
+    along_y, along_x = grid_lines(np.arange(near, far, tile), np.arange(-side, side, tile), (near, far, -side, side))
+    draw_ground_lines(image, camera, np.concatenate([along_x, along_y]), colour)
 
 
 def synthetic_image(
@@ -236,9 +209,6 @@ def generate_dataset(
     return ann_path
 
 
-# --- preview ----------------------------------------------------------------------------------------
-
-
 def draw_annotations(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     """A copy of image (H, W, 3) with boxes (N, 4), limbs and joints (N, 23, 3): green seen, red hidden."""
     out = image.copy()
@@ -250,13 +220,9 @@ def draw_annotations(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray
                 cv2.line(out, ipt(kps[a, :2]), ipt(kps[b, :2]), (0, 255, 255), 1, cv2.LINE_AA)
         for x, y, v in kps:
             if v > 0:
+                seen = v >= 2
                 cv2.circle(
-                    out,
-                    ipt(np.array([x, y])),
-                    3,
-                    (0, 220, 0) if v >= 2 else (0, 0, 255),
-                    -1 if v >= 2 else 1,
-                    cv2.LINE_AA,
+                    out, ipt(np.array([x, y])), 3, (0, 220, 0) if seen else (0, 0, 255), -1 if seen else 1, cv2.LINE_AA
                 )
     return out
 
@@ -285,9 +251,6 @@ def save_preview(
     return out_png
 
 
-# --- CLI --------------------------------------------------------------------------------------------
-
-
 def parse_size(text: str) -> tuple[int, int]:
     """'640x480' -> (640, 480)."""
     try:
@@ -305,13 +268,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--size", type=parse_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
     parser.add_argument("--persons", type=int, nargs=2, default=(4, 12), metavar=("MIN", "MAX"))
-    parser.add_argument(
-        "--height-px",
-        type=float,
-        nargs=2,
-        metavar=("MIN", "MAX"),
-        help="person height range in pixels (default: 1/6 to 5/8 of the image height)",
-    )
+    what = "person height range in pixels (default: 1/6 to 5/8 of the image height)"
+    parser.add_argument("--height-px", type=float, nargs=2, metavar=("MIN", "MAX"), help=what)
     parser.add_argument("--preview", type=Path, help="also save a PNG grid of the first 6 images here")
     args = parser.parse_args(argv)
     if args.num_images < 1:

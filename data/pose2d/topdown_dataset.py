@@ -1,8 +1,6 @@
 """Top-down person crops with multi-modal heatmap targets (paper Sec. 3.1), and a resumable epoch sampler.
 
-Targets hold every person of the image (the others' joints in the crop form the ``mu C`` term). Augmentation
-is drawn from ``default_rng([seed, epoch, index])``, so a sample does not depend on workers, order or an
-interruption; a flip mirrors the whole image and all persons before cropping.
+Augmentation comes from default_rng([seed, epoch, index]): independent of workers, order and interruptions.
 """
 
 from __future__ import annotations
@@ -49,13 +47,7 @@ def denormalize_image(image: torch.Tensor | np.ndarray) -> np.ndarray:
 
 
 class TopDownDataset(Dataset):
-    """Person crops of ImageRecords -> dict(image (3, H, W), target (23, h, w), weight (23,), affine_inv (2, 3),
-    image_id, box (4,), area, score, flipped).
-
-    Training: the persons of :func:`training_persons`, ``augment`` applied. Otherwise no augmentation, and the
-    detector boxes with ``use_det_boxes`` (target and weight 0), else the annotated persons. ``input_size`` (w, h)
-    must be the codec's; ``cache_size`` decoded images are kept per DataLoader worker.
-    """
+    """Person crops -> dict(image (3, H, W), target (23, h, w), weight (23,), affine_inv (2, 3), box, ...)."""
 
     def __init__(
         self,
@@ -149,14 +141,7 @@ class TopDownDataset(Dataset):
             center = flip_points(center, image.shape[1])
         scale = scale * scale_mult
         affine = crop_affine(center, scale, rotation, self.input_size)
-        crop = cv2.warpAffine(
-            image,
-            affine,
-            self.input_size,
-            flags=cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_CONSTANT,
-            borderValue=(0, 0, 0),
-        )
+        crop = cv2.warpAffine(image, affine, self.input_size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         if jitter is not None:
             crop = jitter_colour(crop, jitter)
         if own >= 0:
@@ -178,8 +163,7 @@ class TopDownDataset(Dataset):
 
 
 class EpochSampler(Sampler[int]):
-    """A seeded permutation of range(size) per epoch (identity without shuffle), sharded as DistributedSampler
-    shards it, that can start part-way through an epoch (exact resumption)."""
+    """A seeded per-epoch permutation (identity without shuffle), sharded like DistributedSampler, resumable."""
 
     def __init__(self, size: int, seed: int = 0, shuffle: bool = True, rank: int = 0, world_size: int = 1) -> None:
         self.size, self.seed, self.shuffle = int(size), int(seed), bool(shuffle)

@@ -1,10 +1,4 @@
-"""Per-view COCO keypoint documents of multi-view frames, for per-view COCO AP/AR of 2D poses.
-
-:func:`ground_truth_document` turns frames whose ``views`` hold ground-truth 2D (dataset=synthetic with
-render=true) into a COCO keypoint ground truth (images + annotations with v flags 2 seen / 1 hidden /
-0 unlabelled, bbox, area = w * h) and :func:`results` turns predicted views into COCO results; both are
-keyed by the frames' ``image_ids`` and are what :func:`data.pose2d.coco_eval.evaluate_keypoints` takes.
-"""
+"""Per-view COCO keypoint ground truth and results of multi-view frames, keyed by image_ids, for coco_eval."""
 
 from __future__ import annotations
 
@@ -20,9 +14,7 @@ from data.pose2d.records import ImageRecord
 
 
 def ground_truth_records(frames: Sequence[Frame], rig: Rig) -> list[ImageRecord]:
-    """One ImageRecord per frame and view (file ``<frame:06d>_<camera>.jpg``) of the frames' ground-truth
-    views (V ViewDetections of (N, 23, 3) keypoints, (N, 23) occluded flags, (N, 4) boxes): v = 2 seen,
-    1 hidden, 0 unlabelled; area = w * h."""
+    """One ImageRecord per frame and view of ground-truth views: v = 2 seen, 1 hidden, 0 unlabelled; area w * h."""
     records = []
     for frame in frames:
         for v, (cam, view) in enumerate(zip(rig, _views(frame, rig))):
@@ -36,8 +28,7 @@ def ground_truth_records(frames: Sequence[Frame], rig: Rig) -> list[ImageRecord]
 
 
 def ground_truth_document(frames: Sequence[Frame], rig: Rig) -> dict:
-    """The COCO-23 keypoint document (images with frame and camera, annotations, categories) of
-    :func:`ground_truth_records`."""
+    """The COCO-23 keypoint document (images with frame and camera) of :func:`ground_truth_records`."""
     doc = coco23_document(ground_truth_records(frames, rig))
     where = [(int(frame.index), cam.name) for frame in frames for cam in rig]
     for image, (frame, camera) in zip(doc["images"], where):

@@ -1,18 +1,8 @@
 """Synthetic adult bodies and their COCO-23 joints when standing or walking.
 
-Segment lengths are fractions of stature from the anthropometric tables of Drillis & Contini (1966),
-as reproduced in D. A. Winter, "Biomechanics and Motor Control of Human Movement" (fig. 4.1):
-shoulder height .818 H, hip height .530 H, knee height .285 H, ankle height .039 H, upper arm .186 H,
-forearm .146 H, foot length .152 H. Joint-centre widths (shoulders .22 H, hips .11 H) and the head
-offsets are rounded values from the same tables (bitragion breadth ~.085 H). Stature is drawn from
-N(1.70 m, 0.09 m), a mixed-sex adult population (e.g. NCD-RisC 2016 country means of 1.60-1.80 m), and
-every fraction is then jittered by N(0, 2 %) per person so that proportions vary.
-
-Gait keyframes (hip and knee flexion, foot pitch against the ground over one stride, heel strike at
-phase 0) are rounded from the normal-gait curves of J. Perry, "Gait Analysis" (1992).
-
-Local body frame: x forward, y left, z up; the origin is the ground point below the mid-hip. A person
-at ground position (x, y) with heading theta faces (cos theta, sin theta).
+Proportions: Drillis & Contini (1966) via Winter, "Biomechanics and Motor Control" fig. 4.1; stature
+N(1.70, 0.09) m, fractions jittered 2 % per person. Gait keyframes: Perry, "Gait Analysis" (1992). Body frame:
+x forward, y left, z up, origin below the mid-hip; heading theta faces (cos theta, sin theta).
 """
 
 from __future__ import annotations

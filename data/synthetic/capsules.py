@@ -90,8 +90,7 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
 
 
 def occluded_joints(center: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Joints whose sight line from the camera centre (3,) crosses another person's capsule: poses (P, J, 3) ->
-    (P, J) bool; persons far from a sight line are culled by a bounding sphere first."""
+    """Joints (P, J) bool of poses (P, J, 3) whose sight line from the camera centre (3,) crosses another body."""
     poses = np.asarray(poses, dtype=np.float64)
     num, joints = poses.shape[:2]
     hidden = np.zeros((num, joints), dtype=bool)

@@ -126,8 +126,7 @@ OBSERVATION_KEYS = (
 
 
 def observation_options(where: str, options: dict, keys: tuple[str, ...] = OBSERVATION_KEYS, **fixed: Any) -> dict:
-    """Every observation option of a dataset built on the synthetic detector: SyntheticConfig's defaults, then
-    ``fixed`` (the dataset's own defaults), then ``options``; a name outside ``keys`` is a ValueError."""
+    """SyntheticConfig's observation defaults, then ``fixed``, then ``options`` (names outside keys: ValueError)."""
     unknown = sorted(set(options) - set(keys))
     if unknown:
         raise ValueError(f"{where}: unknown option {unknown[0]!r} (known: {', '.join(keys)})")

@@ -29,10 +29,7 @@ def build_rig(cfg: SyntheticConfig, area: tuple[float, float, float, float]) -> 
 
 
 def generate_sequence(cfg: SyntheticConfig, rig: Rig | None = None) -> Sequence:
-    """A synthetic Sequence of F frames of V views, gt_poses (P, 23, 4) valid 1, gt_ids (P,), on ``rig`` or cfg's rig.
-
-    Drawn from numpy Generators seeded by cfg.seed: the scene, then one stream per frame.
-    """
+    """Synthetic Sequence of F frames, V views, gt_poses (P, 23, 4), gt_ids (P,); streams seeded by cfg.seed."""
     scene_seed, render_seed = np.random.SeedSequence(cfg.seed).spawn(2)
     scene = simulate_scene(cfg, np.random.default_rng(scene_seed))
     if rig is None:

@@ -22,8 +22,7 @@ _STAND_SPEED = 0.3  # m/s below which a person of the positions hook is standing
 
 @dataclass(frozen=True)
 class SceneTrack:
-    """The persons' states: area (4,) m, bodies (P,), positions (F, P, 2) m (NaN absent), headings (F, P) rad,
-    phases (F, P) in [0, 1), walking (F, P) bool, present (F, P) bool."""
+    """Persons: area (4,) m, bodies (P,), positions (F, P, 2) NaN absent, headings, phases, walking, present (F, P)."""
 
     area: tuple[float, float, float, float]
     bodies: tuple[BodyShape, ...]
