@@ -166,10 +166,8 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
     """Evaluate the 2D checkpoint cfg.checkpoint; print and return its metrics (a bad file: one-line error)."""
     from evaluation.pose2d_eval import evaluate_checkpoint  # torch only for this mode
 
-    try:
+    with one_line_errors(FileNotFoundError, ValueError):
         metrics = evaluate_checkpoint(cfg, out_dir)
-    except (FileNotFoundError, ValueError) as err:
-        raise SystemExit(f"error: {err}") from None
     text = (
         f"{cfg.checkpoint} ({cfg.coco2d.decode} decoding): COCO OKS, COCO-23 sigmas; feet: 6 sigmas, person "
         "area\n" + "\n".join(f"  {k:8s} {v:.4f}" + _why_missing(k, v) for k, v in metrics.items())

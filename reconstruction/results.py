@@ -14,7 +14,7 @@ class Matches(NamedTuple):
     unmatched, this frame's detections left out of every person, counted by reason."""
 
     assignment: np.ndarray
-    unmatched: Counter[str] = Counter()
+    unmatched: Counter[str]
 
 
 class Reconstruction(NamedTuple):

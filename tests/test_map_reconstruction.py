@@ -456,14 +456,10 @@ def test_the_cost_alone_is_the_linearisations_cost_bit_for_bit(robust):
 
 
 def test_observations_are_the_finite_pixels_and_inverse_sigmas_of_the_noise_model():
-    rng = np.random.default_rng(5)
-    poses2d = np.concatenate([rng.uniform(-50, 2000, (4, 9, 23, 2)), rng.uniform(-0.2, 1.0, (4, 9, 23, 1))], axis=-1)
-    odd = rng.random(poses2d.shape[:3]) < 0.15
-    poses2d[odd, rng.integers(0, 3)] = rng.choice([np.nan, np.inf, -np.inf, 0.0], size=odd.sum())
-    bboxes = rng.uniform(1, 400, (4, 9, 4))
-    stage = MAPReconstruction()
-    uv, inv_sigma = stage._observations(poses2d, bboxes)
-    sigma = NoiseModel().sigma(poses2d, bboxes)
-    np.testing.assert_array_equal(uv, np.nan_to_num(poses2d[..., :2]))
-    np.testing.assert_array_equal(inv_sigma, np.where(np.isfinite(sigma), 1.0 / sigma, 0.0))
-    assert np.isinf(sigma).any() and (inv_sigma == 0).any() and not np.isfinite(poses2d).all()
+    poses2d = np.array([[[[10.0, 20.0, 1.0], [np.nan, 5.0, 0.9], [np.inf, 3.0, 0.8], [7.0, 8.0, 0.0]]]])
+    bboxes = np.array([[[0.0, 0.0, 100.0, 100.0]]])
+    uv, inv_sigma = MAPReconstruction(noise_model=NoiseModel())._observations(poses2d, bboxes)
+    big = np.finfo(np.float64).max
+    np.testing.assert_array_equal(uv[0, 0], [[10.0, 20.0], [0.0, 5.0], [big, 3.0], [7.0, 8.0]])
+    # score 1: sigma = hypot(5.2 px, 0.016 x 100 px); a non-finite pixel or score 0: not observed
+    np.testing.assert_allclose(inv_sigma[0, 0], [1 / np.hypot(5.2, 1.6), 0.0, 0.0, 0.0])
