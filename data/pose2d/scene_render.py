@@ -16,22 +16,7 @@ from data.geometry.camera import Camera, Rig
 from data.image_ids import coco_image_id
 from data.keypoints import NUM_JOINTS
 from data.multiview import Frame, Sequence, ViewDetections
-from data.pose2d.render import (
-    PART_GROUPS,
-    PersonLook,
-    backdrop,
-    draw_ground_lines,
-    draw_shadows,
-    finish,
-    grain_field,
-    grid_lines,
-    paint_persons,
-    person_labels,
-    random_colour,
-    sample_look,
-    smooth_field,
-    view_person,
-)
+from data.pose2d import render
 
 # Independent random streams of a scene seed: default_rng([seed, STREAM, ...]).
 LOOK, BACKDROP, FLOOR, LIGHT, GRAIN, ORDER = range(6)
@@ -62,9 +47,9 @@ class RenderedView:
     boxes: np.ndarray
 
 
-def person_look(seed: int, person_id: int) -> PersonLook:
+def person_look(seed: int, person_id: int) -> render.PersonLook:
     """The look of one person of a scene, the same in every frame and view."""
-    return sample_look(np.random.default_rng([int(seed), LOOK, int(person_id)]))
+    return render.sample_look(np.random.default_rng([int(seed), LOOK, int(person_id)]))
 
 
 def render_view(
@@ -75,23 +60,23 @@ def render_view(
     poses = np.asarray(poses, dtype=np.float64)
     shown = np.flatnonzero([_paintable(camera, joints) for joints in poses])
     light = _light(camera, scene.seed)
-    views = [view_person(camera, poses[p], light) for p in shown]
+    views = [render.view_person(camera, poses[p], light) for p in shown]
     looks = [person_look(scene.seed, ids[p]) for p in shown]
     image = _background(scene, view) if paint else None
     if image is not None:
-        draw_shadows(image, camera, poses[shown])
-    painted = paint_persons(image, views, looks, camera.size)  # numbered by the shown persons
+        render.draw_shadows(image, camera, poses[shown])
+    painted = render.paint_persons(image, views, looks, camera.size)  # numbered by the shown persons
     keypoints, boxes = np.zeros((len(poses), NUM_JOINTS, 3)), np.zeros((len(poses), 4))
-    keypoints[shown], boxes[shown] = person_labels(camera, poses[shown], views, painted)
+    keypoints[shown], boxes[shown] = render.person_labels(camera, poses[shown], views, painted)
     if image is not None:
         grain_rng = np.random.default_rng([int(scene.seed), GRAIN, int(frame), int(view)])
-        image = finish(image, grain_field(grain_rng, camera.size))
+        image = render.finish(image, render.grain_field(grain_rng, camera.size))
     return RenderedView(image, _rows_owner(painted, shown), keypoints, boxes)
 
 
 def _rows_owner(owner: np.ndarray, shown: np.ndarray) -> np.ndarray:
     """An owner map (H, W) of the shown persons (S,) renumbered by their rows of the input persons."""
-    parts = len(PART_GROUPS)
+    parts = len(render.PART_GROUPS)
     part = owner.astype(np.int64) - 1
     rows = np.append(shown, 0)[np.where(part >= 0, part // parts, len(shown))]
     return np.where(part >= 0, 1 + rows * parts + part % parts, 0).astype(np.uint16)
@@ -120,18 +105,18 @@ def _light(camera: Camera, seed: int) -> np.ndarray:
 def _background(scene: Scene, view: int) -> np.ndarray:
     """The empty scene (H, W, 3) uint8 seen by one camera: its backdrop, the floor and its tile lines."""
     camera = scene.rig[view]
-    image = backdrop(np.random.default_rng([int(scene.seed), BACKDROP, int(view)]), camera.size)
+    image = render.backdrop(np.random.default_rng([int(scene.seed), BACKDROP, int(view)]), camera.size)
     rng = np.random.default_rng([int(scene.seed), FLOOR])
     extent = _floor_extent(scene.area)
     texel = max(FLOOR_TEXEL_M, (extent[1] - extent[0]) / MAX_TEXTURE_PX, (extent[3] - extent[2]) / MAX_TEXTURE_PX)
     size = (int(math.ceil((extent[1] - extent[0]) / texel)), int(math.ceil((extent[3] - extent[2]) / texel)))
-    texture = smooth_field(rng, size, int(rng.integers(3, 8)), 40, 200)
+    texture = render.smooth_field(rng, size, int(rng.integers(3, 8)), 40, 200)
     xy, ground = _ground_points(camera)
     maps = np.clip((xy - np.float32([extent[0], extent[2]])) / np.float32(texel), -1e5, 1e5)
     floor = cv2.remap(texture, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     blend = cv2.addWeighted(image, 1.0 - FLOOR_WEIGHT, floor, FLOOR_WEIGHT, 0.0)
     np.copyto(image, blend, where=ground[..., None])
-    draw_ground_lines(image, camera, _tile_lines(extent, rng.uniform(0.5, 2.0)), random_colour(rng))
+    render.draw_ground_lines(image, camera, _tile_lines(extent, rng.uniform(0.5, 2.0)), render.random_colour(rng))
     return image
 
 
@@ -146,7 +131,7 @@ def _tile_lines(extent: tuple[float, float, float, float], tile: float) -> np.nd
     xmin, xmax, ymin, ymax = extent
     xs = tile * np.arange(math.ceil(xmin / tile), math.floor(xmax / tile) + 1)
     ys = tile * np.arange(math.ceil(ymin / tile), math.floor(ymax / tile) + 1)
-    return np.concatenate(grid_lines(xs, ys, extent))
+    return np.concatenate(render.grid_lines(xs, ys, extent))
 
 
 def _ground_points(camera: Camera) -> tuple[np.ndarray, np.ndarray]:

@@ -14,25 +14,9 @@ from tqdm import tqdm
 
 from data.geometry.camera import Camera
 from data.keypoints import LIMBS, NUM_JOINTS
+from data.pose2d import render
 from data.pose2d.coco_keypoints import load_coco23, write_coco_keypoints
 from data.pose2d.records import ImageRecord
-from data.pose2d.render import (
-    MAX_PERSONS,
-    backdrop,
-    draw_ground_lines,
-    draw_shadows,
-    finish,
-    grain_field,
-    grid_lines,
-    ipt,
-    paint_persons,
-    painting_order,
-    person_labels,
-    random_colour,
-    sample_look,
-    smooth_field,
-    view_person,
-)
 from data.synthetic.body import pose_joints, sample_body
 from data.synthetic.rigs import look_at_camera
 
@@ -56,8 +40,8 @@ class ImageOptions:
             ("size", min(self.size) >= 32, "must be at least 32 x 32 pixels"),
             (
                 "persons",
-                1 <= self.persons[0] <= self.persons[1] <= MAX_PERSONS,
-                f"must be (min, max), 1 <= min <= max <= {MAX_PERSONS}",
+                1 <= self.persons[0] <= self.persons[1] <= render.MAX_PERSONS,
+                f"must be (min, max), 1 <= min <= max <= {render.MAX_PERSONS}",
             ),
             ("height_px", 0 < self.height_px[0] <= self.height_px[1], "must be (min, max), 0 < min <= max"),
             ("jpeg_quality", 1 <= self.jpeg_quality <= 100, "must be in 1..100"),
@@ -133,10 +117,10 @@ def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions
 def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
     """A textured background (H, W, 3) uint8: a backdrop, and a tiled floor below the horizon."""
     w, h = camera.size
-    image = backdrop(rng, (w, h))
+    image = render.backdrop(rng, (w, h))
     horizon = int(np.clip(camera.project(np.array([1e4, 0.0, 0.0]))[1], 0, h))
     if horizon < h:
-        floor = smooth_field(rng, (w, h - horizon), 3, 40, 200)
+        floor = render.smooth_field(rng, (w, h - horizon), 3, 40, 200)
         image[horizon:] = cv2.addWeighted(image[horizon:], 0.3, floor, 0.7, 0.0)
         _draw_floor_grid(image, camera, rng)
     return image
@@ -145,10 +129,12 @@ def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
 def _draw_floor_grid(image: np.ndarray, camera: Camera, rng: np.random.Generator) -> None:
     """Tile lines of the ground plane z = 0 in perspective, 1..30 m ahead, in place on (H, W, 3)."""
     tile = rng.uniform(0.4, 2.0)
-    colour = random_colour(rng)
+    colour = render.random_colour(rng)
     near, far, side = 1.0, 30.0, 30.0
-    along_y, along_x = grid_lines(np.arange(near, far, tile), np.arange(-side, side, tile), (near, far, -side, side))
-    draw_ground_lines(image, camera, np.concatenate([along_x, along_y]), colour)
+    along_y, along_x = render.grid_lines(
+        np.arange(near, far, tile), np.arange(-side, side, tile), (near, far, -side, side)
+    )
+    render.draw_ground_lines(image, camera, np.concatenate([along_x, along_y]), colour)
 
 
 def synthetic_image(
@@ -159,22 +145,21 @@ def synthetic_image(
     poses = sample_crowd(rng, camera, options)
     background = render_background(rng, camera)
     image = background.copy()
-    draw_shadows(image, camera, poses)
+    render.draw_shadows(image, camera, poses)
     light = rng.normal(size=2) * [1.0, 0.5]
     light[1] = -abs(light[1])  # highlights towards the top
     light /= max(float(np.linalg.norm(light)), 1e-9)
-    views = [view_person(camera, joints, light) for joints in poses]
+    views = [render.view_person(camera, joints, light) for joints in poses]
     looks: list = [None] * len(views)
-    for p in painting_order(views):  # drawn in painting order: the stream of the earlier generator
-        looks[p] = sample_look(rng)
-    owner = paint_persons(image, views, looks, options.size)
-    keypoints, boxes = person_labels(camera, poses, views, owner)
+    for p in render.painting_order(views):  # drawn in painting order: the stream of the earlier generator
+        looks[p] = render.sample_look(rng)
+    owner = render.paint_persons(image, views, looks, options.size)
+    keypoints, boxes = render.person_labels(camera, poses, views, owner)
     keypoints[..., :2] = np.round(keypoints[..., :2], 2)
     keep = (boxes[:, 2] > 0) & np.any(keypoints[..., 2] > 0, axis=1)
-    grain = grain_field(rng, options.size)
-    return SyntheticImage(
-        finish(image, grain), keypoints[keep], boxes[keep], finish(background, grain) if with_background else None
-    )
+    grain = render.grain_field(rng, options.size)
+    empty = render.finish(background, grain) if with_background else None
+    return SyntheticImage(render.finish(image, grain), keypoints[keep], boxes[keep], empty)
 
 
 def image_rng(seed: int, index: int) -> np.random.Generator:
@@ -217,13 +202,11 @@ def draw_annotations(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray
         cv2.rectangle(out, (x, y), (x + bw, y + bh), (255, 200, 0), 1)
         for a, b in LIMBS:
             if kps[a, 2] > 0 and kps[b, 2] > 0:
-                cv2.line(out, ipt(kps[a, :2]), ipt(kps[b, :2]), (0, 255, 255), 1, cv2.LINE_AA)
+                cv2.line(out, render.ipt(kps[a, :2]), render.ipt(kps[b, :2]), (0, 255, 255), 1, cv2.LINE_AA)
         for x, y, v in kps:
             if v > 0:
-                seen = v >= 2
-                cv2.circle(
-                    out, ipt(np.array([x, y])), 3, (0, 220, 0) if seen else (0, 0, 255), -1 if seen else 1, cv2.LINE_AA
-                )
+                colour, thickness = ((0, 220, 0), -1) if v >= 2 else ((0, 0, 255), 1)  # seen: filled green
+                cv2.circle(out, render.ipt(np.array([x, y])), 3, colour, thickness, cv2.LINE_AA)
     return out
 
 

@@ -186,6 +186,7 @@ class EvidenceMatcher:
 
     def __init__(
         self,
+        *,
         reject_rate: float = 1e-3,
         evidence_per_dof: float = 2.0,
         min_dof: int = 2,

@@ -207,6 +207,7 @@ class FeetMatcher:
 
     def __init__(
         self,
+        *,
         k1: float = 1.0,
         k2: float | None = None,
         k3: float | None = None,

@@ -43,6 +43,7 @@ class FeetEpipolarMatcher:
 
     def __init__(
         self,
+        *,
         epipolar_sigma_px: float = 5.0,
         gate: float = 5.0,
         min_score: float = 0.2,

@@ -94,6 +94,7 @@ class RansacMatcher:
 
     def __init__(
         self,
+        *,
         min_score: float = 0.2,
         min_common_joints: int = 3,
         sample_size: int = 2,
