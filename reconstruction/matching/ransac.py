@@ -89,20 +89,19 @@ def transfer_errors(
 
 
 class RansacMatcher:
-    """Geometric-consensus (RANSAC / MSAC) matching: ``matcher(views, rig) -> Matches``; inlier_px in pixels, gate
-    on the MSAC cost in [0, 1]."""
+    """Geometric-consensus (RANSAC / MSAC) matching: ``matcher(views, rig) -> Matches``."""
 
     def __init__(
         self,
         *,
-        min_score: float = 0.2,
-        min_common_joints: int = 3,
-        sample_size: int = 2,
-        iterations: int = 20,
-        inlier_px: float = 40.0,
-        gate: float = 0.5,
-        seed: int = 0,
-        min_views: int = 2,
+        min_score: float = 0.2,  # a joint counts when scored >= this in both detections
+        min_common_joints: int = 3,  # pairs with fewer such joints are never matched
+        sample_size: int = 2,  # joints per minimal sample (their mean depth is the hypothesis)
+        iterations: int = 20,  # hypotheses per candidate pair
+        inlier_px: float = 40.0,  # symmetric transfer error (px) where an inlier ends and errors truncate
+        gate: float = 0.5,  # pairs whose MSAC cost (in [0, 1]) exceeds this are never matched
+        seed: int = 0,  # seed of the joint orders, the same on every frame
+        min_views: int = 2,  # persons seen in fewer views are dropped
     ) -> None:
         if int(sample_size) < 1 or int(iterations) < 1 or int(min_views) < 1:
             raise ValueError("sample_size, iterations and min_views must be >= 1")

@@ -1,7 +1,7 @@
 """The numpy decoding that models/candidates.py and models/joint_association.py replaced, kept as the reference.
 
 tests/test_pose_decoding.py checks the batched decoding against it (same candidates, same association). It is the
-repository's earlier implementation, unchanged: float64 candidates with a max-pool suppression, then one cdist, connected-components and
+repository's earlier implementation (its parabola refinement in numpy indexing): float64 candidates with a max-pool suppression, then one cdist, connected-components and
 Hungarian problem per joint type in a python loop. Nothing in the pipeline imports it.
 """
 
@@ -33,38 +33,33 @@ def find_candidates(
     flat = torch.where(peaks, hm, torch.zeros_like(hm)).reshape(b, j, h * w)
     k = min(top_m, h * w)
     vals, idx = flat.topk(k, dim=-1)
-    rows, cols = idx // w, idx % w
-    log_hm = hm.clamp_min(_LOG_EPS).log().reshape(b, j, h * w)
-    dx = _parabola_offset(log_hm, rows, cols, w, axis_len=w, along_x=True)
-    dy = _parabola_offset(log_hm, rows, cols, w, axis_len=h, along_x=False)
-    xy = torch.stack([cols + dx, rows + dy], dim=-1)
-    found = vals > 0
-    xy = torch.where(found[..., None], xy, torch.zeros_like(xy))
-    scores = torch.where(found, vals, torch.zeros_like(vals))
-    xy_np, scores_np = xy.cpu().numpy(), scores.cpu().numpy()
+    rows, cols = (idx // w).numpy(), (idx % w).numpy()
+    log_hm = hm.clamp_min(_LOG_EPS).log().numpy()
+    dx = _parabola_offset(log_hm, rows, cols, along_x=True)
+    dy = _parabola_offset(log_hm, rows, cols, along_x=False)
+    found = vals.numpy() > 0
+    xy_np = np.where(found[..., None], np.stack([cols + dx, rows + dy], axis=-1), 0.0)
+    scores_np = np.where(found, vals.numpy(), 0.0)
     if k < top_m:
         xy_np = np.concatenate([xy_np, np.zeros((b, j, top_m - k, 2))], axis=2)
         scores_np = np.concatenate([scores_np, np.zeros((b, j, top_m - k))], axis=2)
     return xy_np, scores_np
 
 
-def _parabola_offset(
-    log_hm: torch.Tensor, rows: torch.Tensor, cols: torch.Tensor, w: int, axis_len: int, along_x: bool
-) -> torch.Tensor:
-    """Vertex offset of the log-parabola through a peak and its two neighbours along one axis: (B, J, K)."""
+def _parabola_offset(log_hm: np.ndarray, rows: np.ndarray, cols: np.ndarray, along_x: bool) -> np.ndarray:
+    """Vertex offset of the log-parabola through each peak and its two neighbours along one axis.
+
+    log_hm (B, J, h, w), rows and cols (B, J, K) -> (B, J, K); 0 at the border and where the log is not concave.
+    """
+    size = log_hm.shape[3] if along_x else log_hm.shape[2]
     pos = cols if along_x else rows
-
-    def log_at(shift: int) -> torch.Tensor:
-        p = (pos + shift).clamp(0, axis_len - 1)
-        flat = rows * w + p if along_x else p * w + cols
-        return log_hm.gather(-1, flat)
-
-    lm, lp = log_at(-1), log_at(1)
-    curvature = lm - 2 * log_at(0) + lp
-    inside = (pos > 0) & (pos < axis_len - 1) & (curvature < 0)
-    safe = torch.where(inside, curvature, -torch.ones_like(curvature))
-    offset = (0.5 * (lm - lp) / safe).clamp(-0.5, 0.5)
-    return torch.where(inside, offset, torch.zeros_like(offset))
+    bi, ji = np.arange(log_hm.shape[0])[:, None, None], np.arange(log_hm.shape[1])[None, :, None]
+    neighbours = [np.clip(pos + shift, 0, size - 1) for shift in (-1, 0, 1)]
+    lm, l0, lp = (log_hm[bi, ji, rows, p] if along_x else log_hm[bi, ji, p, cols] for p in neighbours)
+    curvature = lm - 2 * l0 + lp
+    inside = (pos > 0) & (pos < size - 1) & (curvature < 0)
+    offset = np.clip(0.5 * (lm - lp) / np.where(inside, curvature, -1.0), -0.5, 0.5)
+    return np.where(inside, offset, 0.0)
 
 
 def candidates_to_image(xy: np.ndarray, inverse_affines: np.ndarray, stride: float | Sequence[float]) -> np.ndarray:
