@@ -1,10 +1,9 @@
 """The numpy decoding that models/candidates.py and models/joint_association.py replaced, kept as the reference.
 
-tests/test_pose_decoding.py checks the batched decoding against it (same candidates, same association). It is the
-repository's earlier implementation (its parabola refinement in numpy indexing): float64 candidates with a max-pool suppression, then one cdist, connected-components and
-Hungarian problem per joint type in a python loop. Nothing in the pipeline imports it.
+tests/test_pose_decoding.py checks the batched decoding against it (same candidates, same association): float64
+candidates with a max-pool suppression and a log-parabola refinement by numpy indexing, then one cdist,
+connected-components and Hungarian problem per joint type in a python loop. Nothing in the pipeline imports it.
 """
-
 from __future__ import annotations
 
 from typing import Sequence
