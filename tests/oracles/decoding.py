@@ -4,6 +4,7 @@ tests/test_pose_decoding.py checks the batched decoding against it (same candida
 candidates with a max-pool suppression and a log-parabola refinement by numpy indexing, then one cdist,
 connected-components and Hungarian problem per joint type in a python loop. Nothing in the pipeline imports it.
 """
+
 from __future__ import annotations
 
 from typing import Sequence
