@@ -9,6 +9,8 @@ The pieces shared by the joint-based baselines (confident undistorted joints, un
 from __future__ import annotations
 
 from collections import Counter
+from functools import lru_cache
+from itertools import combinations
 
 import numpy as np
 
@@ -41,6 +43,15 @@ def fundamental_matrix(camera_a: Camera, camera_b: Camera) -> np.ndarray:
     t = camera_b.t - R @ camera_a.t
     F = np.linalg.inv(camera_b.K).T @ skew(t) @ R @ np.linalg.inv(camera_a.K)
     return F / np.linalg.norm(F)
+
+
+@lru_cache(maxsize=8)
+def fundamentals(rig: Rig) -> np.ndarray:
+    """F of every view pair (a < b) of a rig, x_b^T F[a, b] x_a = 0, once per rig (not to be written): (V, V, 3, 3)."""
+    F = np.zeros((len(rig), len(rig), 3, 3))
+    for a, b in combinations(range(len(rig)), 2):
+        F[a, b] = fundamental_matrix(rig[a], rig[b])
+    return F
 
 
 def _line_distance(lines: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -106,9 +117,10 @@ class EpipolarMatcher:
         """Assignment of one frame: V views -> Matches, (P, V) detection indices (-1 where absent)."""
         joints = self.joints(views, rig)
 
+        F = fundamentals(rig)
+
         def cost(a: int, b: int) -> np.ndarray:
-            F = fundamental_matrix(rig[a], rig[b])
-            return epipolar_affinity(*joints[a], *joints[b], F, self.min_common_joints)
+            return epipolar_affinity(*joints[a], *joints[b], F[a, b], self.min_common_joints)
 
         assignment = match_pairs(cost, [len(v) for v in views], self.gate, self.min_views)
         usable = [ok.sum(axis=1) >= self.min_common_joints for _, ok in joints]

@@ -31,7 +31,7 @@ from data.assignment import solve_sparse_pairs
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
 from reconstruction.matching import feet_kernels
-from reconstruction.matching.epipolar import fundamental_matrix
+from reconstruction.matching.epipolar import fundamentals
 from reconstruction.matching.evidence_kernels import ChiTest, Detections, LinkTests, Sample, merge_linked, pairs_chi2
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import as_edges
@@ -70,15 +70,6 @@ def joint_variances(
     uv = [cam.undistort_points(clean[e - len(v) : e, :, :2]) for v, cam, e in zip(views, cameras, ends) if len(v)]
     uv = np.concatenate(uv) if uv else clean[..., :2]
     return np.ascontiguousarray(np.where(ok[..., None], uv, 0.0)), var, bad
-
-
-@lru_cache(maxsize=8)
-def fundamentals(rig: Rig) -> np.ndarray:
-    """F of every view pair (a < b) of a rig, x_b^T F[a, b] x_a = 0, once per rig (not to be written): (V, V, 3, 3)."""
-    F = np.zeros((len(rig), len(rig), 3, 3))
-    for a, b in combinations(range(len(rig)), 2):
-        F[a, b] = fundamental_matrix(rig[a], rig[b])
-    return F
 
 
 def calibrated_chi2(floats: np.ndarray, first: int, loosest: float, scale2: float) -> np.ndarray:

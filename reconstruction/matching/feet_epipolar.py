@@ -15,7 +15,7 @@ import numpy as np
 
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
-from reconstruction.matching.epipolar import TOO_FEW_JOINTS, epipolar_affinity, fundamental_matrix, undistorted_joints
+from reconstruction.matching.epipolar import TOO_FEW_JOINTS, epipolar_affinity, fundamentals, undistorted_joints
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import match_pairs
 from reconstruction.results import Matches
@@ -74,10 +74,11 @@ class FeetEpipolarMatcher:
         """The pair cost function of one frame: V views -> ((a, b) -> (N_a, N_b) combined cost), feet, joints."""
         feats = self.feet.features(views, rig)
         joints = [undistorted_joints(v, cam, self.min_score) for v, cam in zip(views, rig)]
+        F = fundamentals(rig)
 
         def cost(a: int, b: int) -> np.ndarray:
             feet = self.feet.pair_cost(feats[a], feats[b], rig[a])
-            epi = epipolar_affinity(*joints[a], *joints[b], fundamental_matrix(rig[a], rig[b]), self.min_common_joints)
+            epi = epipolar_affinity(*joints[a], *joints[b], F[a, b], self.min_common_joints)
             missing = ~feats[a].has_p[:, None] | ~feats[b].has_p[None, :]
             return combined_cost(feet, epi, self.epipolar_sigma_px, missing, self.missing_feet_cost)
 
