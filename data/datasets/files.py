@@ -6,25 +6,27 @@ A selected frame without any detection stays a frame, so a detector's output can
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Iterable
 
 from data.formats.poses2d_io import read_poses2d
 from data.geometry.calibration import load_rig
 from data.geometry.check_rig import check_rig
 from data.multiview import Frame, Sequence, ViewDetections
 
+FRAMES_EXPECTED = "expected a list of frame numbers or 'start:stop[:step]'"
+
 
 def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str | None = None) -> Sequence:
-    """The rig of ``cameras`` and one Frame per frame number with V ViewDetections (N, 23, 3).
-
-    ``frames``: None = those of the file, a list, or "start:stop[:step]"; frames outside it are counted in
-    ``meta["frames_not_selected"]``.
-    """
+    """The rig of ``cameras`` and one Frame, V ViewDetections (N, 23, 3), per frame of poses2d or of ``frames``."""
     rig = load_rig(cameras, check=False)
     if not Path(poses2d).is_file():
         raise FileNotFoundError(f"{poses2d}: poses2d.json not found")
     views = read_poses2d(poses2d, rig.names, [c.size for c in rig])
     check_rig(rig, cameras, views)  # load_rig ran the geometric checks; this adds the 2D poses against the rig
-    numbers = sorted(views) if frames is None else _frame_numbers(frames)
+    if frames is None:
+        numbers = sorted(views)
+    else:
+        numbers = list(frame_range(frames)) if isinstance(frames, str) else sorted(set(frame_list(frames)))
     empty = [f for f in numbers if f not in views]
     out = [Frame(f, views.get(f) or [ViewDetections.empty() for _ in rig.names]) for f in numbers]
     detections = sum(len(v) for f in numbers for v in views.get(f, []))
@@ -39,17 +41,32 @@ def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str
     return Sequence(rig, out, meta, description=description)
 
 
-def _frame_numbers(frames: list[int] | str) -> list[int]:
-    """Frame numbers of a list, or of a "start:stop[:step]" range string."""
-    if isinstance(frames, str):
-        try:
-            parts = [int(p) for p in frames.split(":")]
-            if len(parts) not in (2, 3):
-                raise ValueError
-            return list(range(*parts))
-        except ValueError:
-            raise ValueError(f"frames={frames!r}: expected a list of frame numbers or 'start:stop[:step]'") from None
+# --- the frames setting of the dataset loaders --------------------------------------------------------
+def frame_range(frames: str, end: int | None = None) -> range:
+    """The frame numbers of "start:stop[:step]"; with ``end``, an empty start, stop or step means 0, end or 1."""
     try:
-        return sorted({int(f) for f in frames})
+        parts = [int(p) if p or end is None else None for p in frames.split(":")]
+        if len(parts) not in (2, 3):
+            raise ValueError
+        return range(*(default if p is None else p for p, default in zip(parts, (0, end, 1))))
     except (TypeError, ValueError):
-        raise ValueError(f"frames={frames!r}: expected a list of frame numbers or 'start:stop[:step]'") from None
+        raise ValueError(f"frames={frames!r}: {FRAMES_EXPECTED}") from None
+
+
+def frame_list(frames: Iterable) -> list[int]:
+    """A list of frame numbers as ints, in its order."""
+    try:
+        return [int(f) for f in frames]
+    except (TypeError, ValueError):
+        raise ValueError(f"frames={frames!r}: {FRAMES_EXPECTED}") from None
+
+
+def position_slice(frames: str) -> slice:
+    """The positions "start:stop[:step]" selects among the frames found (empty parts: the slice's defaults)."""
+    try:
+        positions = slice(*(int(p) if p.strip() else None for p in frames.split(":")))
+        if positions.step == 0:
+            raise ValueError
+        return positions
+    except (TypeError, ValueError):
+        raise ValueError(f"frames={frames!r}: {FRAMES_EXPECTED}") from None

@@ -1,16 +1,14 @@
 """Multi-view images (dataset=images): a calibration and every camera's frames, no detections, no ground truth.
 
-A camera's frames (a folder, a video or one image) are found by its name, a ``pattern`` ({i} view index,
-{name} camera name, a glob in the last part) or a mapping, and matched across cameras by position
-(align=index) or by file stem (align=name). Images are read lazily at the calibration's size (rescaled with an
-ImageSizeWarning). ``Sequence.coco_images`` lists the COCO "images" entries, for running one's own detector and
-giving its boxes back with detector=file (in the file's pixels). CLI: ``python -m data.datasets.images
---cameras cameras.json --images DIR [--pattern P] [--frames F] [--align index|name] -o coco_images.json``.
+A camera's frames (a folder, a video or one image) are found by its name, a ``pattern`` or a mapping, matched
+across cameras by position (align=index) or file stem (align=name), and read lazily at the calibration's size.
+``Sequence.coco_images`` (the CLI writes it) lists the COCO "images" for one's own detector (detector=file).
 """
 
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import warnings
 from collections.abc import Mapping
@@ -21,6 +19,7 @@ from typing import Sequence as Seq
 import cv2
 import numpy as np
 
+from data.datasets.files import frame_list, frame_range
 from data.formats.atomic_io import atomic_write_text
 from data.formats.image_sources import IMAGE_SUFFIXES, VIDEO_SUFFIXES, ImageSource, ImageSourceError, open_source
 from data.geometry.calibration import load_rig
@@ -44,8 +43,7 @@ def load_images(
     frames: list[int] | int | str | None = None,
     align: str = "index",
 ) -> Sequence:
-    """The rig of ``cameras`` and one Frame per selected frame: empty views, lazy images (V of (H, W, 3) uint8 BGR
-    at the calibration size), image ids (V,); ``frames``: None, frame numbers, or "start:stop[:step]" of numbers."""
+    """The rig of ``cameras`` and one Frame per selected frame: empty views, lazy V images (H, W, 3), image ids (V,)."""
     if align not in ALIGNS:
         raise ValueError(f"align={align!r}: must be one of {', '.join(ALIGNS)}")
     rig = load_rig(cameras)
@@ -62,6 +60,7 @@ def load_images(
         for index, positions in table
     ]
     kinds = sorted({s.kind for s in sources})
+    shown = "a mapping of cameras" if isinstance(images, Mapping) else str(images)
     meta = {
         "dataset": "images",
         "cameras": str(cameras),
@@ -70,20 +69,13 @@ def load_images(
         "image_sizes": {cam.name: list(size) for cam, size in zip(rig, sizes)},
     }
     description = (
-        f"{len(out)} frames of {len(rig)} cameras ({'/'.join(kinds)}) from {_shown(images)} "
+        f"{len(out)} frames of {len(rig)} cameras ({'/'.join(kinds)}) from {shown} "
         f"on {cameras}, no detections, no ground truth"
     )
     return Sequence(rig, out, meta, description=description, coco_images=coco_images(rig, sources, table, sizes))
 
 
-def _shown(images: str | Path | Mapping) -> str:
-    """How the images setting reads in a description."""
-    return "a mapping of cameras" if isinstance(images, Mapping) else str(images)
-
-
 # --- finding each camera's frames ---------------------------------------------------------------------
-
-
 def camera_sources(rig: Rig, images: str | Path | Mapping[str, str | Path], pattern: str | None) -> list[ImageSource]:
     """Each camera's ImageSource (rig order): from a mapping camera -> path, or under a root folder."""
     if isinstance(images, Mapping):
@@ -119,7 +111,7 @@ def _source_under(root: Path, name: str, view: int, pattern: str | None) -> Imag
         return open_source(path)
     if (root / name).is_dir():
         return open_source(root / name)
-    files = [f for f in root.glob(f"{glob_escape(name)}.*") if f.suffix.lower() in VIDEO_SUFFIXES + IMAGE_SUFFIXES]
+    files = [f for f in root.glob(f"{glob.escape(name)}.*") if f.suffix.lower() in VIDEO_SUFFIXES + IMAGE_SUFFIXES]
     if len(files) != 1:
         found = "none" if not files else ", ".join(sorted(f.name for f in files))
         raise ImageSourceError(
@@ -128,14 +120,7 @@ def _source_under(root: Path, name: str, view: int, pattern: str | None) -> Imag
     return open_source(files[0])
 
 
-def glob_escape(text: str) -> str:
-    """Text with glob wildcards escaped."""
-    return "".join(f"[{c}]" if c in _GLOB else c for c in text)
-
-
 # --- matching frames across cameras -------------------------------------------------------------------
-
-
 def align_frames(sources: list[ImageSource], align: str) -> list[tuple[int, tuple[int, ...]]]:
     """(frame number, position in every source (V,)) of every frame, in frame order."""
     if align == "index":
@@ -182,23 +167,14 @@ def select_frames(
         return table
     numbers = [n for n, _ in table]
     if isinstance(frames, str):
-        try:
-            parts = [int(p) if p else None for p in frames.split(":")]
-            if len(parts) not in (2, 3):
-                raise ValueError
-            wanted = range(*(p if p is not None else d for p, d in zip(parts, (0, max(numbers) + 1, 1))))
-        except (ValueError, TypeError):
-            raise ValueError(f"frames={frames!r}: expected a list of frame numbers or 'start:stop[:step]'") from None
+        wanted = frame_range(frames, max(numbers) + 1)
         kept = [row for row in table if row[0] in wanted]
         if not kept:
             raise ValueError(
                 f"frames={frames!r}: none of the {len(table)} frames ({numbers[0]}..{numbers[-1]}) is in it"
             )
         return kept
-    try:
-        wanted_list = [int(frames)] if isinstance(frames, (int, np.integer)) else [int(f) for f in frames]
-    except (TypeError, ValueError):
-        raise ValueError(f"frames={frames!r}: expected a list of frame numbers or 'start:stop[:step]'") from None
+    wanted_list = [int(frames)] if isinstance(frames, (int, np.integer)) else frame_list(frames)
     rows = dict(table)
     absent = [f for f in wanted_list if f not in rows]
     if absent:
@@ -209,8 +185,6 @@ def select_frames(
 
 
 # --- reading ----------------------------------------------------------------------------------------
-
-
 def checked_size(camera: Camera, source: ImageSource) -> tuple[int, int]:
     """The (w, h) of a camera's images; an ImageSizeWarning when it is not the calibration's size."""
     size = source.frame_size()
@@ -241,8 +215,7 @@ def read_frame_images(sources: Seq[ImageSource], positions: Seq[int], sizes: Seq
 def coco_images(
     rig: Rig, sources: list[ImageSource], table: list[tuple[int, tuple[int, ...]]], sizes: list[tuple[int, int]]
 ) -> list[dict]:
-    """The COCO "images" entries of the selected frames, frame-major: id, frame, camera, file_name, width,
-    height (the file's), and video_frame for a video."""
+    """The COCO "images" entries of the selected frames, frame-major, with the file's size (and a video's frame)."""
     out = []
     for index, positions in table:
         for v, (cam, source, position) in enumerate(zip(rig, sources, positions)):
@@ -261,8 +234,6 @@ def coco_images(
 
 
 # --- CLI --------------------------------------------------------------------------------------------
-
-
 def main(argv: Seq[str] | None = None) -> None:
     """Command line: write the COCO images list of a multi-view image set."""
     parser = argparse.ArgumentParser(prog="python -m data.datasets.images", description=__doc__.split("\n")[0])

@@ -1,10 +1,7 @@
-"""CMU Panoptic sequences as the dataset ships them, turned into a :class:`data.multiview.Sequence`.
-
-Read: ``<root>/<seq>/calibration_<seq>.json`` and ``hdPose3d_stage1_coco19/body3DScene_XXXXXXXX.json``. Ground
-truth: ``joints19`` (cm, y down) to metres, z up, COCO-23 (feet always invalid), a joint valid when its
-confidence > ``GT_MIN_CONFIDENCE`` (VoxelPose's rule); the first 15 coco19 joints go to the Panoptic protocol
-through ``protocol_inputs``. 2D input: a ``poses2d.json``, or generated from the ground truth (noise, capsule
-occlusion, GT identities, no feet) for protocol checks.
+"""CMU Panoptic sequences as the dataset ships them (``<root>/<seq>/calibration_<seq>.json``,
+``hdPose3d_stage1_coco19/body3DScene_*.json``) as a :class:`data.multiview.Sequence`. Ground truth: ``joints19``
+in metres, z up, COCO-23 (no feet), valid above ``GT_MIN_CONFIDENCE`` (VoxelPose's rule); its first 15 joints go to
+the Panoptic protocol. 2D input: a ``poses2d.json``, or generated from the ground truth for protocol checks.
 """
 
 from __future__ import annotations
@@ -16,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from data.datasets.files import position_slice
+from data.formats.poses2d_io import read_poses2d
 from data.geometry.calibration import load_panoptic, panoptic_world_to_ours
 from data.geometry.camera import Camera, Rig
 from data.keypoints import FOOT_JOINTS, LEFT_ANKLE, LEFT_FOOT, PANOPTIC19_TO_COCO23, RIGHT_ANKLE, RIGHT_FOOT, to_coco23
@@ -40,12 +39,8 @@ def load_panoptic_sequence(
     seed: int = 0,
     **observation: Any,
 ) -> Sequence:
-    """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) per frame, 2D views.
-
-    ``frames``: None = all, a list = frame numbers, a slice or "start:stop:step" = positions among the found frames.
-    ``poses2d``: a poses2d.json; None generates 2D from the GT (``observation``: noise_px at every depth, occlusion,
-    occluded_drop_prob, occluded_noise_scale, min_joints_in_view), deterministic for ``seed``.
-    """
+    """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) and V 2D views per frame;
+    ``frames``: a list of frame numbers, or a slice or "start:stop[:step]" of positions among the frames found."""
     keys = ("noise_px", "occlusion", "occluded_drop_prob", "occluded_noise_scale", "min_joints_in_view")
     fixed = dict(noise_depth_exponent=0.0, miss_rate=0.0, fp_rate=0.0)
     observation = observation_options("load_panoptic_sequence", observation, keys, **fixed)
@@ -64,10 +59,15 @@ def load_panoptic_sequence(
     }
     gt15 = {}
     if poses2d is not None:
-        views_by_frame = _read_poses2d(poses2d, rig, meta)
+        views_by_frame = read_poses2d(poses2d, list(rig.names), [c.size for c in rig])
+        meta["poses2d"] = str(poses2d)
         source = f"2D poses from {poses2d}"
     else:
-        views_by_frame = _generated_views(rig, ground_truth, seed, observation)
+        cfg, rng = SyntheticConfig(**observation), np.random.default_rng(seed)
+        views_by_frame = {
+            f: observe_ground_truth(rig, _coco23(joints19), ids, cfg, rng)
+            for f, (ids, joints19) in ground_truth.items()
+        }
         source = (
             f"2D generated from GT: {observation['noise_px']} px noise, occlusion "
             f"{'on' if observation['occlusion'] else 'off'}, seed {seed}, no foot joints"
@@ -134,22 +134,13 @@ def _coco23(joints19: np.ndarray) -> np.ndarray:
 def observe_ground_truth(
     rig: Rig, gt_poses: np.ndarray, gt_ids: np.ndarray, cfg: SyntheticConfig, rng: np.random.Generator
 ) -> list[ViewDetections]:
-    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera: V ViewDetections.
-
-    Invalid GT joints are filled in for the capsule model only (feet at the ankle, others at the mean), then removed.
-    """
+    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera: V ViewDetections;
+    invalid GT joints are filled in for the capsule model only (feet at the ankle, others at the mean)."""
     gt_poses = np.asarray(gt_poses, dtype=np.float64)
     ids = np.asarray(gt_ids, dtype=np.int64)
     valid_by_id = {int(i): gt_poses[n, :, 3] > 0 for n, i in enumerate(ids)}
     filled = _fill_invalid(gt_poses)
     return [_mask_invalid(observe_view(camera, filled, ids, cfg, rng), valid_by_id, camera, cfg) for camera in rig]
-
-
-def _generated_views(rig: Rig, ground_truth: dict, seed: int, observation: dict) -> dict[int, list[ViewDetections]]:
-    """{frame: V ViewDetections} observed from {frame: (ids (G,), joints19 (G, 19, 4))}, depth-independent noise."""
-    cfg = SyntheticConfig(**observation)
-    rng = np.random.default_rng(seed)
-    return {f: observe_ground_truth(rig, _coco23(j19), ids, cfg, rng) for f, (ids, j19) in ground_truth.items()}
 
 
 def _fill_invalid(poses: np.ndarray) -> np.ndarray:
@@ -191,10 +182,7 @@ def _select_frames(files: dict[int, Path], frames: list[int] | slice | str | Non
     if frames is None:
         return files
     if isinstance(frames, str):
-        try:
-            frames = slice(*(int(p) if p.strip() else None for p in frames.split(":")))
-        except (TypeError, ValueError):
-            raise ValueError(f"frames={frames!r}: expected a list of frame numbers or 'start:stop:step'") from None
+        frames = position_slice(frames)
     numbers = list(files)
     if isinstance(frames, slice):
         return {f: files[f] for f in numbers[frames]}
@@ -205,12 +193,3 @@ def _select_frames(files: dict[int, Path], frames: list[int] | slice | str | Non
             f"is not there (found {numbers[0]}..{numbers[-1]}, {len(numbers)} files)"
         )
     return {int(f): files[int(f)] for f in frames}
-
-
-def _read_poses2d(path: str, rig: Rig, meta: dict) -> dict[int, list[ViewDetections]]:
-    """Detections per frame from a poses2d.json, one ViewDetections per camera in rig order."""
-    from data.formats.poses2d_io import read_poses2d  # imported here: the reader is optional for generated input
-
-    views = read_poses2d(path, list(rig.names), [c.size for c in rig])
-    meta["poses2d"] = str(path)
-    return views

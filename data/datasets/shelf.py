@@ -1,11 +1,8 @@
 """The Shelf benchmark (frames 300..600) as a :class:`data.multiview.Sequence`, scored by its own protocol.
 
-Read under ``root`` (4D Association's data/shelf, see ../shared/data/PROVENANCE.md): ``4d_association/``
-``calibration.json`` (5 cameras), ``detection/<camera>.txt`` (OpenPose BODY_25 candidates and PAFs, grouped
-into COCO-23 persons by the configured ``grouper``; its seconds go to ``stage_seconds["grouping"]``), ``gt.txt``
-(Shelf-14 + mid-hip) and ``skel.txt`` (4D Association's output, the baseline). Or a ``poses2d.json`` of grouped
-detections keyed by Shelf frame number. Shelf-14 is not COCO-23, so ``gt_poses`` is None and the Shelf protocol
-(:class:`evaluation.protocols.shelf.ShelfProtocol`) gets the ground truth through ``protocol_inputs``.
+Read from 4D Association's data/shelf (../shared/data/PROVENANCE.md): the 5 cameras, OpenPose BODY_25 candidates
+grouped into COCO-23 persons by ``grouper`` (or a ``poses2d.json``), gt.txt and skel.txt (the baseline). Shelf-14 is
+not COCO-23: ``gt_poses`` is None and :class:`evaluation.protocols.shelf.ShelfProtocol` gets ``protocol_inputs``.
 """
 
 from __future__ import annotations
@@ -14,8 +11,10 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from data.datasets.files import position_slice
 from data.formats.fourd_detections import FrameCandidates, load_4dassoc_detections
 from data.formats.fourd_skeletons import load_4dassoc_skeletons
+from data.formats.poses2d_io import read_poses2d
 from data.geometry.calibration import load_4dassoc
 from data.geometry.camera import Rig
 from data.keypoints import FOOT_JOINTS
@@ -39,13 +38,9 @@ def load_shelf(
     drop_feet: bool = False,
     grouper: Callable | None = None,
 ) -> Sequence:
-    """The Shelf rig (5 views) and one Frame per chosen frame (``index`` = Shelf frame number), views (N, 23, 3).
-
-    Paths are relative to ``root`` unless absolute. ``frames``: None = all of gt.txt, "start:stop[:step]" =
-    positions in the file, a list = frame numbers. ``grouper(frame_candidates, min_paf=, min_joints=,
-    min_mean_score=, margin=bbox_margin) -> ViewDetections`` is needed unless ``poses2d`` is given. ``drop_feet``
-    removes the 6 foot keypoints (as a COCO-17 detector). ``baseline`` None: no 4D Association comparison.
-    """
+    """The Shelf rig (5 views) and one Frame per chosen frame (``index`` = Shelf frame number), views (N, 23, 3);
+    paths under ``root`` unless absolute; ``frames``: positions "start:stop[:step]" in gt.txt or frame numbers.
+    ``grouper(frame_candidates, min_paf=, min_joints=, min_mean_score=, margin=bbox_margin) -> ViewDetections``."""
     root = Path(root)
     rig = load_4dassoc(_under(root, calibration))
     gt_path = _under(root, gt)
@@ -54,16 +49,17 @@ def load_shelf(
     meta = {"dataset": "shelf", "root": str(root), "first_frame": first_frame, "frames": len(numbers)}
     stage_seconds = {}
     if poses2d is None:
+        folder = _under(root, detections)
         grouping = dict(min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score, margin=bbox_margin)
-        views, stage_seconds["grouping"] = _grouped_views(
-            _under(root, detections), rig, numbers, first_frame, grouper, grouping
-        )
+        views, stage_seconds["grouping"] = _grouped_views(folder, rig, numbers, first_frame, grouper, grouping)
         source = (
-            f"OpenPose BODY_25 candidates of {_under(root, detections)} grouped by PAF (min_paf {min_paf:g}, "
+            f"OpenPose BODY_25 candidates of {folder} grouped by PAF (min_paf {min_paf:g}, "
             f"min_joints {min_joints}, min_mean_score {min_mean_score:g})"
         )
     else:
-        views = _read_poses2d(poses2d, rig)
+        if not Path(poses2d).is_file():
+            raise FileNotFoundError(f"{poses2d}: poses2d.json not found")
+        views = read_poses2d(poses2d, list(rig.names), [c.size for c in rig])
         meta["poses2d_frames_not_selected"] = len(set(views) - set(numbers))
         source = f"grouped 2D poses from {poses2d}"
     if drop_feet:
@@ -75,10 +71,8 @@ def load_shelf(
         f"Shelf frames {numbers[0]}-{numbers[-1]} ({len(numbers)}), cameras "
         f"{', '.join(rig.names)}: {source}; {detected / max(len(out), 1):.1f} detections per frame"
     )
-    protocol = {"name": "shelf", "gt": {n: gts[n - first_frame] for n in numbers}, "gt_path": gt_path}
-    protocol.update(
-        baseline_path=None if baseline is None else _under(root, baseline), first_frame=first_frame, alpha=alpha
-    )
+    protocol = {"name": "shelf", "gt": {n: gts[n - first_frame] for n in numbers}, "gt_path": gt_path, "alpha": alpha}
+    protocol.update(baseline_path=None if baseline is None else _under(root, baseline), first_frame=first_frame)
     return Sequence(rig, out, meta, description=description, protocol_inputs=[protocol], stage_seconds=stage_seconds)
 
 
@@ -103,10 +97,7 @@ def _frame_numbers(frames: str | list[int] | None, count: int, first: int, gt_pa
     if frames is None:
         return everything
     if isinstance(frames, str):
-        try:
-            chosen = everything[slice(*(int(p) if p.strip() else None for p in frames.split(":")))]
-        except (TypeError, ValueError):
-            raise ValueError(f"frames={frames!r}: expected 'start:stop[:step]' or a list of frame numbers") from None
+        chosen = everything[position_slice(frames)]
     else:
         chosen = [int(f) for f in frames]
         outside = [f for f in chosen if f not in everything]
@@ -147,12 +138,3 @@ def _camera_candidates(
             f"{path}: {len(frames)} frames, but frame {numbers[-1]} (position {numbers[-1] - first}) is asked for"
         )
     return [frames[n - first] for n in numbers]
-
-
-def _read_poses2d(path: str | Path, rig: Rig) -> dict[int, list[ViewDetections]]:
-    """Grouped COCO-23 detections {frame: V ViewDetections} from a poses2d.json."""
-    from data.formats.poses2d_io import read_poses2d
-
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"{path}: poses2d.json not found")
-    return read_poses2d(path, list(rig.names), [c.size for c in rig])

@@ -32,8 +32,7 @@ def load_wildtrack_crowd(
     coco_max_dets: int = 100,
     **observation: Any,
 ) -> Sequence:
-    """The Wildtrack rig (7 views) and synthetic bodies at the annotated positions of ``frames`` (the first N or a
-    list), GT (P, 23, 4); ``observation``: OBSERVATION_KEYS (default 5 px at every depth); coco_*: the protocol's."""
+    """The Wildtrack rig (7 views) and synthetic bodies, GT (P, 23, 4), at the positions of ``frames`` (N or a list)."""
     options = observation_options("load_wildtrack_crowd", observation, noise_px=5.0, noise_depth_exponent=0.0)
     root = Path(root)
     rig = load_wildtrack(root)
@@ -42,9 +41,8 @@ def load_wildtrack_crowd(
     out = [_frame(number, positions[number], rig, root, seed, options) for number in chosen]
     meta = {"dataset": "wildtrack", "root": str(root), "frames": chosen, "seed": int(seed), "options": options}
     protocol = [{"name": "reprojection_coco", "min_joints": coco_min_joints, "max_dets": coco_max_dets}]
-    return Sequence(
-        rig, out, meta, description=_description(chosen, positions, seed, options), protocol_inputs=protocol
-    )
+    description = _description(chosen, positions, seed, options)
+    return Sequence(rig, out, meta, description=description, protocol_inputs=protocol)
 
 
 def _frame(number: int, positions: np.ndarray, rig: Rig, root: Path, seed: int, options: dict) -> Frame:
@@ -83,15 +81,11 @@ def _choose_frames(positions: dict[int, np.ndarray], frames: int | list[int], pa
 def _description(chosen: list[int], positions: dict[int, np.ndarray], seed: int, o: dict) -> str:
     """One line saying what the sequence is, from the observation options o."""
     people = np.mean([len(positions[f]) for f in chosen])
-    noise, exponent = o["noise_px"], o["noise_depth_exponent"]
-    noise = (
-        f"{noise:g} px at every depth"
-        if exponent == 0
-        else f"{noise:g} px at {o['noise_ref_depth_m']:g} m x (depth ratio)^{exponent:g}"
-    )
+    exponent = o["noise_depth_exponent"]
+    depth = "every depth" if exponent == 0 else f"{o['noise_ref_depth_m']:g} m x (depth ratio)^{exponent:g}"
     return (
-        f"Wildtrack rig (7 real calibrations), synthetic bodies at the annotated positions of "
-        f"{len(chosen)} frames ({people:.1f} persons per frame), seed {seed}: 2D noise {noise}, "
+        f"Wildtrack rig (7 real calibrations), synthetic bodies at the annotated positions of {len(chosen)} "
+        f"frames ({people:.1f} persons per frame), seed {seed}: 2D noise {o['noise_px']:g} px at {depth}, "
         f"occlusion {'on' if o['occlusion'] else 'off'}, miss rate {o['miss_rate']:g}, "
         f"false positives {o['fp_rate']:g} per view"
     )

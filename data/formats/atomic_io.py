@@ -1,8 +1,5 @@
-"""Atomic file output: write a temporary beside the target, then rename it into place (DESIGN.md).
-
-A temporary ``.<name>.<host>.<pid>.<random>.tmp`` is removed on every exit Python sees (SIGTERM too, with
-:func:`exit_on_sigterm`); one left by a killed writer is removed by the next write to that target.
-"""
+"""Atomic file output (docs/formats.md): write a temporary ``.<name>.<host>.<pid>.<random>.tmp`` beside the target,
+then rename it into place; removed on every exit Python sees, or by the next write after a killed writer."""
 
 from __future__ import annotations
 
@@ -56,25 +53,17 @@ def is_stale(path: Path) -> bool:
     return pid != os.getpid() and not _running(pid)
 
 
-def remove_stale_temporaries(folder: str | Path, target: str | None = None, recursive: bool = False) -> list[Path]:
-    """Delete the stale temporaries in folder (of one target name, or all; in subfolders too) -> their paths."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        return []
-    candidates = folder.rglob("*.tmp") if recursive else folder.glob("*.tmp")
-    removed = []
-    for path in candidates:
+def remove_stale_temporaries(folder: Path, target: str) -> None:
+    """Delete the stale temporaries of the file named target in folder."""
+    for path in folder.glob("*.tmp"):
         match = TEMPORARY.match(path.name)
-        if match and (target is None or match["target"] == target) and is_stale(path):
+        if match and match["target"] == target and is_stale(path):
             path.unlink(missing_ok=True)
-            removed.append(path)
-    return removed
 
 
 @contextmanager
 def atomic_open(path: str | Path, binary: bool = False, fsync: bool = False) -> Iterator[IO]:
-    """Open a temporary beside path for writing (plain open()'s permissions); on success it replaces path, on error
-    it vanishes; stale temporaries of the target are removed first."""
+    """A temporary beside path open for writing (open()'s permissions): replaces path on success, vanishes on error."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path.parent, target=path.name)
@@ -110,6 +99,5 @@ def _exit_on_signal(signum: int, frame: object) -> None:
 
 
 def exit_on_sigterm() -> None:
-    """Turn SIGTERM (kill, a scheduler's stop, torchrun ending its workers) into SystemExit(143) in this
-    process, so temporaries are removed as for Ctrl-C; Python's default would end it without cleanup."""
+    """Turn SIGTERM (kill, a scheduler, torchrun) into SystemExit(143), so temporaries are removed as for Ctrl-C."""
     signal.signal(signal.SIGTERM, _exit_on_signal)

@@ -1,12 +1,9 @@
-"""Person boxes from 2D poses: poses2d.json (any 2D source: OpenPose, a dataset, an earlier run) -> a COCO
-detection-results file for ``detector=file``, keyed by the image ids of an images dataset.
+"""Person boxes from 2D poses: poses2d.json -> a COCO detection-results file for ``detector=file``, keyed by the
+image ids of an images dataset, in the image file's pixels (the poses are in the calibration's)::
 
     python -m data.datasets.images --cameras C --images DIR -o coco_images.json      # the image ids
     python -m data.formats.boxes_from_poses poses2d.json --cameras C --images coco_images.json \\
         -o detections.json [--frame-map 572:0] [--margin 0.1] [--min-joints 3]
-
-A box is the extent of a person's scored joints grown by ``margin`` of its size on every side, scored with
-the entry's score; it is written in the image file's pixels (the poses are in the calibration's).
 """
 
 from __future__ import annotations
@@ -42,7 +39,7 @@ def detections(
     margin: float,
     min_joints: int,
 ) -> list[dict]:
-    """COCO detection results of every person of ``poses`` ({frame: V ViewDetections}) found in ``images``."""
+    """COCO detection results of every person of ``poses`` ({frame: V ViewDetections (N, 23, 3)}) in ``images``."""
     ids = {(int(im["frame"]), str(im["camera"])): im for im in images}
     out = []
     for frame, views in poses.items():
@@ -72,7 +69,7 @@ def _frame_map(items: list[str]) -> dict[int, int]:
 def main(argv: Sequence[str] | None = None) -> None:
     """Command line (module docstring): write the detection-results file."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("poses2d", help="poses2d.json (DESIGN.md)")
+    parser.add_argument("poses2d", help="poses2d.json (docs/formats.md)")
     parser.add_argument("--cameras", required=True, help="the calibration (its image sizes, camera names)")
     parser.add_argument("--images", required=True, help="COCO images list of python -m data.datasets.images")
     parser.add_argument("-o", "--out", required=True, help="the detections .json to write")

@@ -15,35 +15,13 @@ BODY25_NUM_JOINTS = 25
 BODY25_SKELETON_TYPE = 4  # the header's skeleton id for BODY_25 in 4D Association's files
 
 # The 26 BODY_25 part-affinity limbs (joint a, joint b) in the order of the file (and of OpenPose).
+# fmt: off
 BODY25_PAF_LIMBS: tuple[tuple[int, int], ...] = (
-    (1, 8),
-    (9, 10),
-    (10, 11),
-    (8, 9),
-    (8, 12),
-    (12, 13),
-    (13, 14),
-    (1, 2),
-    (2, 3),
-    (3, 4),
-    (2, 17),
-    (1, 5),
-    (5, 6),
-    (6, 7),
-    (5, 18),
-    (1, 0),
-    (0, 15),
-    (0, 16),
-    (15, 17),
-    (16, 18),
-    (14, 19),
-    (19, 20),
-    (14, 21),
-    (11, 22),
-    (22, 23),
+    (1, 8), (9, 10), (10, 11), (8, 9), (8, 12), (12, 13), (13, 14), (1, 2), (2, 3), (3, 4), (2, 17), (1, 5), (5, 6),
+    (6, 7), (5, 18), (1, 0), (0, 15), (0, 16), (15, 17), (16, 18), (14, 19), (19, 20), (14, 21), (11, 22), (22, 23),
     (11, 24),
 )
-
+# fmt: on
 BODY25_LIMB_ARRAY = np.array(BODY25_PAF_LIMBS, dtype=np.int64)  # the limbs as (26, 2) joint pairs
 
 
@@ -67,11 +45,8 @@ class FrameCandidates:
 
 
 class _Layout:
-    """Where each frame's blocks lie in a file's numbers, found in one pass over the counts; errors name the block.
-
-    cand_pos (F, 25): index of joint j's x block (then its y and score blocks), counts (F, 25): its candidates;
-    paf_pos (F, 26): index of limb k's PAF block (n_a x n_b, row-major).
-    """
+    """Where each frame's blocks lie in a file's numbers, found in one pass over the counts; errors name the block:
+    cand_pos (F, 25) of joint j's x block (then y, score), counts (F, 25), paf_pos (F, 26) of limb k's PAF block."""
 
     def __init__(self, path: Path, values: np.ndarray) -> None:
         self.path, self.values, self.pos = path, values, 0
@@ -80,8 +55,7 @@ class _Layout:
         self.first_bad = int(bad[0]) if len(bad) else len(values)
 
     def skip(self, n: int, where: str, *args: object) -> int:
-        """Step over the next n numbers, checked to exist and be finite -> their start; where.format(*args)
-        names them in errors (formatted only then)."""
+        """Skip the next n numbers, checked to exist and be finite -> their start; errors name where.format(*args)."""
         start, self.pos = self.pos, self.pos + n
         if self.pos > len(self.numbers):
             raise ValueError(f"{self.path}: file ends while reading {where.format(*args)}")
@@ -101,8 +75,7 @@ class _Layout:
         return self._frames_unchecked(num_frames) or self._frames_checked(num_frames)
 
     def _frames_unchecked(self, num_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """:meth:`frames` of a well-formed file in one tight loop; None at the first problem (nothing moved), for
-        :meth:`_frames_checked` to name it."""
+        """:meth:`frames` of a well-formed file in one tight loop; None at the first problem, for _frames_checked."""
         numbers, pos, end = self.numbers, self.pos, min(len(self.numbers), self.first_bad)
         J, limbs = BODY25_NUM_JOINTS, BODY25_PAF_LIMBS
         cand_pos, counts, paf_pos = [0] * (num_frames * J), [0] * (num_frames * J), [0] * (num_frames * len(limbs))
@@ -177,10 +150,9 @@ def load_4dassoc_detections(path: str | Path, image_size: tuple[int, int] = (103
         raise ValueError(f"{path}: header skeleton type is {skeleton}, expected {BODY25_SKELETON_TYPE} (BODY_25)")
     num_frames = layout.count("the header's frame count")
     cand_pos, counts, paf_pos = layout.frames(num_frames)
-    if layout.pos != len(layout.values):
-        raise ValueError(
-            f"{path}: {len(layout.values) - layout.pos} numbers left after the {num_frames} frames of the header"
-        )
+    left = len(layout.values) - layout.pos
+    if left:
+        raise ValueError(f"{path}: {left} numbers left after the {num_frames} frames of the header")
     points = _candidate_points(layout.values, cand_pos.ravel(), counts.ravel(), image_size)
     ends = np.cumsum(counts, axis=1)
     first = np.concatenate([[0], ends[:-1, -1].cumsum()]) if num_frames else np.zeros(0, dtype=np.int64)

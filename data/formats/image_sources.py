@@ -13,7 +13,6 @@ import numpy as np
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm", ".jp2")
 VIDEO_SUFFIXES = (".avi", ".mp4", ".mkv", ".mov", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv", ".mts", ".ts")
-KINDS = ("folder", "video", "image")
 
 
 class ImageSourceError(ValueError):
@@ -61,8 +60,7 @@ class ImageSource:
 
 
 def open_source(path: str | Path, pattern: str | None = None) -> ImageSource:
-    """The source at ``path``: a folder (its image files, or those matching a glob ``pattern`` inside it), a
-    video file (by suffix, VIDEO_SUFFIXES) or an image file."""
+    """The frames at ``path``: a folder's images (those matching a glob ``pattern``), a video or an image file."""
     path = Path(path)
     if path.is_dir():
         candidates = [Path(p) for p in glob.glob(str(path / pattern))] if pattern else list(path.iterdir())

@@ -61,10 +61,8 @@ def _body25(path: Path, n: int, person: object) -> np.ndarray:
     if not isinstance(values, list):
         raise ValueError(f"{path}: person {n} has no 'pose_keypoints_2d' list")
     if len(values) != BODY25_VALUES:
-        raise ValueError(
-            f"{path}: person {n} has {len(values)} pose_keypoints_2d numbers, expected "
-            f"{BODY25_VALUES} (BODY_25: 25 keypoints x, y, score)"
-        )
+        expected = f"{BODY25_VALUES} (BODY_25: 25 keypoints x, y, score)"
+        raise ValueError(f"{path}: person {n} has {len(values)} pose_keypoints_2d numbers, expected {expected}")
     try:
         pose = np.array(values, dtype=np.float64).reshape(25, 3)
     except (TypeError, ValueError):
@@ -115,8 +113,7 @@ def camera_folders(specs: Sequence[str]) -> dict[str, Path]:
 
 
 def convert(folders: dict[str, Path], margin: float = 0.1) -> dict[int, list[ViewDetections]]:
-    """OpenPose folders per camera -> {frame: one ViewDetections (N, 23, 3) per camera, in folders' order},
-    keypoint scores clipped to [0, 1]; frames missing in a camera get no detections there."""
+    """OpenPose folders per camera -> {frame: V ViewDetections (N, 23, 3) in folders' order}, scores clipped to 0..1."""
     per_camera = [load_openpose_dir(folder, margin) for folder in folders.values()]
     frames: dict[int, list[ViewDetections]] = {}
     for v, views in enumerate(per_camera):

@@ -1,9 +1,6 @@
-"""poses2d.json (DESIGN.md): one entry per person per camera per frame, COCO-23 keypoints in pixels.
-
-Entry: {"frame": int, "camera": str, "bbox": [x, y, w, h], "score": float, "keypoints": 69 numbers, "id"?}.
-The reader rejects with one line (Poses2DError) malformed entries, unknown cameras, non-finite numbers, scores
-outside [0, 1] (up to ``SCORE_SLACK`` above is clipped), points farther outside the image than
-``OUTSIDE_IMAGE_TOLERANCE`` image sizes, and the same scored detection twice (an export bug a merge would hide).
+"""poses2d.json (docs/formats.md): one entry per person per camera per frame, COCO-23 keypoints in pixels:
+{"frame": int, "camera": str, "bbox": [x, y, w, h], "score": float, "keypoints": 69 numbers, "id"?}. The reader
+rejects in one line (Poses2DError) bad entries, unknown cameras, non-finite or out-of-range values, duplicates.
 """
 
 from __future__ import annotations
@@ -35,19 +32,12 @@ class Poses2DError(ValueError):
 def _numbers(path: Path, i: int, entry: dict, key: str, count: int | None, what: str) -> np.ndarray:
     """entry[key] as finite floats, (count,) or a scalar (count None)."""
     value = entry[key]
-    if count is None:
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    else:
-        ok = isinstance(value, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-        if ok and len(value) != count:
-            raise Poses2DError(f"{path}: entry {i}: {key} has {len(value)} numbers, expected {count} ({what})")
-    if not ok:
-        bad = (
-            value
-            if count is None or not isinstance(value, list)
-            else next((v for v in value if isinstance(v, bool) or not isinstance(v, (int, float))), value)
-        )
-        raise Poses2DError(f"{path}: entry {i}: {key} must be {what}, got {_short(bad)} ({type(bad).__name__})")
+    items = [value] if count is None else value if isinstance(value, list) else None
+    bad = [v for v in items if isinstance(v, bool) or not isinstance(v, (int, float))] if items is not None else [value]
+    if bad:
+        raise Poses2DError(f"{path}: entry {i}: {key} must be {what}, got {_short(bad[0])} ({type(bad[0]).__name__})")
+    if count is not None and len(value) != count:
+        raise Poses2DError(f"{path}: entry {i}: {key} has {len(value)} numbers, expected {count} ({what})")
     try:
         out = np.asarray(value, dtype=np.float64)
     except OverflowError:  # a JSON integer beyond float64

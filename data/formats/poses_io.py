@@ -1,4 +1,4 @@
-"""Reading and writing the pose files users see (DESIGN.md): poses3d.json."""
+"""Reading and writing the pose files users see (docs/formats.md): poses3d.json."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from data.keypoints import COCO23_NAMES
 
 def poses3d_document(frames: Iterable[tuple], camera_names: list[str]) -> dict:
     """The poses3d.json document of (frame, poses (P, 23, 4), assignment (P, V)[, ids (P,)]) tuples; without
-    ids a person's id is its index in the frame (DESIGN.md: with tracking, the track id)."""
+    ids a person's id is its index in the frame (docs/formats.md: with tracking, the track id)."""
     out_frames = []
     for frame, poses, assignment, *rest in frames:
         ids = np.arange(len(poses)) if not rest or rest[0] is None else np.asarray(rest[0])

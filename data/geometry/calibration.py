@@ -1,9 +1,7 @@
-"""Calibration loaders and savers: every dataset's camera format to one `Rig` (DESIGN.md conventions).
+"""Calibration loaders and savers: every dataset's camera format to one `Rig` (docs/formats.md conventions).
 
-Cameras come out with x_cam = R x_world + t, metres, z up, floor z = 0, OpenCV ``dist``; bad files raise
-`CalibrationError` naming file, camera and key. View order: the file's (cameras.json, Panoptic or the given
-``cameras``), keys numerically sorted (4D Association, VoxelPose), CVLab1-4 then IDIAP1-3 (Wildtrack), P0-P4
-named "0".."4" (Shelf P-matrices).
+Bad files raise `CalibrationError` naming file, camera and key. View order: the file's (cameras.json, Panoptic),
+numeric keys (4D Association, VoxelPose), CVLab1-4 then IDIAP1-3 (Wildtrack), P0.. named "0".. (Shelf P files).
 """
 
 from __future__ import annotations
@@ -26,8 +24,7 @@ WILDTRACK_SIZE = (1920, 1080)
 WILDTRACK_GRID_ORIGIN = (-3.0, -9.0)  # metres: world (X, Y) of grid cell (0, 0) in gt_positions_mvdet.txt
 WILDTRACK_GRID_STEP = 0.025  # metres per grid cell
 SHELF_SIZE = (1032, 776)
-# Image sides (px) accepted in a calibration: a side outside this range is a typo or a unit mistake
-# (e.g. [10, 10], 1e308), not a camera; real sensors run from a few hundred to some ten thousand pixels.
+# Image sides (px) outside this range are a typo or a unit mistake (e.g. [10, 10], 1e308), not a camera.
 IMAGE_SIDE_RANGE_PX = (32, 100_000)
 # Panoptic world (cm, y down) -> ours (m, z up): x_ours = (x, z, -y) / 100; a proper rotation (det +1).
 _PANOPTIC_M = ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0))
@@ -64,20 +61,15 @@ def _missing_key(entry: Mapping, key: str) -> str:
 
 
 def _array(entry: Any, key: str, shape: tuple[int, ...], path: str | Path, camera: str) -> np.ndarray:
-    """entry[key] as a finite float array of `shape` (any nesting with that many numbers is accepted);
-    strings and booleans where numbers belong are named, not converted."""
+    """entry[key] as a finite float array of `shape` (any nesting of that many numbers; no strings or booleans)."""
     if not isinstance(entry, Mapping):
         raise _error(path, camera, None, f"entry is a {type(entry).__name__}, expected an object")
     if key not in entry:
         raise _error(path, camera, key, _missing_key(entry, key))
     bad = _non_number(entry[key])
     if bad is not None:
-        raise _error(
-            path,
-            camera,
-            key,
-            f"is not an array of numbers: {bad[0]!r} ({type(bad[0]).__name__}) where a number belongs",
-        )
+        what = f"{bad[0]!r} ({type(bad[0]).__name__})"
+        raise _error(path, camera, key, f"is not an array of numbers: {what} where a number belongs")
     try:
         value = np.array(entry[key], dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -90,8 +82,7 @@ def _array(entry: Any, key: str, shape: tuple[int, ...], path: str | Path, camer
 
 
 def _rotation(R: np.ndarray, path: str | Path, camera: str, key: str) -> np.ndarray:
-    """The nearest rotation (SVD) of a rounded rotation matrix, so that Camera.project (which goes through
-    cv2.Rodrigues) and Camera.P use the same R; CalibrationError when far from a rotation: (3, 3)."""
+    """The nearest rotation (SVD) of a rounded rotation matrix R (3, 3); CalibrationError when far from one: (3, 3)."""
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) <= 0:
         raise _error(path, camera, key, "is not a rotation matrix (orthonormal, det +1)")
     if np.allclose(R @ R.T, np.eye(3), rtol=0, atol=1e-12):
@@ -119,13 +110,8 @@ def _camera(
         raise _error(path, name, keys[2], f"is not a positive integer image size: {list(size)}")
     lo, hi = IMAGE_SIDE_RANGE_PX
     if not (lo <= w <= hi and lo <= h <= hi):
-        raise _error(
-            path,
-            name,
-            keys[2],
-            f"is not a plausible image size (w, h) = ({w:g}, {h:g}) px: each side "
-            f"must lie in [{lo}, {hi}] (IMAGE_SIDE_RANGE_PX)",
-        )
+        what = f"is not a plausible image size (w, h) = ({w:g}, {h:g}) px: each side must lie in [{lo}, {hi}]"
+        raise _error(path, name, keys[2], f"{what} (IMAGE_SIDE_RANGE_PX)")
     return Camera(name, K, dist, R, t, (int(w), int(h)))
 
 
@@ -136,14 +122,9 @@ def _read_json(path: str | Path) -> Any:
             return json.load(f, object_pairs_hook=unique_keys)
     except FileNotFoundError:
         raise _error(path, None, None, "calibration file not found") from None
-    except DuplicateKey as exc:
-        raise _error(
-            path,
-            None,
-            None,
-            f"key {exc.args[0]!r} appears twice in one object (a camera or a "
-            f"parameter given twice; JSON would keep only the last)",
-        ) from None
+    except DuplicateKey as exc:  # its message: key 'k' appears twice in one object
+        hint = "a camera or a parameter given twice; JSON would keep only the last"
+        raise _error(path, None, None, f"{exc} ({hint})") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise _error(path, None, None, f"cannot read calibration JSON ({exc})") from None
 
@@ -160,7 +141,7 @@ def _camera_entries(data: Any, path: str | Path, numeric_order: bool) -> list[tu
 
 # --- the repository's cameras.json -----------------------------------------------------------------
 def load_cameras_json(path: str | Path) -> Rig:
-    """The repository's cameras.json (DESIGN.md): {name: {K, dist, R, t, size}}, metres, in file order."""
+    """The repository's cameras.json (docs/formats.md): {name: {K, dist, R, t, size}}, metres, in file order."""
     cameras = []
     for name, entry in _camera_entries(_read_json(path), path, numeric_order=False):
         K, dist = _array(entry, "K", (3, 3), path, name), _array(entry, "dist", (5,), path, name)
@@ -177,8 +158,7 @@ def save_cameras_json(rig: Rig, path: str | Path) -> None:
 
 # --- Shelf / Campus: 4D Association, VoxelPose, original P matrices ---------------------------------
 def load_4dassoc(path: str | Path) -> Rig:
-    """4D Association calibration.json: K (9,), RT (12,) world->camera metres, imgSize [w, h], optional
-    distortion under "distCoeff"/"dist" (else zeros)."""
+    """4D Association calibration.json: K (9,), RT (12,) world->camera in m, imgSize [w, h], distCoeff(s)/dist (5,)."""
     cameras = []
     for name, entry in _camera_entries(_read_json(path), path, numeric_order=True):
         K = _array(entry, "K", (3, 3), path, name)
@@ -193,8 +173,8 @@ def load_4dassoc(path: str | Path) -> Rig:
 
 
 def load_voxelpose(path: str | Path, image_size: tuple[int, int] = SHELF_SIZE) -> Rig:
-    """VoxelPose calibration_*.json: R (3, 3), T = camera centre (3, 1) in mm, fx fy cx cy, k (3, 1),
-    p (2, 1), x_cam = R (X - T). The file has no image size: Shelf's (1032, 776) unless given."""
+    """VoxelPose calibration_*.json: R (3, 3), T (3, 1) = camera centre in mm, fx fy cx cy, k (3, 1), p (2, 1);
+    x_cam = R (X - T). The file has no image size: Shelf's (1032, 776) unless given."""
     cameras = []
     for name, entry in _camera_entries(_read_json(path), path, numeric_order=True):
         R = _rotation(_array(entry, "R", (3, 3), path, name), path, name, "R")
@@ -255,8 +235,7 @@ def panoptic_world_to_ours(points_cm: np.ndarray) -> np.ndarray:
 
 
 def load_panoptic(path: str | Path, cameras: Sequence[str] | None = None) -> Rig:
-    """CMU Panoptic calibration_<seq>.json: HD cameras in file order, or the named ones in the given order;
-    R_ours = R M^T, t_ours = t / 100 (see panoptic_world_to_ours)."""
+    """CMU Panoptic calibration_<seq>.json: HD cameras in file order, or the named ones; R M^T, t / 100 (metres)."""
     data = _read_json(path)
     if not isinstance(data, Mapping) or not isinstance(data.get("cameras"), list):
         raise _error(path, None, "cameras", "is missing or not a list")
@@ -300,8 +279,7 @@ def _xml_array(path: Path, tag: str, shape: tuple[int, ...], camera: str) -> np.
 
 
 def load_wildtrack(root: str | Path) -> Rig:
-    """Wildtrack calibrations/{intrinsic/intr_*, extrinsic/extr_*}.xml of the 7 cameras, tvec cm -> m (the world
-    is already z up, ground z = 0)."""
+    """Wildtrack calibrations/{intrinsic/intr_*, extrinsic/extr_*}.xml of the 7 cameras, tvec cm -> m (world z up)."""
     root = Path(root)
     calib = root / "calibrations" if (root / "calibrations").is_dir() else root
     cameras = []
@@ -355,25 +333,18 @@ def detect_format(path: str | Path) -> str:
     for fmt, required in _SIGNATURES:  # a camera with every required key decides; the loader names the others
         if any(required <= set(e) for e in entries):
             return fmt
-    # No camera is complete (e.g. a typo 't' -> 'T' in a one-camera file): the format whose keys the
-    # cameras share most, so that its loader names the camera and the missing key.
+    # No camera is complete (a typo 't' -> 'T'?): the format sharing most keys, whose loader names the missing one.
     keys = set().union(*(set(e) for e in entries)) if entries else set()
     overlap = {fmt: len(keys & every) / len(every) for fmt, every in _ALL_KEYS.items()}
     best = max(overlap, key=overlap.get)
     if overlap[best] >= FORMAT_MIN_KEY_OVERLAP:
         return best
-    raise _error(
-        path,
-        None,
-        None,
-        "cannot detect the calibration format of this file (expected cameras.json "
-        "{name: {K, dist, R, t, size}}, 4D Association, VoxelPose or Panoptic JSON)",
-    )
+    expected = "cameras.json {name: {K, dist, R, t, size}}, 4D Association, VoxelPose or Panoptic JSON"
+    raise _error(path, None, None, f"cannot detect the calibration format of this file (expected {expected})")
 
 
 def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: Any) -> Rig:
-    """Any supported calibration: fmt cameras_json, 4dassoc, voxelpose, panoptic, wildtrack, shelf_p or auto (detected);
-    kwargs go to the loader; ``check`` runs the rig check (RigError where every result would be garbage, RigWarning)."""
+    """A calibration of format fmt (a key of ``loaders``, or auto), kwargs to its loader; check: run check_rig on it."""
     loaders = {
         "cameras_json": load_cameras_json,
         "4dassoc": load_4dassoc,

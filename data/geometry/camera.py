@@ -1,6 +1,6 @@
 """Pinhole cameras with OpenCV distortion, and rigs of named cameras.
 
-Conventions (DESIGN.md): world in metres, z up, ground z = 0; x_cam = R x_world + t; pixels of the
+Conventions (docs/formats.md): world in metres, z up, ground z = 0; x_cam = R x_world + t; pixels of the
 original image; ``dist`` = OpenCV (k1, k2, p1, p2, k3).
 """
 
@@ -77,8 +77,7 @@ class Camera:
         flat = points.reshape(-1, 3)
         if flat.shape[0] == 0:
             return np.zeros(points.shape[:-1] + (2,))
-        # Transform with R as stored: cv2.Rodrigues would snap a slightly non-orthogonal R to a
-        # rotation, and projection would then disagree with P and the ground homographies.
+        # R as stored, not through cv2.Rodrigues (which snaps it to a rotation): agrees with P and the homographies.
         uv, _ = cv2.projectPoints(self.world_to_camera(flat), np.zeros(3), np.zeros(3), self.K, self.dist)
         return uv.reshape(points.shape[:-1] + (2,))
 
@@ -109,28 +108,14 @@ class Camera:
         r2 = (cam[..., 0] ** 2 + cam[..., 1] ** 2) / safe_z**2
         ok = (z > 1e-9) & (r2 <= self._fov_r2 * 1.05)
         uv = self.project(points)
-        w, h = self.size
-        inside = (
-            (uv[..., 0] >= -margin)
-            & (uv[..., 0] <= w - 1 + margin)
-            & (uv[..., 1] >= -margin)
-            & (uv[..., 1] <= h - 1 + margin)
-        )
+        inside = np.all((uv >= -margin) & (uv <= np.subtract(self.size, 1) + margin), axis=-1)
         return ok & inside
 
     def _field_of_view_r2(self) -> float:
         """Largest squared normalised radius of the image border (a distortion-safe FOV bound)."""
         w, h = self.size
-        xs = np.linspace(0, w - 1, 9)
-        ys = np.linspace(0, h - 1, 9)
-        border = np.concatenate(
-            [
-                np.stack([xs, np.zeros_like(xs)], 1),
-                np.stack([xs, np.full_like(xs, h - 1)], 1),
-                np.stack([np.zeros_like(ys), ys], 1),
-                np.stack([np.full_like(ys, w - 1), ys], 1),
-            ]
-        )
+        xs, ys = np.linspace(0, w - 1, 9), np.linspace(0, h - 1, 9)
+        border = np.array([(x, y) for y in (0, h - 1) for x in xs] + [(x, y) for x in (0, w - 1) for y in ys], float)
         und = self.undistort_points(border)
         # Where strong distortion is not invertible (e.g. Wildtrack's corners) the iterative undistortion
         # lands on a wrong point; keep only border points it maps back onto themselves.
@@ -165,14 +150,8 @@ class Camera:
         return self.distort_points(uv) if distort else uv
 
     def to_dict(self) -> dict:
-        """The cameras.json entry of this camera (DESIGN.md)."""
-        return {
-            "K": self.K.tolist(),
-            "dist": self.dist.tolist(),
-            "R": self.R.tolist(),
-            "t": self.t.tolist(),
-            "size": list(self.size),
-        }
+        """The cameras.json entry of this camera (docs/formats.md)."""
+        return {key: getattr(self, key).tolist() for key in ("K", "dist", "R", "t")} | {"size": list(self.size)}
 
 
 def apply_homography(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -218,14 +197,6 @@ class Rig:
             raise KeyError(f"no camera named {key!r} in the rig {self.names}")
         return self.cameras[key]
 
-    def index(self, name: str) -> int:
-        """View index of a camera name."""
-        return self.names.index(name)
-
-    def subset(self, names: Iterable[str]) -> "Rig":
-        """A rig of the named cameras, in the given order."""
-        return Rig(tuple(self[n] for n in names))
-
     def projection_matrices(self) -> np.ndarray:
         """Projection matrices of undistorted pixels: (V, 3, 4)."""
         return np.stack([c.P for c in self.cameras])
@@ -244,5 +215,5 @@ class Rig:
         return out
 
     def to_dict(self) -> dict:
-        """The cameras.json content of this rig (DESIGN.md)."""
+        """The cameras.json content of this rig (docs/formats.md)."""
         return {c.name: c.to_dict() for c in self.cameras}

@@ -1,15 +1,10 @@
 """Plausibility checks of a calibrated rig, and of 2D poses against it: ``python -m data.geometry.check_rig
 cameras.json [poses2d.json]``.
 
-A calibration can load and still be wrong (t in mm, R transposed, a camera copied, z not up). What makes every
-result garbage is a `RigError`; the rest are `RigWarning`s naming the camera and the likely mistake. Geometric
-checks (`rig_findings`, tolerances in `RigTolerances`): all centres at one place (error) or two at one place;
-centres far from the origin; below or on the ground plane (the feet matcher cuts rays with the feet's planes);
-the image's y axis pointing up; no pixel seeing the ground; a camera not seeing the common scene of the others
-(the point nearest to their optical axes). 2D check (`pose_findings`): per view pair, the mutual best detection
-pairs are triangulated; a camera whose pairs reproject worse than ``max_reprojection`` of the image diagonal is
-named with the correction (R transposed, camera -> world pose, t in mm or cm, another camera's poses) that fits.
-`load_rig` runs the geometric checks on every load, `data.datasets.files.load_files` adds the 2D check.
+A calibration can load and still be wrong (t in mm, R transposed, a camera copied, z not up): a `RigError` where
+every result would be garbage, else `RigWarning`s naming the camera and the likely mistake. `rig_findings` checks
+the geometry (tolerances in `RigTolerances`) on every `load_rig`; `pose_findings` triangulates the mutual best
+detection pairs of each view pair and names the correction that makes a badly reprojecting camera fit.
 """
 
 from __future__ import annotations
@@ -17,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -41,7 +36,7 @@ class RigWarning(UserWarning):
 
 @dataclass(frozen=True)
 class RigTolerances:
-    """The documented tolerances of the rig check (module docstring)."""
+    """The tolerances of the rig check."""
 
     min_baseline_m: float = 0.05  # centres closer than this are one place
     max_centre_distance_m: float = 250.0  # centres farther from the world origin: units other than metres
@@ -69,7 +64,7 @@ def _share(fraction: float) -> str:
 
 
 def _names(cameras: Iterable[Camera]) -> str:
-    """'a', 'b' and 'c' style list of camera names."""
+    """'a', 'b', 'c': the camera names quoted."""
     return ", ".join(repr(c.name) for c in cameras)
 
 
@@ -103,9 +98,8 @@ def sees_ground(cam: Camera, grid: int = 9) -> bool:
     u, v = np.meshgrid(np.linspace(0, w, grid), np.linspace(0, h, grid))
     pixels = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
     rays = pixels @ np.linalg.inv(cam.K).T @ cam.R  # world directions R^T K^-1 p: (grid^2, 3)
-    cz = cam.center[2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = -cz / rays[:, 2]
+        s = -cam.center[2] / rays[:, 2]
     return bool(np.any(np.isfinite(s) & (s > 0)))
 
 
@@ -115,32 +109,22 @@ def _about(cams: list[Camera], text: str) -> list[Finding]:
 
 
 def rig_findings(rig: Rig, tol: RigTolerances = RigTolerances()) -> list[Finding]:
-    """The geometric findings of a rig (module docstring), errors first."""
+    """The geometric findings of a rig, errors first: cameras at one place, far, low, upside down, looking away."""
     cams = list(rig)
     if len(cams) < 2:
         return [Finding("warning", f"only {len(cams)} camera: nothing can be triangulated")]
     C = np.array([c.center for c in cams])
     dist = np.linalg.norm(C[:, None] - C[None], axis=-1)
     if dist.max() < tol.min_baseline_m:
-        return [
-            Finding(
-                "error",
-                f"all {len(cams)} cameras have their centre at ({C[0, 0]:.3g}, {C[0, 1]:.3g}, "
-                f"{C[0, 2]:.3g}) (within {tol.min_baseline_m} m): no baseline, nothing can be "
-                f"triangulated (R and t copied from one camera?)",
-            )
-        ]
+        where = f"({C[0, 0]:.3g}, {C[0, 1]:.3g}, {C[0, 2]:.3g}) (within {tol.min_baseline_m} m)"
+        what = "no baseline, nothing can be triangulated (R and t copied from one camera?)"
+        return [Finding("error", f"all {len(cams)} cameras have their centre at {where}: {what}")]
     out = []
     for a, b in zip(*np.nonzero(np.triu(dist < tol.min_baseline_m, 1))):
         same = all(np.array_equal(getattr(cams[a], k), getattr(cams[b], k)) for k in ("K", "R", "t"))
         what = "have identical calibrations" if same else "share their centre"
-        out.append(
-            Finding(
-                "warning",
-                f"cameras {cams[a].name!r} and {cams[b].name!r} {what} ({dist[a, b]:.3g} m apart): that view pair "
-                f"cannot triangulate (one camera copied under two names?)",
-            )
-        )
+        why = f"({dist[a, b]:.3g} m apart): that view pair cannot triangulate (one camera copied under two names?)"
+        out.append(Finding("warning", f"cameras {cams[a].name!r} and {cams[b].name!r} {what} {why}"))
     return out + _placement_findings(cams, C, tol) + _scene_findings(cams, tol)
 
 
@@ -182,18 +166,13 @@ def _placement_findings(cams: list[Camera], C: np.ndarray, tol: RigTolerances) -
 
 
 def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
-    """Cameras that do not look at the common scene of the others (module docstring)."""
+    """Cameras that do not see the common scene of the others (the point nearest to their optical axes)."""
     cams = [c for c in cams if np.linalg.norm(c.center) <= tol.max_centre_distance_m]  # flagged already
     if len(cams) == 2:
         point = axes_point(cams, tol.max_axes_condition)
         if point is not None and not all(sees_point(c, point, tol.scene_margin) for c in cams):
-            return [
-                Finding(
-                    "warning",
-                    f"cameras {_names(cams)} do not look at a common region (their optical "
-                    f"axes meet behind or beside them): R transposed or of another camera?",
-                )
-            ]
+            what = "(their optical axes meet behind or beside them): R transposed or of another camera?"
+            return [Finding("warning", f"cameras {_names(cams)} do not look at a common region {what}")]
         return []
     lost = []
     for i, cam in enumerate(cams):
@@ -201,13 +180,8 @@ def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
         if point is not None and not sees_point(cam, point, tol.scene_margin):
             lost.append(cam)
     if lost and len(lost) == len(cams):
-        return [
-            Finding(
-                "warning",
-                "the cameras do not look at a common region (every camera misses the point "
-                "the others look at): R camera -> world instead of world -> camera?",
-            )
-        ]
+        what = "(every camera misses the point the others look at): R camera -> world instead of world -> camera?"
+        return [Finding("warning", f"the cameras do not look at a common region {what}")]
     return _about(
         lost,
         "not looking at the common scene of the other cameras (R transposed, camera -> world, or of another camera?)",
@@ -217,7 +191,7 @@ def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
 # --- 2D poses against the rig ------------------------------------------------------------------------
 def _pair_costs(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.ndarray, min_joints: int) -> np.ndarray:
     """Median reprojection error / image diagonal of every detection pair of two views, inf where they
-    share fewer than min_joints joints or the point lies behind a camera: (Na, 23, 3), (Nb, 23, 3) -> (Na, Nb)."""
+    share fewer than min_joints joints or lie behind a camera: (Na, 23, 3), (Nb, 23, 3) -> (Na, Nb)."""
     Na, Nb, J = len(kp_a), len(kp_b), kp_a.shape[1]
     ua = np.concatenate([cam_a.undistort_points(kp_a[..., :2]), kp_a[..., 2:]], -1)
     ub = np.concatenate([cam_b.undistort_points(kp_b[..., :2]), kp_b[..., 2:]], -1)
@@ -260,9 +234,7 @@ def _frames(views_by_frame: Mapping[int, list[ViewDetections]], count: int) -> l
 def pair_fit(
     cam_a: Camera, cam_b: Camera, frames: list[list[ViewDetections]], a: int, b: int, tol: RigTolerances
 ) -> float:
-    """Median over the frames' mutual best detection pairs of views a, b (poses of those views, cameras
-    cam_a, cam_b) of their 2-view reprojection error (fraction of the diagonal); nan without detections
-    in both views."""
+    """Median 2-view reprojection error / diagonal of the mutual best pairs of views a, b; nan without detections."""
     shared = [f for f in frames if len(f[a]) and len(f[b])]
     costs = [_mutual_best(_pair_costs(cam_a, cam_b, f[a].keypoints, f[b].keypoints, tol.min_joints)) for f in shared]
     costs = np.concatenate(costs) if costs else np.zeros(0)
@@ -279,8 +251,7 @@ def camera_fit(
     tol: RigTolerances,
     poses_of: int | None = None,
 ) -> float:
-    """Median of camera v's pair fits (pair_fit) with the partner views; poses_of: take view v's 2D poses
-    from that view instead (a name swap); nan without pairs."""
+    """Median pair_fit of camera v with the partners (view v's 2D poses from view poses_of if given); nan if none."""
     fits = [pair_fit(cams[v], cams[u], frames, v if poses_of is None else poses_of, u, tol) for u in partners]
     fits = [f for f in fits if np.isfinite(f) or f == np.inf]
     return float(np.median(fits)) if fits else float("nan")
@@ -290,16 +261,11 @@ def _corrections(cam: Camera) -> list[tuple[str, Camera]]:
     """Candidate corrections of a camera that does not fit its 2D poses: (what was wrong, corrected camera)."""
     R, t = cam.R, cam.t
     return [
-        ("R is transposed (give world -> camera)", replace_camera(cam, R.T, t)),
-        ("R, t are the camera -> world pose (invert them)", replace_camera(cam, R.T, -R.T @ t)),
-        ("t is in millimetres (metres expected)", replace_camera(cam, R, t / 1000.0)),
-        ("t is in centimetres (metres expected)", replace_camera(cam, R, t / 100.0)),
+        ("R is transposed (give world -> camera)", replace(cam, R=R.T)),
+        ("R, t are the camera -> world pose (invert them)", replace(cam, R=R.T, t=-R.T @ t)),
+        ("t is in millimetres (metres expected)", replace(cam, t=t / 1000.0)),
+        ("t is in centimetres (metres expected)", replace(cam, t=t / 100.0)),
     ]
-
-
-def replace_camera(cam: Camera, R: np.ndarray, t: np.ndarray) -> Camera:
-    """The camera with another R (3, 3) and t (3,)."""
-    return Camera(cam.name, cam.K, cam.dist, R, t, cam.size)
 
 
 def _diagnose(
@@ -319,9 +285,8 @@ def _diagnose(
 def pose_findings(
     rig: Rig, views_by_frame: Mapping[int, list[ViewDetections]], tol: RigTolerances = RigTolerances()
 ) -> list[Finding]:
-    """Cameras whose 2D poses do not fit the calibration (quick 2-view triangulation), each with the likely
-    mistake; views_by_frame {frame: V ViewDetections (N, 23, 3)}. The worst camera is set aside until the
-    remaining ones fit each other, so one wrong camera does not blame its partners."""
+    """Cameras whose 2D poses {frame: V ViewDetections (N, 23, 3)} do not fit the calibration, with the likely mistake;
+    the worst is set aside until the rest fit each other, so that one wrong camera does not blame its partners."""
     cams, frames = list(rig), _frames(views_by_frame, tol.max_frames)
     V = len(cams)
     if V < 2 or not frames:
@@ -342,23 +307,16 @@ def pose_findings(
         bad.append((worst, fit[worst]))
     if not bad:
         return []
+    limit = f"more than {tol.max_reprojection:.0%}"
     if len(good) < 2:
-        values = [f for _, f in bad]
-        return [
-            Finding(
-                "warning",
-                f"the 2D poses fit no camera pair (median 2-view reprojection error "
-                f"{_share(min(values))} or more, more than "
-                f"{tol.max_reprojection:.0%}): t in other units, R camera -> world, or the "
-                f"2D poses of another rig?",
-            )
-        ]
+        error = f"median 2-view reprojection error {_share(min(f for _, f in bad))} or more, {limit}"
+        what = "t in other units, R camera -> world, or the 2D poses of another rig?"
+        return [Finding("warning", f"the 2D poses fit no camera pair ({error}): {what}")]
     return [
         Finding(
             "warning",
-            f"camera {cams[v].name!r}: its 2D poses do not fit the calibration (median 2-view "
-            f"reprojection error {_share(f)} against the other cameras, more "
-            f"than {tol.max_reprojection:.0%}): {_diagnose(cams, frames, v, good, tol)}",
+            f"camera {cams[v].name!r}: its 2D poses do not fit the calibration (median 2-view reprojection error "
+            f"{_share(f)} against the other cameras, {limit}): {_diagnose(cams, frames, v, good, tol)}",
         )
         for v, f in bad
     ]
@@ -372,8 +330,7 @@ def check_rig(
     tol: RigTolerances = RigTolerances(),
     warn: bool = True,
 ) -> list[Finding]:
-    """Run the checks (2D ones with views_by_frame); raise RigError on the first error, emit the warnings
-    as RigWarning (warn=True) prefixed with `path`, and return the findings."""
+    """The findings (2D ones with views_by_frame); RigError on the first error, the warnings as RigWarning if warn."""
     findings = rig_findings(rig, tol)
     for f in findings:
         if f.level == "error":

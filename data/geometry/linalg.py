@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-# cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1], indices mod 3
 _CYCLIC = np.ix_([1, 2, 0, 1, 2], [1, 2, 0, 1, 2])  # E[i, j] = A[(i + 1) % 3, (j + 1) % 3]
 
 

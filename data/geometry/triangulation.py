@@ -10,11 +10,8 @@ RQI_TOLERANCE = 1e-10  # accepted eigenvector error bound (sine of the angle); t
 
 
 def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -> np.ndarray:
-    """Score-weighted DLT of every joint: undistorted (u, v, score) (V, P, J, 3), proj (V, 3, 4) -> (P, J, 4).
-
-    Confidence = the mean score of the views used; all zeros for a joint seen in fewer than ``min_views`` views
-    (non-finite pixels or scores are not seen) or whose equations overflow.
-    """
+    """Score-weighted DLT of every joint: undistorted (u, v, score) (V, P, J, 3), proj (V, 3, 4) -> (P, J, 4);
+    confidence = mean score of the views used, zeros where fewer than min_views see it or the equations overflow."""
     poses2d = np.asarray(poses2d, dtype=np.float64)
     proj = np.asarray(proj, dtype=np.float64)
     V, P, J, _ = poses2d.shape
@@ -38,13 +35,9 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
 def _normal_matrices(
     poses: np.ndarray, proj: np.ndarray, min_views: int, N: np.ndarray, conf: np.ndarray, solve: np.ndarray
 ) -> None:
-    """A^T A of the normalised, score-weighted DLT rows of n points: poses (V, n, 3), proj (V, 3, 4) -> N (n, 4, 4),
-    the mean score of the views that see each point conf (n,) and whether min_views see it, solve (n,).
-
-    A view sees a point when its pixel and score are finite and the score > 0. Row r (x or y) of view v is
-    a = (u_r P_3 - P_r) w / |u_r P_3 - P_r| with w the score over the point's largest (the DLT is invariant
-    to a common scale of the weights; huge scores cannot overflow the squares).
-    """
+    """A^T A of the DLT rows of n points: poses (V, n, 3), proj (V, 3, 4) -> N (n, 4, 4), mean score conf (n,) of the
+    views that see it (finite pixel and score > 0), solve (n,) = at least min_views. Row r of view v is
+    (u_r P_3 - P_r) / |u_r P_3 - P_r| times score / the point's top score (so huge scores cannot overflow)."""
     V, n = poses.shape[0], poses.shape[1]
     a = np.empty(4)
     for i in range(n):
@@ -79,11 +72,8 @@ def _normal_matrices(
 
 
 def smallest_eigenvectors(N: np.ndarray, use: np.ndarray | None = None) -> np.ndarray:
-    """Unit eigenvectors of the smallest eigenvalues of symmetric PSD 4x4 matrices: (n, 4, 4), use (n,) -> (n, 4).
-
-    Zeros where ``use`` is False. A compiled Rayleigh quotient iteration per matrix; LAPACK's eigh redoes the
-    matrices whose result it cannot certify (batched eigh costs an order of magnitude more per 4x4 matrix).
-    """
+    """Unit eigenvectors of the smallest eigenvalues of symmetric PSD 4x4 matrices: (n, 4, 4), use (n,) -> (n, 4),
+    zeros where not used; compiled Rayleigh quotient iteration, eigh for the results it cannot certify."""
     N = np.ascontiguousarray(N, dtype=np.float64)
     use = np.ones(len(N), dtype=np.bool_) if use is None else np.ascontiguousarray(use, dtype=np.bool_)
     v, ok = np.empty((len(N), 4)), np.empty(len(N), dtype=np.bool_)
@@ -97,14 +87,11 @@ def smallest_eigenvectors(N: np.ndarray, use: np.ndarray | None = None) -> np.nd
 def _rayleigh_quotient(
     N: np.ndarray, iterations: int, tol: float, use: np.ndarray, out: np.ndarray, ok: np.ndarray
 ) -> None:
-    """Rayleigh quotient iteration for the smallest eigenpair of the (n, 4, 4) matrices where use (n,) -> out (n, 4),
-    certified ok (n,) (zeros, ok, where not used).
+    """Smallest eigenvectors of N (n, 4, 4) where use (n,) -> out (n, 4), certified ok (n,) (zeros, ok, where not used).
 
-    With N = [[B, c], [c^T, d]], each step solves (N - rho I) z = v by the Schur complement of the 3x3
-    block B - rho I, from v_0 = [-B^-1 c, 1] (the inhomogeneous least-squares point). Certificate: by
-    Cauchy interlacing lambda_2(N) >= lambda_min(B) >= 1 / tr(B^-1), so with rho = v^T N v below that
-    bound and residual |N v - rho v| <= tol (1 / tr(B^-1) - rho), v is the smallest eigenvector to
-    within an angle of tol (Davis-Kahan).
+    With N = [[B, c], [c^T, d]], each step solves (N - rho I) z = v by the Schur complement of B - rho I, from
+    v_0 = [-B^-1 c, 1]. Certificate: by Cauchy interlacing lambda_2(N) >= lambda_min(B) >= 1 / tr(B^-1), so a
+    residual |N v - rho v| <= tol (1 / tr(B^-1) - rho) bounds v's angle to the eigenvector by tol (Davis-Kahan).
     """
     B_inv, C_inv, v, z, cv = np.empty((3, 3)), np.empty((3, 3)), np.empty(4), np.empty(4), np.empty(3)
     for i in range(N.shape[0]):
@@ -182,8 +169,7 @@ def _normalise(v: np.ndarray, w_positive: bool) -> None:
 
 
 def reprojection_error(points3d: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """Pixel distance of projected 3D joints to 2D joints: (P, J, 4|3), (V, P, J, 3) -> (V, P, J), NaN where either
-    has score / confidence 0."""
+    """Pixel distance of projected 3D to 2D joints: (P, J, 4|3), (V, P, J, 3) -> (V, P, J), NaN where a score is 0."""
     points3d = np.asarray(points3d, dtype=np.float64)
     poses2d = np.asarray(poses2d, dtype=np.float64)
     homog = np.concatenate([points3d[..., :3], np.ones(points3d.shape[:-1] + (1,))], axis=-1)
