@@ -1,10 +1,9 @@
 """Reference bone lengths of the MAP bone prior (paper Eq. 7), and their estimation from 3D ground truth.
 
-Default means: the joint-to-joint distances of the synthetic generator's 1.70 m mean body (Drillis & Contini
-1966 via Winter, "Biomechanics and Motor Control of Human Movement", fig. 4.1), rounded to 0.1 mm. SDs: 5.7 %
-relative (stature spread 5.3 % with 2 % per-segment variation) plus 1 cm absolute in quadrature for where a
-keypoint sits on the body, which keeps the 5-9 cm face and foot bones from a prior the 2D keypoints cannot honour.
-Re-estimate from a dataset with ``benchmarks/fit_bone_lengths.py`` and set ``bone_table`` to its JSON.
+Default means: the synthetic generator's 1.70 m mean body (data.synthetic.body), rounded to 0.1 mm. SDs: 5.7 %
+relative (stature spread 5.3 %, 2 % per segment) plus 1 cm in quadrature for where a keypoint sits on the body, which
+keeps the 5-9 cm face and foot bones from a prior the 2D keypoints cannot honour. Re-estimate from a dataset with
+``benchmarks/fit_bone_lengths.py`` and set ``bone_table`` to its JSON.
 """
 
 from __future__ import annotations
