@@ -23,12 +23,12 @@ CROWDPOSE_JOINTS = len(CROWDPOSE14_TO_COCO23[CROWDPOSE14_TO_COCO23 >= 0]) + 2  #
 Converter = Callable[[dict], np.ndarray]
 
 
-def _read_json(path: Path, what: str) -> Any:
-    """The parsed JSON of a file, or a ValueError naming the file."""
+def _read_json(path: Path) -> Any:
+    """The parsed JSON of an annotation file, or a ValueError naming the file."""
     try:
         text = path.read_text()
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+        raise ValueError(f"{path}: cannot read annotation file ({exc.strerror or exc})") from None
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
@@ -127,7 +127,7 @@ def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd:
         feet = _numbers(path, ann, "foot_kpts", 3 * NUM_FOOT_JOINTS).reshape(-1, 3)
         return np.concatenate([body, feet])
 
-    doc = _read_json(path, "annotation file")
+    doc = _read_json(path)
     return _load(path, doc, image_dir, convert, np.ones(NUM_JOINTS, dtype=bool), skip_crowd)
 
 
@@ -135,7 +135,7 @@ def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = 
     """COCO-format keypoints of 23 x 3 numbers (or COCO-17's 17 x 3, feet unlabelled) -> records; the count comes
     from the person category's ``keypoints`` names, else the first annotation, and every annotation must have it."""
     path = Path(ann_file)
-    doc = _read_json(path, "annotation file")
+    doc = _read_json(path)
     count = _coco23_count(path, doc)
     labelled = np.arange(NUM_JOINTS) < count
 
@@ -173,7 +173,7 @@ def load_crowdpose(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool
         kps = _numbers(path, ann, "keypoints", 3 * CROWDPOSE_JOINTS).reshape(-1, 3)
         return to_coco23(kps, CROWDPOSE14_TO_COCO23)
 
-    doc = _read_json(path, "annotation file")
+    doc = _read_json(path)
     return _load(path, doc, image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
 
 
@@ -197,14 +197,10 @@ def load_detections(
     ]
 
 
-def labelled_counts(record: ImageRecord) -> np.ndarray:
-    """Labelled joints (v > 0 on a joint the dataset annotates) of each person: (N,) int."""
-    return np.sum((record.keypoints[..., 2] > 0) & record.labelled[None], axis=1)
-
-
 def training_persons(record: ImageRecord, min_keypoints: int = 1) -> np.ndarray:
-    """Indices (K,) of the persons with at least min_keypoints labelled joints: the training samples."""
-    return np.flatnonzero(labelled_counts(record) >= min_keypoints)
+    """Indices (K,) of the persons with >= min_keypoints labelled joints (v > 0 on a joint the dataset annotates)."""
+    labelled = np.sum((record.keypoints[..., 2] > 0) & record.labelled[None], axis=1)
+    return np.flatnonzero(labelled >= min_keypoints)
 
 
 def load_keypoint_dataset(
