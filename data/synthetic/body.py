@@ -69,9 +69,6 @@ class BodyShape:
     stature: float
     lengths: tuple[tuple[str, float], ...]
 
-    def __getitem__(self, key: str) -> float:
-        return dict(self.lengths)[key]
-
     def as_dict(self) -> dict[str, float]:
         """Segment lengths in metres by name."""
         return dict(self.lengths)
@@ -133,33 +130,20 @@ def local_pose(body: BodyShape, phase: float, walking: bool) -> np.ndarray:
     """COCO-23 joints in the local body frame (x forward, y left, z up), lowest sole at z = 0: (23, 3)."""
     b = body.as_dict()
     joints = np.zeros((NUM_JOINTS, 3))
-    if walking:
-        # The left leg is at `phase`, the right leg half a stride later.
-        legs = {}
+    if walking:  # the left leg is at `phase`, the right leg half a stride later; each arm swings with the other leg
+        legs, arm_flex, hip_rest = {}, {}, math.radians(8.0)
         for side, ph in ((1, phase), (-1, phase + 0.5)):
-            legs[side] = _leg(
-                b,
-                side,
-                _periodic(_HIP_KEYS, ph),
-                _periodic(_KNEE_KEYS, ph),
-                _periodic(_FOOT_PITCH_KEYS, ph),
-                _WALK_LEG_ADDUCTION,
-            )
-        hip_rest = math.radians(8.0)
-        # Each arm swings with the opposite leg.
-        arm_flex = {
-            side: -_ARM_SWING_GAIN * (_periodic(_HIP_KEYS, ph) - hip_rest)
-            for side, ph in ((1, phase), (-1, phase + 0.5))
-        }
+            hip = _periodic(_HIP_KEYS, ph)
+            knee, pitch = _periodic(_KNEE_KEYS, ph), _periodic(_FOOT_PITCH_KEYS, ph)
+            legs[side] = _leg(b, side, hip, knee, pitch, _WALK_LEG_ADDUCTION)
+            arm_flex[side] = -_ARM_SWING_GAIN * (hip - hip_rest)
         lean = _WALK_LEAN
     else:
         legs = {side: _leg(b, side, 0.0, math.radians(_STAND_KNEE_DEG), 0.0, _STAND_LEG_ABDUCTION) for side in (1, -1)}
-        arm_flex = {1: 0.0, -1: 0.0}
-        lean = 0.0
+        arm_flex, lean = {1: 0.0, -1: 0.0}, 0.0
     for side, (hip_j, knee_j, ankle_j, foot_j) in ((1, (11, 13, 15, LEFT_FOOT)), (-1, (12, 14, 16, RIGHT_FOOT))):
-        pts = legs[side]
-        joints[[hip_j, knee_j, ankle_j]] = pts[:3]
-        joints[list(foot_j)] = pts[3:]  # (big toe, small toe, heel), as LEFT_FOOT / RIGHT_FOOT
+        joints[[hip_j, knee_j, ankle_j]] = legs[side][:3]
+        joints[list(foot_j)] = legs[side][3:]  # (big toe, small toe, heel), as LEFT_FOOT / RIGHT_FOOT
 
     # Trunk and head are one rigid block rotated forward by `lean` about the mid-hip.
     cl, sl = math.cos(lean), math.sin(lean)

@@ -40,12 +40,7 @@ _LIMB_B = np.array([b for _, b in LIMBS])
 
 def capsule_radii() -> np.ndarray:
     """Radius (m) of every capsule of :func:`body_capsules`: (K,) with K = len(LIMBS) + 2."""
-    radii = []
-    for a, b in LIMBS:
-        if max(a, b) >= 17:
-            radii.append(FOOT_RADIUS_M)
-        else:
-            radii.append(_LIMB_RADII.get(frozenset((a, b)), FACE_RADIUS_M))
+    radii = [FOOT_RADIUS_M if max(a, b) >= 17 else _LIMB_RADII.get(frozenset((a, b)), FACE_RADIUS_M) for a, b in LIMBS]
     return np.array(radii + [TORSO_RADIUS_M, HEAD_RADIUS_M])
 
 
@@ -100,13 +95,8 @@ def occluded_joints(center: np.ndarray, poses: np.ndarray) -> np.ndarray:
     ends_a, ends_b = body_capsules(poses)
     radii = capsule_radii()
     sphere_c = (ends_a.mean(axis=1) + ends_b.mean(axis=1)) / 2  # (P, 3)
-    reach = (
-        np.maximum(
-            np.linalg.norm(ends_a - sphere_c[:, None], axis=-1), np.linalg.norm(ends_b - sphere_c[:, None], axis=-1)
-        )
-        + radii
-    )
-    sphere_r = reach.max(axis=1)  # (P,)
+    reach_a, reach_b = (np.linalg.norm(ends - sphere_c[:, None], axis=-1) for ends in (ends_a, ends_b))
+    sphere_r = (np.maximum(reach_a, reach_b) + radii).max(axis=1)  # (P,)
 
     targets = poses.reshape(-1, 3)  # (N, 3)
     owner = np.repeat(np.arange(num), joints)

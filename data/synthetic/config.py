@@ -63,22 +63,15 @@ class SyntheticConfig:
 
     def _validate(self) -> None:
         """Raise ValueError naming the first option that is out of range."""
+        low_speed, high_speed = self.walk_speed_mps
         checks = [
             ("num_frames", self.num_frames >= 1, "must be >= 1"),
             ("num_persons", self.num_persons >= 1 or self.positions is not None, "must be >= 1"),
             ("density", self.density > 0, "must be > 0 persons per m^2"),
             ("min_spacing_m", self.min_spacing_m >= 0, "must be >= 0"),
             ("fps", self.fps > 0, "must be > 0"),
-            (
-                "walk_speed_mps",
-                0 <= self.walk_speed_mps[0] <= self.walk_speed_mps[1],
-                "must be [low, high], 0 <= low <= high",
-            ),
-            (
-                "num_cameras",
-                self.num_cameras >= 2 or self.rig != "ring",
-                "must be >= 2 (triangulation needs two views)",
-            ),
+            ("walk_speed_mps", 0 <= low_speed <= high_speed, "must be [low, high], 0 <= low <= high"),
+            ("num_cameras", self.num_cameras >= 2 or self.rig != "ring", "must be >= 2 (triangulation needs 2 views)"),
             ("camera_radius_m", self.camera_radius_m is None or self.camera_radius_m > 0, "must be > 0 or null"),
             ("image_size", min(self.image_size) > 0, "must be positive (width, height)"),
             ("focal_px", self.focal_px > 0, "must be > 0"),
@@ -112,16 +105,9 @@ class SyntheticConfig:
         return out
 
 
-OBSERVATION_KEYS = (
-    "noise_px",
-    "noise_ref_depth_m",
-    "noise_depth_exponent",
-    "occlusion",
-    "occluded_drop_prob",
-    "occluded_noise_scale",
-    "miss_rate",
-    "fp_rate",
-    "min_joints_in_view",
+OBSERVATION_KEYS = tuple(
+    "noise_px noise_ref_depth_m noise_depth_exponent occlusion occluded_drop_prob occluded_noise_scale miss_rate"
+    " fp_rate min_joints_in_view".split()
 )
 
 
