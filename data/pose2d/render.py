@@ -29,7 +29,6 @@ NEAR_M = 0.05  # ground lines are clipped to this depth in front of the camera
 DISTORTED_STEP_M = 0.25  # ground lines are drawn in pieces this long where the lens distorts
 
 _HEAD = len(LIMBS) + 1  # index of the head sphere in body_capsules
-_HAIR = len(LIMBS) + 2  # the hair sphere, appended after the capsules
 
 
 def _part_groups() -> np.ndarray:
@@ -117,8 +116,8 @@ def draw_ground_lines(image: np.ndarray, camera: Camera, ends: np.ndarray, colou
     """Draw ground segments (S, 2, 2) (x, y on z = 0, m) in place on (H, W, 3), clipped in front of the camera."""
     world = np.concatenate([ends, np.zeros(ends.shape[:2] + (1,))], axis=-1)
     depth = camera.depth(world)
-    world = world[np.any(depth > NEAR_M, axis=1)]
-    depth = depth[np.any(depth > NEAR_M, axis=1)]
+    front = np.any(depth > NEAR_M, axis=1)
+    world, depth = world[front], depth[front]
     for end in (0, 1):  # move an end behind the camera onto the near plane
         other = 1 - end
         behind = depth[:, end] <= NEAR_M
@@ -234,12 +233,8 @@ def view_person(camera: Camera, joints: np.ndarray, light: np.ndarray) -> Person
     ra, rb = np.maximum(focal * radii / da, 1.0), np.maximum(focal * radii / db, 1.0)
     scale = np.array([f for f, _, _ in SHADE_LAYERS])
     shift = np.array([s for _, s, _ in SHADE_LAYERS])[None, :, None] * np.maximum(ra, rb)[:, None, None] * light
-    outlines = capsule_outlines(
-        camera.project(ends_a)[:, None] + shift,
-        camera.project(ends_b)[:, None] + shift,
-        ra[:, None] * scale,
-        rb[:, None] * scale,
-    )
+    uv_a, uv_b = camera.project(ends_a)[:, None] + shift, camera.project(ends_b)[:, None] + shift
+    outlines = capsule_outlines(uv_a, uv_b, ra[:, None] * scale, rb[:, None] * scale)
     rel = joints - head
     cos = rel @ to_cam / np.maximum(np.linalg.norm(rel, axis=1) * np.linalg.norm(to_cam), 1e-12)
     face_seen = np.ones(NUM_JOINTS, dtype=bool)

@@ -1,7 +1,5 @@
-"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies and its ground-truth 2D.
-
-A person's look depends only on (seed, person id), an image only on (seed, frame, view).
-"""
+"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies and its ground-truth 2D. A person's
+look depends only on (seed, person id), an image only on (seed, frame, view)."""
 
 from __future__ import annotations
 
@@ -93,10 +91,8 @@ def _light(camera: Camera, seed: int) -> np.ndarray:
     """Image direction (2,) of the highlights: the scene's sun seen from the camera, towards the top."""
     rng = np.random.default_rng([int(seed), LIGHT])
     azimuth, elevation = rng.uniform(0, 2 * math.pi), rng.uniform(0.5, 1.2)
-    sun = np.array(
-        [math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth), math.sin(elevation)]
-    )
-    x, y, _ = camera.R @ sun
+    flat = math.cos(elevation)
+    x, y, _ = camera.R @ np.array([flat * math.cos(azimuth), flat * math.sin(azimuth), math.sin(elevation)])
     light = np.array([x, -abs(y)])
     norm = float(np.linalg.norm(light))
     return light / norm if norm > 1e-6 else np.array([0.0, -1.0])
@@ -217,11 +213,10 @@ def render_sequence(sequence: Sequence, seed: int) -> Sequence:
                 image_ids=[coco_image_id(frame.index, v, len(rig)) for v in range(len(rig))],
             )
         )
-    render = {"seed": int(seed), "persons_left_out": left_out}
     return replace(
         sequence,
         frames=frames,
-        meta={**sequence.meta, "render": render},
+        meta={**sequence.meta, "render": {"seed": int(seed), "persons_left_out": left_out}},
         protocols=list(sequence.protocols),
         coco_images=coco_images(frames, rig),
     )

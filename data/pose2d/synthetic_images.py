@@ -115,26 +115,18 @@ def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions
 
 
 def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
-    """A textured background (H, W, 3) uint8: a backdrop, and a tiled floor below the horizon."""
+    """A textured background (H, W, 3) uint8: a backdrop, and a floor with tile lines below the horizon."""
     w, h = camera.size
     image = render.backdrop(rng, (w, h))
     horizon = int(np.clip(camera.project(np.array([1e4, 0.0, 0.0]))[1], 0, h))
     if horizon < h:
         floor = render.smooth_field(rng, (w, h - horizon), 3, 40, 200)
         image[horizon:] = cv2.addWeighted(image[horizon:], 0.3, floor, 0.7, 0.0)
-        _draw_floor_grid(image, camera, rng)
+        tile, colour = rng.uniform(0.4, 2.0), render.random_colour(rng)
+        extent = (1.0, 30.0, -30.0, 30.0)  # tile lines 1..30 m ahead, 30 m to either side
+        along_y, along_x = render.grid_lines(np.arange(*extent[:2], tile), np.arange(*extent[2:], tile), extent)
+        render.draw_ground_lines(image, camera, np.concatenate([along_x, along_y]), colour)
     return image
-
-
-def _draw_floor_grid(image: np.ndarray, camera: Camera, rng: np.random.Generator) -> None:
-    """Tile lines of the ground plane z = 0 in perspective, 1..30 m ahead, in place on (H, W, 3)."""
-    tile = rng.uniform(0.4, 2.0)
-    colour = render.random_colour(rng)
-    near, far, side = 1.0, 30.0, 30.0
-    along_y, along_x = render.grid_lines(
-        np.arange(near, far, tile), np.arange(-side, side, tile), (near, far, -side, side)
-    )
-    render.draw_ground_lines(image, camera, np.concatenate([along_x, along_y]), colour)
 
 
 def synthetic_image(
