@@ -36,9 +36,8 @@ _MEAN_M: Mapping[str, float] = {
     "heel_big_toe": 0.2556,
 }
 
-# The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up, lowest sole
-# point at z = 0, rounded to 1 mm; a sided name gives the left joint, the right one is its mirror (y -> -y).
-# Used to initialise unseen joints.
+# The same mean body standing (knees 3 deg flexed), which initialises unseen joints: x forward, y left, z up, lowest
+# sole point at z = 0, rounded to 1 mm; a sided name gives the left joint, the right one is its mirror (y -> -y).
 _MEAN_POSITION_M: Mapping[str, tuple[float, float, float]] = {
     "nose": (0.111, 0.000, 1.559),
     "eye": (0.085, 0.032, 1.597),
