@@ -102,14 +102,9 @@ def _leg(b: dict[str, float], side: int, hip: float, knee: float, pitch: float, 
     knee_pos = hip_pos + rot_x @ thigh
     ankle = knee_pos + rot_x @ shin
     # Foot points with the sole flat, then pitched (toes up > 0) and yawed outwards.
-    h = b["ankle_height"]
-    foot = np.array(
-        [
-            [b["big_toe"], -side * b["big_toe_medial"], -h],
-            [b["small_toe"], side * b["small_toe_lateral"], -h],
-            [-b["heel_back"], 0.0, -h],
-        ]
-    )
+    forward = [b["big_toe"], b["small_toe"], -b["heel_back"]]
+    left = [-side * b["big_toe_medial"], side * b["small_toe_lateral"], 0.0]
+    foot = np.column_stack([forward, left, np.full(3, -b["ankle_height"])])
     cp, sp = math.cos(pitch), math.sin(pitch)
     foot = np.column_stack([foot[:, 0] * cp - foot[:, 2] * sp, foot[:, 1], foot[:, 0] * sp + foot[:, 2] * cp])
     cy, sy = math.cos(side * _TOE_OUT), math.sin(side * _TOE_OUT)

@@ -75,18 +75,13 @@ def observe_view(
 def bbox_from_keypoints(keypoints: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
     """Box x, y, w, h around the joints with score > 0, a margin added, clipped to the image: (N, 23, 3) -> (N, 4)."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
-    out = np.zeros((len(keypoints), 4))
-    w, h = image_size
-    for n, kp in enumerate(keypoints):
-        pts = kp[kp[:, 2] > 0, :2]
-        if len(pts) == 0:
-            continue
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        pad = BBOX_MARGIN * (hi - lo)
-        lo = np.clip(lo - pad, 0.0, [w - 1, h - 1])
-        hi = np.clip(hi + pad, 0.0, [w - 1, h - 1])
-        out[n] = [lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]]
-    return out
+    corner = np.array(image_size, dtype=np.float64) - 1
+    seen = keypoints[..., 2:] > 0
+    lo = np.where(seen, keypoints[..., :2], np.inf).min(axis=1)
+    hi = np.where(seen, keypoints[..., :2], -np.inf).max(axis=1)
+    pad = BBOX_MARGIN * (hi - lo)
+    lo, hi = np.clip(lo - pad, 0.0, corner), np.clip(hi + pad, 0.0, corner)
+    return np.where(seen.any(axis=1), np.concatenate([lo, hi - lo], axis=1), 0.0)
 
 
 def false_positives(count: int, image_size: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
