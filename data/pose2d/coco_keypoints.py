@@ -54,28 +54,19 @@ def _numbers(path: Path, ann: dict, key: str, count: int) -> np.ndarray:
     return arr
 
 
-def _person_category_ids(doc: dict) -> set:
-    """Ids of the categories named "person" (COCO: 1); {1} when the file lists none."""
-    ids = {c.get("id") for c in doc.get("categories", []) if isinstance(c, dict) and c.get("name") == "person"}
-    return ids or {1}
-
-
 def _load(
     path: Path, doc: Any, image_dir: str | Path, convert: Converter, labelled: np.ndarray, skip_crowd: bool
 ) -> list[ImageRecord]:
     """Records of a parsed COCO keypoint file; convert maps one annotation to its (23, 3) keypoints."""
-    if (
-        not isinstance(doc, dict)
-        or not isinstance(doc.get("images"), list)
-        or not isinstance(doc.get("annotations"), list)
-    ):
+    if not isinstance(doc, dict) or not all(isinstance(doc.get(key), list) for key in ("images", "annotations")):
         raise ValueError(f"{path}: not a COCO annotation file (needs the lists 'images' and 'annotations')")
     persons: dict[Any, list[tuple[np.ndarray, np.ndarray, float]]] = {}
     for img in doc["images"]:
         if not isinstance(img, dict) or not all(k in img for k in ("id", "file_name", "width", "height")):
             raise ValueError(f"{path}: image entry {img!r:.80} lacks one of id, file_name, width, height")
         persons[img["id"]] = []
-    category_ids = _person_category_ids(doc)
+    person = {c.get("id") for c in doc.get("categories", []) if isinstance(c, dict) and c.get("name") == "person"}
+    category_ids = person or {1}  # the file lists no person category: COCO's id 1
     for ann in doc["annotations"]:
         if not isinstance(ann, dict):
             raise ValueError(f"{path}: annotation {ann!r:.80} is not an object")

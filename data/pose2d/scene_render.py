@@ -103,7 +103,8 @@ def _background(scene: Scene, view: int) -> np.ndarray:
     camera = scene.rig[view]
     image = render.backdrop(np.random.default_rng([int(scene.seed), BACKDROP, int(view)]), camera.size)
     rng = np.random.default_rng([int(scene.seed), FLOOR])
-    extent = _floor_extent(scene.area)
+    xmin, xmax, ymin, ymax = (float(v) for v in scene.area)
+    extent = (xmin - FLOOR_MARGIN_M, xmax + FLOOR_MARGIN_M, ymin - FLOOR_MARGIN_M, ymax + FLOOR_MARGIN_M)
     texel = max(FLOOR_TEXEL_M, (extent[1] - extent[0]) / MAX_TEXTURE_PX, (extent[3] - extent[2]) / MAX_TEXTURE_PX)
     size = (int(math.ceil((extent[1] - extent[0]) / texel)), int(math.ceil((extent[3] - extent[2]) / texel)))
     texture = render.smooth_field(rng, size, int(rng.integers(3, 8)), 40, 200)
@@ -112,22 +113,12 @@ def _background(scene: Scene, view: int) -> np.ndarray:
     floor = cv2.remap(texture, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     blend = cv2.addWeighted(image, 1.0 - FLOOR_WEIGHT, floor, FLOOR_WEIGHT, 0.0)
     np.copyto(image, blend, where=ground[..., None])
-    render.draw_ground_lines(image, camera, _tile_lines(extent, rng.uniform(0.5, 2.0)), render.random_colour(rng))
+    tile = rng.uniform(0.5, 2.0)  # tile lines at multiples of tile m
+    xs = tile * np.arange(math.ceil(extent[0] / tile), math.floor(extent[1] / tile) + 1)
+    ys = tile * np.arange(math.ceil(extent[2] / tile), math.floor(extent[3] / tile) + 1)
+    lines = np.concatenate(render.grid_lines(xs, ys, extent))
+    render.draw_ground_lines(image, camera, lines, render.random_colour(rng))
     return image
-
-
-def _floor_extent(area: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    """The floor (xmin, xmax, ymin, ymax): the area and FLOOR_MARGIN_M around it."""
-    xmin, xmax, ymin, ymax = (float(v) for v in area)
-    return xmin - FLOOR_MARGIN_M, xmax + FLOOR_MARGIN_M, ymin - FLOOR_MARGIN_M, ymax + FLOOR_MARGIN_M
-
-
-def _tile_lines(extent: tuple[float, float, float, float], tile: float) -> np.ndarray:
-    """Ground segments (S, 2, 2) of the tile grid (lines at multiples of tile m) over the extent."""
-    xmin, xmax, ymin, ymax = extent
-    xs = tile * np.arange(math.ceil(xmin / tile), math.floor(xmax / tile) + 1)
-    ys = tile * np.arange(math.ceil(ymin / tile), math.floor(ymax / tile) + 1)
-    return np.concatenate(render.grid_lines(xs, ys, extent))
 
 
 def _ground_points(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
