@@ -55,7 +55,6 @@ class Frame:
 @dataclass
 class Sequence:
     """A rig, its frames, and the typed facts that change how they are run and scored; ``meta``: free-form extras.
-
     ``protocol_inputs`` (``[{"name": ..., **arguments}]``) become ``protocols`` in evaluation.protocols."""
 
     rig: Rig
