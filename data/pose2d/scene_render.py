@@ -15,6 +15,7 @@ from data.image_ids import coco_image_id
 from data.keypoints import NUM_JOINTS
 from data.multiview import Frame, Sequence, ViewDetections
 from data.pose2d import render
+from data.pose2d.view_coco import coco_images
 
 # Independent random streams of a scene seed: default_rng([seed, STREAM, ...]).
 LOOK, BACKDROP, FLOOR, LIGHT, GRAIN, ORDER = range(6)
@@ -235,19 +236,3 @@ def _renderable(frame: Frame) -> tuple[np.ndarray, np.ndarray, int]:
     ids = np.arange(len(gt)) if frame.gt_ids is None else np.asarray(frame.gt_ids, dtype=np.int64)
     full = np.all(gt[..., 3] > 0, axis=1) & np.all(np.isfinite(gt[..., :3]), axis=(1, 2))
     return gt[full, :, :3].copy(), ids[full].copy(), int(np.count_nonzero(~full))
-
-
-def coco_images(frames: list[Frame], rig: Rig) -> list[dict]:
-    """The COCO "images" entries (id, frame, camera, file_name, width, height) of rendered frames."""
-    return [
-        {
-            "id": frame.image_ids[v],
-            "frame": int(frame.index),
-            "camera": cam.name,
-            "file_name": f"{int(frame.index):06d}_{cam.name}.jpg",
-            "width": cam.size[0],
-            "height": cam.size[1],
-        }
-        for frame in frames
-        for v, cam in enumerate(rig)
-    ]
