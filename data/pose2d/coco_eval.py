@@ -29,11 +29,11 @@ def evaluate_keypoints(
     if subset not in SUBSET_JOINTS:
         raise ValueError(f"subset must be one of {sorted(SUBSET_JOINTS)}, got {subset!r}")
     joints = np.array(SUBSET_JOINTS[subset])
-    gt_doc = _ground_truth(gt)
+    gt_doc = _ground_truth(gt, joints)
     image_ids = {img["id"] for img in gt_doc["images"]}
     dt_anns = _detections(predictions, image_ids, joints)
     with contextlib.redirect_stdout(io.StringIO()):
-        coco_gt = _coco({**gt_doc, "annotations": [_gt_subset(a, joints) for a in gt_doc["annotations"]]})
+        coco_gt = _coco(gt_doc)
         coco_dt = _coco({"images": gt_doc["images"], "categories": _CATEGORIES, "annotations": dt_anns})
         evaluator = COCOeval(coco_gt, coco_dt, "keypoints")
         evaluator.params.kpt_oks_sigmas = OKS_SIGMAS[joints]
@@ -44,20 +44,22 @@ def evaluate_keypoints(
     return {name: float(v) for name, v in zip(STAT_NAMES, evaluator.stats)}
 
 
-def _ground_truth(gt: Sequence[ImageRecord] | dict) -> dict:
-    """A COCO-format gt dict (images, annotations with COCO-23 keypoints (23, 3) arrays, categories)."""
+def _ground_truth(gt: Sequence[ImageRecord] | dict, joints: np.ndarray) -> dict:
+    """A COCO-format gt dict (images, annotations of the subset's joints, categories)."""
     doc = gt if isinstance(gt, dict) else coco23_document(list(gt))
     images = doc.get("images") or [{"id": i} for i in sorted({a["image_id"] for a in doc["annotations"]})]
     anns = []
     for ann in doc["annotations"]:
         bbox = [float(v) for v in ann["bbox"]]
+        kps = _annotation_keypoints(ann)[joints]
         anns.append(
             {
                 "id": len(anns) + 1,  # pycocotools treats id 0 as "no match"
                 "image_id": int(ann["image_id"]),
                 "category_id": 1,
                 "bbox": bbox,
-                "keypoints": _annotation_keypoints(ann),
+                "keypoints": kps.ravel().tolist(),
+                "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0)),
                 "area": float(ann.get("area", bbox[2] * bbox[3])),
                 "iscrowd": int(ann.get("iscrowd", 0)),
             }
@@ -76,12 +78,6 @@ def _annotation_keypoints(ann: dict) -> np.ndarray:
         )
     foot = np.asarray(ann.get("foot_kpts", np.zeros(3 * len(FOOT_JOINTS))), dtype=np.float64)
     return np.concatenate([kps, foot.ravel()]).reshape(NUM_JOINTS, 3)
-
-
-def _gt_subset(ann: dict, joints: np.ndarray) -> dict:
-    """A gt annotation restricted to the subset's joints, num_keypoints recounted."""
-    kps = ann["keypoints"][joints]
-    return {**ann, "keypoints": kps.ravel().tolist(), "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0))}
 
 
 def _detections(predictions: Iterable[dict], image_ids: set[int], joints: np.ndarray) -> list[dict]:

@@ -216,19 +216,6 @@ def load_keypoint_dataset(
     return records
 
 
-def coco23_categories() -> list[dict]:
-    """The COCO "categories" list of COCO-23: person, the 23 keypoint names, LIMBS as 1-based skeleton."""
-    return [
-        {
-            "supercategory": "person",
-            "id": 1,
-            "name": "person",
-            "keypoints": list(COCO23_NAMES),
-            "skeleton": [[a + 1, b + 1] for a, b in LIMBS],
-        }
-    ]
-
-
 def coco23_document(records: list[ImageRecord], image_root: str | Path | None = None, info: dict | None = None) -> dict:
     """The COCO-23 annotation document of records; file_name is relative to image_root, else the base name."""
     images, annotations = [], []
@@ -249,7 +236,9 @@ def coco23_document(records: list[ImageRecord], image_root: str | Path | None = 
                     "area": float(area),
                 }
             )
-    return {"info": dict(info or {}), "categories": coco23_categories(), "images": images, "annotations": annotations}
+    skeleton = [[a + 1, b + 1] for a, b in LIMBS]  # 1-based
+    person = {"supercategory": "person", "id": 1, "name": "person", "keypoints": [*COCO23_NAMES], "skeleton": skeleton}
+    return {"info": dict(info or {}), "categories": [person], "images": images, "annotations": annotations}
 
 
 def _file_name(record: ImageRecord, image_root: str | Path | None) -> str:

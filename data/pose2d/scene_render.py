@@ -46,11 +46,6 @@ class RenderedView:
     boxes: np.ndarray
 
 
-def person_look(seed: int, person_id: int) -> render.PersonLook:
-    """The look of one person of a scene, the same in every frame and view."""
-    return render.sample_look(np.random.default_rng([int(seed), LOOK, int(person_id)]))
-
-
 def render_view(
     scene: Scene, view: int, frame: int, poses: np.ndarray, ids: np.ndarray, paint: bool = True
 ) -> RenderedView:
@@ -60,7 +55,7 @@ def render_view(
     shown = np.flatnonzero([_paintable(camera, joints) for joints in poses])
     light = _light(camera, scene.seed)
     views = [render.view_person(camera, poses[p], light) for p in shown]
-    looks = [person_look(scene.seed, ids[p]) for p in shown]
+    looks = [render.sample_look(np.random.default_rng([int(scene.seed), LOOK, int(ids[p])])) for p in shown]
     image = _background(scene, view) if paint else None
     if image is not None:
         render.draw_shadows(image, camera, poses[shown])
