@@ -67,11 +67,7 @@ class BodyShape:
     """Segment lengths (m) of one person; build with :func:`sample_body` or :func:`mean_body`."""
 
     stature: float
-    lengths: tuple[tuple[str, float], ...]
-
-    def as_dict(self) -> dict[str, float]:
-        """Segment lengths in metres by name."""
-        return dict(self.lengths)
+    lengths: tuple[tuple[str, float], ...]  # (name, m)
 
 
 def mean_body(stature: float = STATURE_MEAN_M) -> BodyShape:
@@ -123,7 +119,7 @@ def _arm(b: dict[str, float], shoulder: np.ndarray, side: int, flexion: float, e
 
 def local_pose(body: BodyShape, phase: float, walking: bool) -> np.ndarray:
     """COCO-23 joints in the local body frame (x forward, y left, z up), lowest sole at z = 0: (23, 3)."""
-    b = body.as_dict()
+    b = dict(body.lengths)
     joints = np.zeros((NUM_JOINTS, 3))
     if walking:  # the left leg is at `phase`, the right leg half a stride later; each arm swings with the other leg
         legs, arm_flex, hip_rest = {}, {}, math.radians(8.0)

@@ -34,8 +34,7 @@ FOOT_RADIUS_M = 0.04  # ankle-heel, ankle-toe, toe-toe segments
 TORSO_RADIUS_M = 0.12  # mid-shoulder -> mid-hip capsule (chest depth ~ 23 cm)
 HEAD_RADIUS_M = 0.10  # sphere at the ear centre (head breadth ~ 15 cm, length ~ 19 cm)
 
-_LIMB_A = np.array([a for a, _ in LIMBS])
-_LIMB_B = np.array([b for _, b in LIMBS])
+_LIMB_A, _LIMB_B = np.array(LIMBS).T  # the ends of every LIMBS segment
 
 
 def capsule_radii() -> np.ndarray:
