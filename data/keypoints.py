@@ -126,9 +126,8 @@ BONE_JOINTS: dict[str, tuple[str, str]] = {
 BONES: dict[str, tuple[int, int]] = dict(zip(BONE_JOINTS, name_pairs(BONE_JOINTS.values())))
 
 # Joint groups of the per-joint error tables.
-_HEAD = ("nose", "left_eye", "right_eye", "left_ear", "right_ear")
 JOINT_GROUPS: dict[str, tuple[int, ...]] = {
-    "head": joint_indices(_HEAD),
+    "head": joint_indices(("nose", "left_eye", "right_eye", "left_ear", "right_ear")),
     **{g: joint_indices((f"left_{g}", f"right_{g}")) for g in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")},
     "foot": FOOT_JOINTS,
 }

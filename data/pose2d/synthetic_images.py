@@ -63,8 +63,7 @@ class SyntheticImage:
 
 def sample_camera(rng: np.random.Generator, size: tuple[int, int]) -> Camera:
     """A low camera at (0, 0, h) looking along +x, focal 0.75..1.1 x width: people hide each other."""
-    w, _ = size
-    focal = rng.uniform(0.75, 1.1) * w
+    focal = rng.uniform(0.75, 1.1) * size[0]
     height = rng.uniform(0.8, 2.4)
     target = (rng.uniform(5.0, 9.0), rng.uniform(-0.3, 0.3), rng.uniform(0.7, 1.2))
     return look_at_camera("synthetic", (0.0, 0.0, height), target, size, focal)
@@ -88,9 +87,8 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions) -> np.ndarray:
     """World COCO-23 joints (P, 23, 3) of a crowd in a wedge of the camera's view, >= 0.5 m apart."""
-    w, _ = camera.size
     focal = camera.K[0, 0]
-    half_fov = math.atan(w / 2 / focal)
+    half_fov = math.atan(camera.size[0] / 2 / focal)
     spread = rng.uniform(0.3, 1.1) * half_fov
     count = int(rng.integers(options.persons[0], options.persons[1] + 1))
     ground: list[np.ndarray] = []
