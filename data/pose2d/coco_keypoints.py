@@ -118,8 +118,7 @@ def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd:
         feet = _numbers(path, ann, "foot_kpts", 3 * NUM_FOOT_JOINTS).reshape(-1, 3)
         return np.concatenate([body, feet])
 
-    doc = _read_json(path)
-    return _load(path, doc, image_dir, convert, np.ones(NUM_JOINTS, dtype=bool), skip_crowd)
+    return _load(path, _read_json(path), image_dir, convert, np.ones(NUM_JOINTS, dtype=bool), skip_crowd)
 
 
 def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
@@ -164,8 +163,7 @@ def load_crowdpose(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool
         kps = _numbers(path, ann, "keypoints", 3 * CROWDPOSE_JOINTS).reshape(-1, 3)
         return to_coco23(kps, CROWDPOSE14_TO_COCO23)
 
-    doc = _read_json(path)
-    return _load(path, doc, image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
+    return _load(path, _read_json(path), image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
 
 
 def load_detections(

@@ -125,10 +125,8 @@ def _ground_points(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     else:
         uv = np.stack(np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)), axis=-1)
     ray_z = (camera.R.T @ np.linalg.inv(camera.K))[2]  # world z of a pixel's ray, linear in (u, v, 1)
-    if camera.center[2] > 0:
-        ground = uv[..., 0] * ray_z[0] + uv[..., 1] * ray_z[1] + ray_z[2] < -1e-9
-    else:
-        ground = np.zeros((h, w), dtype=bool)
+    above = bool(camera.center[2] > 0)  # a camera below the floor sees none of it
+    ground = above & (uv[..., 0] * ray_z[0] + uv[..., 1] * ray_z[1] + ray_z[2] < -1e-9)
     xy = cv2.perspectiveTransform(uv.reshape(-1, 1, 2), camera.image_to_ground_homography()).reshape(h, w, 2)
     return np.nan_to_num(xy, nan=0.0, posinf=1e5, neginf=-1e5), ground
 

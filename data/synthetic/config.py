@@ -83,8 +83,7 @@ class SyntheticConfig:
             ("positions", self.positions is None or len(self.positions) >= 1, "must hold at least one frame"),
         ]
         for key in ("walking_fraction", "occluded_drop_prob", "miss_rate"):
-            value = getattr(self, key)
-            checks.append((key, 0.0 <= value <= 1.0, "must be a probability in [0, 1]"))
+            checks.append((key, 0.0 <= getattr(self, key) <= 1.0, "must be a probability in [0, 1]"))
         if self.area is not None:
             xmin, xmax, ymin, ymax = self.area
             checks.append(("area", xmin < xmax and ymin < ymax, "must be [xmin, xmax, ymin, ymax] with min < max"))
