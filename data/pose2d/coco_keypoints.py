@@ -23,16 +23,17 @@ CROWDPOSE_JOINTS = len(CROWDPOSE14_TO_COCO23[CROWDPOSE14_TO_COCO23 >= 0]) + 2  #
 Converter = Callable[[dict], np.ndarray]
 
 
-def _read_json(path: Path) -> Any:
-    """The parsed JSON of an annotation file, or a ValueError naming the file."""
+def _read_coco(path: Path) -> dict:
+    """The parsed COCO annotation file (a dict with lists "images" and "annotations"), or a ValueError naming it."""
     try:
-        text = path.read_text()
+        doc = json.loads(path.read_text())
     except OSError as exc:
         raise ValueError(f"{path}: cannot read annotation file ({exc.strerror or exc})") from None
-    try:
-        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(doc, dict) or not all(isinstance(doc.get(key), list) for key in ("images", "annotations")):
+        raise ValueError(f"{path}: not a COCO annotation file (needs the lists 'images' and 'annotations')")
+    return doc
 
 
 def _numbers(path: Path, ann: dict, key: str, count: int) -> np.ndarray:
@@ -55,11 +56,9 @@ def _numbers(path: Path, ann: dict, key: str, count: int) -> np.ndarray:
 
 
 def _load(
-    path: Path, doc: Any, image_dir: str | Path, convert: Converter, labelled: np.ndarray, skip_crowd: bool
+    path: Path, doc: dict, image_dir: str | Path, convert: Converter, labelled: np.ndarray, skip_crowd: bool
 ) -> list[ImageRecord]:
-    """Records of a parsed COCO keypoint file; convert maps one annotation to its (23, 3) keypoints."""
-    if not isinstance(doc, dict) or not all(isinstance(doc.get(key), list) for key in ("images", "annotations")):
-        raise ValueError(f"{path}: not a COCO annotation file (needs the lists 'images' and 'annotations')")
+    """Records of a file read by :func:`_read_coco`; convert maps one annotation to its (23, 3) keypoints."""
     persons: dict[Any, list[tuple[np.ndarray, np.ndarray, float]]] = {}
     for img in doc["images"]:
         if not isinstance(img, dict) or not all(k in img for k in ("id", "file_name", "width", "height")):
@@ -118,14 +117,14 @@ def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd:
         feet = _numbers(path, ann, "foot_kpts", 3 * NUM_FOOT_JOINTS).reshape(-1, 3)
         return np.concatenate([body, feet])
 
-    return _load(path, _read_json(path), image_dir, convert, np.ones(NUM_JOINTS, dtype=bool), skip_crowd)
+    return _load(path, _read_coco(path), image_dir, convert, np.ones(NUM_JOINTS, dtype=bool), skip_crowd)
 
 
 def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
     """COCO-format keypoints of 23 x 3 numbers (or COCO-17's 17 x 3, feet unlabelled) -> records; the count comes
     from the person category's ``keypoints`` names, else the first annotation, and every annotation must have it."""
     path = Path(ann_file)
-    doc = _read_json(path)
+    doc = _read_coco(path)
     count = _coco23_count(path, doc)
     labelled = np.arange(NUM_JOINTS) < count
 
@@ -136,10 +135,8 @@ def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = 
     return _load(path, doc, image_dir, convert, labelled, skip_crowd)
 
 
-def _coco23_count(path: Path, doc: Any) -> int:
+def _coco23_count(path: Path, doc: dict) -> int:
     """Keypoints per person of a COCO-23 / COCO-17 file: 23 or 17."""
-    if not isinstance(doc, dict):
-        raise ValueError(f"{path}: not a COCO annotation file")
     for cat in doc.get("categories", []):
         if isinstance(cat, dict) and len(cat.get("keypoints", [])) in (NUM_BODY_JOINTS, NUM_JOINTS):
             return len(cat["keypoints"])
@@ -163,7 +160,7 @@ def load_crowdpose(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool
         kps = _numbers(path, ann, "keypoints", 3 * CROWDPOSE_JOINTS).reshape(-1, 3)
         return to_coco23(kps, CROWDPOSE14_TO_COCO23)
 
-    return _load(path, _read_json(path), image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
+    return _load(path, _read_coco(path), image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
 
 
 def load_detections(

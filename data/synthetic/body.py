@@ -171,8 +171,7 @@ def pose_joints(
     c, s = math.cos(theta), math.sin(theta)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     out = local @ rot.T
-    out[:, 0] += x
-    out[:, 1] += y
+    out[:, :2] += (x, y)
     return out
 
 
