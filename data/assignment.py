@@ -1,11 +1,10 @@
-"""Assignment solvers shared by the matchers, the tracker and the evaluation (dense problems: scipy's
-``linear_sum_assignment``): a person-label grouping and the gated sparse assignment of view pairs.
+"""Assignment solvers shared by the matchers, the tracker and the evaluation: a person-label grouping and the
+gated sparse assignment of view pairs (dense problems: scipy's ``linear_sum_assignment``).
 
-:func:`solve_sparse_pairs` solves a gated problem (the pairs not allowed at a big finite cost M, as
-``reconstruction.matching.merge.solve_pair``) one connected component of allowed pairs at a time: the objective
-sum(cost - M) splits over the components, and a crowd's view pair has hundreds of small ones, so this is much
-cheaper than one dense (Na, Nb) problem. Each component is solved over its allowed entries alone by the shortest
-augmenting paths of scipy's solver; where the optimum is unique (ties of float costs aside) the result is scipy's.
+:func:`solve_sparse_pairs` solves a gated problem (disallowed pairs at a big finite cost M, as
+``reconstruction.matching.merge.solve_pair``) one connected component of allowed pairs at a time, by scipy's shortest
+augmenting paths over the allowed entries alone: sum(cost - M) splits over the components, and a crowd's view pair
+has hundreds of small ones. Where the optimum is unique (float ties aside) the result is scipy's.
 """
 
 from __future__ import annotations
@@ -15,10 +14,8 @@ from numba import njit
 
 
 def assignment_from_labels(labels: list[np.ndarray], min_views: int = 2) -> np.ndarray:
-    """Group detections by person label: V arrays (N_v,) int (-1 = none) -> (P, V) detection index or -1.
-
-    Persons are ordered by label; one seen in fewer than ``min_views`` views is dropped; a label twice in a view
-    is an error."""
+    """Group detections by person label: V arrays (N_v,) int (-1 = none) -> (P, V) detection index or -1; persons
+    ordered by label, those in fewer than ``min_views`` views dropped, a label twice in a view a ValueError."""
     V = len(labels)
     people: dict[int, np.ndarray] = {}
     for v, lab in enumerate(labels):
@@ -45,23 +42,9 @@ def find_root(parent: np.ndarray, i: int) -> int:
 
 
 @njit(cache=True, error_model="numpy")
-def _flip_path(cur, sink, path, col4row, row4col) -> None:
-    """Augment along the shortest path from free row cur to free column sink (path[j]: the row before column j)."""
-    j = sink
-    while True:
-        i = path[j]
-        row4col[j] = i
-        col4row[i], j = j, col4row[i]
-        if i == cur:
-            break
-
-
-@njit(cache=True, error_model="numpy")
 def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
-    """Assign one component, entries ks (rows ascending) -> keep[ks]; row_at (na,), col_at (nb,): -1 scratch.
-
-    Each row has its allowed entries and a column of its own at cost big (matched to nothing): the dense
-    problem's optimum. Solved by a row reduction, then shortest augmenting paths (:func:`_sparse_augment`)."""
+    """Assign one component, entries ks (rows ascending) -> keep[ks]; row_at (na,), col_at (nb,): -1 scratch. Each
+    row has its entries and an own column at cost big (unmatched); row reduction, then :func:`_sparse_augment`."""
     E, R, C = len(ks), 0, 0
     cols = np.empty(E, dtype=np.int64)
     ptr = np.zeros(E + 1, dtype=np.int64)  # row r's entries: ks[ptr[r]:ptr[r + 1]]
@@ -140,7 +123,13 @@ def _sparse_augment(cur, ptr, cols, ks, cost, big, C, u, v, col4row, row4col, wo
         u[rows[s]] += min_val - spc[col4row[rows[s]]]
     for s in range(len(seen) - n_scanned, len(seen)):
         v[seen[s]] -= min_val - spc[seen[s]]
-    _flip_path(cur, sink, path, col4row, row4col)
+    j = sink  # augment along the path back to row cur (path[j]: the row before column j)
+    while True:
+        i = path[j]
+        row4col[j] = i
+        col4row[i], j = j, col4row[i]
+        if i == cur:
+            break
     for s in range(n_seen):
         spc[seen[s]] = np.inf
     for s in range(len(seen) - n_scanned, len(seen)):
@@ -171,10 +160,8 @@ def _components(s: int, e: int, na: int, nb: int, li, lj) -> tuple:
 
 @njit(cache=True, error_model="numpy")
 def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj: np.ndarray, cost: np.ndarray):
-    """Gated assignment of view pairs given by their allowed entries -> accepted (E,) bool.
-
-    Pair p has sizes[p] = (na, nb) detections and the entries starts[p]:starts[p + 1] of li, lj (local row,
-    column; sorted by row) and cost (finite); entries not listed are not allowed (solve_pair's big cost)."""
+    """Gated assignment of view pairs by their allowed entries -> accepted (E,) bool. Pair p: sizes[p] = (na, nb),
+    entries starts[p]:starts[p + 1] of li, lj (local row, column; by row) and cost (finite); others disallowed."""
     keep = np.zeros(len(cost), dtype=np.bool_)
     for p in range(len(starts) - 1):
         s, e = starts[p], starts[p + 1]

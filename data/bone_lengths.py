@@ -1,10 +1,9 @@
 """Reference bone lengths of the MAP bone prior (paper Eq. 7), and their estimation from 3D ground truth.
 
-Default means: the joint-to-joint distances of the synthetic generator's 1.70 m mean body (Drillis & Contini
-1966 via Winter, "Biomechanics and Motor Control of Human Movement", fig. 4.1), rounded to 0.1 mm. SDs: 5.7 %
-relative (stature spread 5.3 % with 2 % per-segment variation) plus 1 cm absolute in quadrature for where a
-keypoint sits on the body, which keeps the 5-9 cm face and foot bones from a prior the 2D keypoints cannot honour.
-Re-estimate from a dataset with ``benchmarks/fit_bone_lengths.py`` and set ``bone_table`` to its JSON.
+Default means: the synthetic generator's 1.70 m mean body (data.synthetic.body), rounded to 0.1 mm. SDs: 5.7 %
+relative (stature spread 5.3 %, 2 % per segment) plus 1 cm in quadrature for where a keypoint sits on the body, which
+keeps the 5-9 cm face and foot bones from a prior the 2D keypoints cannot honour. Re-estimate from a dataset with
+``benchmarks/fit_bone_lengths.py`` and set ``bone_table`` to its JSON.
 """
 
 from __future__ import annotations
@@ -37,9 +36,8 @@ _MEAN_M: Mapping[str, float] = {
     "heel_big_toe": 0.2556,
 }
 
-# The same mean body standing (knees 3 deg flexed) in its local frame: x forward, y left, z up, lowest sole
-# point at z = 0, rounded to 1 mm; a sided name gives the left joint, the right one is its mirror (y -> -y).
-# Used to initialise unseen joints.
+# The same mean body standing (knees 3 deg flexed), which initialises unseen joints: x forward, y left, z up, lowest
+# sole point at z = 0, rounded to 1 mm; a sided name gives the left joint, the right one is its mirror (y -> -y).
 _MEAN_POSITION_M: Mapping[str, tuple[float, float, float]] = {
     "nose": (0.111, 0.000, 1.559),
     "eye": (0.085, 0.032, 1.597),

@@ -1,8 +1,5 @@
 """Keypoint metadata by name (COCO-23 = COCO-17 body + 6 foot joints); every index map is derived from the names.
-
-Index maps are *gather* maps: ``coco23[j] = source[MAP[j]]`` where ``MAP[j] >= 0``; joints with
-``MAP[j] == -1`` do not exist in the source format and get score 0 (see :func:`to_coco23`).
-"""
+Index maps *gather*: ``coco23[j] = source[MAP[j]]``; ``MAP[j] == -1``: not in the source format, score 0 (to_coco23)."""
 
 from __future__ import annotations
 
@@ -129,9 +126,8 @@ BONE_JOINTS: dict[str, tuple[str, str]] = {
 BONES: dict[str, tuple[int, int]] = dict(zip(BONE_JOINTS, name_pairs(BONE_JOINTS.values())))
 
 # Joint groups of the per-joint error tables.
-_HEAD = ("nose", "left_eye", "right_eye", "left_ear", "right_ear")
 JOINT_GROUPS: dict[str, tuple[int, ...]] = {
-    "head": joint_indices(_HEAD),
+    "head": joint_indices(("nose", "left_eye", "right_eye", "left_ear", "right_ear")),
     **{g: joint_indices((f"left_{g}", f"right_{g}")) for g in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")},
     "foot": FOOT_JOINTS,
 }
@@ -178,17 +174,13 @@ SHELF_PCP_PARTS: dict[str, tuple[tuple[int, int], ...]] = {
     }.items()
 }
 
-# Head construction of the public Shelf evaluations (mvpose, VoxelPose and the works that copy their
-# evaluation): the bottom of the head is 3/4 of the way "half-way from the shoulder centre to the
-# nose" plus 1/4 of "half-way from the shoulder centre to the ear centre"; the top of the head is 3/4 of
-# "the shoulder centre plus the shoulder->nose vector scaled by (0.75, 0.75, 1.5)" (x, y, z world axes,
-# z up) plus 1/4 of "the shoulder->ear-centre midpoint mirrored through the ear centre".
+# Head construction of the public Shelf evaluations (mvpose, VoxelPose and the works that copy them): each head
+# joint is SHELF_HEAD_BLEND of a point set off from the shoulder centre by the nose, the rest of one by the ears.
 SHELF_HEAD_BOTTOM_NOSE_FRACTION = 0.5
-SHELF_HEAD_TOP_NOSE_SCALE = np.array([0.75, 0.75, 1.5])
+SHELF_HEAD_TOP_NOSE_SCALE = np.array([0.75, 0.75, 1.5])  # x, y, z (z up)
 SHELF_HEAD_BLEND = 0.75
-_NOSE, _L_EAR, _R_EAR, _L_SHOULDER, _R_SHOULDER = joint_indices(
-    ("nose", "left_ear", "right_ear", "left_shoulder", "right_shoulder")
-)
+_HEAD_SOURCES = joint_indices(("nose", "left_ear", "right_ear", "left_shoulder", "right_shoulder"))
+_NOSE, _L_EAR, _R_EAR, _L_SHOULDER, _R_SHOULDER = _HEAD_SOURCES
 
 
 def to_coco23(src: np.ndarray, index_map: np.ndarray) -> np.ndarray:
@@ -219,7 +211,6 @@ def coco23_to_shelf14(pose: np.ndarray) -> np.ndarray:
 
 
 # COCO-23 joints each Shelf-14 + mid-hip joint is built from (coco23_to_shelf14, with_mid_hip).
-_HEAD_SOURCES = (_NOSE, _L_EAR, _R_EAR, _L_SHOULDER, _R_SHOULDER)
 SHELF15_SOURCES: tuple[tuple[int, ...], ...] = (
     *((int(j),) for j in COCO23_TO_SHELF14_LIMBS),
     _HEAD_SOURCES,

@@ -54,12 +54,8 @@ class Frame:
 
 @dataclass
 class Sequence:
-    """A rig, its frames, and the typed facts that change how they are run and scored.
-
-    A loader lists the plain-data inputs of its benchmark protocols in ``protocol_inputs``
-    (``[{"name": ..., **arguments}]``); :func:`evaluation.protocols.attach_protocols` builds them into
-    ``protocols`` (datasets sit below evaluation). ``meta`` holds free-form descriptive extras only.
-    """
+    """A rig, its frames, and the typed facts that change how they are run and scored; ``meta``: free-form extras.
+    ``protocol_inputs`` (``[{"name": ..., **arguments}]``) become ``protocols`` in evaluation.protocols."""
 
     rig: Rig
     frames: list[Frame]

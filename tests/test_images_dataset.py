@@ -13,7 +13,7 @@ import pytest
 from data.datasets.images import ImageSizeWarning, load_images, main
 from data.formats.image_sources import ImageSourceError
 from data.geometry.calibration import save_cameras_json
-from data.image_ids import coco_image_id, frame_view_of
+from data.image_ids import coco_image_id
 from data.pose2d.scene_render import render_sequence
 from data.synthetic import SyntheticConfig, generate_sequence
 
@@ -91,8 +91,7 @@ def test_the_render_truth_carries_over_to_images_read_back(scene, rendered, tmp_
     cameras = write_rig(scene, tmp_path)
     loaded = load_images(cameras, write_videos(scene, rendered, tmp_path / "videos"))
     for frame, source in zip(loaded.frames, scene.frames):
-        ids = [frame_view_of(i, len(loaded.rig)) for i in frame.image_ids]
-        assert ids == [(source.index, v) for v in range(len(scene.rig))]
+        assert frame.image_ids == [coco_image_id(source.index, v, len(scene.rig)) for v in range(len(scene.rig))]
         crops = [_crops(im, view.bboxes) for im, view in zip(frame.images(), source.views)]
         truth = [_crops(im, view.bboxes) for im, view in zip(source.images(), source.views)]
         for a, b in zip(crops, truth):

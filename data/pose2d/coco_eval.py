@@ -29,18 +29,12 @@ def evaluate_keypoints(
     if subset not in SUBSET_JOINTS:
         raise ValueError(f"subset must be one of {sorted(SUBSET_JOINTS)}, got {subset!r}")
     joints = np.array(SUBSET_JOINTS[subset])
-    gt_doc = _ground_truth(gt)
+    gt_doc = _ground_truth(gt, joints)
     image_ids = {img["id"] for img in gt_doc["images"]}
-    dt_anns = _detections(predictions, image_ids)
+    dt_anns = _detections(predictions, image_ids, joints)
     with contextlib.redirect_stdout(io.StringIO()):
-        coco_gt = _coco({**gt_doc, "annotations": [_gt_subset(a, joints) for a in gt_doc["annotations"]]})
-        coco_dt = _coco(
-            {
-                "images": gt_doc["images"],
-                "categories": _CATEGORIES,
-                "annotations": [_dt_subset(a, joints) for a in dt_anns],
-            }
-        )
+        coco_gt = _coco(gt_doc)
+        coco_dt = _coco({"images": gt_doc["images"], "categories": _CATEGORIES, "annotations": dt_anns})
         evaluator = COCOeval(coco_gt, coco_dt, "keypoints")
         evaluator.params.kpt_oks_sigmas = OKS_SIGMAS[joints]
         evaluator.params.imgIds = sorted(image_ids)
@@ -50,20 +44,22 @@ def evaluate_keypoints(
     return {name: float(v) for name, v in zip(STAT_NAMES, evaluator.stats)}
 
 
-def _ground_truth(gt: Sequence[ImageRecord] | dict) -> dict:
-    """A COCO-format gt dict (images, annotations with COCO-23 keypoints (23, 3) arrays, categories)."""
+def _ground_truth(gt: Sequence[ImageRecord] | dict, joints: np.ndarray) -> dict:
+    """A COCO-format gt dict (images, annotations of the subset's joints, categories)."""
     doc = gt if isinstance(gt, dict) else coco23_document(list(gt))
     images = doc.get("images") or [{"id": i} for i in sorted({a["image_id"] for a in doc["annotations"]})]
     anns = []
     for ann in doc["annotations"]:
         bbox = [float(v) for v in ann["bbox"]]
+        kps = _annotation_keypoints(ann)[joints]
         anns.append(
             {
                 "id": len(anns) + 1,  # pycocotools treats id 0 as "no match"
                 "image_id": int(ann["image_id"]),
                 "category_id": 1,
                 "bbox": bbox,
-                "keypoints": _annotation_keypoints(ann),
+                "keypoints": kps.ravel().tolist(),
+                "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0)),
                 "area": float(ann.get("area", bbox[2] * bbox[3])),
                 "iscrowd": int(ann.get("iscrowd", 0)),
             }
@@ -84,14 +80,8 @@ def _annotation_keypoints(ann: dict) -> np.ndarray:
     return np.concatenate([kps, foot.ravel()]).reshape(NUM_JOINTS, 3)
 
 
-def _gt_subset(ann: dict, joints: np.ndarray) -> dict:
-    """A gt annotation restricted to the subset's joints, num_keypoints recounted."""
-    kps = ann["keypoints"][joints]
-    return {**ann, "keypoints": kps.ravel().tolist(), "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0))}
-
-
-def _detections(predictions: Iterable[dict], image_ids: set[int]) -> list[dict]:
-    """Validated detection annotations with COCO-23 keypoints (23, 3) and loadRes-style bbox/area."""
+def _detections(predictions: Iterable[dict], image_ids: set[int], joints: np.ndarray) -> list[dict]:
+    """Validated detection annotations of the subset's joints, with loadRes-style bbox/area of all 23."""
     anns = []
     for i, pred in enumerate(predictions):
         kps = np.asarray(pred["keypoints"], dtype=np.float64)
@@ -107,18 +97,13 @@ def _detections(predictions: Iterable[dict], image_ids: set[int]) -> list[dict]:
                 "id": i + 1,
                 "image_id": int(pred["image_id"]),
                 "category_id": 1,
-                "keypoints": kps,
+                "keypoints": kps[joints].ravel().tolist(),
                 "score": float(pred["score"]),
                 "bbox": [x0, y0, x1 - x0, y1 - y0],
                 "area": float((x1 - x0) * (y1 - y0)),
             }
         )
     return anns
-
-
-def _dt_subset(ann: dict, joints: np.ndarray) -> dict:
-    """A detection restricted to the subset's joints."""
-    return {**ann, "keypoints": ann["keypoints"][joints].ravel().tolist()}
 
 
 def _coco(dataset: dict) -> COCO:

@@ -23,16 +23,17 @@ CROWDPOSE_JOINTS = len(CROWDPOSE14_TO_COCO23[CROWDPOSE14_TO_COCO23 >= 0]) + 2  #
 Converter = Callable[[dict], np.ndarray]
 
 
-def _read_json(path: Path, what: str) -> Any:
-    """The parsed JSON of a file, or a ValueError naming the file."""
+def _read_coco(path: Path) -> dict:
+    """The parsed COCO annotation file (a dict with lists "images" and "annotations"), or a ValueError naming it."""
     try:
-        text = path.read_text()
+        doc = json.loads(path.read_text())
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
-    try:
-        return json.loads(text)
+        raise ValueError(f"{path}: cannot read annotation file ({exc.strerror or exc})") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(doc, dict) or not all(isinstance(doc.get(key), list) for key in ("images", "annotations")):
+        raise ValueError(f"{path}: not a COCO annotation file (needs the lists 'images' and 'annotations')")
+    return doc
 
 
 def _numbers(path: Path, ann: dict, key: str, count: int) -> np.ndarray:
@@ -54,28 +55,17 @@ def _numbers(path: Path, ann: dict, key: str, count: int) -> np.ndarray:
     return arr
 
 
-def _person_category_ids(doc: dict) -> set:
-    """Ids of the categories named "person" (COCO: 1); {1} when the file lists none."""
-    ids = {c.get("id") for c in doc.get("categories", []) if isinstance(c, dict) and c.get("name") == "person"}
-    return ids or {1}
-
-
 def _load(
-    path: Path, doc: Any, image_dir: str | Path, convert: Converter, labelled: np.ndarray, skip_crowd: bool
+    path: Path, doc: dict, image_dir: str | Path, convert: Converter, labelled: np.ndarray, skip_crowd: bool
 ) -> list[ImageRecord]:
-    """Records of a parsed COCO keypoint file; convert maps one annotation to its (23, 3) keypoints."""
-    if (
-        not isinstance(doc, dict)
-        or not isinstance(doc.get("images"), list)
-        or not isinstance(doc.get("annotations"), list)
-    ):
-        raise ValueError(f"{path}: not a COCO annotation file (needs the lists 'images' and 'annotations')")
+    """Records of a file read by :func:`_read_coco`; convert maps one annotation to its (23, 3) keypoints."""
     persons: dict[Any, list[tuple[np.ndarray, np.ndarray, float]]] = {}
     for img in doc["images"]:
         if not isinstance(img, dict) or not all(k in img for k in ("id", "file_name", "width", "height")):
             raise ValueError(f"{path}: image entry {img!r:.80} lacks one of id, file_name, width, height")
         persons[img["id"]] = []
-    category_ids = _person_category_ids(doc)
+    person = {c.get("id") for c in doc.get("categories", []) if isinstance(c, dict) and c.get("name") == "person"}
+    category_ids = person or {1}  # the file lists no person category: COCO's id 1
     for ann in doc["annotations"]:
         if not isinstance(ann, dict):
             raise ValueError(f"{path}: annotation {ann!r:.80} is not an object")
@@ -127,15 +117,14 @@ def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd:
         feet = _numbers(path, ann, "foot_kpts", 3 * NUM_FOOT_JOINTS).reshape(-1, 3)
         return np.concatenate([body, feet])
 
-    doc = _read_json(path, "annotation file")
-    return _load(path, doc, image_dir, convert, np.ones(NUM_JOINTS, dtype=bool), skip_crowd)
+    return _load(path, _read_coco(path), image_dir, convert, np.ones(NUM_JOINTS, dtype=bool), skip_crowd)
 
 
 def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
     """COCO-format keypoints of 23 x 3 numbers (or COCO-17's 17 x 3, feet unlabelled) -> records; the count comes
     from the person category's ``keypoints`` names, else the first annotation, and every annotation must have it."""
     path = Path(ann_file)
-    doc = _read_json(path, "annotation file")
+    doc = _read_coco(path)
     count = _coco23_count(path, doc)
     labelled = np.arange(NUM_JOINTS) < count
 
@@ -146,10 +135,8 @@ def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = 
     return _load(path, doc, image_dir, convert, labelled, skip_crowd)
 
 
-def _coco23_count(path: Path, doc: Any) -> int:
+def _coco23_count(path: Path, doc: dict) -> int:
     """Keypoints per person of a COCO-23 / COCO-17 file: 23 or 17."""
-    if not isinstance(doc, dict):
-        raise ValueError(f"{path}: not a COCO annotation file")
     for cat in doc.get("categories", []):
         if isinstance(cat, dict) and len(cat.get("keypoints", [])) in (NUM_BODY_JOINTS, NUM_JOINTS):
             return len(cat["keypoints"])
@@ -173,8 +160,7 @@ def load_crowdpose(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool
         kps = _numbers(path, ann, "keypoints", 3 * CROWDPOSE_JOINTS).reshape(-1, 3)
         return to_coco23(kps, CROWDPOSE14_TO_COCO23)
 
-    doc = _read_json(path, "annotation file")
-    return _load(path, doc, image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
+    return _load(path, _read_coco(path), image_dir, convert, CROWDPOSE14_TO_COCO23 >= 0, skip_crowd)
 
 
 def load_detections(
@@ -197,14 +183,10 @@ def load_detections(
     ]
 
 
-def labelled_counts(record: ImageRecord) -> np.ndarray:
-    """Labelled joints (v > 0 on a joint the dataset annotates) of each person: (N,) int."""
-    return np.sum((record.keypoints[..., 2] > 0) & record.labelled[None], axis=1)
-
-
 def training_persons(record: ImageRecord, min_keypoints: int = 1) -> np.ndarray:
-    """Indices (K,) of the persons with at least min_keypoints labelled joints: the training samples."""
-    return np.flatnonzero(labelled_counts(record) >= min_keypoints)
+    """Indices (K,) of the persons with >= min_keypoints labelled joints (v > 0 on a joint the dataset annotates)."""
+    labelled = np.sum((record.keypoints[..., 2] > 0) & record.labelled[None], axis=1)
+    return np.flatnonzero(labelled >= min_keypoints)
 
 
 def load_keypoint_dataset(
@@ -229,19 +211,6 @@ def load_keypoint_dataset(
     return records
 
 
-def coco23_categories() -> list[dict]:
-    """The COCO "categories" list of COCO-23: person, the 23 keypoint names, LIMBS as 1-based skeleton."""
-    return [
-        {
-            "supercategory": "person",
-            "id": 1,
-            "name": "person",
-            "keypoints": list(COCO23_NAMES),
-            "skeleton": [[a + 1, b + 1] for a, b in LIMBS],
-        }
-    ]
-
-
 def coco23_document(records: list[ImageRecord], image_root: str | Path | None = None, info: dict | None = None) -> dict:
     """The COCO-23 annotation document of records; file_name is relative to image_root, else the base name."""
     images, annotations = [], []
@@ -262,7 +231,9 @@ def coco23_document(records: list[ImageRecord], image_root: str | Path | None = 
                     "area": float(area),
                 }
             )
-    return {"info": dict(info or {}), "categories": coco23_categories(), "images": images, "annotations": annotations}
+    skeleton = [[a + 1, b + 1] for a, b in LIMBS]  # 1-based
+    person = {"supercategory": "person", "id": 1, "name": "person", "keypoints": [*COCO23_NAMES], "skeleton": skeleton}
+    return {"info": dict(info or {}), "categories": [person], "images": images, "annotations": annotations}
 
 
 def _file_name(record: ImageRecord, image_root: str | Path | None) -> str:

@@ -1,8 +1,7 @@
 """The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels.
 
-Owner map (H, W) uint16: 0 = no body, else 1 + person x parts + part. A joint is v = 2 when its own part is on
-top there and no body is in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image.
-"""
+Owner map (H, W) uint16: 0 = no body, else 1 + person x parts + part. A joint is v = 2 when its own part is on top
+there and no body is in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image."""
 
 from __future__ import annotations
 
@@ -21,6 +20,7 @@ SHIRT, SLEEVE, TROUSERS, SHIN, SHOES, SKIN, HAIR = range(7)
 SKIN_TONES = np.array([(185, 205, 240), (150, 180, 225), (110, 150, 205), (80, 115, 170), (50, 75, 120)], float)
 HAIR_TONES = np.array([(20, 20, 25), (30, 45, 70), (40, 80, 130), (120, 170, 210), (140, 140, 140)], float)
 SHADE_LAYERS = ((1.0, 0.0, 0.62), (0.78, 0.10, 0.84), (0.45, 0.30, 1.0))  # (radius, light shift, brightness)
+_SHADE_SCALE, _SHADE_SHIFT, _SHADE_BRIGHT = np.array(SHADE_LAYERS).T
 FACE_VISIBLE_COS = -0.2  # a face joint is seen while cos(joint - head centre, camera - head centre) >= this
 HAIR_BACK_M, HAIR_UP_M, HAIR_RADIUS_M = 0.03, 0.015, 0.095
 SUBPIXEL_SHIFT = 3  # fixed-point bits of the polygon coordinates
@@ -29,7 +29,6 @@ NEAR_M = 0.05  # ground lines are clipped to this depth in front of the camera
 DISTORTED_STEP_M = 0.25  # ground lines are drawn in pieces this long where the lens distorts
 
 _HEAD = len(LIMBS) + 1  # index of the head sphere in body_capsules
-_HAIR = len(LIMBS) + 2  # the hair sphere, appended after the capsules
 
 
 def _part_groups() -> np.ndarray:
@@ -117,8 +116,8 @@ def draw_ground_lines(image: np.ndarray, camera: Camera, ends: np.ndarray, colou
     """Draw ground segments (S, 2, 2) (x, y on z = 0, m) in place on (H, W, 3), clipped in front of the camera."""
     world = np.concatenate([ends, np.zeros(ends.shape[:2] + (1,))], axis=-1)
     depth = camera.depth(world)
-    world = world[np.any(depth > NEAR_M, axis=1)]
-    depth = depth[np.any(depth > NEAR_M, axis=1)]
+    front = np.any(depth > NEAR_M, axis=1)
+    world, depth = world[front], depth[front]
     for end in (0, 1):  # move an end behind the camera onto the near plane
         other = 1 - end
         behind = depth[:, end] <= NEAR_M
@@ -232,14 +231,9 @@ def view_person(camera: Camera, joints: np.ndarray, light: np.ndarray) -> Person
     focal = camera.K[0, 0]
     da, db = camera.depth(ends_a), camera.depth(ends_b)
     ra, rb = np.maximum(focal * radii / da, 1.0), np.maximum(focal * radii / db, 1.0)
-    scale = np.array([f for f, _, _ in SHADE_LAYERS])
-    shift = np.array([s for _, s, _ in SHADE_LAYERS])[None, :, None] * np.maximum(ra, rb)[:, None, None] * light
-    outlines = capsule_outlines(
-        camera.project(ends_a)[:, None] + shift,
-        camera.project(ends_b)[:, None] + shift,
-        ra[:, None] * scale,
-        rb[:, None] * scale,
-    )
+    shift = _SHADE_SHIFT[None, :, None] * np.maximum(ra, rb)[:, None, None] * light
+    uv_a, uv_b = camera.project(ends_a)[:, None] + shift, camera.project(ends_b)[:, None] + shift
+    outlines = capsule_outlines(uv_a, uv_b, ra[:, None] * _SHADE_SCALE, rb[:, None] * _SHADE_SCALE)
     rel = joints - head
     cos = rel @ to_cam / np.maximum(np.linalg.norm(rel, axis=1) * np.linalg.norm(to_cam), 1e-12)
     face_seen = np.ones(NUM_JOINTS, dtype=bool)
@@ -276,9 +270,8 @@ def _draw_person(
 ) -> None:
     """Paint one person's parts far to near in place; the owner map gets first_id + part index."""
     groups = PART_GROUPS
-    bright = np.array([b for _, _, b in SHADE_LAYERS])
     layer_colours = np.clip(
-        look.colours[groups][:, None] * look.tint[:, None, None] * bright[None, :, None], 0, 255
+        look.colours[groups][:, None] * look.tint[:, None, None] * _SHADE_BRIGHT[None, :, None], 0, 255
     ).tolist()
     for k in np.argsort(-view.depth, kind="stable"):
         if groups[k] < 0:

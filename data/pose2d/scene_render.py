@@ -1,7 +1,5 @@
-"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies and its ground-truth 2D.
-
-A person's look depends only on (seed, person id), an image only on (seed, frame, view).
-"""
+"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies and its ground-truth 2D. A person's
+look depends only on (seed, person id), an image only on (seed, frame, view)."""
 
 from __future__ import annotations
 
@@ -17,6 +15,7 @@ from data.image_ids import coco_image_id
 from data.keypoints import NUM_JOINTS
 from data.multiview import Frame, Sequence, ViewDetections
 from data.pose2d import render
+from data.pose2d.view_coco import coco_images
 
 # Independent random streams of a scene seed: default_rng([seed, STREAM, ...]).
 LOOK, BACKDROP, FLOOR, LIGHT, GRAIN, ORDER = range(6)
@@ -47,11 +46,6 @@ class RenderedView:
     boxes: np.ndarray
 
 
-def person_look(seed: int, person_id: int) -> render.PersonLook:
-    """The look of one person of a scene, the same in every frame and view."""
-    return render.sample_look(np.random.default_rng([int(seed), LOOK, int(person_id)]))
-
-
 def render_view(
     scene: Scene, view: int, frame: int, poses: np.ndarray, ids: np.ndarray, paint: bool = True
 ) -> RenderedView:
@@ -61,7 +55,7 @@ def render_view(
     shown = np.flatnonzero([_paintable(camera, joints) for joints in poses])
     light = _light(camera, scene.seed)
     views = [render.view_person(camera, poses[p], light) for p in shown]
-    looks = [person_look(scene.seed, ids[p]) for p in shown]
+    looks = [render.sample_look(np.random.default_rng([int(scene.seed), LOOK, int(ids[p])])) for p in shown]
     image = _background(scene, view) if paint else None
     if image is not None:
         render.draw_shadows(image, camera, poses[shown])
@@ -93,10 +87,8 @@ def _light(camera: Camera, seed: int) -> np.ndarray:
     """Image direction (2,) of the highlights: the scene's sun seen from the camera, towards the top."""
     rng = np.random.default_rng([int(seed), LIGHT])
     azimuth, elevation = rng.uniform(0, 2 * math.pi), rng.uniform(0.5, 1.2)
-    sun = np.array(
-        [math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth), math.sin(elevation)]
-    )
-    x, y, _ = camera.R @ sun
+    flat = math.cos(elevation)
+    x, y, _ = camera.R @ np.array([flat * math.cos(azimuth), flat * math.sin(azimuth), math.sin(elevation)])
     light = np.array([x, -abs(y)])
     norm = float(np.linalg.norm(light))
     return light / norm if norm > 1e-6 else np.array([0.0, -1.0])
@@ -107,7 +99,8 @@ def _background(scene: Scene, view: int) -> np.ndarray:
     camera = scene.rig[view]
     image = render.backdrop(np.random.default_rng([int(scene.seed), BACKDROP, int(view)]), camera.size)
     rng = np.random.default_rng([int(scene.seed), FLOOR])
-    extent = _floor_extent(scene.area)
+    xmin, xmax, ymin, ymax = (float(v) for v in scene.area)
+    extent = (xmin - FLOOR_MARGIN_M, xmax + FLOOR_MARGIN_M, ymin - FLOOR_MARGIN_M, ymax + FLOOR_MARGIN_M)
     texel = max(FLOOR_TEXEL_M, (extent[1] - extent[0]) / MAX_TEXTURE_PX, (extent[3] - extent[2]) / MAX_TEXTURE_PX)
     size = (int(math.ceil((extent[1] - extent[0]) / texel)), int(math.ceil((extent[3] - extent[2]) / texel)))
     texture = render.smooth_field(rng, size, int(rng.integers(3, 8)), 40, 200)
@@ -116,22 +109,12 @@ def _background(scene: Scene, view: int) -> np.ndarray:
     floor = cv2.remap(texture, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     blend = cv2.addWeighted(image, 1.0 - FLOOR_WEIGHT, floor, FLOOR_WEIGHT, 0.0)
     np.copyto(image, blend, where=ground[..., None])
-    render.draw_ground_lines(image, camera, _tile_lines(extent, rng.uniform(0.5, 2.0)), render.random_colour(rng))
+    tile = rng.uniform(0.5, 2.0)  # tile lines at multiples of tile m
+    xs = tile * np.arange(math.ceil(extent[0] / tile), math.floor(extent[1] / tile) + 1)
+    ys = tile * np.arange(math.ceil(extent[2] / tile), math.floor(extent[3] / tile) + 1)
+    lines = np.concatenate(render.grid_lines(xs, ys, extent))
+    render.draw_ground_lines(image, camera, lines, render.random_colour(rng))
     return image
-
-
-def _floor_extent(area: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    """The floor (xmin, xmax, ymin, ymax): the area and FLOOR_MARGIN_M around it."""
-    xmin, xmax, ymin, ymax = (float(v) for v in area)
-    return xmin - FLOOR_MARGIN_M, xmax + FLOOR_MARGIN_M, ymin - FLOOR_MARGIN_M, ymax + FLOOR_MARGIN_M
-
-
-def _tile_lines(extent: tuple[float, float, float, float], tile: float) -> np.ndarray:
-    """Ground segments (S, 2, 2) of the tile grid (lines at multiples of tile m) over the extent."""
-    xmin, xmax, ymin, ymax = extent
-    xs = tile * np.arange(math.ceil(xmin / tile), math.floor(xmax / tile) + 1)
-    ys = tile * np.arange(math.ceil(ymin / tile), math.floor(ymax / tile) + 1)
-    return np.concatenate(render.grid_lines(xs, ys, extent))
 
 
 def _ground_points(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
@@ -142,10 +125,8 @@ def _ground_points(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     else:
         uv = np.stack(np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)), axis=-1)
     ray_z = (camera.R.T @ np.linalg.inv(camera.K))[2]  # world z of a pixel's ray, linear in (u, v, 1)
-    if camera.center[2] > 0:
-        ground = uv[..., 0] * ray_z[0] + uv[..., 1] * ray_z[1] + ray_z[2] < -1e-9
-    else:
-        ground = np.zeros((h, w), dtype=bool)
+    above = bool(camera.center[2] > 0)  # a camera below the floor sees none of it
+    ground = above & (uv[..., 0] * ray_z[0] + uv[..., 1] * ray_z[1] + ray_z[2] < -1e-9)
     xy = cv2.perspectiveTransform(uv.reshape(-1, 1, 2), camera.image_to_ground_homography()).reshape(h, w, 2)
     return np.nan_to_num(xy, nan=0.0, posinf=1e5, neginf=-1e5), ground
 
@@ -217,11 +198,10 @@ def render_sequence(sequence: Sequence, seed: int) -> Sequence:
                 image_ids=[coco_image_id(frame.index, v, len(rig)) for v in range(len(rig))],
             )
         )
-    render = {"seed": int(seed), "persons_left_out": left_out}
     return replace(
         sequence,
         frames=frames,
-        meta={**sequence.meta, "render": render},
+        meta={**sequence.meta, "render": {"seed": int(seed), "persons_left_out": left_out}},
         protocols=list(sequence.protocols),
         coco_images=coco_images(frames, rig),
     )
@@ -249,19 +229,3 @@ def _renderable(frame: Frame) -> tuple[np.ndarray, np.ndarray, int]:
     ids = np.arange(len(gt)) if frame.gt_ids is None else np.asarray(frame.gt_ids, dtype=np.int64)
     full = np.all(gt[..., 3] > 0, axis=1) & np.all(np.isfinite(gt[..., :3]), axis=(1, 2))
     return gt[full, :, :3].copy(), ids[full].copy(), int(np.count_nonzero(~full))
-
-
-def coco_images(frames: list[Frame], rig: Rig) -> list[dict]:
-    """The COCO "images" entries (id, frame, camera, file_name, width, height) of rendered frames."""
-    return [
-        {
-            "id": frame.image_ids[v],
-            "frame": int(frame.index),
-            "camera": cam.name,
-            "file_name": f"{int(frame.index):06d}_{cam.name}.jpg",
-            "width": cam.size[0],
-            "height": cam.size[1],
-        }
-        for frame in frames
-        for v, cam in enumerate(rig)
-    ]

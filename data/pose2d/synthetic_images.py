@@ -63,8 +63,7 @@ class SyntheticImage:
 
 def sample_camera(rng: np.random.Generator, size: tuple[int, int]) -> Camera:
     """A low camera at (0, 0, h) looking along +x, focal 0.75..1.1 x width: people hide each other."""
-    w, _ = size
-    focal = rng.uniform(0.75, 1.1) * w
+    focal = rng.uniform(0.75, 1.1) * size[0]
     height = rng.uniform(0.8, 2.4)
     target = (rng.uniform(5.0, 9.0), rng.uniform(-0.3, 0.3), rng.uniform(0.7, 1.2))
     return look_at_camera("synthetic", (0.0, 0.0, height), target, size, focal)
@@ -88,9 +87,8 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions) -> np.ndarray:
     """World COCO-23 joints (P, 23, 3) of a crowd in a wedge of the camera's view, >= 0.5 m apart."""
-    w, _ = camera.size
     focal = camera.K[0, 0]
-    half_fov = math.atan(w / 2 / focal)
+    half_fov = math.atan(camera.size[0] / 2 / focal)
     spread = rng.uniform(0.3, 1.1) * half_fov
     count = int(rng.integers(options.persons[0], options.persons[1] + 1))
     ground: list[np.ndarray] = []
@@ -115,26 +113,18 @@ def sample_crowd(rng: np.random.Generator, camera: Camera, options: ImageOptions
 
 
 def render_background(rng: np.random.Generator, camera: Camera) -> np.ndarray:
-    """A textured background (H, W, 3) uint8: a backdrop, and a tiled floor below the horizon."""
+    """A textured background (H, W, 3) uint8: a backdrop, and a floor with tile lines below the horizon."""
     w, h = camera.size
     image = render.backdrop(rng, (w, h))
     horizon = int(np.clip(camera.project(np.array([1e4, 0.0, 0.0]))[1], 0, h))
     if horizon < h:
         floor = render.smooth_field(rng, (w, h - horizon), 3, 40, 200)
         image[horizon:] = cv2.addWeighted(image[horizon:], 0.3, floor, 0.7, 0.0)
-        _draw_floor_grid(image, camera, rng)
+        tile, colour = rng.uniform(0.4, 2.0), render.random_colour(rng)
+        extent = (1.0, 30.0, -30.0, 30.0)  # tile lines 1..30 m ahead, 30 m to either side
+        along_y, along_x = render.grid_lines(np.arange(*extent[:2], tile), np.arange(*extent[2:], tile), extent)
+        render.draw_ground_lines(image, camera, np.concatenate([along_x, along_y]), colour)
     return image
-
-
-def _draw_floor_grid(image: np.ndarray, camera: Camera, rng: np.random.Generator) -> None:
-    """Tile lines of the ground plane z = 0 in perspective, 1..30 m ahead, in place on (H, W, 3)."""
-    tile = rng.uniform(0.4, 2.0)
-    colour = render.random_colour(rng)
-    near, far, side = 1.0, 30.0, 30.0
-    along_y, along_x = render.grid_lines(
-        np.arange(near, far, tile), np.arange(-side, side, tile), (near, far, -side, side)
-    )
-    render.draw_ground_lines(image, camera, np.concatenate([along_x, along_y]), colour)
 
 
 def synthetic_image(

@@ -1,7 +1,5 @@
-"""Top-down person crops with multi-modal heatmap targets (paper Sec. 3.1), and a resumable epoch sampler.
-
-Augmentation comes from default_rng([seed, epoch, index]): independent of workers, order and interruptions.
-"""
+"""Top-down person crops with multi-modal heatmap targets (paper Sec. 3.1), and a resumable epoch sampler; augmentation
+comes from default_rng([seed, epoch, index]): independent of workers, order and interruptions."""
 
 from __future__ import annotations
 
@@ -77,15 +75,11 @@ class TopDownDataset(Dataset):
         samples = []
         for r, record in enumerate(self.records):
             if det_boxes:
-                samples += [
-                    (r, -1, box, float(score), float(box[2] * box[3]))
-                    for box, score in zip(record.det_boxes, record.det_scores)
-                ]
+                detections = zip(record.det_boxes, record.det_scores)
+                samples += [(r, -1, box, float(score), float(box[2] * box[3])) for box, score in detections]
             else:
-                samples += [
-                    (r, int(p), record.boxes[p], 1.0, float(record.areas[p]))
-                    for p in training_persons(record, min_keypoints)
-                ]
+                persons = training_persons(record, min_keypoints)
+                samples += [(r, int(p), record.boxes[p], 1.0, float(record.areas[p])) for p in persons]
         return samples
 
     def set_epoch(self, epoch: int) -> None:
@@ -176,11 +170,9 @@ class EpochSampler(Sampler[int]):
 
     def indices(self) -> np.ndarray:
         """This rank's indices (K,) of the current epoch, from the start position."""
-        order = (
-            np.random.default_rng([self.seed, self.epoch]).permutation(self.size)
-            if self.shuffle
-            else np.arange(self.size)
-        )
+        order = np.arange(self.size)
+        if self.shuffle:
+            order = np.random.default_rng([self.seed, self.epoch]).permutation(self.size)
         total = -(-self.size // self.world_size) * self.world_size
         order = np.resize(order, total) if self.size else order
         return order[self.rank :: self.world_size][self.start :]

@@ -20,7 +20,7 @@ def ground_truth_records(frames: Sequence[Frame], rig: Rig) -> list[ImageRecord]
         for v, (cam, view) in enumerate(zip(rig, _views(frame, rig))):
             flags = np.where(view.keypoints[..., 2] > 0, np.where(view.occluded, 1.0, 2.0), 0.0)
             xy = np.where(flags[..., None] > 0, view.keypoints[..., :2], 0.0)
-            name = f"{int(frame.index):06d}_{cam.name}.jpg"
+            name = f"{int(frame.index):06d}_{cam.name}.jpg"  # as coco_images
             keypoints = np.concatenate([xy, flags[..., None]], axis=-1)
             areas = view.bboxes[:, 2] * view.bboxes[:, 3]
             records.append(ImageRecord(frame.image_ids[v], name, *cam.size, keypoints, view.bboxes, areas))
@@ -28,12 +28,24 @@ def ground_truth_records(frames: Sequence[Frame], rig: Rig) -> list[ImageRecord]
 
 
 def ground_truth_document(frames: Sequence[Frame], rig: Rig) -> dict:
-    """The COCO-23 keypoint document (images with frame and camera) of :func:`ground_truth_records`."""
-    doc = coco23_document(ground_truth_records(frames, rig))
-    where = [(int(frame.index), cam.name) for frame in frames for cam in rig]
-    for image, (frame, camera) in zip(doc["images"], where):
-        image.update(frame=frame, camera=camera)
-    return doc
+    """The COCO-23 keypoint document of :func:`ground_truth_records`, its images those of :func:`coco_images`."""
+    return {**coco23_document(ground_truth_records(frames, rig)), "images": coco_images(frames, rig)}
+
+
+def coco_images(frames: list[Frame], rig: Rig) -> list[dict]:
+    """The COCO "images" entries (id, frame, camera, file_name, width, height) of rendered frames."""
+    return [
+        {
+            "id": frame.image_ids[v],
+            "frame": int(frame.index),
+            "camera": cam.name,
+            "file_name": f"{int(frame.index):06d}_{cam.name}.jpg",
+            "width": cam.size[0],
+            "height": cam.size[1],
+        }
+        for frame in frames
+        for v, cam in enumerate(rig)
+    ]
 
 
 def results(frames: Sequence[Frame], rig: Rig, views: Sequence[Sequence[ViewDetections]] | None = None) -> list[dict]:

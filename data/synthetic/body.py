@@ -67,14 +67,7 @@ class BodyShape:
     """Segment lengths (m) of one person; build with :func:`sample_body` or :func:`mean_body`."""
 
     stature: float
-    lengths: tuple[tuple[str, float], ...]
-
-    def __getitem__(self, key: str) -> float:
-        return dict(self.lengths)[key]
-
-    def as_dict(self) -> dict[str, float]:
-        """Segment lengths in metres by name."""
-        return dict(self.lengths)
+    lengths: tuple[tuple[str, float], ...]  # (name, m)
 
 
 def mean_body(stature: float = STATURE_MEAN_M) -> BodyShape:
@@ -105,14 +98,9 @@ def _leg(b: dict[str, float], side: int, hip: float, knee: float, pitch: float, 
     knee_pos = hip_pos + rot_x @ thigh
     ankle = knee_pos + rot_x @ shin
     # Foot points with the sole flat, then pitched (toes up > 0) and yawed outwards.
-    h = b["ankle_height"]
-    foot = np.array(
-        [
-            [b["big_toe"], -side * b["big_toe_medial"], -h],
-            [b["small_toe"], side * b["small_toe_lateral"], -h],
-            [-b["heel_back"], 0.0, -h],
-        ]
-    )
+    forward = [b["big_toe"], b["small_toe"], -b["heel_back"]]
+    left = [-side * b["big_toe_medial"], side * b["small_toe_lateral"], 0.0]
+    foot = np.column_stack([forward, left, np.full(3, -b["ankle_height"])])
     cp, sp = math.cos(pitch), math.sin(pitch)
     foot = np.column_stack([foot[:, 0] * cp - foot[:, 2] * sp, foot[:, 1], foot[:, 0] * sp + foot[:, 2] * cp])
     cy, sy = math.cos(side * _TOE_OUT), math.sin(side * _TOE_OUT)
@@ -131,35 +119,22 @@ def _arm(b: dict[str, float], shoulder: np.ndarray, side: int, flexion: float, e
 
 def local_pose(body: BodyShape, phase: float, walking: bool) -> np.ndarray:
     """COCO-23 joints in the local body frame (x forward, y left, z up), lowest sole at z = 0: (23, 3)."""
-    b = body.as_dict()
+    b = dict(body.lengths)
     joints = np.zeros((NUM_JOINTS, 3))
-    if walking:
-        # The left leg is at `phase`, the right leg half a stride later.
-        legs = {}
+    if walking:  # the left leg is at `phase`, the right leg half a stride later; each arm swings with the other leg
+        legs, arm_flex, hip_rest = {}, {}, math.radians(8.0)
         for side, ph in ((1, phase), (-1, phase + 0.5)):
-            legs[side] = _leg(
-                b,
-                side,
-                _periodic(_HIP_KEYS, ph),
-                _periodic(_KNEE_KEYS, ph),
-                _periodic(_FOOT_PITCH_KEYS, ph),
-                _WALK_LEG_ADDUCTION,
-            )
-        hip_rest = math.radians(8.0)
-        # Each arm swings with the opposite leg.
-        arm_flex = {
-            side: -_ARM_SWING_GAIN * (_periodic(_HIP_KEYS, ph) - hip_rest)
-            for side, ph in ((1, phase), (-1, phase + 0.5))
-        }
+            hip = _periodic(_HIP_KEYS, ph)
+            knee, pitch = _periodic(_KNEE_KEYS, ph), _periodic(_FOOT_PITCH_KEYS, ph)
+            legs[side] = _leg(b, side, hip, knee, pitch, _WALK_LEG_ADDUCTION)
+            arm_flex[side] = -_ARM_SWING_GAIN * (hip - hip_rest)
         lean = _WALK_LEAN
     else:
         legs = {side: _leg(b, side, 0.0, math.radians(_STAND_KNEE_DEG), 0.0, _STAND_LEG_ABDUCTION) for side in (1, -1)}
-        arm_flex = {1: 0.0, -1: 0.0}
-        lean = 0.0
+        arm_flex, lean = {1: 0.0, -1: 0.0}, 0.0
     for side, (hip_j, knee_j, ankle_j, foot_j) in ((1, (11, 13, 15, LEFT_FOOT)), (-1, (12, 14, 16, RIGHT_FOOT))):
-        pts = legs[side]
-        joints[[hip_j, knee_j, ankle_j]] = pts[:3]
-        joints[list(foot_j)] = pts[3:]  # (big toe, small toe, heel), as LEFT_FOOT / RIGHT_FOOT
+        joints[[hip_j, knee_j, ankle_j]] = legs[side][:3]
+        joints[list(foot_j)] = legs[side][3:]  # (big toe, small toe, heel), as LEFT_FOOT / RIGHT_FOOT
 
     # Trunk and head are one rigid block rotated forward by `lean` about the mid-hip.
     cl, sl = math.cos(lean), math.sin(lean)
@@ -196,8 +171,7 @@ def pose_joints(
     c, s = math.cos(theta), math.sin(theta)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     out = local @ rot.T
-    out[:, 0] += x
-    out[:, 1] += y
+    out[:, :2] += (x, y)
     return out
 
 

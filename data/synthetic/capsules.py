@@ -34,18 +34,12 @@ FOOT_RADIUS_M = 0.04  # ankle-heel, ankle-toe, toe-toe segments
 TORSO_RADIUS_M = 0.12  # mid-shoulder -> mid-hip capsule (chest depth ~ 23 cm)
 HEAD_RADIUS_M = 0.10  # sphere at the ear centre (head breadth ~ 15 cm, length ~ 19 cm)
 
-_LIMB_A = np.array([a for a, _ in LIMBS])
-_LIMB_B = np.array([b for _, b in LIMBS])
+_LIMB_A, _LIMB_B = np.array(LIMBS).T  # the ends of every LIMBS segment
 
 
 def capsule_radii() -> np.ndarray:
     """Radius (m) of every capsule of :func:`body_capsules`: (K,) with K = len(LIMBS) + 2."""
-    radii = []
-    for a, b in LIMBS:
-        if max(a, b) >= 17:
-            radii.append(FOOT_RADIUS_M)
-        else:
-            radii.append(_LIMB_RADII.get(frozenset((a, b)), FACE_RADIUS_M))
+    radii = [FOOT_RADIUS_M if max(a, b) >= 17 else _LIMB_RADII.get(frozenset((a, b)), FACE_RADIUS_M) for a, b in LIMBS]
     return np.array(radii + [TORSO_RADIUS_M, HEAD_RADIUS_M])
 
 
@@ -100,13 +94,8 @@ def occluded_joints(center: np.ndarray, poses: np.ndarray) -> np.ndarray:
     ends_a, ends_b = body_capsules(poses)
     radii = capsule_radii()
     sphere_c = (ends_a.mean(axis=1) + ends_b.mean(axis=1)) / 2  # (P, 3)
-    reach = (
-        np.maximum(
-            np.linalg.norm(ends_a - sphere_c[:, None], axis=-1), np.linalg.norm(ends_b - sphere_c[:, None], axis=-1)
-        )
-        + radii
-    )
-    sphere_r = reach.max(axis=1)  # (P,)
+    reach_a, reach_b = (np.linalg.norm(ends - sphere_c[:, None], axis=-1) for ends in (ends_a, ends_b))
+    sphere_r = (np.maximum(reach_a, reach_b) + radii).max(axis=1)  # (P,)
 
     targets = poses.reshape(-1, 3)  # (N, 3)
     owner = np.repeat(np.arange(num), joints)

@@ -63,22 +63,15 @@ class SyntheticConfig:
 
     def _validate(self) -> None:
         """Raise ValueError naming the first option that is out of range."""
+        low_speed, high_speed = self.walk_speed_mps
         checks = [
             ("num_frames", self.num_frames >= 1, "must be >= 1"),
             ("num_persons", self.num_persons >= 1 or self.positions is not None, "must be >= 1"),
             ("density", self.density > 0, "must be > 0 persons per m^2"),
             ("min_spacing_m", self.min_spacing_m >= 0, "must be >= 0"),
             ("fps", self.fps > 0, "must be > 0"),
-            (
-                "walk_speed_mps",
-                0 <= self.walk_speed_mps[0] <= self.walk_speed_mps[1],
-                "must be [low, high], 0 <= low <= high",
-            ),
-            (
-                "num_cameras",
-                self.num_cameras >= 2 or self.rig != "ring",
-                "must be >= 2 (triangulation needs two views)",
-            ),
+            ("walk_speed_mps", 0 <= low_speed <= high_speed, "must be [low, high], 0 <= low <= high"),
+            ("num_cameras", self.num_cameras >= 2 or self.rig != "ring", "must be >= 2 (triangulation needs 2 views)"),
             ("camera_radius_m", self.camera_radius_m is None or self.camera_radius_m > 0, "must be > 0 or null"),
             ("image_size", min(self.image_size) > 0, "must be positive (width, height)"),
             ("focal_px", self.focal_px > 0, "must be > 0"),
@@ -90,8 +83,7 @@ class SyntheticConfig:
             ("positions", self.positions is None or len(self.positions) >= 1, "must hold at least one frame"),
         ]
         for key in ("walking_fraction", "occluded_drop_prob", "miss_rate"):
-            value = getattr(self, key)
-            checks.append((key, 0.0 <= value <= 1.0, "must be a probability in [0, 1]"))
+            checks.append((key, 0.0 <= getattr(self, key) <= 1.0, "must be a probability in [0, 1]"))
         if self.area is not None:
             xmin, xmax, ymin, ymax = self.area
             checks.append(("area", xmin < xmax and ymin < ymax, "must be [xmin, xmax, ymin, ymax] with min < max"))
@@ -112,16 +104,9 @@ class SyntheticConfig:
         return out
 
 
-OBSERVATION_KEYS = (
-    "noise_px",
-    "noise_ref_depth_m",
-    "noise_depth_exponent",
-    "occlusion",
-    "occluded_drop_prob",
-    "occluded_noise_scale",
-    "miss_rate",
-    "fp_rate",
-    "min_joints_in_view",
+OBSERVATION_KEYS = tuple(
+    "noise_px noise_ref_depth_m noise_depth_exponent occlusion occluded_drop_prob occluded_noise_scale miss_rate"
+    " fp_rate min_joints_in_view".split()
 )
 
 

@@ -34,7 +34,6 @@ def observe_view(
     """Detections of world poses (P, 23, 3) with ids (P,) in one camera, in a shuffled order."""
     poses = np.asarray(poses, dtype=np.float64)
     num = len(poses)
-    w, h = camera.size
     uv = camera.project(poses)  # (P, 23, 2)
     in_view = camera.in_view(poses)  # (P, 23)
     hidden = occluded_joints(camera.center, poses) if cfg.occlusion and num else np.zeros((num, NUM_JOINTS), bool)
@@ -58,7 +57,7 @@ def observe_view(
     keypoints, hidden = keypoints[detected], hidden[detected]
     ids = np.asarray(person_ids, dtype=np.int64)[detected]
 
-    fp = false_positives(int(rng.poisson(cfg.fp_rate)) if cfg.fp_rate > 0 else 0, (w, h), rng)
+    fp = false_positives(int(rng.poisson(cfg.fp_rate)) if cfg.fp_rate > 0 else 0, camera.size, rng)
     keypoints = np.concatenate([keypoints, fp])
     ids = np.concatenate([ids, np.full(len(fp), -1, dtype=np.int64)])
     hidden = np.concatenate([hidden, np.zeros((len(fp), NUM_JOINTS), dtype=bool)])
@@ -67,26 +66,20 @@ def observe_view(
         return ViewDetections.empty(NUM_JOINTS)
     order = rng.permutation(len(keypoints))
     keypoints, ids, hidden = keypoints[order], ids[order], hidden[order]
-    return ViewDetections(
-        keypoints, bbox_from_keypoints(keypoints, (w, h)), keypoints[..., 2].mean(axis=1), ids, hidden
-    )
+    boxes = bbox_from_keypoints(keypoints, camera.size)
+    return ViewDetections(keypoints, boxes, keypoints[..., 2].mean(axis=1), ids, hidden)
 
 
 def bbox_from_keypoints(keypoints: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
     """Box x, y, w, h around the joints with score > 0, a margin added, clipped to the image: (N, 23, 3) -> (N, 4)."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
-    out = np.zeros((len(keypoints), 4))
-    w, h = image_size
-    for n, kp in enumerate(keypoints):
-        pts = kp[kp[:, 2] > 0, :2]
-        if len(pts) == 0:
-            continue
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        pad = BBOX_MARGIN * (hi - lo)
-        lo = np.clip(lo - pad, 0.0, [w - 1, h - 1])
-        hi = np.clip(hi + pad, 0.0, [w - 1, h - 1])
-        out[n] = [lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]]
-    return out
+    corner = np.array(image_size, dtype=np.float64) - 1
+    seen = keypoints[..., 2:] > 0
+    lo = np.where(seen, keypoints[..., :2], np.inf).min(axis=1)
+    hi = np.where(seen, keypoints[..., :2], -np.inf).max(axis=1)
+    pad = BBOX_MARGIN * (hi - lo)
+    lo, hi = np.clip(lo - pad, 0.0, corner), np.clip(hi + pad, 0.0, corner)
+    return np.where(seen.any(axis=1), np.concatenate([lo, hi - lo], axis=1), 0.0)
 
 
 def false_positives(count: int, image_size: tuple[int, int], rng: np.random.Generator) -> np.ndarray:

@@ -1,9 +1,8 @@
-"""Camera rigs for synthetic scenes: a ring of cameras around the area, or a calibration file."""
+"""Camera rigs for synthetic scenes: a ring of cameras around the area."""
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -48,10 +47,3 @@ def ring_rig(
         center = (cx + radius * math.cos(a), cy + radius * math.sin(a), height)
         cams.append(look_at_camera(str(v), center, look_at, image_size, focal_px))
     return Rig.from_cameras(cams)
-
-
-def rig_from_file(path: str | Path, fmt: str = "auto") -> Rig:
-    """A rig read by data.geometry.calibration.load_rig (cameras.json, Panoptic, Shelf, Wildtrack...)."""
-    from data.geometry.calibration import load_rig
-
-    return load_rig(path, fmt)

@@ -106,9 +106,7 @@ def simulate_scene(cfg: SyntheticConfig, rng: np.random.Generator) -> SceneTrack
     speed = rng.uniform(*cfg.walk_speed_mps, num)
     strides = np.array([stride_length(b) for b in bodies])
 
-    positions = np.zeros((frames, num, 2))
-    headings = np.zeros((frames, num))
-    phases = np.zeros((frames, num))
+    positions, headings, phases = np.zeros((frames, num, 2)), np.zeros((frames, num)), np.zeros((frames, num))
     for f in range(frames):
         if f > 0:
             for i in np.flatnonzero(walker):
@@ -123,13 +121,7 @@ def simulate_scene(cfg: SyntheticConfig, rng: np.random.Generator) -> SceneTrack
 
 
 def _step(
-    pos: np.ndarray,
-    i: int,
-    heading: float,
-    step: float,
-    area: tuple[float, ...],
-    min_spacing: float,
-    rng: np.random.Generator,
+    pos: np.ndarray, i: int, heading: float, step: float, area: tuple, min_spacing: float, rng: np.random.Generator
 ) -> tuple[np.ndarray, float] | None:
     """Next (position (2,), heading) of walker i, turning away from borders and others; None if stuck."""
     xmin, xmax, ymin, ymax = area
@@ -159,9 +151,7 @@ def _track_from_positions(cfg: SyntheticConfig, area: tuple[float, ...], rng: np
     strides = np.array([stride_length(b) for b in bodies])
     heading = rng.uniform(0.0, 2 * math.pi, num)
     phase = rng.uniform(0.0, 1.0, num)
-    headings = np.zeros((frames, num))
-    phases = np.zeros((frames, num))
-    walking = np.zeros((frames, num), dtype=bool)
+    headings, phases, walking = np.zeros((frames, num)), np.zeros((frames, num)), np.zeros((frames, num), dtype=bool)
     for f in range(frames):
         for i in np.flatnonzero(present[f]):
             nxt = f + 1 if f + 1 < frames and present[f + 1, i] else None
