@@ -42,14 +42,16 @@ def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[n
     """Stack the matched detections of V views, (P, V) -> poses2d (V, P, J, 3), bboxes (V, P, 4): zeros where a person
     has no detection, and for a joint with a non-finite entry or a non-finite box entry (a detector's NaN)."""
     (P, V), J = assignment.shape, next((v.keypoints.shape[1] for v in views if len(v)), 23)
-    poses2d, bboxes = np.zeros((V, P, J, 3)), np.zeros((V, P, 4))
-    for v, dets in enumerate(views):
-        have = assignment[:, v] >= 0
-        if have.any():
-            poses2d[v, have] = dets.keypoints[assignment[have, v]]
-            bboxes[v, have] = dets.bboxes[assignment[have, v]]
-    poses2d[~np.isfinite(poses2d).all(axis=-1)] = 0.0
-    return poses2d, np.where(np.isfinite(bboxes), bboxes, 0.0)
+    counts = [len(v) for v in views]
+    if not sum(counts) or not P:
+        return np.zeros((V, P, J, 3)), np.zeros((V, P, 4))
+    first = np.cumsum([0, *counts[:-1]])  # row of each view's first detection in the stacked arrays
+    row = np.where(assignment >= 0, assignment + first, 0).T  # (V, P)
+    have = (assignment >= 0).T[..., None]
+    keypoints = np.concatenate([v.keypoints for v in views])[row]
+    bboxes = np.concatenate([v.bboxes for v in views])[row]
+    poses2d = np.where(have[..., None] & np.isfinite(keypoints).all(axis=-1, keepdims=True), keypoints, 0.0)
+    return poses2d, np.where(have & np.isfinite(bboxes), bboxes, 0.0)
 
 
 class MultiViewPipeline:

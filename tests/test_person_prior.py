@@ -13,7 +13,7 @@ from data.synthetic.rigs import ring_rig
 from evaluation.pcp import pcp_by_part
 from evaluation.pose3d import Pose3DEvaluator
 from reconstruction.noise_model import NoiseModel
-from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstruction
+from reconstruction.solver.map_solver import MAPReconstruction, MLEReconstruction, mean_variances
 from reconstruction.solver.person_prior import (
     OUTLIER_SD,
     PROPORTION_SD,
@@ -223,6 +223,35 @@ def test_noise_scale_recovers_the_true_noise_over_the_model():
     assert chi2.median(1) < 1
 
 
+def _numpy_noise_scale(X, uv, inv_sigma, proj, floor):
+    """The reference: median over joints seen in n >= 2 views of RSS / scipy's chi^2(2n - 3) median, by np.median."""
+    hom = np.einsum("vab,pjb->vpja", proj[:, :, :3], X) + proj[:, None, None, :, 3]
+    xy = hom[..., :2] / np.maximum(hom[..., 2:], 1e-6)
+    seen = inv_sigma > 0
+    r2 = np.where(seen, ((uv - xy) ** 2).sum(axis=-1) * inv_sigma**2, 0.0)
+    views = seen.sum(axis=0)
+    out = np.ones(len(X))
+    for p in range(len(X)):
+        ok = views[p] >= 2
+        if ok.any():
+            out[p] = np.sqrt(np.median(r2.sum(axis=0)[p, ok] / chi2.median(2 * views[p, ok] - 3)))
+    return np.maximum(out, floor)
+
+
+def test_noise_scale_equals_the_numpy_median_formula():
+    rng = np.random.default_rng(3)
+    rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
+    X = np.stack([_scaled_body(1.0, -1.0, 0.5), _scaled_body(1.1, 1.0, -0.5), _scaled_body(0.9)])
+    proj = rig.projection_matrices()
+    uv = rig.project(X) + rng.normal(0.0, 4.0, (4, 3, 23, 2))
+    inv_sigma = rng.uniform(0.1, 0.5, (4, 3, 23)) * (rng.random((4, 3, 23)) > 0.3)
+    inv_sigma[:, 2, 5:] = 0.0  # person 2: 5 joints at most (odd and even counts across persons)
+    inv_sigma[1:, 2, :5] = 0.0  # ... each in one view only: no joint in >= 2 views, scale 1
+    expected = _numpy_noise_scale(X, uv, inv_sigma, proj, 0.01)
+    assert expected[2] == 1.0
+    np.testing.assert_allclose(noise_scale(X, uv, inv_sigma, proj, 0.01), expected, rtol=1e-12)
+
+
 def test_a_left_right_swap_in_one_view_is_found_and_undone():
     rig = ring_rig(4, 7.0, 2.5, look_at=(0.0, 0.0, 1.0))
     X = _scaled_body(1.0)[None]
@@ -273,3 +302,15 @@ def test_rejects_bad_settings():
 def test_chi2_medians_are_scipy_chi2_medians() -> None:
     dof = np.arange(1, 64)
     np.testing.assert_array_equal(chi2_medians(dof), chi2.median(dof))
+
+
+def test_mean_variances_equal_the_trace_of_inverse_3x3():
+    rng = np.random.default_rng(0)
+    B = rng.normal(size=(4, 23, 3, 5))
+    info = B @ np.swapaxes(B, -1, -2)
+    info[:, :3] = 0.0  # singular where no tie: inf / NaN as the full inverse gives
+    tie = np.where(rng.random((4, 23)) > 0.5, 1111.1, 0.0)
+    inv, _ = inverse_3x3(np.moveaxis(info + tie[..., None, None] * np.eye(3), (-2, -1), (0, 1)), check=False)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        got = mean_variances(info, tie)
+    np.testing.assert_array_equal(got, np.trace(inv, axis1=0, axis2=1) / 3)

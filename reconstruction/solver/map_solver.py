@@ -17,7 +17,6 @@ import numpy as np
 
 from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from data.geometry.camera import Rig
-from data.geometry.linalg import inverse_3x3
 from data.geometry.triangulation import triangulate_dlt
 from reconstruction.noise_model import NoiseModel
 from reconstruction.results import Reconstruction, SkeletonPrior
@@ -72,20 +71,31 @@ def combine_estimates(
 def seen_views(poses2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Views that saw each joint (P, J) int and its clipped 2D scores (V, P, J) (0 where the pixel is not finite)."""
     finite = np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
-    score = np.where(finite, np.clip(poses2d[..., 2], 0, None), 0.0)
+    score = np.where(finite, np.maximum(poses2d[..., 2], 0.0), 0.0)  # np.maximum: np.clip's dispatch is slow
     return (score > 0).sum(axis=0), score
+
+
+def mean_variances(info: np.ndarray, tie: np.ndarray) -> np.ndarray:
+    """A third of the trace of (info + tie I)^-1 per joint: (P, J, 3, 3), (P, J) -> (P, J); the diagonal cofactors over
+    the determinant, as data.geometry.linalg.inverse_3x3 (inf / NaN where singular)."""
+    a = lambda i, j: info[..., i, j]  # noqa: E731
+    a00, a11, a22 = a(0, 0) + tie, a(1, 1) + tie, a(2, 2) + tie
+    c00, c11, c22 = a11 * a22 - a(1, 2) * a(2, 1), a22 * a00 - a(2, 0) * a(0, 2), a00 * a11 - a(0, 1) * a(1, 0)
+    det = a00 * c00 + a(0, 1) * (a(1, 2) * a(2, 0) - a(1, 0) * a22) + a(0, 2) * (a(1, 0) * a(2, 1) - a11 * a(2, 0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (c00 / det + c11 / det + c22 / det) / 3
 
 
 def output_confidence(
     dlt_conf: np.ndarray,
-    poses2d: np.ndarray,
+    views: np.ndarray,
+    score: np.ndarray,
     placed: np.ndarray,
     output_min_views: int,
     single_view_score: float,
     unseen_score: float,
 ) -> np.ndarray:
-    """Score of each reconstructed joint (module docstring): (P, J), (V, P, J, 3), (P,) -> (P, J)."""
-    views, score = seen_views(poses2d)
+    """Score of each reconstructed joint (module docstring): (P, J), seen_views' (P, J) and (V, P, J), (P,) -> (P, J)."""
     mean_score = score.sum(axis=0) / np.maximum(views, 1)
     conf = np.where(dlt_conf > 0, dlt_conf, np.where(views > 0, single_view_score * mean_score, unseen_score))
     return np.where((views >= output_min_views) & placed[:, None], conf, 0.0)
@@ -254,11 +264,11 @@ class MAPReconstruction:
         variance = np.full((P, J), np.inf)
         if len(idx):
             variance[idx] = self._joint_variance(Xp, first.uv, first.inv_sigma, proj, info)
-        conf = output_confidence(
-            first.dlt[..., 3], first.und, first.placed, self.output_min_views, self.single_view_score, self.unseen_score
-        )
+        views, score = seen_views(first.und)
+        settings = (self.output_min_views, self.single_view_score, self.unseen_score)
+        conf = output_confidence(first.dlt[..., 3], views, score, first.placed, *settings)
         poses = np.concatenate([np.where(conf[..., None] > 0, X, 0.0), conf[..., None]], axis=-1)
-        return Reconstruction(poses, variance, bones, seen_views(first.und)[0])
+        return Reconstruction(poses, variance, bones, views)
 
     def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig) -> Reconstruction:
         """Reconstruct matched persons: (V, P, J, 3), (V, P, 4) -> Reconstruction (poses (P, J, 4))."""
@@ -275,8 +285,7 @@ class MAPReconstruction:
             info = joint_information(X, proj, inv_sigma / scale[None, :, None])
         views = (inv_sigma > 0).sum(axis=0)
         tie = np.where(views == 1, 1.0 / self.bone_tie_sd_m**2, 0.0) if self.prior_weight > 0 else 0.0 * views
-        inv, _ = inverse_3x3(np.moveaxis(info + tie[..., None, None] * np.eye(3), (-2, -1), (0, 1)), check=False)
-        var = np.trace(inv, axis1=0, axis2=1) / 3
+        var = mean_variances(info, tie)
         return np.where((views >= 1 + (tie == 0)) & np.isfinite(var) & (var > 0), var, np.inf)
 
     def _noise_scales(

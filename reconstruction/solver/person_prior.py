@@ -15,7 +15,7 @@ from scipy.special import gammaincinv
 
 from data.bone_lengths import BONE_NAMES
 from reconstruction.solver.pose_kernels import EPS_DEPTH
-from reconstruction.solver.prior_kernels import BoneModel, bone_posteriors, bone_sums, information_sums
+from reconstruction.solver.prior_kernels import BoneModel, bone_posteriors, bone_sums, information_sums, noise_medians
 
 STATURE_SD = 0.053  # relative SD of adult stature (0.09 m / 1.70 m), shared by every bone of a person
 PROPORTION_SD = 0.02  # relative SD of one bone group's length given the stature (left = right)
@@ -67,17 +67,11 @@ def noise_scale(
 ) -> np.ndarray:
     """Each person's 2D noise over the sigma model from MLE residuals: (P, J, 3), (V, P, J, 2), (V, P, J) 1/sigma
     (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views. hom: view_matmul of X."""
-    xy = project(X, proj, hom)[0]
-    seen = inv_sigma > 0
-    d = uv - xy
-    r2 = np.where(seen, (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) * (inv_sigma * inv_sigma), 0.0)
-    rss, views = r2.sum(axis=0), seen.sum(axis=0)
-    ok = views >= 2
-    ratio = np.sort(np.where(ok, rss / np.where(ok, chi2_medians(2 * views - 3), 1.0), np.inf), axis=1)
-    n, rows = ok.sum(axis=1), np.arange(len(X))
-    a, b = ratio[rows, np.maximum(n - 1, 0) // 2], ratio[rows, np.minimum(n // 2, ratio.shape[1] - 1)]
-    median = np.where(n % 2 == 1, a, 0.5 * (a + b))
-    return np.maximum(np.where(n > 0, np.sqrt(np.where(n > 0, median, 1.0)), 1.0), floor)
+    hom = view_matmul(X, proj) if hom is None else hom
+    median, ratio = np.empty(len(X)), np.empty(X.shape[1])
+    as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    noise_medians(hom, as_float(proj), as_float(uv), as_float(inv_sigma), _CHI2_MEDIANS, ratio, median)
+    return np.maximum(np.sqrt(np.where(median < 0, 1.0, median)), floor)  # median -1: no joint in >= 2 views
 
 
 def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:

@@ -186,3 +186,39 @@ def bone_posteriors(
                     outliers = True
             if not outliers:
                 break
+
+
+@njit(**_JIT)
+def noise_medians(
+    hom: np.ndarray,
+    proj: np.ndarray,
+    uv: np.ndarray,
+    w: np.ndarray,
+    medians: np.ndarray,
+    ratio: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """out (P,): each person's median over joints seen in n >= 2 views of RSS / median(chi^2(2n - 3)), -1 without any;
+    RSS the squared residuals of pixels uv (V, P, J, 2) in units of 1/w (V, P, J) against hom (V, 3, P J) = M X
+    (person_prior.view_matmul); medians: chi^2 medians by degrees of freedom; ratio (J,) scratch."""
+    V, P, J = w.shape
+    for p in range(P):
+        n = 0
+        for j in range(J):
+            rss, views = 0.0, 0
+            for v in range(V):
+                if w[v, p, j] > 0:
+                    z = hom[v, 2, p * J + j] + proj[v, 2, 3]
+                    z = z if z >= EPS_DEPTH or np.isnan(z) else EPS_DEPTH  # np.maximum
+                    dx = uv[v, p, j, 0] - (hom[v, 0, p * J + j] + proj[v, 0, 3]) / z
+                    dy = uv[v, p, j, 1] - (hom[v, 1, p * J + j] + proj[v, 1, 3]) / z
+                    rss += (dx * dx + dy * dy) * (w[v, p, j] * w[v, p, j])
+                    views += 1
+            if views >= 2:  # insertion into the sorted ratios of this person
+                value, i = rss / medians[min(2 * views - 3, len(medians) - 1)], n
+                while i > 0 and (value < ratio[i - 1] or (np.isnan(ratio[i - 1]) and not np.isnan(value))):  # NaN last
+                    ratio[i] = ratio[i - 1]
+                    i -= 1
+                ratio[i] = value
+                n += 1
+        out[p] = 0.5 * (ratio[max(n - 1, 0) // 2] + ratio[n // 2]) if n > 0 else -1.0

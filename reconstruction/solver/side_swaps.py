@@ -15,17 +15,22 @@ from reconstruction.solver.person_prior import project
 from reconstruction.solver.pose_kernels import EPS_DEPTH
 
 
-def _chi2s(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> tuple[np.ndarray, np.ndarray]:
-    """Chi-square of joint pairs as given and exchanged: (V, P, J, 2) x2, (V, P, J), left / right indices (an
-    int or (K,)) -> (V, P) or (V, P, K) x2."""
+def _squared(d: np.ndarray) -> np.ndarray:
+    """Squared length of 2-vectors (..., 2) -> (...) (not np.sum over the axis of 2: slow on small arrays)."""
+    return d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]
 
-    def d(a, b) -> np.ndarray:  # squared distances (not np.sum over the axis of 2: slow)
-        dx, dy = uv[:, :, a, 0] - xy[:, :, b, 0], uv[:, :, a, 1] - xy[:, :, b, 1]
-        return dx * dx + dy * dy
 
-    given = w2[..., left] * d(left, left) + w2[..., right] * d(right, right)
-    exchanged = w2[..., right] * d(right, left) + w2[..., left] * d(left, right)
-    return given, exchanged
+def _given(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> np.ndarray:
+    """Chi-square of joint pairs as given: (V, P, J, 2) x2, (V, P, J), left / right indices (int or (K,)) -> (V, P)
+    or (V, P, K)."""
+    r2 = w2 * _squared(uv - xy)
+    return r2[..., left] + r2[..., right]
+
+
+def _exchanged(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> np.ndarray:
+    """Chi-square of joint pairs with the two detections exchanged: as :func:`_given`."""
+    to_left, to_right = _squared(uv[..., right, :] - xy[..., left, :]), _squared(uv[..., left, :] - xy[..., right, :])
+    return w2[..., right] * to_left + w2[..., left] * to_right
 
 
 def find_swaps(
@@ -47,10 +52,21 @@ def find_swaps(
     full = triangulate_dlt(poses2d, proj, 2) if full is None else full
     seen = inv_sigma > 0
     left, right = np.array([p[0] for p in pairs], dtype=np.int64), np.array([p[1] for p in pairs], dtype=np.int64)
-    given, exchanged = _chi2s(poses2d[..., :2], project(full[..., :3], proj)[0], w2, left, right)
+    uv, xy = poses2d[..., :2], project(full[..., :3], proj)[0]
+    given = _given(uv, xy, w2, left, right)
+    high = (given > min_chi2) & seen[..., left] & seen[..., right]
+    if not high.any():
+        return []
     # a swap reprojects worse than its exchange even from the DLT it pulls (only the exchange test below
-    # needs the other views alone)
-    bad = ((given > min_chi2) & (exchanged < given) & seen[..., left] & seen[..., right]).any(axis=0)
+    # needs the other views alone); exchanged where the pair reprojects badly only (few entries)
+    v, p, k = np.nonzero(high)
+    to_left, to_right = (
+        _squared(uv[v, p, right[k]] - xy[v, p, left[k]]),
+        _squared(uv[v, p, left[k]] - xy[v, p, right[k]]),
+    )
+    better = w2[v, p, right[k]] * to_left + w2[v, p, left[k]] * to_right < given[v, p, k]
+    bad = np.zeros(given.shape[1:], dtype=bool)
+    bad[p[better], k[better]] = True
     bad &= (full[:, left, 3] > 0) & (full[:, right, 3] > 0)  # (P, pairs)
     persons, which = np.nonzero(bad)
     cand = [(int(p), int(left[k]), int(right[k])) for p, k in zip(persons, which)]
@@ -65,7 +81,7 @@ def find_swaps(
     X = triangulate_dlt(others.reshape(V, V * K, 2, 3), proj, 2).reshape(V, K, 2, 4)  # one DLT for all V variants
     hom = np.matmul(X[..., :3].reshape(V, 2 * K, 3), proj[:, :, :3].transpose(0, 2, 1)) + proj[:, None, :, 3]
     pxy = (hom[..., :2] / np.maximum(hom[..., 2:], EPS_DEPTH)).reshape(V, K, 2, 2)  # each X[v] in its view v
-    g, e = _chi2s(sub[..., :2], pxy, sub_w2, 0, 1)  # (V, K)
+    g, e = _given(sub[..., :2], pxy, sub_w2, 0, 1), _exchanged(sub[..., :2], pxy, sub_w2, 0, 1)  # (V, K)
     ok = (sub_w2 > 0).all(axis=-1) & (X[..., 3] > 0).all(axis=-1) & (g > min_chi2) & (e < ratio * g)
     gains = np.where(ok, g - e, -np.inf)
     best = np.argmax(gains, axis=0)
