@@ -27,6 +27,7 @@ class Camera:
     size: tuple[int, int]
     _fov_r2: float = field(init=False, repr=False)
     _distorted: bool = field(init=False, repr=False)  # any distortion coefficient non-zero (asked per frame)
+    _P: np.ndarray = field(init=False, repr=False)  # K [R | t], fixed with the camera (asked per frame)
 
     def __post_init__(self) -> None:
         for key, shape in (("K", (3, 3)), ("dist", (5,)), ("R", (3, 3)), ("t", (3,))):
@@ -46,12 +47,15 @@ class Camera:
         object.__setattr__(self, "size", (w, h))
         object.__setattr__(self, "_distorted", bool(np.any(self.dist != 0)))
         object.__setattr__(self, "_fov_r2", self._field_of_view_r2())
+        P = self.K @ np.hstack([self.R, self.t[:, None]])
+        P.flags.writeable = False
+        object.__setattr__(self, "_P", P)
 
     # --- geometry ---------------------------------------------------------------------------------
     @property
     def P(self) -> np.ndarray:
-        """Projection matrix K [R | t] of undistorted pixels: (3, 4)."""
-        return self.K @ np.hstack([self.R, self.t[:, None]])
+        """Projection matrix K [R | t] of undistorted pixels (read-only): (3, 4)."""
+        return self._P
 
     @property
     def center(self) -> np.ndarray:
@@ -172,6 +176,8 @@ class Rig:
         names = [c.name for c in self.cameras]
         if len(set(names)) != len(names):
             raise ValueError(f"camera names must be unique, got {names}")
+        proj = np.stack([c.P for c in self.cameras]) if self.cameras else np.zeros((0, 3, 4))
+        object.__setattr__(self, "_proj", proj)  # fixed with the cameras (asked per frame)
 
     @classmethod
     def from_cameras(cls, cameras: Iterable[Camera]) -> "Rig":
@@ -198,8 +204,8 @@ class Rig:
         return self.cameras[key]
 
     def projection_matrices(self) -> np.ndarray:
-        """Projection matrices of undistorted pixels: (V, 3, 4)."""
-        return np.stack([c.P for c in self.cameras])
+        """Projection matrices of undistorted pixels (a copy: the compiled kernels take writable arrays): (V, 3, 4)."""
+        return self._proj.copy()
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """World points into every view (distorted pixels): (..., 3) -> (V, ..., 2)."""

@@ -110,7 +110,10 @@ def _merge(ga, gb, cost, counts: np.ndarray, linked: np.ndarray, min_views: int,
     links = np.ascontiguousarray(np.asarray(linked, dtype=np.int64).reshape(-1, 2))
     order = np.lexsort((gb, ga, cost))
     ga, gb = (np.ascontiguousarray(g, np.int64)[order] for g in (ga, gb))
-    _, person = np.unique(merge_linked(ga, gb, view_of, links, lazy), return_inverse=True)  # by their root
+    root = merge_linked(ga, gb, view_of, links, lazy)
+    is_root = np.zeros(len(view_of), dtype=bool)
+    is_root[root] = True
+    person = (np.cumsum(is_root) - 1)[root]  # persons numbered by their root (np.unique's order, a third of its time)
     rows = np.full((person.max(initial=-1) + 1, len(counts)), -1, dtype=np.int64)
     rows[person, view_of] = np.arange(offsets[-1]) - offsets[view_of]
     return rows[np.bincount(person, minlength=len(rows)) >= min_views]

@@ -127,6 +127,7 @@ def warm_up() -> None:
             solve_poses(problem, X, max_iterations=2)
     w = poses2d[..., 2]
     lengths, variances = bone_variances(X, joint_information(X, proj, w), BONE_PAIRS, w.sum(axis=0) >= 2)
+    noise_scale(X, poses2d[..., :2], w, proj)
     person_bone_lengths(lengths, variances, BONE_MEAN, np.full(len(BONE_PAIRS), 0.02), 0.01, BONE_GROUPS)
 
 
