@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from reconstruction.precompile import NOTICE
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -18,29 +20,59 @@ def twice(x):
     return 2.0 * x
 
 
-def warm_up():
+@njit(cache=True)
+def square(x):
+    return x * x
+
+
+def warm_up_twice():
     twice(np.float64(2.0))
+
+
+def warm_up_square():
+    square(np.float64(2.0))
 """
-PRECOMPILE_ONE = """
+PRECOMPILE_TWO = """
+import sys
 import precompile_kernels
 from reconstruction import precompile
 
-precompile.warm_ups = lambda: [precompile_kernels.warm_up]
-print(precompile.precompile())
+precompile.warm_ups = lambda: [precompile_kernels.warm_up_twice, precompile_kernels.warm_up_square]
+if sys.argv[1] == "probe":
+    print(precompile.kernels_ready(precompile.warm_ups()))
+else:
+    print(precompile.precompile(workers=int(sys.argv[1])))
 """
 
 
-def test_the_first_call_compiles_with_the_notice_the_second_loads_quietly(tmp_path):
+def run_precompile(tmp_path: Path, argument: str) -> list[str]:
+    """PRECOMPILE_TWO in a fresh process with its own numba cache in tmp_path -> its stdout lines."""
     (tmp_path / "precompile_kernels.py").write_text(KERNEL_MODULE)
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba"), "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"}
-    outputs = []
-    for _ in range(2):
-        done = subprocess.run(
-            [sys.executable, "-c", PRECOMPILE_ONE], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
-        )
-        assert done.returncode == 0, done.stderr[-3000:]
-        outputs.append(done.stdout.splitlines())
-    assert outputs == [[NOTICE, "True"], ["False"]]
+    done = subprocess.run(
+        [sys.executable, "-c", PRECOMPILE_TWO, argument], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done.stdout.splitlines()
+
+
+def cached_kernels(tmp_path: Path) -> int:
+    return len(list((tmp_path / "numba").rglob("*.nbi")))
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_first_call_compiles_with_the_notice_the_second_loads_quietly(tmp_path, workers):
+    # workers=2: each warm-up compiles in a forked worker, which writes the cache this process loads from
+    assert run_precompile(tmp_path, str(workers)) == [NOTICE, "True"]
+    assert cached_kernels(tmp_path) == 2
+    assert run_precompile(tmp_path, str(workers)) == ["False"]
+
+
+def test_the_readiness_probe_compiles_nothing(tmp_path):
+    assert run_precompile(tmp_path, "probe") == ["False"]
+    assert cached_kernels(tmp_path) == 0
+    run_precompile(tmp_path, "1")
+    assert run_precompile(tmp_path, "probe") == ["True"]
 
 
 SPECIALISATIONS = """
