@@ -35,7 +35,8 @@ PROTOCOL = (
     "to a prediction by Hungarian on mean joint distance (unmatched beyond {max_dist_m} m); "
     "PCP alpha={alpha} on the 10 Shelf parts of Shelf-14 built from COCO-23, unmatched GT "
     "persons count all parts wrong; matching precision/recall over pairs of detections placed "
-    "in one person, against ground-truth identities"
+    "in one person, against ground-truth identities; every output joint is scored, those seen in fewer than 2 "
+    "views where the pipeline placed them (poses3d.json gives them score 0 unless output.fill=true)"
 )
 
 
@@ -44,7 +45,7 @@ def check_config(cfg: DictConfig) -> None:
     for key in ("evaluation.max_dist_m", "evaluation.alpha", "vis_sequence_max_mb"):
         check_number(cfg, key)
     check_int(cfg, "vis_frame", 0, nullable=True)
-    for key in ("vis", "vis_sequence", "progress", "overwrite"):
+    for key in ("vis", "vis_sequence", "progress", "overwrite", "output.fill"):
         check_bool(cfg, key)
 
 
@@ -85,8 +86,8 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
 
 def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: SequenceReport) -> None:
     """Write poses3d.json, metrics.json, the protocols' files and report.txt into out_dir; print the report."""
-    frames = ((r.frame, r.poses3d, r.assignment, r.ids) for r in report.results)
-    write_poses3d(out_dir / cfg.output, frames, sequence.rig.names)
+    frames = ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in report.results)
+    write_poses3d(out_dir / cfg.output.poses3d, frames, sequence.rig.names, fill=cfg.output.fill)
     summary = {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped)}
     summary.update(unmatched=dict(report.unmatched), timings_s=report.timings)
     atomic_write_text(out_dir / cfg.metrics_file, json.dumps(summary, indent=2))
@@ -98,7 +99,7 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
         f"{len(sequence.rig)} cameras\n{format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation))}"
     )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
-    print(f"\n{text}\n\nWrote {out_dir / cfg.output}, {cfg.poses2d_output}, {cfg.metrics_file} and {cfg.report_file}")
+    print(f"\n{text}\n\nWrote {out_dir / cfg.output.poses3d}, {cfg.poses2d_output}, {cfg.metrics_file} and {cfg.report_file}")
 
 
 def draw_pictures(

@@ -12,7 +12,7 @@ from hydra.utils import instantiate
 
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
-from reconstruction.results import Matches, Reconstruction
+from reconstruction.results import Matches, Reconstruction, joint_sources
 from tracking.tracker import Association, Tracker
 
 Matcher = Callable[[list[ViewDetections], Rig], Matches]
@@ -30,12 +30,15 @@ class Reconstructor(Protocol):
 @dataclass
 class FrameResult:
     """poses3d (P, J, 4): x, y, z (m) and confidence; assignment (P, V): detection index per view or -1;
-    ids (P,): the persons' track ids with a tracker, else None (the index in the frame is the id)."""
+    ids (P,): the persons' track ids with a tracker, else None (the index in the frame is the id); joint_views (P, J)
+    int: the matched views that saw each joint; joint_source (P, J) int8: its provenance, codes into JOINT_SOURCES."""
 
     frame: int
     poses3d: np.ndarray
     assignment: np.ndarray
     ids: np.ndarray | None = None
+    joint_views: np.ndarray | None = None
+    joint_source: np.ndarray | None = None
 
 
 def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -90,14 +93,17 @@ class MultiViewPipeline:
         t2 = time.perf_counter()
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
+        views = (poses2d[..., 2] > 0).sum(axis=0)  # gather_views zeroed the non-finite joints
         if self.tracker is None:
-            return FrameResult(frame.index, result.poses, matches.assignment)
+            source = joint_sources(result.poses[..., 3], views, np.zeros(len(views), dtype=bool))
+            return FrameResult(frame.index, result.poses, matches.assignment, None, views, source)
         # the pairing the skeleton prior came from (on the first pass's poses) is kept, else the final poses decide
         if association is None or not self.tracker.skeleton_min_frames or association.count != len(result.poses):
             association = self.tracker.associate(frame.index, result.poses)
-        ids, poses3d = self.tracker.update(association, result)
+        tracked = self.tracker.update(association, result)
         self.timings["tracking"] += time.perf_counter() - t2
-        return FrameResult(frame.index, poses3d, matches.assignment, ids)
+        source = joint_sources(tracked.poses3d[..., 3], views, tracked.smoothed)
+        return FrameResult(frame.index, tracked.poses3d, matches.assignment, tracked.ids, views, source)
 
     def _reconstruct(
         self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray

@@ -9,6 +9,14 @@ from typing import NamedTuple
 import numpy as np
 
 
+def joint_sources(scores: np.ndarray, views: np.ndarray, smoothed: np.ndarray) -> np.ndarray:
+    """Where each output joint came from, codes into data.formats.poses_io.JOINT_SOURCES: scores (P, J), views (P, J) int, smoothed (P,)
+    bool -> (P, J) int8. none: score 0 (not output); views: triangulated from 2+ views; fewer views: motion on a
+    person the tracker's motion model weighed in, else prior (the reconstruction's bone prior and fitted body)."""
+    fewer = np.where(np.asarray(smoothed, dtype=bool)[:, None], 3, 2)
+    return np.where(scores <= 0, 0, np.where(views >= 2, 1, fewer)).astype(np.int8)
+
+
 class Matches(NamedTuple):
     """A matcher's answer for one frame: assignment (P, V) int, the detection index of person p in view v or -1;
     unmatched, this frame's detections left out of every person, counted by reason."""

@@ -30,10 +30,12 @@ BODY_SPAN_M = 1.0  # m: the centres of any two subsets of one body's head and tr
 
 
 class Tracked(NamedTuple):
-    """One frame's output of the tracker: ids (P,) and poses (P, J, 4), smoothed where the tracker smooths."""
+    """One frame's output of the tracker: ids (P,), poses (P, J, 4), and smoothed (P,) bool, the persons whose joints
+    the motion model weighed in (a hit track, smoothing on, variances given)."""
 
     ids: np.ndarray
     poses3d: np.ndarray
+    smoothed: np.ndarray
 
 
 class Association(NamedTuple):
@@ -234,7 +236,7 @@ class Tracker:
     def update(self, association: Association, reconstruction: Reconstruction) -> Tracked:
         """Correct the tracks with the associated persons of a Reconstruction (poses (P, J, 4), joint variances (P, J)
         m^2, measured bone lengths (P, L) m, the latter two optional), start tracks for the others, drop the dead ->
-        Tracked(ids (P,), poses (P, J, 4)); the poses smoothed where ``smooth`` and variances are given."""
+        Tracked(ids (P,), poses (P, J, 4), smoothed (P,)); the poses smoothed where ``smooth`` and variances are given."""
         frame, poses3d = self._checked(association.frame, reconstruction.poses)
         if association.count != len(poses3d):
             raise ValueError(f"tracking: the association is of {association.count} poses, the update of {len(poses3d)}")
@@ -245,6 +247,7 @@ class Tracker:
         st, tracks, persons = self.state, self._indices(association), association.persons
         alive, self.last_frame = self._alive(st, frame - 1), frame
         ids, out = np.full(len(poses3d), -1, dtype=np.int64), poses3d.copy()
+        smoothed = np.zeros(len(poses3d), dtype=bool)
         if len(tracks):  # the hit tracks corrected in place, then one select keeps the survivors
             hits = Hits(
                 frame=frame,
@@ -257,7 +260,7 @@ class Tracker:
                 smooth=self.smooth and reconstruction.joint_variance is not None,  # without variances: ids only
             )
             kernels.correct_tracks(st, hits, self.filters)
-            ids[persons] = st.ids[tracks]
+            ids[persons], smoothed[persons] = st.ids[tracks], hits.smooth
         hit = np.zeros(len(st.ids), dtype=bool)
         hit[tracks] = True
         born, births = np.flatnonzero(ids < 0), None
@@ -267,7 +270,7 @@ class Tracker:
             births = self._births(ids[born], frame, poses3d[born], variance[born], bones[born])
         keep = alive & (hit | self._alive(st, frame))
         self.state = st.select(keep, births, self._bone_pool(st, int(keep.sum()) + len(born)))
-        return Tracked(ids, out)
+        return Tracked(ids, out, smoothed)
 
     def _checked(self, frame: int, poses3d: np.ndarray) -> tuple[int, np.ndarray]:
         """A coming frame's number and poses (P, J, 4) as float64, or a ValueError."""

@@ -11,25 +11,37 @@ import numpy as np
 from data.formats.atomic_io import atomic_write_text
 from data.keypoints import COCO23_NAMES
 
+JOINT_SOURCES = ("none", "views", "prior", "motion")  # an output joint's provenance, by its code (joint_source)
 
-def poses3d_document(frames: Iterable[tuple], camera_names: list[str]) -> dict:
-    """The poses3d.json document of (frame, poses (P, 23, 4), assignment (P, V)[, ids (P,)]) tuples; without
-    ids a person's id is its index in the frame (docs/formats.md: with tracking, the track id)."""
+
+def poses3d_document(frames: Iterable[tuple], camera_names: list[str], fill: bool = True) -> dict:
+    """The poses3d.json document of (frame, poses (P, 23, 4), assignment (P, V)[, ids (P,)[, joint_views (P, 23),
+    joint_source (P, 23) codes into JOINT_SOURCES]]) tuples; without ids a person's id is its index in the frame
+    (docs/formats.md: with tracking, the track id). fill=False writes joints seen in fewer than 2 views with score 0."""
     out_frames = []
     for frame, poses, assignment, *rest in frames:
-        ids = np.arange(len(poses)) if not rest or rest[0] is None else np.asarray(rest[0])
+        ids, views, source = (*rest, None, None, None)[:3]
+        ids = np.arange(len(poses)) if ids is None else np.asarray(ids)
+        poses = np.asarray(poses, dtype=np.float64)
+        if views is not None and not fill:
+            poses = np.where((np.asarray(views) < 2)[..., None], 0.0, poses)
+            source = np.where(np.asarray(views) < 2, 0, source)
         people = []
-        for p, pose in enumerate(np.asarray(poses, dtype=np.float64)):
+        for p, pose in enumerate(poses):
             kps = np.where(pose[:, 3:4] > 0, pose, 0.0)
-            views = {camera_names[v]: int(d) for v, d in enumerate(assignment[p]) if d >= 0}
-            people.append({"id": int(ids[p]), "keypoints": np.round(kps, 6).tolist(), "views": views})
+            person = {"id": int(ids[p]), "keypoints": np.round(kps, 6).tolist()}
+            person["views"] = {camera_names[v]: int(d) for v, d in enumerate(assignment[p]) if d >= 0}
+            if views is not None:
+                person["joint_views"] = [int(n) for n in views[p]]
+                person["joint_source"] = [JOINT_SOURCES[c] for c in source[p]]
+            people.append(person)
         out_frames.append({"frame": int(frame), "poses": people})
     return {"keypoints": list(COCO23_NAMES), "units": "m", "frames": out_frames}
 
 
-def write_poses3d(path: str | Path, frames: Iterable[tuple], camera_names: list[str]) -> None:
-    """Write poses3d.json atomically from (frame, poses (P, 23, 4), assignment (P, V)[, ids (P,)]) tuples."""
-    atomic_write_text(path, json.dumps(poses3d_document(frames, camera_names)))
+def write_poses3d(path: str | Path, frames: Iterable[tuple], camera_names: list[str], fill: bool = True) -> None:
+    """Write poses3d.json atomically from poses3d_document's tuples (fill: as there)."""
+    atomic_write_text(path, json.dumps(poses3d_document(frames, camera_names, fill)))
 
 
 def read_poses3d_frames(path: str | Path) -> list[tuple[int, np.ndarray, np.ndarray]]:
@@ -50,3 +62,15 @@ def read_poses3d_frames(path: str | Path) -> list[tuple[int, np.ndarray, np.ndar
 def read_poses3d(path: str | Path) -> dict[int, np.ndarray]:
     """Read poses3d.json: {frame: (P, 23, 4) x, y, z, score}."""
     return {frame: poses for frame, poses, _ in read_poses3d_frames(path)}
+
+
+def read_joint_provenance(path: str | Path) -> dict[int, tuple[np.ndarray, list[list[str]]]]:
+    """Each frame's joint provenance in poses3d.json: {frame: (joint_views (P, 23) int, joint_source P x 23 names)};
+    files written before provenance was recorded give -1 views and source "unknown"."""
+    doc = json.loads(Path(path).read_text())
+    out = {}
+    for f in doc["frames"]:
+        views = [p.get("joint_views", [-1] * len(COCO23_NAMES)) for p in f["poses"]]
+        source = [p.get("joint_source", ["unknown"] * len(COCO23_NAMES)) for p in f["poses"]]
+        out[int(f["frame"])] = (np.array(views, dtype=np.int64).reshape(-1, len(COCO23_NAMES)), source)
+    return out
