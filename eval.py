@@ -44,6 +44,7 @@ def check_config(cfg: DictConfig) -> None:
     """Stop with one line naming the key when a top-level or evaluation value has the wrong type or range."""
     for key in ("evaluation.max_dist_m", "evaluation.alpha", "vis_sequence_max_mb"):
         check_number(cfg, key)
+    check_number(cfg, "coincident_m", 0.0, strict=False)
     check_int(cfg, "vis_frame", 0, nullable=True)
     for key in ("vis", "vis_sequence", "progress", "overwrite", "output.fill"):
         check_bool(cfg, key)
@@ -99,7 +100,9 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
         f"{len(sequence.rig)} cameras\n{format_report(report, len(sequence.frames), PROTOCOL.format(**cfg.evaluation))}"
     )
     atomic_write_text(out_dir / cfg.report_file, text + "\n")
-    print(f"\n{text}\n\nWrote {out_dir / cfg.output.poses3d}, {cfg.poses2d_output}, {cfg.metrics_file} and {cfg.report_file}")
+    print(
+        f"\n{text}\n\nWrote {out_dir / cfg.output.poses3d}, {cfg.poses2d_output}, {cfg.metrics_file} and {cfg.report_file}"
+    )
 
 
 def draw_pictures(

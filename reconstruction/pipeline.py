@@ -12,6 +12,7 @@ from hydra.utils import instantiate
 
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
+from reconstruction.coincident import merge_coincident
 from reconstruction.results import Matches, Reconstruction, joint_sources
 from tracking.tracker import Association, Tracker
 
@@ -62,21 +63,28 @@ class MultiViewPipeline:
     per stage and the detections left unmatched by reason. One pipeline serves one sequence (frames increasing)."""
 
     def __init__(
-        self, rig: Rig, matcher: Matcher, reconstructor: Reconstructor, tracker: Tracker | None = None
+        self,
+        rig: Rig,
+        matcher: Matcher,
+        reconstructor: Reconstructor,
+        tracker: Tracker | None = None,
+        coincident_m: float = 0.2,
     ) -> None:
         self.rig = rig
         self.matcher = matcher
         self.reconstructor = reconstructor
         self.tracker = tracker
+        self.coincident_m = coincident_m  # reconstruction/coincident.py; 0: off
         self.timings: dict[str, float] = defaultdict(float)
         self.unmatched: Counter[str] = Counter()
 
     @classmethod
     def from_config(cls, cfg: Any, rig: Rig) -> MultiViewPipeline:
         """The pipeline of an eval.yaml config: cfg.matching, cfg.reconstruction and, unless tracking=off (a
-        group entry without ``_target_``), cfg.tracking, each built by Hydra's instantiate."""
+        group entry without ``_target_``), cfg.tracking, each built by Hydra's instantiate; cfg.coincident_m."""
         tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
-        return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker)
+        coincident_m = cfg.get("coincident_m", 0.2)
+        return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker, coincident_m)
 
     def __call__(self, frame: Frame) -> FrameResult:
         """Reconstruct one frame: Frame with V views -> FrameResult."""
@@ -86,24 +94,37 @@ class MultiViewPipeline:
         matches = self.matcher(frame.views, self.rig)
         self.unmatched += matches.unmatched
         t1 = time.perf_counter()
-        poses2d, bboxes = gather_views(frame.views, matches.assignment)
-        result, association = Reconstruction(np.zeros((0, poses2d.shape[2], 4))), None
-        if len(matches.assignment):
-            result, association = self._reconstruct(frame.index, poses2d, bboxes)
+        assignment, poses2d, result, association = self._reconstruct_once(frame, matches.assignment)
+        views = (poses2d[..., 2] > 0).sum(axis=0)  # gather_views zeroed the non-finite joints
         t2 = time.perf_counter()
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
-        views = (poses2d[..., 2] > 0).sum(axis=0)  # gather_views zeroed the non-finite joints
         if self.tracker is None:
             source = joint_sources(result.poses[..., 3], views, np.zeros(len(views), dtype=bool))
-            return FrameResult(frame.index, result.poses, matches.assignment, None, views, source)
+            return FrameResult(frame.index, result.poses, assignment, None, views, source)
         # the pairing the skeleton prior came from (on the first pass's poses) is kept, else the final poses decide
         if association is None or not self.tracker.skeleton_min_frames or association.count != len(result.poses):
             association = self.tracker.associate(frame.index, result.poses)
         tracked = self.tracker.update(association, result)
         self.timings["tracking"] += time.perf_counter() - t2
         source = joint_sources(tracked.poses3d[..., 3], views, tracked.smoothed)
-        return FrameResult(frame.index, tracked.poses3d, matches.assignment, tracked.ids, views, source)
+        return FrameResult(frame.index, tracked.poses3d, assignment, tracked.ids, views, source)
+
+    def _reconstruct_once(
+        self, frame: Frame, assignment: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, Reconstruction, Association | None]:
+        """Gather and reconstruct a frame's matched persons; where two coincide, join them and reconstruct again ->
+        the final assignment (P, V), poses2d (V, P, J, 3), Reconstruction and association (as _reconstruct)."""
+        poses2d, bboxes = gather_views(frame.views, assignment)
+        if not len(assignment):
+            return assignment, poses2d, Reconstruction(np.zeros((0, poses2d.shape[2], 4))), None
+        result, association = self._reconstruct(frame.index, poses2d, bboxes)
+        views = (poses2d[..., 2] > 0).sum(axis=0)
+        merged = merge_coincident(result.poses, views, assignment, self.coincident_m)
+        if merged is assignment:
+            return assignment, poses2d, result, association
+        poses2d, bboxes = gather_views(frame.views, merged)
+        return merged, poses2d, *self._reconstruct(frame.index, poses2d, bboxes)
 
     def _reconstruct(
         self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray

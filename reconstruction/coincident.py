@@ -1,0 +1,61 @@
+"""Persons reconstructed twice: two output persons seen in different views and closer than a body could be to
+another are one person whose views the matcher split into two groups."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+BODY_SPAN_M = 1.0  # the centroids of two joint subsets of one body lie closer than this: the pairs worth comparing
+ALL_PAIRS_UP_TO = 24  # persons in a frame up to which every pair is compared (a k-d tree of centroids above)
+
+
+def near_pairs(poses3d: np.ndarray, placed: np.ndarray, within_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs i < j whose centroids of placed joints lie within within_m + BODY_SPAN_M: (P, J, 3+), (P, J) -> (K,) x2."""
+    weight = placed.astype(np.float64)
+    count = weight.sum(1)
+    some = np.flatnonzero(count > 0)
+    centroid = np.einsum("pj,pjk->pk", weight[some], poses3d[some, :, :3]) / count[some, None]
+    near = cKDTree(centroid).query_pairs(within_m + BODY_SPAN_M, output_type="ndarray").reshape(-1, 2)
+    return some[near.min(1)], some[near.max(1)]
+
+
+def close_pairs(poses3d: np.ndarray, placed: np.ndarray, within_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs i < j whose mean distance over the joints both place is under within_m, closest first: (P, J, 3+),
+    placed (P, J) bool -> (K, 2) int, (K,) m."""
+    i, j = all_pairs(len(poses3d)) if len(poses3d) <= ALL_PAIRS_UP_TO else near_pairs(poses3d, placed, within_m)
+    both = placed[i] & placed[j]
+    diff = poses3d[i, :, :3] - poses3d[j, :, :3]
+    total = (np.sqrt(np.einsum("kjc,kjc->kj", diff, diff)) * both).sum(1)
+    count = both.sum(1)
+    mean = np.where(count > 0, total / np.maximum(count, 1), np.inf)
+    keep = np.flatnonzero(mean < within_m)
+    if not len(keep):
+        return np.zeros((0, 2), dtype=np.int64), mean[keep]
+    keep = keep[np.argsort(mean[keep], kind="stable")]
+    return np.stack([i[keep], j[keep]], axis=1), mean[keep]
+
+
+@lru_cache(maxsize=ALL_PAIRS_UP_TO + 1)
+def all_pairs(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair i < j of count persons: (K,) x2 (cached: np.triu_indices builds a matrix each call)."""
+    return np.triu_indices(count, 1)
+
+
+def merge_coincident(poses3d: np.ndarray, views: np.ndarray, assignment: np.ndarray, within_m: float) -> np.ndarray:
+    """Join the persons seen in different views that stand closer than within_m over the joints both triangulated:
+    poses (P, J, 4), the views that saw each joint (P, J) int, assignment (P, V) -> the new assignment (P', V), or
+    the same object when nothing was joined. Closest pairs first. Two persons with detections in one view are
+    different detections there, so both are kept (bodies can touch; near-duplicate detections are merged earlier)."""
+    if within_m <= 0 or len(assignment) < 2:
+        return assignment
+    placed = (poses3d[..., 3] > 0) & (views >= 2)  # a joint placed by a prior may stray from its body
+    close, _ = close_pairs(poses3d, placed, within_m)
+    rows, alive = assignment, np.ones(len(assignment), dtype=bool)
+    for i, j in close:
+        if alive[i] and alive[j] and not np.any((rows[i] >= 0) & (rows[j] >= 0)):
+            rows = rows.copy() if rows is assignment else rows
+            rows[i], alive[j] = np.maximum(rows[i], rows[j]), False
+    return rows if rows is assignment else rows[alive]
