@@ -32,6 +32,21 @@ class SequenceReport:
     unmatched: Counter = field(default_factory=Counter)
     protocols: dict[str, dict] = field(default_factory=dict)
     protocol_reports: list[str] = field(default_factory=list)
+    detections: int = 0  # 2D detections over every view and frame run
+
+
+# the likeliest cause of a run that reconstructs nobody, by the matcher's commonest reason for leaving detections out
+NOBODY_CAUSES = {
+    "no_counterpart": "no two views agree on a person, so the calibration does not fit the detections (a camera's "
+    "R given camera -> world, swapped camera names, mirrored or flipped images, another image size): "
+    "python -m data.geometry.check_rig cameras.json poses2d.json names the camera",
+    "too_little_evidence": "too few joints scored >= matching.min_score (another detector's score scale?)",
+    "too_few_joints": "too few joints scored >= matching.min_score (another detector's score scale?)",
+    "non_finite_keypoints": "the keypoints are NaN or infinite",
+    "no_foot_joints": "no foot or ankle joints scored: a feet matcher needs them (matching=evidence does not)",
+    "feet_above_horizon": "the feet meet no ground plane in front of the cameras: the calibration's up axis or "
+    "units do not fit (docs/formats.md)",
+}
 
 
 def evaluate_sequence(
@@ -45,9 +60,10 @@ def evaluate_sequence(
     tracked = pipeline.tracker is not None and sequence.persistent_ids
     tracked = tracked and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None)
     identities = IdentityEvaluator(evaluator.max_dist_m) if tracked else None
-    t_eval = 0.0
+    t_eval, detections = 0.0, 0
     for frame in tqdm(sequence.frames, desc="frames", unit="frame", disable=not progress):
         result = pipeline(frame)
+        detections += sum(len(v) for v in frame.views)
         results.append(result)
         if len(result.poses3d) == 0:
             skipped["no person matched in two or more views"] += 1
@@ -77,7 +93,24 @@ def evaluate_sequence(
     timings = dict(pipeline.timings, evaluation=t_eval)
     protocols = {p.name: p.summary() for p in sequence.protocols}
     reports = [p.report() for p in sequence.protocols]
-    return SequenceReport(results, metrics, skipped, timings, Counter(pipeline.unmatched), protocols, reports)
+    unmatched = Counter(pipeline.unmatched)
+    return SequenceReport(results, metrics, skipped, timings, unmatched, protocols, reports, detections)
+
+
+def nobody_diagnosis(report: SequenceReport) -> str | None:
+    """For a run that reconstructed nobody: one line naming the stage that lost the people and the likeliest cause."""
+    if any(len(r.poses3d) for r in report.results):
+        return None
+    if not report.detections:
+        return "Nobody reconstructed: the frames run hold no 2D detection (dataset.frames, the 2D input)"
+    if not report.unmatched:
+        return f"Nobody reconstructed from {report.detections} detections: the matcher placed some, the reconstruction none"
+    reason, count = report.unmatched.most_common(1)[0]
+    cause = NOBODY_CAUSES.get(reason, "see docs/usage.md")
+    return (
+        f"Nobody reconstructed from {report.detections} detections: the matcher left them out "
+        f"({count} {reason}); likeliest cause: {cause}"
+    )
 
 
 def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str:
@@ -121,6 +154,9 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
             "Detections left unmatched by the matcher: "
             + ", ".join(f"{n} {why}" for why, n in sorted(report.unmatched.items()))
         )
+    diagnosis = nobody_diagnosis(report)
+    if diagnosis is not None:
+        lines.append(diagnosis)
     skipped = sum(report.skipped.values())
     lines.append(
         f"Frames: {num_frames} evaluated, {skipped} skipped"
