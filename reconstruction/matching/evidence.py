@@ -32,6 +32,7 @@ from data.assignment import solve_sparse_pairs
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
 from reconstruction.matching import feet_kernels
+from reconstruction.matching.ambiguity import sparse_swap_regret
 from reconstruction.matching.epipolar import fundamentals
 from reconstruction.matching.evidence_kernels import ChiTest, Detections, LinkTests, Sample, merge_linked, pairs_chi2
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
@@ -42,6 +43,7 @@ from reconstruction.solver.person_prior import chi2_medians
 
 TOO_LITTLE_EVIDENCE = "too_little_evidence"  # no usable foot and fewer than min_dof usable joints
 NON_FINITE_KEYPOINTS = "non_finite_keypoints"  # ... and some keypoints were NaN / inf (treated as missing)
+AMBIGUOUS = "ambiguous"  # its pairs were refused: an alternative partner fit within ambiguity_margin
 CALIBRATION_SAMPLE = 400  # mutual best pairs enough for the median of the noise calibration
 
 
@@ -177,7 +179,8 @@ class EvidenceMatcher:
     sigma model); evidence_per_dof: log-likelihood ratio credited per agreeing dof; min_dof: fewest dof a pair needs;
     min_score: a joint is used from it on; feet: FeetMatcher keys of the ground-plane feet; calibrate, max_noise_scale,
     min_calibration_pairs: the frame's noise scale (:meth:`noise_scale2`); outlier_sd: one joint adds at most
-    outlier_sd^2 model variances; link_scale: the noise factor of the merge's looser test."""
+    outlier_sd^2 model variances; link_scale: the noise factor of the merge's looser test; ambiguity_margin: a pair
+    is kept only if every alternative assignment of its view pair costs this much more (log-likelihood ratio)."""
 
     def __init__(
         self,
@@ -194,6 +197,7 @@ class EvidenceMatcher:
         min_calibration_pairs: int = 5,
         outlier_sd: float = 12.0,
         link_scale: float = 2.0,
+        ambiguity_margin: float = 0.0,
     ) -> None:
         if not 0 < reject_rate < 1 or int(min_dof) < 1 or int(min_views) < 1 or not evidence_per_dof >= 0:
             raise ValueError(
@@ -208,6 +212,9 @@ class EvidenceMatcher:
             raise ValueError(f"outlier_sd must be > 0, got {outlier_sd}")
         if not 1 <= link_scale <= max_noise_scale:
             raise ValueError(f"need 1 <= link_scale <= max_noise_scale, got {link_scale}")
+        if not 0 <= ambiguity_margin < np.inf:
+            raise ValueError(f"ambiguity_margin must be a finite number >= 0, got {ambiguity_margin}")
+        self.ambiguity_margin = float(ambiguity_margin)
         self.reject_rate, self.evidence_per_dof = float(reject_rate), float(evidence_per_dof)
         self.min_dof, self.min_score, self.min_views = int(min_dof), float(min_score), int(min_views)
         self.noise_model = NoiseModel() if noise_model is None else noise_model
@@ -262,10 +269,15 @@ class EvidenceMatcher:
         da, db = ev.gi[rows] - offsets[ev.view_pairs[q, 0]], ev.gj[rows] - offsets[ev.view_pairs[q, 1]]
         cost = 0.5 * ev.d2[rows] - self.evidence_per_dof * ev.dof[rows]
         starts = np.concatenate([[0], np.cumsum(np.bincount(q, minlength=len(ev.view_pairs)))]).astype(np.int64)
-        keep = solve_sparse_pairs(starts, ev.counts[ev.view_pairs], da, db, cost)
+        keep = np.flatnonzero(solve_sparse_pairs(starts, ev.counts[ev.view_pairs], da, db, cost))
+        refused = keep[:0]
+        if self.ambiguity_margin > 0:
+            clear = sparse_swap_regret(q, da, db, cost, keep) >= self.ambiguity_margin
+            keep, refused = keep[clear], keep[~clear]
         linked, kept = np.stack([ev.gi[links], ev.gj[links]], axis=1), rows[keep]
         assignment = _merge(ev.gi[kept], ev.gj[kept], cost[keep], ev.counts, linked, self.min_views, ev.lazy)
-        return Matches(assignment, _unmatched(assignment, ev))
+        ambiguous = np.concatenate([ev.gi[rows[refused]], ev.gj[rows[refused]]])
+        return Matches(assignment, _unmatched(assignment, ev, ambiguous))
 
     def _calibrated_pairs(self, det: Detections, view_pairs: np.ndarray) -> tuple[list[np.ndarray], float, int]:
         """[view pair row, i, j, D^2 at the calibrated noise, dof] (E,) each of the detection pairs that pass, the
@@ -315,15 +327,19 @@ def _run_pairs(det: Detections, view_pairs, q0: int, test: ChiTest, sample: Samp
         out[1] = np.concatenate([out[1][: out[3]], np.empty((grow, 2))])
 
 
-def _unmatched(assignment: np.ndarray, ev: FrameEvidence) -> Counter[str]:
-    """Unmatched detections by reason: too little evidence (with NaN keypoints, or not) or no counterpart."""
+def _unmatched(assignment: np.ndarray, ev: FrameEvidence, ambiguous: np.ndarray) -> Counter[str]:
+    """Unmatched detections by reason: too little evidence (with NaN keypoints, or not), ambiguous (in a refused
+    pair: global indices) or no counterpart."""
     placed = np.zeros(len(ev.usable), dtype=bool)
     placed[(ev.lazy.det.offsets[:-1] + assignment)[assignment >= 0]] = True
     unusable = ~placed & ~ev.usable
+    refused = np.zeros(len(ev.usable), dtype=bool)
+    refused[ambiguous] = True
     reasons: Counter[str] = Counter()
     reasons[NON_FINITE_KEYPOINTS] = int(np.count_nonzero(unusable & ev.bad))
     reasons[TOO_LITTLE_EVIDENCE] = int(np.count_nonzero(unusable)) - reasons[NON_FINITE_KEYPOINTS]
-    reasons[NO_COUNTERPART] = int(np.count_nonzero(~placed & ev.usable))
+    reasons[AMBIGUOUS] = int(np.count_nonzero(~placed & ev.usable & refused))
+    reasons[NO_COUNTERPART] = int(np.count_nonzero(~placed & ev.usable & ~refused))
     return +reasons
 
 
