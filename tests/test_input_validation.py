@@ -167,7 +167,7 @@ def test_transposed_rotation_is_found_by_the_2d_poses(tmp_path, camera):
     doc = cameras(**{camera: {"R": np.asarray(CAMERAS[camera]["R"]).T.tolist()}})
     path = write(tmp_path, "cameras.json", doc)
     with pytest.warns(
-        RigWarning, match=f"camera '{camera}': its 2D poses do not fit the calibration .* likely R is transposed"
+        RigWarning, match=f"camera '{camera}': its 2D poses do not fit the other cameras' .*: likely R is transposed"
     ):
         load_files(path, EXAMPLE / "poses2d.json")
 
