@@ -32,6 +32,7 @@ class SequenceReport:
     unmatched: Counter = field(default_factory=Counter)
     protocols: dict[str, dict] = field(default_factory=dict)
     protocol_reports: list[str] = field(default_factory=list)
+    inputs: Counter = field(default_factory=Counter)  # detections dropped or merged before matching, by reason
 
 
 def evaluate_sequence(
@@ -116,6 +117,8 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
         ]
     for text in report.protocol_reports:
         lines += [text, ""]
+    if report.inputs:
+        lines.append("Detections before matching: " + ", ".join(f"{n} {why}" for why, n in report.inputs.items()))
     if report.unmatched:
         lines.append(
             "Detections left unmatched by the matcher: "
