@@ -274,13 +274,6 @@ def _median(fits: Iterable[np.ndarray]) -> np.ndarray:
     return np.median(fits, axis=0) if len(fits) else np.full(2, np.nan)
 
 
-def camera_fit(
-    cams: list[Camera], frames: list[list[np.ndarray]], v: int, partners: Iterable[int], tol: RigTolerances
-) -> np.ndarray:
-    """Camera v's median (epipolar residual, shift) px against the partners: (2,), nan without shared detections."""
-    return _median(pair_fit(cams[v], cams[u], frames, v, u, tol) for u in partners)
-
-
 def _fit_matrix(cams: list[Camera], frames: list[list[np.ndarray]], tol: RigTolerances) -> np.ndarray:
     """pair_fit of every view pair: (V, V, 2), nan on the diagonal."""
     M = np.full((len(cams), len(cams), 2), np.nan)
@@ -330,10 +323,15 @@ def _diagnose(
     cams: list[Camera], frames: list[list[np.ndarray]], v: int, good: list[int], limit: float, tol: RigTolerances
 ) -> str:
     """The fixes that make camera v's 2D poses fit the good cameras, in words; the usual causes without one."""
-    fits = [what for what, c, f in _fixes(cams, frames, v) if camera_fit(c, f, v, good, tol).sum() <= limit]
-    if fits:
-        return f"likely {' or '.join(fits)}{' (the 2D poses fit each)' if len(fits) > 1 else ''}"
-    return "no single fix makes it fit: check K (principal point), R and t, and its 2D poses for a shift (crop, padding), a flip, or another camera's"
+    fit = [
+        what
+        for what, c, f in _fixes(cams, frames, v)
+        if _median(pair_fit(c[v], c[u], f, v, u, tol) for u in good).sum() <= limit
+    ]
+    if fit:
+        return f"likely {' or '.join(fit)}{' (the 2D poses fit each)' if len(fit) > 1 else ''}"
+    what = "K (principal point), R and t, and its 2D poses for a shift (crop, padding), a flip, or another camera's"
+    return f"no single fix makes it fit: check {what}"
 
 
 def _exchanged(cams: list[Camera], frames: list[list[np.ndarray]], M: np.ndarray, tol: RigTolerances) -> list[Finding]:
@@ -365,12 +363,8 @@ def pose_findings(
     best = M[good[0], good[1]].sum() / np.hypot(*cams[good[0]].size)
     if not best <= tol.max_residual:
         what = f"median epipolar residual {_share(best)} or more, more than {tol.max_residual:.0%}"
-        return [
-            Finding(
-                "warning",
-                f"the 2D poses fit no camera pair ({what}): t in other units, R camera -> world, or the 2D poses of another rig?",
-            )
-        ]
+        why = "t in other units, R camera -> world, or the 2D poses of another rig?"
+        return [Finding("warning", f"the 2D poses fit no camera pair ({what}): {why}")]
     bad = [v for v in range(len(cams)) if v not in good and _median(M[v, good]).sum() > limit]
     if not bad and len(cams) == 3:  # exchanged 2D poses spoil every pair of 3 cameras: none to compare against
         return _exchanged(cams, frames, M, tol)
