@@ -19,6 +19,7 @@ from data.config_checks import ConfigError, check_bool, check_int, check_number
 from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
 from data.formats.poses2d_io import Poses2DError, write_poses2d
 from data.formats.poses_io import write_poses3d
+from data.frame_inputs import InputWarning, clean_frames
 from data.geometry.calibration import CalibrationError
 from data.geometry.check_rig import RigWarning
 from data.multiview import Sequence
@@ -72,10 +73,14 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))  # protocols: evaluation/protocols
     t_data = time.perf_counter() - t0
     check_sequence(cfg, sequence)
+    check_int(cfg, "inputs.max_detections_per_frame", 1)
+    check_number(cfg, "inputs.near_duplicate", strict=False)
+    sequence, repaired = clean_frames(sequence, cfg.inputs.max_detections_per_frame, cfg.inputs.near_duplicate)
     sequence, front_timings, view_report = run_2d_stage(cfg, sequence, out_dir)
     pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
     report = evaluate_sequence(sequence, pipeline, Pose3DEvaluator(**cfg.evaluation), cfg.progress)
     stage_s = sequence.stage_seconds  # e.g. 2D grouping done while loading
+    report.inputs = repaired
     report.timings = {"dataset": t_data - sum(stage_s.values()), **stage_s, **front_timings, **report.timings}
     if view_report is not None:
         report.metrics.update(view_report[0])
@@ -90,7 +95,7 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
     frames = ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in report.results)
     write_poses3d(out_dir / cfg.output.poses3d, frames, sequence.rig.names, fill=cfg.output.fill)
     summary = {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped)}
-    summary.update(unmatched=dict(report.unmatched), timings_s=report.timings)
+    summary.update(inputs=dict(report.inputs), unmatched=dict(report.unmatched), timings_s=report.timings)
     atomic_write_text(out_dir / cfg.metrics_file, json.dumps(summary, indent=2))
     for protocol in sequence.protocols:
         if hasattr(protocol, "write"):  # e.g. the Shelf-14 predictions that were scored
@@ -183,8 +188,8 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """warnings.showwarning for the run: RigWarning as one line 'warning: ...', others as Python prints them."""
-    if issubclass(category, RigWarning):
+    """warnings.showwarning for the run: RigWarning and InputWarning as one line 'warning: ...', others as Python prints them."""
+    if issubclass(category, (RigWarning, InputWarning)):
         print(f"warning: {message}", file=sys.stderr if file is None else file)
     else:
         _show_warning(message, category, filename, lineno, file, line)

@@ -33,6 +33,7 @@ class SequenceReport:
     protocols: dict[str, dict] = field(default_factory=dict)
     protocol_reports: list[str] = field(default_factory=list)
     detections: int = 0  # 2D detections over every view and frame run
+    inputs: Counter = field(default_factory=Counter)  # detections dropped or merged before matching, by reason
 
 
 # the likeliest cause of a run that reconstructs nobody, by the matcher's commonest reason for leaving detections out
@@ -149,6 +150,8 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
         ]
     for text in report.protocol_reports:
         lines += [text, ""]
+    if report.inputs:
+        lines.append("Detections before matching: " + ", ".join(f"{n} {why}" for why, n in report.inputs.items()))
     if report.unmatched:
         lines.append(
             "Detections left unmatched by the matcher: "

@@ -1,6 +1,7 @@
 """poses2d.json (docs/formats.md): one entry per person per camera per frame, COCO-23 keypoints in pixels:
 {"frame": int, "camera": str, "bbox": [x, y, w, h], "score": float, "keypoints": 69 numbers, "id"?}. The reader
-rejects in one line (Poses2DError) bad entries, unknown cameras, non-finite or out-of-range values, duplicates.
+rejects in one line (Poses2DError) bad entries, unknown cameras, non-finite or out-of-range values; repeated
+detections are kept (data/frame_inputs.py drops them before matching, counted in the run's report).
 """
 
 from __future__ import annotations
@@ -146,18 +147,10 @@ def read_poses2d(
     path = Path(path)
     cameras = {str(name): v for v, name in enumerate(camera_names)}
     grouped: dict[int, list[list[tuple]]] = {}
-    seen: dict[tuple[int, int, bytes], int] = {}
     for i, raw in enumerate(_load(path)):
         frame, v, det = _entry(path, i, raw, cameras)
         where = f"{path}: entry {i}: frame {frame}, camera {camera_names[v]!r}"
         det = _check_values(where, det, None if image_sizes is None else tuple(image_sizes[v]))
-        key = (frame, v, det[0].tobytes())
-        if key in seen and np.any(det[0][:, 2] > 0):  # detections without any joint carry nothing twice
-            raise Poses2DError(
-                f"{path}: entries {seen[key]} and {i} are the same detection (frame {frame}, camera "
-                f"{camera_names[v]!r}, identical keypoints): remove the duplicate"
-            )
-        seen[key] = i
         grouped.setdefault(frame, [[] for _ in camera_names])[v].append(det)
     return {frame: [_view(dets) for dets in views] for frame, views in sorted(grouped.items())}
 

@@ -165,6 +165,19 @@ def apply_homography(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return homog[..., :2] / homog[..., 2:3]
 
 
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix [v]_x: (3,) -> (3, 3)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def fundamental_matrix(camera_a: Camera, camera_b: Camera) -> np.ndarray:
+    """F with x_b^T F x_a = 0 for undistorted pixels of the same world point, unit Frobenius norm: (3, 3)."""
+    R = camera_b.R @ camera_a.R.T  # camera a frame -> camera b frame
+    t = camera_b.t - R @ camera_a.t
+    F = np.linalg.inv(camera_b.K).T @ skew(t) @ R @ np.linalg.inv(camera_a.K)
+    return F / np.linalg.norm(F)
+
+
 @dataclass(frozen=True)
 class Rig:
     """An ordered set of named cameras; view index v is the position in this order."""

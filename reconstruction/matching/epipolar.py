@@ -14,7 +14,7 @@ from itertools import combinations
 
 import numpy as np
 
-from data.geometry.camera import Camera, Rig
+from data.geometry.camera import Camera, Rig, fundamental_matrix
 from data.multiview import ViewDetections
 from reconstruction.matching.merge import match_pairs
 from reconstruction.results import Matches
@@ -30,19 +30,6 @@ def undistorted_joints(view: ViewDetections, camera: Camera, min_score: float) -
     ok = np.isfinite(kp).all(axis=-1) & (np.nan_to_num(kp[..., 2], nan=-np.inf) >= min_score)
     uv = camera.undistort_points(np.where(ok[..., None], kp[..., :2], 0.0))
     return np.where(ok[..., None], uv, 0.0), ok
-
-
-def skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrix [v]_x: (3,) -> (3, 3)."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def fundamental_matrix(camera_a: Camera, camera_b: Camera) -> np.ndarray:
-    """F with x_b^T F x_a = 0 for undistorted pixels of the same world point, unit Frobenius norm: (3, 3)."""
-    R = camera_b.R @ camera_a.R.T  # camera a frame -> camera b frame
-    t = camera_b.t - R @ camera_a.t
-    F = np.linalg.inv(camera_b.K).T @ skew(t) @ R @ np.linalg.inv(camera_a.K)
-    return F / np.linalg.norm(F)
 
 
 @lru_cache(maxsize=8)
