@@ -6,27 +6,37 @@ from __future__ import annotations
 import numpy as np
 
 
-def sparse_swap_regret(q: np.ndarray, a: np.ndarray, b: np.ndarray, cost: np.ndarray, kept: np.ndarray) -> np.ndarray:
+def sparse_swap_regret(
+    q: np.ndarray, a: np.ndarray, b: np.ndarray, cost: np.ndarray, kept: np.ndarray, cap: float = np.inf
+) -> np.ndarray:
     """Least extra cost of re-matching each accepted pair within its view pair: candidates' view pair q, detections
     a, b and cost (E,) each, kept (K,) indices of the accepted candidates -> (K,), inf without an alternative.
 
     Alternatives: a candidate to a free detection, or swapping partners with another accepted pair of the view pair
-    (both cross candidates must exist); a pair that is not a candidate never counts."""
+    (both cross candidates must exist); a pair that is not a candidate never counts. Swaps that cannot cost less
+    than cap are skipped: a regret >= cap is then a lower bound (the refusal test needs no more)."""
     regret = np.full(len(kept), np.inf)
     if not len(kept):
         return regret
     width = int(max(a.max(), b.max())) + 1
-    pair_key = (q.astype(np.int64) * width + a) * width + b
-    others = np.setdiff1d(np.arange(len(cost)), kept)
-    slot_a = find(q[kept] * width + a[kept], q[others] * width + a[others])  # the accepted pair holding a, or -1
-    slot_b = find(q[kept] * width + b[kept], q[others] * width + b[others])
+    other = np.ones(len(cost), dtype=bool)
+    other[kept] = False
+    others = np.flatnonzero(other)
+    slot_a = holders(q[kept] * width + a[kept], q[others] * width + a[others], int(q.max() + 1) * width)
+    slot_b = holders(q[kept] * width + b[kept], q[others] * width + b[others], int(q.max() + 1) * width)
     own = cost[kept]
     free_b = (slot_a >= 0) & (slot_b < 0)  # a accepted with another partner, b free
     np.minimum.at(regret, slot_a[free_b], cost[others[free_b]] - own[slot_a[free_b]])
     free_a = (slot_b >= 0) & (slot_a < 0)
     np.minimum.at(regret, slot_b[free_a], cost[others[free_a]] - own[slot_b[free_a]])
-    cross = (slot_a >= 0) & (slot_b >= 0)  # (a of k, b of l): the swap also needs (a of l, b of k)
+    cross = np.flatnonzero((slot_a >= 0) & (slot_b >= 0))  # (a of k, b of l): the swap also needs (a of l, b of k)
     k, l = slot_a[cross], slot_b[cross]
+    if cap < np.inf:  # (a of l, b of k) costs at least a of l's cheapest candidate
+        cheapest = np.full(int(q.max() + 1) * width, np.inf)
+        np.minimum.at(cheapest, q * width + a, cost)
+        low = cost[others[cross]] - own[k] - own[l] + cheapest[q[kept][l] * width + a[kept][l]]
+        cross, k, l = cross[low < cap], k[low < cap], l[low < cap]
+    pair_key = (q.astype(np.int64) * width + a) * width + b
     back = find(pair_key, (q[kept][k].astype(np.int64) * width + a[kept][l]) * width + b[kept][k])
     ok = back >= 0
     swap = cost[others[cross][ok]] + cost[back[ok]] - own[k[ok]] - own[l[ok]]
@@ -35,10 +45,19 @@ def sparse_swap_regret(q: np.ndarray, a: np.ndarray, b: np.ndarray, cost: np.nda
     return regret
 
 
+def holders(held: np.ndarray, queries: np.ndarray, size: int) -> np.ndarray:
+    """For each query key (M,) in [0, size), the index of the held key (K,) (distinct) equal to it, or -1."""
+    table = np.full(size, -1, dtype=np.int64)
+    table[held] = np.arange(len(held))
+    return table[queries]
+
+
 def find(keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
     """Index in keys (N,) (distinct) of each query (M,), -1 where absent."""
     if not len(keys):
         return np.full(len(queries), -1)
-    order = np.argsort(keys, kind="stable")
-    at = np.minimum(np.searchsorted(keys[order], queries), len(keys) - 1)
-    return np.where(keys[order][at] == queries, order[at], -1)
+    order = np.argsort(keys, kind="stable")  # linear time where the keys come sorted (the matcher's candidates do)
+    ordered, by_key = keys[order], np.argsort(queries)  # sorted queries search several times faster
+    at = np.empty(len(queries), dtype=np.int64)
+    at[by_key] = np.minimum(np.searchsorted(ordered, queries[by_key]), len(keys) - 1)
+    return np.where(ordered[at] == queries, order[at], -1)

@@ -272,7 +272,7 @@ class EvidenceMatcher:
         keep = np.flatnonzero(solve_sparse_pairs(starts, ev.counts[ev.view_pairs], da, db, cost))
         refused = keep[:0]
         if self.ambiguity_margin > 0:
-            clear = sparse_swap_regret(q, da, db, cost, keep) >= self.ambiguity_margin
+            clear = sparse_swap_regret(q, da, db, cost, keep, self.ambiguity_margin) >= self.ambiguity_margin
             keep, refused = keep[clear], keep[~clear]
         linked, kept = np.stack([ev.gi[links], ev.gj[links]], axis=1), rows[keep]
         assignment = _merge(ev.gi[kept], ev.gj[kept], cost[keep], ev.counts, linked, self.min_views, ev.lazy)
