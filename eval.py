@@ -15,7 +15,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 from omegaconf.errors import MissingMandatoryValue
 
-from data.config_checks import ConfigError, check_bool, check_int, check_number
+from data.config_checks import ConfigError, check_bool, check_int, check_number, check_target
 from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
 from data.formats.poses2d_io import Poses2DError, write_poses2d
 from data.formats.poses_io import write_poses3d
@@ -40,7 +40,9 @@ PROTOCOL = (
 
 
 def check_config(cfg: DictConfig) -> None:
-    """Stop with one line naming the key when a top-level or evaluation value has the wrong type or range."""
+    """Stop with one line naming the key when a top-level, evaluation or stage value has the wrong type or range."""
+    for group in ("dataset", "noise_model", "matching", "reconstruction", "tracking"):
+        check_target(cfg, group)
     for key in ("evaluation.max_dist_m", "evaluation.alpha", "vis_sequence_max_mb"):
         check_number(cfg, key)
     check_int(cfg, "vis_frame", 0, nullable=True)
@@ -197,7 +199,7 @@ def main(cfg: DictConfig) -> dict:
     if cfg.checkpoint:
         return run_pose2d(cfg, out_dir)
     try:
-        with one_line_errors(ConfigError, CalibrationError, Poses2DError):
+        with one_line_errors(ConfigError, CalibrationError, Poses2DError, config=cfg):
             return run(cfg, out_dir).metrics
     except MissingMandatoryValue as err:  # e.g. dataset=files without dataset.cameras=...
         raise SystemExit(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 from contextlib import contextmanager
 from datetime import datetime
@@ -10,6 +11,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Iterator
 
+from hydra.core.hydra_config import HydraConfig
 from hydra.core.utils import JobReturn, JobStatus
 from hydra.errors import InstantiationException
 from hydra.experimental.callback import Callback
@@ -37,16 +39,38 @@ def register_resolvers() -> None:
 
 
 @contextmanager
-def one_line_errors(*errors: type[Exception]) -> Iterator[None]:
-    """Stop with ``error: <message>`` (no traceback) on errors, or on instantiate's ValueError / FileNotFoundError."""
+def one_line_errors(*errors: type[Exception], config: DictConfig | None = None) -> Iterator[None]:
+    """Stop with ``error: <message>`` (no traceback) on errors, and on what a config group's ``_target_`` raises
+    in instantiate: FileNotFoundError, or a TypeError / ValueError then naming the group's key (:func:`keyed`)."""
     try:
         yield
     except errors as err:
         raise SystemExit(f"error: {err}") from None
     except InstantiationException as err:
-        if isinstance(err.__cause__, (ValueError, FileNotFoundError)):
-            raise SystemExit(f"error: {err.__cause__}") from None
+        cause, full_key = err.__cause__, re.search(r"full_key: (\S+)$", str(err))
+        if isinstance(cause, (*errors, FileNotFoundError)):
+            raise SystemExit(f"error: {cause}") from None
+        if isinstance(cause, (TypeError, ValueError)) and full_key:
+            raise SystemExit(f"error: {keyed(full_key[1], str(cause), config)}") from None
         raise
+
+
+def keyed(full_key: str, message: str, config: DictConfig | None) -> str:
+    """A constructor's message naming its key with the group ('frames=5' -> 'dataset.frames=5'; 'group: ...')."""
+    node = OmegaConf.select(config, full_key) if config is not None else None
+    names = [str(k) for k in node] if isinstance(node, DictConfig) else []
+    unknown = re.search(r"unexpected keyword argument '(\w+)'", message)
+    if unknown and unknown[1] in names:  # a key its config file does not have, e.g. +dataset.camera=x
+        group = full_key.split(".")[0]
+        choice = HydraConfig.get().runtime.choices.get(group) if HydraConfig.initialized() else None
+        return f"{full_key}.{unknown[1]}: not a key of {group}" + (
+            f" (see configs/{group}/{choice}.yaml)" if choice else ""
+        )
+    if message.startswith(full_key.rsplit(".")[-1]):  # e.g. 'tracking: need ...'
+        return message
+    pattern = rf"(?<![\w.])({'|'.join(map(re.escape, names))})=" if names else "(?!)"
+    message, named = re.subn(pattern, rf"{full_key}.\1=", message, count=1)
+    return message if named else f"{full_key}: {message}"
 
 
 def other_runs_files(folder: Path, log_name: str, limit: int = SHOWN_FILES) -> list[str]:

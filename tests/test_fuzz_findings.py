@@ -1,0 +1,88 @@
+"""Fuzz findings of the command lines: bad stage keys, frame ranges, run folders, metrics.json, checkpoints' temporaries
+and `python -m` outside the repository each end as one `error:` line (or run correctly)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from data.config_checks import KINDS, ConfigError, check_target, target_hints
+from run_folders import keyed
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIGS = REPO / "configs"
+OWN_RIG = REPO / "examples" / "own_rig"
+FILES = ["dataset=files", f"dataset.cameras={OWN_RIG / 'cameras.json'}", f"dataset.poses2d={OWN_RIG / 'poses2d.json'}"]
+STAGES = ("noise_model", "matching", "reconstruction", "tracking")
+
+
+def eval_run(tmp_path: Path, *overrides: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
+    """eval.py with these overrides, quick settings, into tmp_path/run."""
+    run_dir = [] if any(o.startswith("hydra.run.dir=") for o in overrides) else [f"hydra.run.dir={tmp_path / 'run'}"]
+    cmd = [sys.executable, str(REPO / "eval.py"), "progress=false", *run_dir, *overrides]
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, timeout=120)
+
+
+def one_line_error(proc: subprocess.CompletedProcess) -> str:
+    """The single stderr line of a run that failed (asserted)."""
+    assert proc.returncode != 0 and proc.stderr.count("\n") == 1, proc.stderr[-2000:]
+    return proc.stderr.strip()
+
+
+def choices(group: str) -> list[str]:
+    """The config files of a group."""
+    return sorted(p.stem for p in (CONFIGS / group).glob("*.yaml"))
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("matching.reject_rate=abc", "error: matching.reject_rate='abc': must be a finite number"),
+        ("+dataset.camera=x", "error: dataset.camera: not a key of dataset (see configs/dataset/synthetic.yaml)"),
+        ("matching.min_score=2", "error: matching.min_score=2: must be a score in [0, 1]"),
+        (  # a constructor's own range check: the group named before its message
+            "matching.reject_rate=2",
+            "error: matching: need 0 < reject_rate < 1, min_dof >= 1, min_views >= 1, evidence_per_dof >= 0; "
+            "got 2, 2, 2, 2.0",
+        ),
+        ("dataset.seed=abc", "error: synthetic dataset option dataset.seed='abc' must be int"),
+    ],
+)
+def test_a_bad_stage_key_stops_with_one_line_naming_it_with_its_group(tmp_path, override, message):
+    proc = eval_run(tmp_path, override, "dataset.num_frames=1")
+    assert one_line_error(proc) == message and not (tmp_path / "run" / "poses3d.json").exists()
+
+
+def test_every_number_of_the_stages_refuses_nan_and_inf_and_every_shipped_config_passes():
+    checked = 0
+    with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
+        for group in ("dataset", *STAGES):
+            for choice in choices(group):
+                cfg = compose(config_name="eval", overrides=[f"{group}={choice}"])
+                check_target(cfg, group)  # the shipped values pass
+                target = cfg[group].get("_target_")
+                hints = target_hints(target) if target else {}
+                floats = [k for k, h in hints.items() if h.startswith("float")]
+                for name in (k for k in floats if k in cfg[group] and group in STAGES):
+                    for bad in (math.nan, math.inf, -math.inf):
+                        bad_cfg = cfg.copy()
+                        OmegaConf.update(bad_cfg, f"{group}.{name}", bad)
+                        with pytest.raises(ConfigError) as err:
+                            check_target(bad_cfg, group)
+                        null = " or null" if hints[name].endswith(" | None") else ""
+                        assert str(err.value) == f"{group}.{name}={bad!r}: must be {KINDS['float'][1]}{null}"
+                        checked += 1
+    assert checked >= 3 * 100  # every float key of every matcher, noise model, reconstruction and tracker
+
+
+def test_a_constructor_message_gets_the_group_of_its_key():
+    config = OmegaConf.create({"dataset": {"frames": "5:1", "seed": 0}})
+    assert keyed("dataset", "frames='5:1': selects no frame", config) == "dataset.frames='5:1': selects no frame"
+    assert keyed("dataset", "bad seed", config) == "dataset: bad seed"
+    assert keyed("tracking", "tracking: need seed=1", config) == "tracking: need seed=1"  # already named
