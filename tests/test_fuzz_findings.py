@@ -13,6 +13,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from data.config_checks import KINDS, ConfigError, check_target, target_hints
+from data.datasets.files import load_files
 from run_folders import keyed
 
 REPO = Path(__file__).resolve().parents[1]
@@ -86,3 +87,23 @@ def test_a_constructor_message_gets_the_group_of_its_key():
     assert keyed("dataset", "frames='5:1': selects no frame", config) == "dataset.frames='5:1': selects no frame"
     assert keyed("dataset", "bad seed", config) == "dataset: bad seed"
     assert keyed("tracking", "tracking: need seed=1", config) == "tracking: need seed=1"  # already named
+
+
+def test_a_frame_range_is_clamped_to_the_files_frames_in_its_order(capsys):
+    sequence = load_files(OWN_RIG / "cameras.json", OWN_RIG / "poses2d.json", "0:100000")
+    assert [f.index for f in sequence.frames] == [100, 101, 102]
+    assert capsys.readouterr().err == "warning: dataset.frames: 100000 frames clamped to the file's 100..102\n"
+    sequence = load_files(OWN_RIG / "cameras.json", OWN_RIG / "poses2d.json", "102:0:-1")
+    assert [f.index for f in sequence.frames] == [102, 101, 100]
+    assert capsys.readouterr().err == "warning: dataset.frames: 102 frames clamped to the file's 100..102\n"
+    sequence = load_files(OWN_RIG / "cameras.json", OWN_RIG / "poses2d.json", "101:102")
+    assert [f.index for f in sequence.frames] == [101] and capsys.readouterr().err == ""  # within: no line
+
+
+@pytest.mark.parametrize("frames", ["5:1", "[]"])
+def test_frames_that_select_nothing_stop_with_one_line(tmp_path, frames):
+    proc = eval_run(tmp_path, *FILES, f"dataset.frames={frames}")
+    shown = "'5:1'" if frames == "5:1" else "[]"
+    assert one_line_error(proc) == (
+        f"error: dataset.frames={shown}: selects no frame ({OWN_RIG / 'poses2d.json'} holds frames 100..102)"
+    )
