@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
 import shutil
@@ -9,7 +10,7 @@ from contextlib import contextmanager
 from datetime import datetime
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Iterator
+from typing import IO, Any, Iterator
 
 from hydra.core.hydra_config import HydraConfig
 from hydra.core.utils import JobReturn, JobStatus
@@ -21,6 +22,7 @@ from data.formats.atomic_io import is_stale, is_temporary
 
 STAGING_SUFFIX = ".incomplete"  # <output_subdir>.incomplete: the config of a run that has not completed
 SHOWN_FILES = 3  # files named in the refusal message
+LOCK_NAME = ".run.lock"  # flock()ed by the run writing into the folder: a second run at once stops
 
 
 @lru_cache(maxsize=1)
@@ -79,7 +81,7 @@ def other_runs_files(folder: Path, log_name: str, limit: int = SHOWN_FILES) -> l
     for root, _, names in os.walk(folder):
         for name in sorted(names):
             path = Path(root) / name
-            if root == str(folder) and name == log_name:
+            if root == str(folder) and name in (log_name, LOCK_NAME):
                 continue
             if is_temporary(path):
                 if is_stale(path):
@@ -104,11 +106,25 @@ def check_folder(folder: Path, config: DictConfig, key: str) -> bool:
     return bool(files)
 
 
+def lock_folder(folder: Path, key: str) -> IO:
+    """Create folder and hold its lock file (until closed or exit); one line when it cannot or another run holds it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        lock = open(folder / LOCK_NAME, "a")
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return lock
+    except BlockingIOError:  # flock: another process holds it
+        raise SystemExit(f"error: {key}={folder} is in use by another run; choose another folder") from None
+    except OSError as err:
+        raise SystemExit(f"error: {key}={folder}: cannot write the run folder ({err.strerror or err})") from None
+
+
 class RunFolderGuard(Callback):
     """Hydra callback: refuses a folder holding another run; overwrite=true stages .hydra/ until the run completes."""
 
     def __init__(self) -> None:
         self.staged: tuple[Path, Path] | None = None  # (.hydra.incomplete, .hydra) of an overwriting run
+        self.lock: IO | None = None  # the run folder's lock file, held until the process exits
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
         """Check hydra.run.dir before Hydra writes into it (rank 0 of a torchrun job; the others write no .hydra/)."""
@@ -118,6 +134,7 @@ class RunFolderGuard(Callback):
                 config.hydra.output_subdir = None
             return
         folder = Path(config.hydra.run.dir)
+        self.lock = lock_folder(folder, "hydra.run.dir")  # before the check: a run starting beside it waits for none
         occupied = check_folder(folder, config, "hydra.run.dir")
         if occupied and subdir is not None and (folder / subdir).exists():
             staging = f"{subdir}{STAGING_SUFFIX}"

@@ -3,6 +3,7 @@ and `python -m` outside the repository each end as one `error:` line (or run cor
 
 from __future__ import annotations
 
+import fcntl
 import math
 import subprocess
 import sys
@@ -14,7 +15,7 @@ from omegaconf import OmegaConf
 
 from data.config_checks import KINDS, ConfigError, check_target, target_hints
 from data.datasets.files import load_files
-from run_folders import keyed
+from run_folders import LOCK_NAME, keyed
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"
@@ -107,3 +108,21 @@ def test_frames_that_select_nothing_stop_with_one_line(tmp_path, frames):
     assert one_line_error(proc) == (
         f"error: dataset.frames={shown}: selects no frame ({OWN_RIG / 'poses2d.json'} holds frames 100..102)"
     )
+
+
+def test_a_run_folder_that_cannot_be_created_stops_with_one_line(tmp_path):
+    proc = eval_run(tmp_path, "hydra.run.dir=/proc/nope/run")
+    assert (
+        one_line_error(proc)
+        == "error: hydra.run.dir=/proc/nope/run: cannot write the run folder (No such file or directory)"
+    )
+
+
+def test_a_run_folder_in_use_by_another_run_stops_the_second_with_one_line(tmp_path):
+    folder = tmp_path / "run"
+    folder.mkdir()
+    with open(folder / LOCK_NAME, "a") as held:  # as the first run holds it
+        fcntl.flock(held, fcntl.LOCK_EX)
+        proc = eval_run(tmp_path, "dataset.num_frames=1")
+    assert one_line_error(proc) == f"error: hydra.run.dir={folder} is in use by another run; choose another folder"
+    assert [p.name for p in folder.iterdir()] == [LOCK_NAME]  # nothing written beside the first run's files
