@@ -19,6 +19,7 @@ from data.config_checks import ConfigError, check_bool, check_int, check_number,
 from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
 from data.formats.poses2d_io import Poses2DError, write_poses2d
 from data.formats.poses_io import write_poses3d
+from data.formats.strict_json import finite
 from data.geometry.calibration import CalibrationError
 from data.geometry.check_rig import RigWarning
 from data.multiview import Sequence
@@ -91,7 +92,7 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
     write_poses3d(out_dir / cfg.output, frames, sequence.rig.names)
     summary = {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped)}
     summary.update(unmatched=dict(report.unmatched), timings_s=report.timings)
-    atomic_write_text(out_dir / cfg.metrics_file, json.dumps(summary, indent=2))
+    atomic_write_text(out_dir / cfg.metrics_file, json.dumps(finite(summary), indent=2))  # NaN -> null
     for protocol in sequence.protocols:
         if hasattr(protocol, "write"):  # e.g. the Shelf-14 predictions that were scored
             protocol.write(out_dir)

@@ -4,6 +4,7 @@ and `python -m` outside the repository each end as one `error:` line (or run cor
 from __future__ import annotations
 
 import fcntl
+import json
 import math
 import subprocess
 import sys
@@ -126,3 +127,14 @@ def test_a_run_folder_in_use_by_another_run_stops_the_second_with_one_line(tmp_p
         proc = eval_run(tmp_path, "dataset.num_frames=1")
     assert one_line_error(proc) == f"error: hydra.run.dir={folder} is in use by another run; choose another folder"
     assert [p.name for p in folder.iterdir()] == [LOCK_NAME]  # nothing written beside the first run's files
+
+
+def test_metrics_json_holds_null_where_a_metric_is_undefined(tmp_path):
+    proc = eval_run(tmp_path, "dataset.miss_rate=1.0", "dataset.num_frames=1", "dataset.num_persons=2")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"metrics.json holds {constant}")
+
+    doc = json.loads((tmp_path / "run" / "metrics.json").read_text(), parse_constant=refuse)
+    assert doc["metrics"]["mpjpe_mm"] is None  # nothing reconstructed: undefined, not NaN
