@@ -6,16 +6,20 @@ from __future__ import annotations
 import fcntl
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from data.config_checks import KINDS, ConfigError, check_target, target_hints
 from data.datasets.files import load_files
+from data.formats.atomic_io import _host
+from models.checkpoint_io import KEYS, read_checkpoint, write_checkpoint
 from run_folders import LOCK_NAME, keyed
 
 REPO = Path(__file__).resolve().parents[1]
@@ -138,3 +142,23 @@ def test_metrics_json_holds_null_where_a_metric_is_undefined(tmp_path):
 
     doc = json.loads((tmp_path / "run" / "metrics.json").read_text(), parse_constant=refuse)
     assert doc["metrics"]["mpjpe_mm"] is None  # nothing reconstructed: undefined, not NaN
+
+
+def test_resuming_removes_the_partial_checkpoints_of_a_sigkilled_run(tmp_path):
+    last = tmp_path / "checkpoints" / "last.ckpt"
+    write_checkpoint({k: 0 for k in KEYS["resume"]}, last, "resume")
+    writer = (
+        "import sys, time\nfrom data.formats.atomic_io import atomic_open\n"
+        f"with atomic_open({str(last)!r}, binary=True) as f:\n"
+        "    f.write(b'half a checkpoint'); f.flush(); print('writing', flush=True); time.sleep(60)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", writer], cwd=REPO, stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "writing"
+    proc.kill()  # SIGKILL: no handler removes the temporary
+    proc.wait()
+    live = last.parent / f".best.pth.{_host()}.{os.getpid()}.x.tmp"  # a writer still running keeps its temporary
+    live.write_bytes(b"")
+    (partial,) = [p for p in last.parent.iterdir() if p.name.startswith(".last.ckpt.")]
+    assert read_checkpoint(last, "resume")["epoch"] == 0
+    assert sorted(p.name for p in last.parent.iterdir()) == sorted(["last.ckpt", live.name]) and not partial.exists()
+    assert torch.load(last, weights_only=False)["kind"] == "resume"  # the checkpoint itself untouched
