@@ -162,3 +162,15 @@ def test_resuming_removes_the_partial_checkpoints_of_a_sigkilled_run(tmp_path):
     assert read_checkpoint(last, "resume")["epoch"] == 0
     assert sorted(p.name for p in last.parent.iterdir()) == sorted(["last.ckpt", live.name]) and not partial.exists()
     assert torch.load(last, weights_only=False)["kind"] == "resume"  # the checkpoint itself untouched
+
+
+def test_python_m_outside_the_repository_fails_in_one_line_and_runs_with_the_documented_pythonpath(tmp_path):
+    cmd = [sys.executable, "-m", "data.geometry.check_rig", "--help"]
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    outside = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=60)
+    assert outside.returncode != 0 and outside.stderr.count("\n") == 1 and "No module named 'data'" in outside.stderr
+    inside = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, env={**env, "PYTHONPATH": str(REPO)})
+    assert inside.returncode == 0 and "usage:" in inside.stdout
+    usage = " ".join((REPO / "docs" / "usage.md").read_text().split())
+    assert "The tools run as python -m are modules of this repository, not an installed package" in usage
+    assert "`PYTHONPATH`" in usage
