@@ -15,10 +15,11 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 from omegaconf.errors import MissingMandatoryValue
 
-from data.config_checks import ConfigError, check_bool, check_int, check_number
+from data.config_checks import ConfigError, check_bool, check_int, check_number, check_target
 from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
 from data.formats.poses2d_io import Poses2DError, write_poses2d
 from data.formats.poses_io import write_poses3d
+from data.formats.strict_json import finite
 from data.frame_inputs import InputWarning, clean_frames
 from data.geometry.calibration import CalibrationError
 from data.geometry.check_rig import RigWarning
@@ -42,7 +43,9 @@ PROTOCOL = (
 
 
 def check_config(cfg: DictConfig) -> None:
-    """Stop with one line naming the key when a top-level or evaluation value has the wrong type or range."""
+    """Stop with one line naming the key when a top-level, evaluation or stage value has the wrong type or range."""
+    for group in ("dataset", "noise_model", "matching", "reconstruction", "tracking"):
+        check_target(cfg, group)
     for key in ("evaluation.max_dist_m", "evaluation.alpha", "vis_sequence_max_mb"):
         check_number(cfg, key)
     check_number(cfg, "coincident_m", 0.0, strict=False)
@@ -96,7 +99,7 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
     write_poses3d(out_dir / cfg.output.poses3d, frames, sequence.rig.names, fill=cfg.output.fill)
     summary = {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped)}
     summary.update(inputs=dict(report.inputs), unmatched=dict(report.unmatched), timings_s=report.timings)
-    atomic_write_text(out_dir / cfg.metrics_file, json.dumps(summary, indent=2))
+    atomic_write_text(out_dir / cfg.metrics_file, json.dumps(finite(summary), indent=2))  # NaN -> null
     for protocol in sequence.protocols:
         if hasattr(protocol, "write"):  # e.g. the Shelf-14 predictions that were scored
             protocol.write(out_dir)
@@ -206,7 +209,7 @@ def main(cfg: DictConfig) -> dict:
     if cfg.checkpoint:
         return run_pose2d(cfg, out_dir)
     try:
-        with one_line_errors(ConfigError, CalibrationError, Poses2DError):
+        with one_line_errors(ConfigError, CalibrationError, Poses2DError, config=cfg):
             return run(cfg, out_dir).metrics
     except MissingMandatoryValue as err:  # e.g. dataset=files without dataset.cameras=...
         raise SystemExit(

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
+import re
 import shutil
 from contextlib import contextmanager
 from datetime import datetime
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Iterator
+from typing import IO, Any, Iterator
 
+from hydra.core.hydra_config import HydraConfig
 from hydra.core.utils import JobReturn, JobStatus
 from hydra.errors import InstantiationException
 from hydra.experimental.callback import Callback
@@ -19,6 +22,7 @@ from data.formats.atomic_io import is_stale, is_temporary
 
 STAGING_SUFFIX = ".incomplete"  # <output_subdir>.incomplete: the config of a run that has not completed
 SHOWN_FILES = 3  # files named in the refusal message
+LOCK_NAME = ".run.lock"  # flock()ed by the run writing into the folder: a second run at once stops
 
 
 @lru_cache(maxsize=1)
@@ -37,16 +41,38 @@ def register_resolvers() -> None:
 
 
 @contextmanager
-def one_line_errors(*errors: type[Exception]) -> Iterator[None]:
-    """Stop with ``error: <message>`` (no traceback) on errors, or on instantiate's ValueError / FileNotFoundError."""
+def one_line_errors(*errors: type[Exception], config: DictConfig | None = None) -> Iterator[None]:
+    """Stop with ``error: <message>`` (no traceback) on errors, and on what a config group's ``_target_`` raises
+    in instantiate: FileNotFoundError, or a TypeError / ValueError then naming the group's key (:func:`keyed`)."""
     try:
         yield
     except errors as err:
         raise SystemExit(f"error: {err}") from None
     except InstantiationException as err:
-        if isinstance(err.__cause__, (ValueError, FileNotFoundError)):
-            raise SystemExit(f"error: {err.__cause__}") from None
+        cause, full_key = err.__cause__, re.search(r"full_key: (\S+)$", str(err))
+        if isinstance(cause, (*errors, FileNotFoundError)):
+            raise SystemExit(f"error: {cause}") from None
+        if isinstance(cause, (TypeError, ValueError)) and full_key:
+            raise SystemExit(f"error: {keyed(full_key[1], str(cause), config)}") from None
         raise
+
+
+def keyed(full_key: str, message: str, config: DictConfig | None) -> str:
+    """A constructor's message naming its key with the group ('frames=5' -> 'dataset.frames=5'; 'group: ...')."""
+    node = OmegaConf.select(config, full_key) if config is not None else None
+    names = [str(k) for k in node] if isinstance(node, DictConfig) else []
+    unknown = re.search(r"unexpected keyword argument '(\w+)'", message)
+    if unknown and unknown[1] in names:  # a key its config file does not have, e.g. +dataset.camera=x
+        group = full_key.split(".")[0]
+        choice = HydraConfig.get().runtime.choices.get(group) if HydraConfig.initialized() else None
+        return f"{full_key}.{unknown[1]}: not a key of {group}" + (
+            f" (see configs/{group}/{choice}.yaml)" if choice else ""
+        )
+    if message.startswith(full_key.rsplit(".")[-1]):  # e.g. 'tracking: need ...'
+        return message
+    pattern = rf"(?<![\w.])({'|'.join(map(re.escape, names))})=" if names else "(?!)"
+    message, named = re.subn(pattern, rf"{full_key}.\1=", message, count=1)
+    return message if named else f"{full_key}: {message}"
 
 
 def other_runs_files(folder: Path, log_name: str, limit: int = SHOWN_FILES) -> list[str]:
@@ -55,7 +81,7 @@ def other_runs_files(folder: Path, log_name: str, limit: int = SHOWN_FILES) -> l
     for root, _, names in os.walk(folder):
         for name in sorted(names):
             path = Path(root) / name
-            if root == str(folder) and name == log_name:
+            if root == str(folder) and name in (log_name, LOCK_NAME):
                 continue
             if is_temporary(path):
                 if is_stale(path):
@@ -80,11 +106,25 @@ def check_folder(folder: Path, config: DictConfig, key: str) -> bool:
     return bool(files)
 
 
+def lock_folder(folder: Path, key: str) -> IO:
+    """Create folder and hold its lock file (until closed or exit); one line when it cannot or another run holds it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        lock = open(folder / LOCK_NAME, "a")
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return lock
+    except BlockingIOError:  # flock: another process holds it
+        raise SystemExit(f"error: {key}={folder} is in use by another run; choose another folder") from None
+    except OSError as err:
+        raise SystemExit(f"error: {key}={folder}: cannot write the run folder ({err.strerror or err})") from None
+
+
 class RunFolderGuard(Callback):
     """Hydra callback: refuses a folder holding another run; overwrite=true stages .hydra/ until the run completes."""
 
     def __init__(self) -> None:
         self.staged: tuple[Path, Path] | None = None  # (.hydra.incomplete, .hydra) of an overwriting run
+        self.lock: IO | None = None  # the run folder's lock file, held until the process exits
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
         """Check hydra.run.dir before Hydra writes into it (rank 0 of a torchrun job; the others write no .hydra/)."""
@@ -94,6 +134,7 @@ class RunFolderGuard(Callback):
                 config.hydra.output_subdir = None
             return
         folder = Path(config.hydra.run.dir)
+        self.lock = lock_folder(folder, "hydra.run.dir")  # before the check: a run starting beside it waits for none
         occupied = check_folder(folder, config, "hydra.run.dir")
         if occupied and subdir is not None and (folder / subdir).exists():
             staging = f"{subdir}{STAGING_SUFFIX}"

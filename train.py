@@ -27,7 +27,7 @@ def main(cfg: DictConfig) -> dict:
     """Hydra entry point -> the last validation metrics; resume=<last.ckpt> restores that run's stored config."""
     hydra_cfg = HydraConfig.get()
     choices = {k: v for k, v in hydra_cfg.runtime.choices.items() if not k.startswith("hydra")}
-    with one_line_errors(FileNotFoundError, ConfigError, CheckpointError, WeightsUnavailable):
+    with one_line_errors(FileNotFoundError, ConfigError, CheckpointError, WeightsUnavailable, config=cfg):
         checkpoint = None
         if cfg.resume:
             from models.checkpoint_io import read_checkpoint  # torch

@@ -3,9 +3,11 @@ line that names the key (``trainer.batch_size=0: must be an integer >= 1``), bef
 
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Any
 
+from hydra.utils import get_object
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
 
@@ -55,3 +57,37 @@ def check_bool(cfg: DictConfig, key: str) -> None:
     value = value_of(cfg, key)
     if not isinstance(value, bool):
         fail(key, value, "must be true or false")
+
+
+KINDS = {
+    "float": (is_number, "a finite number"),
+    "int": (is_int, "an integer"),
+    "bool": (lambda v: isinstance(v, bool), "true or false"),
+}
+
+
+def target_hints(target: str) -> dict[str, str]:
+    """The named parameters of a ``_target_`` and their annotations as written (a class's **kwargs: its bases')."""
+    hints: dict[str, str] = {}
+    obj = get_object(target)
+    for owner in obj.__mro__[:-1] if isinstance(obj, type) else (obj,):  # [:-1]: not object's signature
+        params = inspect.signature(owner).parameters.values()
+        hints.update({p.name: str(p.annotation) for p in params if p.kind != p.VAR_KEYWORD and p.name not in hints})
+        if all(p.kind != p.VAR_KEYWORD for p in params):
+            break
+    return hints
+
+
+def check_target(cfg: DictConfig, group: str) -> None:
+    """cfg[group]'s keys have their _target_'s annotated types: float finite, int, bool; a *score in [0, 1]."""
+    target = OmegaConf.select(cfg, f"{group}._target_", default=None)
+    for name, hint in target_hints(target).items() if target else ():
+        kind, _, rest = hint.partition(" | ")
+        key, nullable = f"{group}.{name}", rest == "None"
+        if name not in cfg[group] or kind not in KINDS or (nullable and value_of(cfg, key) is None):
+            continue
+        value = value_of(cfg, key)
+        if not KINDS[kind][0](value):
+            fail(key, value, f"must be {KINDS[kind][1]}" + (" or null" if nullable else ""))
+        if name.endswith("score") and not 0 <= value <= 1:  # scores are in [0, 1] (docs/formats.md)
+            fail(key, value, "must be a score in [0, 1]")

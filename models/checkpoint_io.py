@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import io
 import logging
+from contextlib import suppress
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +17,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torch import nn
 
-from data.formats.atomic_io import atomic_open
+from data.formats.atomic_io import atomic_open, remove_stale_temporaries
 from models.load_errors import CheckpointError
 
 log = logging.getLogger(__name__)
@@ -77,6 +78,9 @@ def _unwrap(outer: Any, path: Path) -> tuple[dict, str]:
 def read_checkpoint(path: str | Path, kind: str | None = None) -> dict:
     """The checked state dict of a train.py file; kind 'resume' also refuses a weights-only file (best.pth)."""
     path = Path(path)
+    if kind == "resume":  # a killed run's partial checkpoints: its resumed run saves into another folder
+        with suppress(OSError):  # a read-only folder keeps them
+            remove_stale_temporaries(path.parent)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such checkpoint")
     if path.stat().st_size == 0:

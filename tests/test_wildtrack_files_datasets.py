@@ -172,11 +172,14 @@ def test_files_round_trip_reproduces_keypoints_and_rig(ring, tmp_path):
             np.testing.assert_array_equal(got.person_ids, want.person_ids)
 
 
-def test_files_frame_range_keeps_frames_without_detections():
-    seq = load_files(str(EXAMPLE / "cameras.json"), str(EXAMPLE / "poses2d.json"), frames="99:104")
+def test_files_frame_list_keeps_frames_without_detections_a_range_stays_within_the_files_frames(capsys):
+    seq = load_files(str(EXAMPLE / "cameras.json"), str(EXAMPLE / "poses2d.json"), frames=[99, 100, 101, 102, 103])
     assert [f.index for f in seq.frames] == [99, 100, 101, 102, 103]
     assert [sum(len(v) for v in f.views) == 0 for f in seq.frames] == [True, False, False, False, True]
     assert seq.meta["frames_without_detections"] == 2
+    seq = load_files(str(EXAMPLE / "cameras.json"), str(EXAMPLE / "poses2d.json"), frames="99:104")
+    assert [f.index for f in seq.frames] == [100, 101, 102] and seq.meta["frames_without_detections"] == 0
+    assert capsys.readouterr().err == "warning: dataset.frames: 5 frames clamped to the file's 100..102\n"
 
 
 def test_files_bad_entry_is_named(tmp_path):

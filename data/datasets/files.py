@@ -1,10 +1,11 @@
 """Your own rig: a calibration (any format :func:`data.geometry.calibration.load_rig` reads) and a poses2d.json
 turned into a Sequence without ground truth, checked by :mod:`data.geometry.check_rig` with the 2D poses.
-A selected frame without any detection stays a frame, so a detector's output can be scored over a fixed range.
-"""
+A selected frame without any detection stays a frame (a range is clamped to the file's first..last frame)."""
 
 from __future__ import annotations
 
+import sys
+from bisect import bisect_left, bisect_right
 from pathlib import Path
 from typing import Iterable
 
@@ -23,10 +24,15 @@ def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str
         raise FileNotFoundError(f"{poses2d}: poses2d.json not found")
     views = read_poses2d(poses2d, rig.names, [c.size for c in rig])
     check_rig(rig, cameras, views)  # load_rig ran the geometric checks; this adds the 2D poses against the rig
+    first, last = (min(views), max(views)) if views else (0, -1)
     if frames is None:
         numbers = sorted(views)
+    elif isinstance(frames, str):
+        numbers = list(clamped(frame_range(frames), first, last))
     else:
-        numbers = list(frame_range(frames)) if isinstance(frames, str) else sorted(set(frame_list(frames)))
+        numbers = sorted(set(frame_list(frames)))
+    if not numbers:
+        raise ValueError(f"frames={frames!r}: selects no frame ({poses2d} holds frames {first}..{last})")
     empty = [f for f in numbers if f not in views]
     out = [Frame(f, views.get(f) or [ViewDetections.empty() for _ in rig.names]) for f in numbers]
     detections = sum(len(v) for f in numbers for v in views.get(f, []))
@@ -51,6 +57,15 @@ def frame_range(frames: str, end: int | None = None) -> range:
         return range(*(default if p is None else p for p, default in zip(parts, (0, end, 1))))
     except (TypeError, ValueError):
         raise ValueError(f"frames={frames!r}: {FRAMES_EXPECTED}") from None
+
+
+def clamped(wanted: range, first: int, last: int) -> range:
+    """The numbers of wanted within first..last (past them a range would run on empty frames); a line says so."""
+    up = wanted if wanted.step > 0 else wanted[::-1]
+    inside = up[bisect_left(up, first) : bisect_right(up, last)][:: 1 if wanted.step > 0 else -1]
+    if 0 < len(inside) < len(wanted):
+        print(f"warning: dataset.frames: {len(wanted)} frames clamped to the file's {first}..{last}", file=sys.stderr)
+    return inside
 
 
 def frame_list(frames: Iterable) -> list[int]:

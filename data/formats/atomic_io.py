@@ -53,11 +53,11 @@ def is_stale(path: Path) -> bool:
     return pid != os.getpid() and not _running(pid)
 
 
-def remove_stale_temporaries(folder: Path, target: str) -> None:
-    """Delete the stale temporaries of the file named target in folder."""
+def remove_stale_temporaries(folder: Path, target: str | None = None) -> None:
+    """Delete the stale temporaries of the file named target (None: of any file) in folder."""
     for path in folder.glob("*.tmp"):
         match = TEMPORARY.match(path.name)
-        if match and match["target"] == target and is_stale(path):
+        if match and target in (None, match["target"]) and is_stale(path):
             path.unlink(missing_ok=True)
 
 

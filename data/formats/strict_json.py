@@ -1,7 +1,9 @@
-"""JSON objects read strictly: a key given twice is an error (json keeps the last one silently)."""
+"""JSON objects read strictly: a key given twice is an error (json keeps the last one silently); written strictly:
+null for NaN and infinities (json writes NaN, which most readers refuse)."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 
@@ -20,3 +22,12 @@ def unique_keys(pairs: list[tuple[str, Any]]) -> dict:
             raise DuplicateKey(key)
         out[key] = value
     return out
+
+
+def finite(value: Any) -> Any:
+    """value (dicts, lists, numbers) with every NaN or infinite float replaced by None."""
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return None if isinstance(value, float) and not math.isfinite(value) else value

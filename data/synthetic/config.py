@@ -50,7 +50,12 @@ class SyntheticConfig:
         plain = {"int": int, "float": float, "bool": bool, "str": str}
         for f in fields(self):
             if f.type in plain:
-                setattr(self, f.name, plain[f.type](getattr(self, f.name)))
+                try:
+                    setattr(self, f.name, plain[f.type](getattr(self, f.name)))
+                except (TypeError, ValueError):
+                    raise ValueError(
+                        f"synthetic dataset option {f.name}={getattr(self, f.name)!r} must be {f.type}"
+                    ) from None
         if self.camera_radius_m is not None:
             self.camera_radius_m = float(self.camera_radius_m)
         self.walk_speed_mps = _floats(self.walk_speed_mps, 2, "walk_speed_mps")
