@@ -1,8 +1,5 @@
 """Dev-set table: the default pipeline beside the paper's configuration and the baselines, same frames, same run.
 
-    python -m benchmarks.real_inputs [--sets shelf,panoptic,wildtrack,crowd,timing] [--rows default,paper,...]
-                                     [--match TEXT] [--crowd-frames 3] [--out FILE.md] [--data ../shared/data]
-
 Dev sets: Shelf (real OpenPose BODY_25) as shipped and without its 6 foot keypoints (a COCO-17 detector's);
 Panoptic band1 / band2 (20 frames, 5 HD cameras, 2D projected from the GT with 0 / 2 / 5 px noise); Wildtrack
 (7 real cameras, synthetic bodies at the annotated positions, 5 px); the crowd sweep of 10-400 people; 100

@@ -1,7 +1,5 @@
 """3D reconstruction benchmark: vanilla / mle / map / mle_map on synthetic crowds, as one markdown report.
 
-    python -m benchmarks.reconstruction [--quick] [--out FILE.md] [--data ../shared/data]
-
 (a) MPJPE (mm, Pose3DEvaluator protocol: joints valid in prediction and GT), MPJPE over the joints the vanilla
     DLT outputs (the same joints for every stage), PCP (%) and ms per frame of the four stages, oracle matching,
     occlusion on, 2D noise 2 / 5 / 10 px (SD at 5 m, growing with depth), on the real Wildtrack rig (synthetic

@@ -1,7 +1,5 @@
 """Oracle upper bounds of per-frame multi-view reconstruction on Shelf's OpenPose detections.
 
-    python -m benchmarks.shelf_bound [--data ../shared/data] [overrides ...]   (e.g. dataset.drop_feet=true)
-
 For every annotated actor 1-3 of every Shelf frame, strict Shelf PCP (alpha 0.5) of the pipeline's prediction
 beside two oracles that use the ground truth to choose, not to move, the points: the view-subset oracle
 triangulates every subset of >= 2 of the views the matcher put in the person and keeps, per joint, the point
@@ -127,7 +125,7 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", default="../shared/data")
     parser.add_argument("--max-px", type=float, default=40.0, help="a view's nearest detection must be this close")
-    parser.add_argument("overrides", nargs="*", help="Hydra overrides of configs/eval.yaml")
+    parser.add_argument("overrides", nargs="*", help="eval.yaml overrides, e.g. dataset.drop_feet=true")
     args = parser.parse_args(argv)
     rows = run([*common.shelf(args.data), *args.overrides], args.max_px)
     table = []
