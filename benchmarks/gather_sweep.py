@@ -45,8 +45,7 @@ class Run:
 
 def parse_overrides(lines: Sequence[str]) -> dict[str, str]:
     """``key=value`` override strings as {key: value}, without the ``+``/``++``/``~`` prefixes."""
-    pairs = (line.partition("=") for line in lines)
-    return {key.lstrip("+~"): value for key, _, value in pairs}
+    return {key.lstrip("+~"): value for key, _, value in (line.partition("=") for line in lines)}
 
 
 def load_run(run_dir: Path) -> Run:

@@ -59,8 +59,7 @@ def paired_difference(baseline: list[float], ours: list[float]) -> tuple[float, 
 @contextmanager
 def worktree(rev: str) -> Iterator[Path]:
     """A temporary detached git worktree of rev (removed after): -> its path."""
-    folder = Path(tempfile.mkdtemp(prefix="paired_speed_"))
-    path = folder / "tree"
+    path = Path(tempfile.mkdtemp(prefix="paired_speed_")) / "tree"
     subprocess.run(["git", "worktree", "add", "--detach", str(path), rev], cwd=ROOT, check=True, capture_output=True)
     try:
         yield path

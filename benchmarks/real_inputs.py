@@ -108,8 +108,7 @@ def main(argv: list[str] | None = None) -> list[list]:
             k: v for k, v in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items() if args.match in k
         }
         for label, dataset in tqdm(chosen.items(), desc="dev sets"):
-            base = compose(config_name="eval", overrides=dataset)
-            sequence = instantiate(base.dataset, _convert_="all")
+            sequence = instantiate(compose(config_name="eval", overrides=dataset).dataset, _convert_="all")
             for row, overrides in rows_wanted:
                 if row.startswith("oracle") and label.startswith("Shelf"):  # Shelf's detections carry no identities
                     table.append([label, row, *["-"] * 8])

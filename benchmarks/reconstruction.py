@@ -51,8 +51,7 @@ def make_stages() -> dict[str, Stage]:
 
 def gt_for_assignment(frame: Frame, assignment: np.ndarray) -> np.ndarray:
     """Ground truth of each matched person through the detection identities: (P, V) -> (P, J, 4)."""
-    first = np.argmax(assignment >= 0, axis=1)
-    ids = [frame.views[v].person_ids[assignment[p, v]] for p, v in enumerate(first)]
+    ids = [frame.views[v].person_ids[assignment[p, v]] for p, v in enumerate(np.argmax(assignment >= 0, axis=1))]
     index = {int(i): k for k, i in enumerate(frame.gt_ids)}
     return frame.gt_poses[[index[int(i)] for i in ids]]
 

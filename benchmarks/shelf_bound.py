@@ -44,8 +44,7 @@ def subset_poses(keypoints: np.ndarray, rig: Rig) -> np.ndarray:
     for p, subset in enumerate(subsets):
         poses2d[list(subset), p] = und[list(subset)]
     points = triangulate_dlt(poses2d, rig.projection_matrices())
-    xyz = np.where(points[..., 3:] > 0, points[..., :3], np.nan)
-    return with_mid_hip(coco23_to_shelf14(xyz))
+    return with_mid_hip(coco23_to_shelf14(np.where(points[..., 3:] > 0, points[..., :3], np.nan)))
 
 
 def oracle_pose(own: np.ndarray, candidates: np.ndarray, gt: np.ndarray) -> np.ndarray:
@@ -56,8 +55,7 @@ def oracle_pose(own: np.ndarray, candidates: np.ndarray, gt: np.ndarray) -> np.n
     err = np.where(np.isfinite(err), err, np.inf)
     out = own.copy()
     limbs = np.arange(len(COCO23_TO_SHELF14_LIMBS))
-    best = np.argmin(err[:, limbs], axis=0)
-    out[limbs] = cands[best, limbs]
+    out[limbs] = cands[np.argmin(err[:, limbs], axis=0), limbs]
     out[list(HEAD)] = cands[np.argmin(err[:, list(HEAD)].sum(axis=1)), list(HEAD)]
     return with_mid_hip(out[:14])
 

@@ -65,8 +65,7 @@ def evaluate_sequence(
                 frame_reprojection_errors(result.poses3d, result.assignment, frame.views, sequence.rig).ravel()
             )
         t_eval += time.perf_counter() - t0
-    has_gt = any(f.gt_poses is not None for f in sequence.frames)
-    metrics = evaluator.summary() if has_gt else {}
+    metrics = evaluator.summary() if any(f.gt_poses is not None for f in sequence.frames) else {}
     if has_ids:
         metrics.update({f"matching_{k}": v for k, v in pairs.as_dict().items()})
     if identities is not None:

@@ -148,8 +148,7 @@ def _validate(r: _Run, loader: DataLoader) -> dict[str, float]:
     write_coco_results(r.run_dir / r.cfg.predictions_file, result.predictions)
     latest = {"metrics": result.metrics, "step": step, "epoch": r.state.epoch}  # for sweep tables
     atomic_write_text(r.run_dir / "metrics.json", json.dumps(latest, indent=2))
-    shown = ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items())
-    log.info("validation at step %d: %s", step, shown)
+    log.info("validation at step %d: %s", step, ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items()))
     return result.metrics
 
 
