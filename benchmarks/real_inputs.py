@@ -76,18 +76,10 @@ def run_row(sequence: Sequence, cfg: DictConfig) -> list:
     if "shelf" in report.protocols:
         return ["-"] * 6 + [report.protocols["shelf"]["ours"]["strict"]["average"]["average"], ms]
     m, seen = report.metrics, detectable_persons(sequence)
-    found = m.get("num_matched", 0)
-    pct = lambda k: 100.0 * m[k] if k in m else "-"
-    return [
-        m.get("recall", "-"),
-        100.0 * found / seen if seen else "-",
-        m.get("num_pred", 0) - found,
-        pct("matching_precision"),
-        pct("matching_recall"),
-        m.get("mpjpe_mm", "-"),
-        m.get("pcp_average", "-"),
-        ms,
-    ]
+    found, get = m.get("num_matched", 0), lambda k: m.get(k, "-")
+    pairs = [100.0 * m[k] if k in m else "-" for k in ("matching_precision", "matching_recall")]
+    share = 100.0 * found / seen if seen else "-"
+    return [get("recall"), share, m.get("num_pred", 0) - found, *pairs, get("mpjpe_mm"), get("pcp_average"), ms]
 
 
 def main(argv: list[str] | None = None) -> list[list]:
