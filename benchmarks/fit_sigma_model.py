@@ -1,7 +1,5 @@
 """Fit the 2D noise model (``noise_model`` config group) to the real errors of Shelf's OpenPose detections.
 
-    python -m benchmarks.fit_sigma_model [--root ../shared/data/shelf] [--frames 0:301] [--out FILE.yaml]
-
 Every PAF-grouped OpenPose detection is paired with the actor of ``tum/actorsGT.mat`` whose projected limb joints
 lie closest (median over the 12 Shelf-14 limb joints, below ``--max-px``); each scored limb joint's pixel error is
 kept with its score and box size sqrt(w h). reconstruction.noise_model.NoiseModel's

@@ -1,7 +1,5 @@
 """Per-frame time by stage of a tree's multi-view pipeline, this tree's or an older revision's.
 
-    python -m benchmarks.frame_times [--only TEXT] [--repeats 3] [--cpu N] [--data DIR]
-
 It times the tree whose packages are imported (the working directory's, or PYTHONPATH's) and imports nothing of
 the repository at its top, so that ``benchmarks.paired_speed --driver frames`` can run it in an older revision's
 worktree. One table in benchmarks.speed's format: per setting, the median over frames x repeats of matching,

@@ -45,8 +45,7 @@ class Run:
 
 def parse_overrides(lines: Sequence[str]) -> dict[str, str]:
     """``key=value`` override strings as {key: value}, without the ``+``/``++``/``~`` prefixes."""
-    pairs = (line.partition("=") for line in lines)
-    return {key.lstrip("+~"): value for key, _, value in pairs}
+    return {key.lstrip("+~"): value for key, _, value in (line.partition("=") for line in lines)}
 
 
 def load_run(run_dir: Path) -> Run:
@@ -78,9 +77,7 @@ def _sort_value(value: str) -> tuple[int, float, str]:
 def metric_cell(run: Run, name: str) -> str:
     """The formatted value of one metric of a run; "-" when the run lacks it."""
     if name.endswith("_ms") and name[:-3] in run.timings_s:
-        if not run.num_frames:
-            return "-"
-        return f"{1000.0 * run.timings_s[name[:-3]] / run.num_frames:.2f}"
+        return f"{1000.0 * run.timings_s[name[:-3]] / run.num_frames:.2f}" if run.num_frames else "-"
     if name not in run.metrics:
         return "-"
     _, factor, fmt = METRIC_COLUMNS.get(name, (name, 1.0, ".4g"))

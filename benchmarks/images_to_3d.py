@@ -1,8 +1,5 @@
 """Images to 3D on a rendered synthetic scene: the SPPE's 2D poses beside the render's ground-truth 2D.
 
-    python -m benchmarks.images_to_3d --checkpoint <run>/checkpoints/best.pth [--frames 20] [--persons 10]
-                                      [--cameras 5] [--out FILE.md] [--rows gt2d,sppe,...]
-
 Scene: ``dataset=synthetic dataset.render=true`` (ring cameras, 1280 x 720); every row runs the same frames
 through eval.py's ``run`` with the default matching, MAP and tracking. Rows (ROWS): the render's exact 2D (the
 upper bound of any 2D stage), the SPPE on the render's boxes with flip test, with separate_pairs + fix_sides,

@@ -1,8 +1,5 @@
 """Paired speed runs: this tree against a git revision, alternately, each run's stage medians compared.
 
-    python -m benchmarks.paired_speed --baseline REV [--pairs 8] [--only "100 people"] [--repeats 3] [--cpu 1]
-                                      [--driver frames|process]
-
 Alternating runs resolve a change of a few percent on a machine whose speed drifts over minutes. Each pair runs
 the driver in a temporary git worktree of the baseline, then in this tree, each tree with a numba cache of its own
 kept over the pairs. Drivers: ``frames`` runs this tree's benchmarks/frame_times.py in both trees (the same
@@ -62,8 +59,7 @@ def paired_difference(baseline: list[float], ours: list[float]) -> tuple[float, 
 @contextmanager
 def worktree(rev: str) -> Iterator[Path]:
     """A temporary detached git worktree of rev (removed after): -> its path."""
-    folder = Path(tempfile.mkdtemp(prefix="paired_speed_"))
-    path = folder / "tree"
+    path = Path(tempfile.mkdtemp(prefix="paired_speed_")) / "tree"
     subprocess.run(["git", "worktree", "add", "--detach", str(path), rev], cwd=ROOT, check=True, capture_output=True)
     try:
         yield path

@@ -1,7 +1,5 @@
 """Speed of the SPPE stage's parts: FastPose crops per second, and decoding + association time per person.
 
-    python -m benchmarks.pose2d_speed [--min-time 0.3] [--persons 10] [--repeats 10] [--devices cpu,cuda]
-
 Network: FastPose-18 and -50 with random weights, inputs 256x192 and 128x96 (h x w), batches of 1 and 32 crops,
 flip test off and on, through models/heatmap_inference.predict_heatmaps on the CPU with 1 thread and torch's
 default thread count, and on CUDA with float16 autocast where there is a GPU. Each setting has untimed passes

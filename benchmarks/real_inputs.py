@@ -1,8 +1,5 @@
 """Dev-set table: the default pipeline beside the paper's configuration and the baselines, same frames, same run.
 
-    python -m benchmarks.real_inputs [--sets shelf,panoptic,wildtrack,crowd,timing] [--rows default,paper,...]
-                                     [--match TEXT] [--crowd-frames 3] [--out FILE.md] [--data ../shared/data]
-
 Dev sets: Shelf (real OpenPose BODY_25) as shipped and without its 6 foot keypoints (a COCO-17 detector's);
 Panoptic band1 / band2 (20 frames, 5 HD cameras, 2D projected from the GT with 0 / 2 / 5 px noise); Wildtrack
 (7 real cameras, synthetic bodies at the annotated positions, 5 px); the crowd sweep of 10-400 people; 100
@@ -79,18 +76,10 @@ def run_row(sequence: Sequence, cfg: DictConfig) -> list:
     if "shelf" in report.protocols:
         return ["-"] * 6 + [report.protocols["shelf"]["ours"]["strict"]["average"]["average"], ms]
     m, seen = report.metrics, detectable_persons(sequence)
-    found = m.get("num_matched", 0)
-    pct = lambda k: 100.0 * m[k] if k in m else "-"
-    return [
-        m.get("recall", "-"),
-        100.0 * found / seen if seen else "-",
-        m.get("num_pred", 0) - found,
-        pct("matching_precision"),
-        pct("matching_recall"),
-        m.get("mpjpe_mm", "-"),
-        m.get("pcp_average", "-"),
-        ms,
-    ]
+    found, get = m.get("num_matched", 0), lambda k: m.get(k, "-")
+    pairs = [100.0 * m[k] if k in m else "-" for k in ("matching_precision", "matching_recall")]
+    share = 100.0 * found / seen if seen else "-"
+    return [get("recall"), share, m.get("num_pred", 0) - found, *pairs, get("mpjpe_mm"), get("pcp_average"), ms]
 
 
 def main(argv: list[str] | None = None) -> list[list]:
@@ -111,8 +100,7 @@ def main(argv: list[str] | None = None) -> list[list]:
             k: v for k, v in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items() if args.match in k
         }
         for label, dataset in tqdm(chosen.items(), desc="dev sets"):
-            base = compose(config_name="eval", overrides=dataset)
-            sequence = instantiate(base.dataset, _convert_="all")
+            sequence = instantiate(compose(config_name="eval", overrides=dataset).dataset, _convert_="all")
             for row, overrides in rows_wanted:
                 if row.startswith("oracle") and label.startswith("Shelf"):  # Shelf's detections carry no identities
                     table.append([label, row, *["-"] * 8])

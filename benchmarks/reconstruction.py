@@ -1,7 +1,5 @@
 """3D reconstruction benchmark: vanilla / mle / map / mle_map on synthetic crowds, as one markdown report.
 
-    python -m benchmarks.reconstruction [--quick] [--out FILE.md] [--data ../shared/data]
-
 (a) MPJPE (mm, Pose3DEvaluator protocol: joints valid in prediction and GT), MPJPE over the joints the vanilla
     DLT outputs (the same joints for every stage), PCP (%) and ms per frame of the four stages, oracle matching,
     occlusion on, 2D noise 2 / 5 / 10 px (SD at 5 m, growing with depth), on the real Wildtrack rig (synthetic
@@ -53,8 +51,7 @@ def make_stages() -> dict[str, Stage]:
 
 def gt_for_assignment(frame: Frame, assignment: np.ndarray) -> np.ndarray:
     """Ground truth of each matched person through the detection identities: (P, V) -> (P, J, 4)."""
-    first = np.argmax(assignment >= 0, axis=1)
-    ids = [frame.views[v].person_ids[assignment[p, v]] for p, v in enumerate(first)]
+    ids = [frame.views[v].person_ids[assignment[p, v]] for p, v in enumerate(np.argmax(assignment >= 0, axis=1))]
     index = {int(i): k for k, i in enumerate(frame.gt_ids)}
     return frame.gt_poses[[index[int(i)] for i in ids]]
 

@@ -1,7 +1,5 @@
 """Oracle upper bounds of per-frame multi-view reconstruction on Shelf's OpenPose detections.
 
-    python -m benchmarks.shelf_bound [--data ../shared/data] [overrides ...]   (e.g. dataset.drop_feet=true)
-
 For every annotated actor 1-3 of every Shelf frame, strict Shelf PCP (alpha 0.5) of the pipeline's prediction
 beside two oracles that use the ground truth to choose, not to move, the points: the view-subset oracle
 triangulates every subset of >= 2 of the views the matcher put in the person and keeps, per joint, the point
@@ -46,8 +44,7 @@ def subset_poses(keypoints: np.ndarray, rig: Rig) -> np.ndarray:
     for p, subset in enumerate(subsets):
         poses2d[list(subset), p] = und[list(subset)]
     points = triangulate_dlt(poses2d, rig.projection_matrices())
-    xyz = np.where(points[..., 3:] > 0, points[..., :3], np.nan)
-    return with_mid_hip(coco23_to_shelf14(xyz))
+    return with_mid_hip(coco23_to_shelf14(np.where(points[..., 3:] > 0, points[..., :3], np.nan)))
 
 
 def oracle_pose(own: np.ndarray, candidates: np.ndarray, gt: np.ndarray) -> np.ndarray:
@@ -58,8 +55,7 @@ def oracle_pose(own: np.ndarray, candidates: np.ndarray, gt: np.ndarray) -> np.n
     err = np.where(np.isfinite(err), err, np.inf)
     out = own.copy()
     limbs = np.arange(len(COCO23_TO_SHELF14_LIMBS))
-    best = np.argmin(err[:, limbs], axis=0)
-    out[limbs] = cands[best, limbs]
+    out[limbs] = cands[np.argmin(err[:, limbs], axis=0), limbs]
     out[list(HEAD)] = cands[np.argmin(err[:, list(HEAD)].sum(axis=1)), list(HEAD)]
     return with_mid_hip(out[:14])
 
@@ -127,7 +123,7 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", default="../shared/data")
     parser.add_argument("--max-px", type=float, default=40.0, help="a view's nearest detection must be this close")
-    parser.add_argument("overrides", nargs="*", help="Hydra overrides of configs/eval.yaml")
+    parser.add_argument("overrides", nargs="*", help="eval.yaml overrides, e.g. dataset.drop_feet=true")
     args = parser.parse_args(argv)
     rows = run([*common.shelf(args.data), *args.overrides], args.max_px)
     table = []

@@ -1,8 +1,5 @@
 """Speed of the default pipeline: per-frame time by stage, and whole-process times.
 
-    python -m benchmarks.speed [--repeats 3] [--crowd-frames 3] [--skip-process] [--quick] [--only TEXT]
-                               [--cpu N] [--out FILE.md]
-
 Table 1: benchmarks/frame_times.py's per-frame stage medians (ms, one core, default config with tracking) of Shelf
 300-600 (plus its PAF grouping), 100 people in 7 ring views and the crowd sweep (10-400 people, 5 and 10 views).
 Table 2: ``python eval.py`` and the Shelf evaluation as fresh processes, warm (median of ``--repeats``, on

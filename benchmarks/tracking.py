@@ -1,7 +1,5 @@
 """Identity metrics and cost of the tracker (``tracking=on``) beside ``tracking=off``, same frames, one process.
 
-    python -m benchmarks.tracking [--data ../shared/data] [--sets shelf,panoptic,crowd] [--crowd-frames 50]
-
 Sets: Shelf (actors 1-3), Panoptic band1 and band2 at 5 px (persistent body ids), the walking crowd of
 ``configs/dataset/crowd.yaml`` with 10 and 100 people. Columns: identity switches (per 100 GT person-frames),
 the share of GT person-frames whose prediction carries the person's most frequent track id (IDF1-like, %),

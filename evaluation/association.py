@@ -22,8 +22,7 @@ def match_to_ground_truth(pred: np.ndarray, gt: np.ndarray, max_dist_m: float = 
     if len(pred) == 0 or len(gt) == 0:
         return np.zeros((0, 2), dtype=np.int64)
     cost = mean_joint_distance(pred, gt)
-    finite = np.where(np.isfinite(cost), cost, 1e6)
-    rows, cols = linear_sum_assignment(finite)
+    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e6))
     keep = cost[rows, cols] <= max_dist_m
     return np.stack([rows[keep], cols[keep]], axis=1).astype(np.int64)
 

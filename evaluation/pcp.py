@@ -18,8 +18,7 @@ def correct_parts(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5, parts: n
     gt = np.asarray(gt, dtype=np.float64)[..., :3]
     a, b = parts[:, 0], parts[:, 1]
     err = (np.linalg.norm(pred[:, a] - gt[:, a], axis=-1) + np.linalg.norm(pred[:, b] - gt[:, b], axis=-1)) / 2
-    length = np.linalg.norm(gt[:, a] - gt[:, b], axis=-1)
-    return err <= alpha * length
+    return err <= alpha * np.linalg.norm(gt[:, a] - gt[:, b], axis=-1)
 
 
 def pcp_by_part(correct: np.ndarray, valid: np.ndarray | None = None) -> dict[str, float]:

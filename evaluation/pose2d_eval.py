@@ -45,8 +45,7 @@ def build_eval_dataset(
             raise FileNotFoundError(f"{p} does not exist")
     records = load_keypoint_dataset(kind, ann_file, image_dir, det_file, min_keypoints=int(det_file is None))
     crops = dict(augment=None, train=False, use_det_boxes=det_file is not None, padding=data.padding, cache_size=0)
-    dataset = TopDownDataset(records, codec, tuple(data.input_size), **crops)
-    return dataset, ann_file
+    return TopDownDataset(records, codec, tuple(data.input_size), **crops), ann_file
 
 
 def decode_candidates(
@@ -118,8 +117,7 @@ def write_predictions_poses2d(
     for p in predictions:
         frame, camera = views[p["image_id"]]
         grouped[frame][cameras.index(camera)].append(p)
-    frames = {f: [_view(dets) for dets in per_camera] for f, per_camera in grouped.items()}
-    write_poses2d(path, frames, cameras)
+    write_poses2d(path, {f: [_view(dets) for dets in per_camera] for f, per_camera in grouped.items()}, cameras)
     return cameras
 
 

@@ -60,8 +60,7 @@ def estimate_2d(
 
 def view_metrics(sequence: Sequence, gt_views: list[list[ViewDetections]]) -> dict[str, float]:
     """Per-view COCO OKS AP/AR (all 23, body 17, foot 6) of the sequence's predicted views against gt_views."""
-    gt_frames = [replace(f, views=g) for f, g in zip(sequence.frames, gt_views)]
-    doc = ground_truth_document(gt_frames, sequence.rig)
+    doc = ground_truth_document([replace(f, views=g) for f, g in zip(sequence.frames, gt_views)], sequence.rig)
     predictions = results(sequence.frames, sequence.rig)
     metrics = {}
     for subset in ("all", "body", "foot"):

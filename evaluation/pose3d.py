@@ -38,11 +38,6 @@ class Pose3DEvaluator(PairedEvaluator):
         parts = np.concatenate(self.parts) if self.parts else np.zeros((0, len(PART_JOINTS)), bool)
         valid = np.concatenate(self.parts_valid) if self.parts_valid else parts.copy()
         out.update({f"pcp_{k}": v for k, v in pcp_by_part(parts, valid).items()})
-        out.update(
-            num_gt=self.num_gt,
-            num_pred=self.num_pred,
-            num_matched=self.num_matched,
-            recall=100.0 * self.num_matched / max(self.num_gt, 1),
-            precision=100.0 * self.num_matched / max(self.num_pred, 1),
-        )
-        return out
+        out.update(num_gt=self.num_gt, num_pred=self.num_pred, num_matched=self.num_matched)
+        recall, precision = (100.0 * self.num_matched / max(n, 1) for n in (self.num_gt, self.num_pred))
+        return {**out, "recall": recall, "precision": precision}

@@ -82,8 +82,7 @@ def evaluate_sequence(
                 frame_reprojection_errors(result.poses3d, result.assignment, frame.views, sequence.rig).ravel()
             )
         t_eval += time.perf_counter() - t0
-    has_gt = any(f.gt_poses is not None for f in sequence.frames)
-    metrics = evaluator.summary() if has_gt else {}
+    metrics = evaluator.summary() if any(f.gt_poses is not None for f in sequence.frames) else {}
     if has_ids:
         metrics.update({f"matching_{k}": v for k, v in pairs.as_dict().items()})
     if identities is not None:
@@ -117,11 +116,10 @@ def nobody_diagnosis(report: SequenceReport) -> str | None:
 def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str:
     """The console summary: metrics with their protocol, per-group MPJPE, PCP, skipped frames, timings."""
     m = report.metrics
-    lines = []
+    blocks = []
     if "mpjpe_mm" in m:
-        lines += [
+        blocks += [
             f"Protocol: {protocol}",
-            "",
             format_table(
                 ["metric", "value"],
                 [
@@ -134,40 +132,30 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
                     *_identity_rows(m),
                 ],
             ),
-            "",
             format_table(["MPJPE (mm)", *JOINT_GROUPS], [["", *(m[f"mpjpe_{g}_mm"] for g in JOINT_GROUPS)]]),
-            "",
             format_table(["PCP (%)", *PART_NAMES], [["", *(m[f"pcp_{p}"] for p in PART_NAMES)]]),
-            "",
         ]
     if "reprojection_mean_px" in m:
-        lines += [
+        blocks.append(
             "Reprojection error of the reconstructed joints against the 2D detections (undistorted px, "
             "every joint with score > 0 in every view; paper Table 3): mean {reprojection_mean_px:.2f}, "
             "min {reprojection_min_px:.3f}, max {reprojection_max_px:.1f}, "
-            "variance {reprojection_var_px2:.2f} px^2".format(**m),
-            "",
-        ]
-    for text in report.protocol_reports:
-        lines += [text, ""]
+            "variance {reprojection_var_px2:.2f} px^2".format(**m)
+        )
+    lines = []
     if report.inputs:
         lines.append("Detections before matching: " + ", ".join(f"{n} {why}" for why, n in report.inputs.items()))
     if report.unmatched:
-        lines.append(
-            "Detections left unmatched by the matcher: "
-            + ", ".join(f"{n} {why}" for why, n in sorted(report.unmatched.items()))
-        )
+        unmatched = ", ".join(f"{n} {why}" for why, n in sorted(report.unmatched.items()))
+        lines.append(f"Detections left unmatched by the matcher: {unmatched}")
     diagnosis = nobody_diagnosis(report)
-    if diagnosis is not None:
-        lines.append(diagnosis)
-    skipped = sum(report.skipped.values())
-    lines.append(
-        f"Frames: {num_frames} evaluated, {skipped} skipped"
-        + "".join(f"; {n} {why}" for why, n in report.skipped.items())
-    )
+    lines += [diagnosis] if diagnosis is not None else []
+    skipped = "".join(f"; {n} {why}" for why, n in report.skipped.items())
+    lines.append(f"Frames: {num_frames} evaluated, {sum(report.skipped.values())} skipped{skipped}")
+    blocks += [*report.protocol_reports, "\n".join(lines)]
     per_frame = [[stage, 1000.0 * sec / max(num_frames, 1), sec] for stage, sec in report.timings.items()]
-    lines += ["", format_table(["stage", "ms / frame", "total s"], per_frame, floatfmt=".2f")]
-    return "\n".join(lines)
+    blocks.append(format_table(["stage", "ms / frame", "total s"], per_frame, floatfmt=".2f"))
+    return "\n\n".join(blocks)
 
 
 def _identity_rows(m: dict[str, float]) -> list[list[object]]:

@@ -51,6 +51,5 @@ class FastPose(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """(B, 3, H, W) -> (B, num_joints, H/4, W/4); H and W multiples of 32."""
         if x.shape[-2] % 32 or x.shape[-1] % 32:
-            size = tuple(x.shape[2:])
-            raise ValueError(f"FastPose input height and width must be multiples of 32, got {size}")
+            raise ValueError(f"FastPose input height and width must be multiples of 32, got {tuple(x.shape[2:])}")
         return self.conv_out(self.duc2(self.duc1(self.shuffle1(self.preact(x)))))

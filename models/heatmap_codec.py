@@ -70,8 +70,7 @@ class MultiModalHeatmapCodec:
         """Person own_index of keypoints_all (N, 23, 3) image px, image-to-crop affine (2, 3) -> target, weight."""
         keypoints = np.array(keypoints_all, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
         keypoints[..., :2] = transform_points(keypoints[..., :2], affine)
-        others = np.delete(keypoints, own_index, axis=0)
-        return self.encode(keypoints[own_index], others, labelled)
+        return self.encode(keypoints[own_index], np.delete(keypoints, own_index, axis=0), labelled)
 
     def decode(self, heatmaps: np.ndarray | torch.Tensor, modulate: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Heatmaps (..., 23, h, w) -> keypoints (..., 23, 2) crop-input px, scores (..., 23): argmax + DARK step."""
@@ -121,5 +120,4 @@ def _newton_offsets(log_maps: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.
     safe_det = np.where(concave, det, 1.0)
     off_x = -(dyy * dx - dxy * dy) / safe_det
     off_y = -(dxx * dy - dxy * dx) / safe_det
-    offsets = np.stack([off_x, off_y], axis=-1) * concave[:, None]
-    return np.clip(offsets, -0.5, 0.5)
+    return np.clip(np.stack([off_x, off_y], axis=-1) * concave[:, None], -0.5, 0.5)

@@ -12,8 +12,7 @@ def flip_back(heatmaps: torch.Tensor) -> torch.Tensor:
     """Heatmaps (B, 23, h, w) of mirrored crops -> those of the crops (no one-pixel shift: models/heatmap_codec.py)."""
     if heatmaps.shape[1] != NUM_JOINTS:
         raise ValueError(f"flip test needs {NUM_JOINTS} COCO-23 channels, the network gives {heatmaps.shape[1]}")
-    perm = torch.as_tensor(flip_permutation(), device=heatmaps.device)
-    return heatmaps.flip(-1).index_select(1, perm)
+    return heatmaps.flip(-1).index_select(1, torch.as_tensor(flip_permutation(), device=heatmaps.device))
 
 
 @torch.no_grad()

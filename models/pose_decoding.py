@@ -39,8 +39,7 @@ def joint_candidates(
     """Heatmaps (B, 23, h, w), crop-to-image affines (B, 2, 3) -> candidates (B, 23, M, 3) x, y, score in image px."""
     xy, scores = find_candidates(heatmaps, threshold=threshold, top_m=top_m)
     stride = np.array(codec.input_size, dtype=np.float64) / np.array(codec.heatmap_size)
-    image_xy = candidates_to_image(xy, inverse_affines, stride)
-    return torch.cat([image_xy, scores[..., None]], dim=-1).cpu().numpy()
+    return torch.cat([candidates_to_image(xy, inverse_affines, stride), scores[..., None]], dim=-1).cpu().numpy()
 
 
 def associate_by_image(

@@ -31,8 +31,7 @@ class SELayer(nn.Module):
 
     def forward(self, x: Tensor) -> Tensor:
         """(B, C, H, W) -> (B, C, H, W), each channel scaled by a gate in (0, 1)."""
-        gate = self.fc(self.avg_pool(x).flatten(1))
-        return x * gate[:, :, None, None]
+        return x * self.fc(self.avg_pool(x).flatten(1))[:, :, None, None]
 
 
 def _gate_output(se: SELayer, module: nn.Module, inputs: tuple, output: Tensor) -> Tensor:

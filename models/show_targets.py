@@ -35,8 +35,7 @@ def tile_grid(tiles: Sequence[np.ndarray], columns: int, gap: int = 2) -> np.nda
     if not tiles:
         raise ValueError("no tiles to arrange")
     h, w = tiles[0].shape[:2]
-    blank = np.zeros((h, w, 3), np.uint8)
-    tiles = list(tiles) + [blank] * (-len(tiles) % columns)
+    tiles = list(tiles) + [np.zeros((h, w, 3), np.uint8)] * (-len(tiles) % columns)
     padded = [np.pad(t, ((gap, gap), (gap, gap), (0, 0))) for t in tiles]
     return np.vstack([np.hstack(padded[r : r + columns]) for r in range(0, len(padded), columns)])
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import random
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +46,23 @@ def _reached(state: TrainState, max_steps: int | None) -> bool:
     return max_steps is not None and state.global_step >= max_steps
 
 
+@dataclass
+class _Run:
+    """What the epochs, validations and checkpoints of one run share."""
+
+    cfg: DictConfig
+    run_dir: Path
+    model: nn.Module
+    net: nn.Module  # the model, wrapped by DistributedDataParallel when several processes train
+    loss_fn: nn.Module
+    optimizer: torch.optim.Optimizer
+    scheduler: Any
+    device: torch.device
+    state: TrainState
+    writer: SummaryWriter | None
+    rank: int
+
+
 def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices: dict[str, str] | None = None) -> dict:
     """Train (or resume) into run_dir -> {"losses": {step: loss}, "metrics", "state"}; choices go into checkpoints."""
     check_train_config(cfg)
@@ -63,9 +81,8 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
         raise ValueError(f"{cfg.data.train.ann_file}: no training person")
     sampler = EpochSampler(len(train_set), trainer.seed, shuffle=True, rank=rank, world_size=world)
     train_loader = build_loader(train_set, trainer.batch_size, trainer.num_workers, sampler, device)
-    val_loader = build_loader(
-        val_set, trainer.val_batch_size, trainer.num_workers, EpochSampler(len(val_set), shuffle=False), device
-    )
+    val_sampler = EpochSampler(len(val_set), shuffle=False)
+    val_loader = build_loader(val_set, trainer.val_batch_size, trainer.num_workers, val_sampler, device)
     model = instantiate(cfg.model).to(device)  # e.g. models.fastpose.FastPose
     loss_fn = WeightedHeatmapLoss(cfg.loss.foot_weight)  # Eq. 1's lambda; mu is in the codec
     optimizer = instantiate(cfg.optimizer, _convert_="all")(params=model.parameters())
@@ -73,20 +90,21 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     state = load_checkpoint(checkpoint, model, optimizer, scheduler) if checkpoint else TrainState()
     net = DistributedDataParallel(model, device_ids=[device] if device.type == "cuda" else None) if world > 1 else model
     writer = SummaryWriter(str(run_dir)) if rank == 0 else None
+    r = _Run(cfg, run_dir, model, net, loss_fn, optimizer, scheduler, device, state, writer, rank)
     config = OmegaConf.to_container(cfg, resolve=True)
     sizes = (len(train_set), len(val_set), device, world, state.epoch, state.global_step)
     log.info("%d training crops, %d validation crops, device %s x %d, from epoch %d step %d", *sizes)
     losses: dict[int, float] = {}
     metrics: dict[str, float] = {}
     while state.epoch < trainer.epochs and not _reached(state, trainer.max_steps):
-        finished = _epoch(trainer, net, train_loader, loss_fn, optimizer, device, state, writer, losses, rank)
+        finished = _epoch(r, train_loader, losses)
         if finished:
             scheduler.step()
         last = state.epoch >= trainer.epochs or _reached(state, trainer.max_steps)
         if rank == 0:
             if last or (finished and state.epoch % trainer.val_every == 0):
-                metrics = _validate(cfg, model, val_loader, loss_fn, device, writer, state, run_dir)
-            _save(cfg, run_dir, model, optimizer, scheduler, state, config, metrics, choices)
+                metrics = _validate(r, val_loader)
+            _save(r, config, metrics, choices)
         if world > 1:
             dist.barrier()
     if writer is not None:
@@ -96,24 +114,14 @@ def run(cfg: DictConfig, run_dir: Path, checkpoint: dict | None = None, choices:
     return {"losses": losses, "metrics": metrics, "state": state}
 
 
-def _epoch(
-    trainer: DictConfig,
-    net: nn.Module,
-    loader: DataLoader,
-    loss_fn: nn.Module,
-    optimizer: torch.optim.Optimizer,
-    device: torch.device,
-    state: TrainState,
-    writer: SummaryWriter | None,
-    losses: dict[int, float],
-    rank: int,
-) -> bool:
+def _epoch(r: _Run, loader: DataLoader, losses: dict[int, float]) -> bool:
     """Train the rest of the current epoch (or up to max_steps), adding {global step: loss} to losses -> finished."""
+    trainer, state = r.cfg.trainer, r.state
     loader.dataset.set_epoch(state.epoch)
     loader.sampler.set_epoch(state.epoch, start=state.step_in_epoch * trainer.batch_size)
-    remaining, first_step, progress = len(loader), state.global_step + 1, trainer.progress and rank == 0
+    remaining, first_step, progress = len(loader), state.global_step + 1, trainer.progress and r.rank == 0
     epoch_losses = train_one_epoch(
-        net, loader, loss_fn, optimizer, device, state, trainer.max_steps, writer, trainer.log_every, progress
+        r.net, loader, r.loss_fn, r.optimizer, r.device, state, trainer.max_steps, r.writer, trainer.log_every, progress
     )
     losses.update(zip(range(first_step, state.global_step + 1), epoch_losses))
     finished = len(epoch_losses) == remaining
@@ -124,50 +132,32 @@ def _epoch(
     return finished
 
 
-def _validate(
-    cfg: DictConfig,
-    model: nn.Module,
-    loader: DataLoader,
-    loss_fn: nn.Module,
-    device: torch.device,
-    writer: SummaryWriter,
-    state: TrainState,
-    run_dir: Path,
-) -> dict[str, float]:
+def _validate(r: _Run, loader: DataLoader) -> dict[str, float]:
     """Validate, log to TensorBoard, write the predictions JSON -> the metrics."""
-    dataset = loader.dataset
-    t = cfg.trainer  # val_flip_test: absent from a resumed run stored before the key existed
+    dataset, writer, step = loader.dataset, r.writer, r.state.global_step
+    t = r.cfg.trainer  # val_flip_test: absent from a resumed run stored before the key existed
     flip = t.get("val_flip_test", False)
-    result = validate(model, loader, dataset.codec, dataset.records, loss_fn, device, t.grid_images, t.progress, flip)
+    result = validate(
+        r.model, loader, dataset.codec, dataset.records, r.loss_fn, r.device, t.grid_images, t.progress, flip
+    )
     for key, value in result.metrics.items():
-        writer.add_scalar(f"val/{key}", value, state.global_step)
+        writer.add_scalar(f"val/{key}", value, step)
     if result.grid is not None:
-        writer.add_image("val/heatmaps", result.grid, state.global_step, dataformats="HWC")
+        writer.add_image("val/heatmaps", result.grid, step, dataformats="HWC")
     writer.flush()
-    write_coco_results(run_dir / cfg.predictions_file, result.predictions)
-    latest = {"metrics": result.metrics, "step": state.global_step, "epoch": state.epoch}  # for sweep tables
-    atomic_write_text(run_dir / "metrics.json", json.dumps(latest, indent=2))
-    shown = ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items())
-    log.info("validation at step %d: %s", state.global_step, shown)
+    write_coco_results(r.run_dir / r.cfg.predictions_file, result.predictions)
+    latest = {"metrics": result.metrics, "step": step, "epoch": r.state.epoch}  # for sweep tables
+    atomic_write_text(r.run_dir / "metrics.json", json.dumps(latest, indent=2))
+    log.info("validation at step %d: %s", step, ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items()))
     return result.metrics
 
 
-def _save(
-    cfg: DictConfig,
-    run_dir: Path,
-    model: nn.Module,
-    optimizer: torch.optim.Optimizer,
-    scheduler: Any,
-    state: TrainState,
-    config: dict,
-    metrics: dict[str, float],
-    choices: dict[str, str] | None,
-) -> None:
+def _save(r: _Run, config: dict, metrics: dict[str, float], choices: dict[str, str] | None) -> None:
     """Write checkpoints/last.ckpt, and best.pth when the latest validation beat the best AP (all joints)."""
-    folder = run_dir / cfg.checkpoint_dir
+    folder, state = r.run_dir / r.cfg.checkpoint_dir, r.state
     improved = metrics.get("AP_all", -1.0) > state.best_ap
     if improved:
         state.best_ap = metrics["AP_all"]
-    save_checkpoint(folder / "last.ckpt", model, optimizer, scheduler, state, config, choices)
+    save_checkpoint(folder / "last.ckpt", r.model, r.optimizer, r.scheduler, state, config, choices)
     if improved:
-        save_weights(folder / "best.pth", model, state, metrics, config)
+        save_weights(folder / "best.pth", r.model, state, metrics, config)

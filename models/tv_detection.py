@@ -38,8 +38,7 @@ def image_tensor(image: np.ndarray, index: int) -> Tensor:
     if not (isinstance(image, np.ndarray) and image.ndim == 3 and image.shape[2] == 3 and image.dtype == np.uint8):
         got = f"{image.shape} {image.dtype}" if isinstance(image, np.ndarray) else type(image).__name__
         raise ValueError(f"image of view {index}: expected an (H, W, 3) uint8 BGR array, got {got}")
-    rgb = np.ascontiguousarray(image[:, :, ::-1])
-    return torch.from_numpy(rgb).permute(2, 0, 1).float().div_(255.0)
+    return torch.from_numpy(np.ascontiguousarray(image[:, :, ::-1])).permute(2, 0, 1).float().div_(255.0)
 
 
 def detect(model: nn.Module, images: list[np.ndarray], batch_size: int, device: torch.device) -> list[dict]:

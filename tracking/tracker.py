@@ -39,8 +39,7 @@ class Tracked(NamedTuple):
 
 
 class Association(NamedTuple):
-    """A frame's pairing made by :meth:`Tracker.associate`: frame, the number P of poses paired, track ids (K,) and
-    the indices (K,) of the persons that join them."""
+    """A frame's pairing by :meth:`Tracker.associate`: frame, P poses paired, track ids (K,), their persons (K,)."""
 
     frame: int
     count: int
@@ -139,8 +138,7 @@ def predicted_positions(position: np.ndarray, velocity: np.ndarray, live: np.nda
 
 @lru_cache(maxsize=1)
 def warm_up() -> None:
-    """Compile the tracker's kernels (or load them from numba's cache) once per process: two frames of one person,
-    then the pair distances of large crowds."""
+    """Compile the tracker's kernels (or load them from numba's cache) once per process."""
     tracker, pose = Tracker(min_hits=1), np.ones((1, 23, 4))
     for frame in (0, 1):
         tracker.update(tracker.associate(frame, pose), Reconstruction(pose, np.ones(pose.shape[:2])))
@@ -326,8 +324,7 @@ class Tracker:
         return pool
 
     def _alive(self, st: TrackState, frame: int) -> np.ndarray:
-        """Which tracks not hit after their last frame survive up to this frame: tentative ones die at once,
-        confirmed ones after max_age frames without a hit: (T,) bool."""
+        """(T,) bool: alive at frame without a new hit (tentative tracks die at once, confirmed ones after max_age)."""
         return frame - st.last_frame <= np.where(st.confirmed, self.max_age, 0)
 
     def _births(

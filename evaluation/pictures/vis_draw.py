@@ -43,8 +43,7 @@ def project_skeleton(
     xyz = np.where(np.isfinite(pose[:, :3]), pose[:, :3], 0.0)
     ok = (pose[:, 3] > 0) & np.isfinite(pose).all(axis=1)
     ok &= camera.in_view(xyz, margin=float(max(camera.size)))
-    uv = camera.project(xyz) * np.asarray(scale, dtype=np.float64)
-    return np.where(ok[:, None], uv, 0.0), ok
+    return np.where(ok[:, None], camera.project(xyz) * np.asarray(scale, dtype=np.float64), 0.0), ok
 
 
 def _fixed(uv: np.ndarray) -> tuple[int, int]:

@@ -182,22 +182,16 @@ def format_panoptic_report(s: dict[str, float]) -> str:
     ]
     root_mpjpe = [s["root_mpjpe_average_mm"], s["root_mpjpe_13_mm"], *(s[f"root_mpjpe_{g}_mm"] for g in groups)]
     pcp = [s["pcp_average"], *(s[f"pcp_{p}"] for p in PCP_PARTS)]
-    return "\n".join(
+    return "\n\n".join(
         [
             "VoxelPose Panoptic protocol (15 joints; AP/recall over the sequence, prediction -> nearest "
             "GT by MPJPE, score-ordered, TP if MPJPE < t and GT not yet taken)",
-            "",
             format_table(["", *(f"@{t}mm" for t in ts), "mean"], ap_rows),
-            "",
             format_table(["metric", "value"], counts),
-            "",
             "Paper Table 4 protocol: root-aligned MPJPE (mm, root = mean of the hips, Hungarian-paired persons; "
             "head = nose, foot = ankle)",
-            "",
             format_table(["average of groups", "13 joints", *groups], [root_mpjpe]),
-            "",
             "Paper Table 5 protocol: PCP (%), alpha 0.5, absolute; head = neck->nose, torso = neck->mid-hip",
-            "",
             format_table(["average", *PCP_PARTS], [pcp]),
         ]
     )

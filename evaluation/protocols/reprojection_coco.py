@@ -175,16 +175,14 @@ def format_reprojection_report(summary: dict) -> str:
     capped = summary["max_gt_per_image"] > summary["max_dets"]
     warning = f"; WARNING: more GT persons in an image than max_dets={summary['max_dets']}, recall is capped"
     warning = warning if capped else ""
-    return "\n".join(
+    return "\n\n".join(
         [
             "reprojection_coco (paper Table 1 protocol): COCO keypoint AP/AR (%) of the 3D poses reprojected into every view "
             "(with distortion) against the noise-free projections of the GT poses; OKS with the COCO-23 "
             "sigmas; one image per (frame, camera); GT area = projected GT box clipped to the image; "
             f"score = mean joint confidence; persons with >= {summary['min_joints']} joints in the image; "
             f"up to {summary['max_dets']} detections per image (COCO: {COCO_MAX_DETS})",
-            "",
             format_table(["subset", *STAT_NAMES], rows),
-            "",
             f"{summary['images']} images, {summary['gt_persons']} GT persons (at most {summary['max_gt_per_image']} "
             f"in one image), {summary['predictions']} reprojected predictions{warning}",
         ]

@@ -52,8 +52,7 @@ FOURDA_HEAD_UP_M = 0.145
 def coco23_predictions_to_shelf15(poses3d: np.ndarray) -> np.ndarray:
     """Our COCO-23 world poses to Shelf-14 + mid-hip: (P, 23, 4) -> (P, 15, 3), NaN where missing."""
     poses3d = np.asarray(poses3d, dtype=np.float64).reshape(-1, 23, 4)
-    points = np.where(poses3d[..., 3:] > 0, poses3d[..., :3], np.nan)
-    return with_mid_hip(coco23_to_shelf14(points))
+    return with_mid_hip(coco23_to_shelf14(np.where(poses3d[..., 3:] > 0, poses3d[..., :3], np.nan)))
 
 
 def skel19_to_shelf15(skel: np.ndarray) -> np.ndarray:
@@ -157,8 +156,7 @@ class ShelfEvaluator:
 
     def _averaged_present(self) -> tuple[int, ...]:
         """The averaged GT ids annotated in a scored frame; all of them when none is (a NaN mean, not one over nobody)."""
-        present = tuple(a for a in self.averaged_ids if self._rows["strict"].get(a))
-        return present or self.averaged_ids
+        return tuple(a for a in self.averaged_ids if self._rows["strict"].get(a)) or self.averaged_ids
 
     def _protocol(self) -> dict:
         """The settings and frame range behind a summary."""
@@ -177,8 +175,7 @@ class ShelfEvaluator:
 
 def _actor_pcp(rows: list[np.ndarray]) -> dict[str, float]:
     """Per-part and average PCP (%) of one actor plus its frame count: K rows of (10,) bool."""
-    correct = np.array(rows, dtype=bool).reshape(-1, len(PART_JOINTS))
-    return {**pcp_by_part(correct), "frames": len(rows)}
+    return {**pcp_by_part(np.array(rows, dtype=bool).reshape(-1, len(PART_JOINTS))), "frames": len(rows)}
 
 
 def _mean_over(per_actor: dict[int, dict[str, float]], ids: tuple[int, ...]) -> dict[str, float]:
