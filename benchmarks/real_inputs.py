@@ -91,6 +91,7 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser.add_argument("--crowd-frames", type=int, default=3)
     parser.add_argument("--data", default="../shared/data")
     parser.add_argument("--out", default=None)
+    parser.add_argument("overrides", nargs="*", help="eval.yaml overrides added to every row (matching.x=1 ...)")
     args = parser.parse_args(argv)
     rows_wanted = [ROWS[r] for r in args.rows.split(",")]
     table = []
@@ -105,7 +106,7 @@ def main(argv: list[str] | None = None) -> list[list]:
                 if row.startswith("oracle") and label.startswith("Shelf"):  # Shelf's detections carry no identities
                     table.append([label, row, *["-"] * 8])
                     continue
-                cfg = compose(config_name="eval", overrides=[*dataset, *overrides])
+                cfg = compose(config_name="eval", overrides=[*dataset, *overrides, *args.overrides])
                 table.append([label, row, *run_row(sequence, cfg)])
     common.emit(f"{format_table(HEADERS, table, floatfmt='.2f')}\n\n({time.perf_counter() - t_start:.0f} s)", args.out)
     return table
