@@ -219,14 +219,8 @@ def coco_images(
     out = []
     for index, positions in table:
         for v, (cam, source, position) in enumerate(zip(rig, sources, positions)):
-            entry = {
-                "id": coco_image_id(index, v, len(rig)),
-                "frame": int(index),
-                "camera": cam.name,
-                "file_name": source.file_name(position),
-                "width": sizes[v][0],
-                "height": sizes[v][1],
-            }
+            entry = {"id": coco_image_id(index, v, len(rig)), "frame": int(index), "camera": cam.name}
+            entry |= {"file_name": source.file_name(position), "width": sizes[v][0], "height": sizes[v][1]}
             if source.kind == "video":
                 entry["video_frame"] = int(position)
             out.append(entry)

@@ -219,18 +219,9 @@ def coco23_document(records: list[ImageRecord], image_root: str | Path | None = 
         images.append({"id": record.image_id, "file_name": name, "width": record.width, "height": record.height})
         for kps, box, area in zip(record.keypoints, record.boxes, record.areas):
             flat = [v for x, y, vis in kps.tolist() for v in (x, y, int(vis))]
-            annotations.append(
-                {
-                    "id": len(annotations) + 1,
-                    "image_id": record.image_id,
-                    "category_id": 1,
-                    "iscrowd": 0,
-                    "num_keypoints": int(np.sum(kps[:, 2] > 0)),
-                    "keypoints": flat,
-                    "bbox": box.tolist(),
-                    "area": float(area),
-                }
-            )
+            ann = {"id": len(annotations) + 1, "image_id": record.image_id, "category_id": 1, "iscrowd": 0}
+            ann |= {"num_keypoints": int(np.sum(kps[:, 2] > 0)), "keypoints": flat, "bbox": box.tolist()}
+            annotations.append(ann | {"area": float(area)})
     skeleton = [[a + 1, b + 1] for a, b in LIMBS]  # 1-based
     person = {"supercategory": "person", "id": 1, "name": "person", "keypoints": [*COCO23_NAMES], "skeleton": skeleton}
     return {"info": dict(info or {}), "categories": [person], "images": images, "annotations": annotations}
