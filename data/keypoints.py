@@ -8,33 +8,13 @@ from typing import Iterable
 import numpy as np
 
 # COCO-23 joints in order, with their OKS sigmas: COCO-17, then the COCO-WholeBody foot sigmas.
-_OKS_SIGMA_BY_NAME: dict[str, float] = {
-    "nose": 0.026,
-    "left_eye": 0.025,
-    "right_eye": 0.025,
-    "left_ear": 0.035,
-    "right_ear": 0.035,
-    "left_shoulder": 0.079,
-    "right_shoulder": 0.079,
-    "left_elbow": 0.072,
-    "right_elbow": 0.072,
-    "left_wrist": 0.062,
-    "right_wrist": 0.062,
-    "left_hip": 0.107,
-    "right_hip": 0.107,
-    "left_knee": 0.087,
-    "right_knee": 0.087,
-    "left_ankle": 0.089,
-    "right_ankle": 0.089,
-    "left_big_toe": 0.068,
-    "left_small_toe": 0.066,
-    "left_heel": 0.066,
-    "right_big_toe": 0.092,
-    "right_small_toe": 0.094,
-    "right_heel": 0.094,
-}
-COCO23_NAMES: tuple[str, ...] = tuple(_OKS_SIGMA_BY_NAME)
-OKS_SIGMAS = np.array(list(_OKS_SIGMA_BY_NAME.values()))
+COCO23_NAMES: tuple[str, ...] = tuple(
+    "nose left_eye right_eye left_ear right_ear left_shoulder right_shoulder left_elbow right_elbow left_wrist"
+    " right_wrist left_hip right_hip left_knee right_knee left_ankle right_ankle left_big_toe left_small_toe left_heel"
+    " right_big_toe right_small_toe right_heel".split()
+)
+OKS_SIGMAS = np.array([0.026, 0.025, 0.025, 0.035, 0.035, 0.079, 0.079, 0.072, 0.072, 0.062, 0.062, 0.107, 0.107])
+OKS_SIGMAS = np.append(OKS_SIGMAS, [0.087, 0.087, 0.089, 0.089, 0.068, 0.066, 0.066, 0.092, 0.094, 0.094])
 NUM_JOINTS = len(COCO23_NAMES)  # 23
 NUM_BODY_JOINTS = 17
 JOINT_INDEX: dict[str, int] = {name: i for i, name in enumerate(COCO23_NAMES)}
@@ -67,61 +47,36 @@ FLIP_PAIRS = name_pairs((n, "right_" + n[5:]) for n in COCO23_NAMES if n.startsw
 
 # Limbs drawn in pictures: the COCO skeleton plus heel, big toe and small toe on each foot.
 LIMBS = name_pairs(
-    (
-        ("left_ankle", "left_knee"),
-        ("left_knee", "left_hip"),
-        ("right_ankle", "right_knee"),
-        ("right_knee", "right_hip"),
-        ("left_hip", "right_hip"),
-        ("left_shoulder", "left_hip"),
-        ("right_shoulder", "right_hip"),
-        ("left_shoulder", "right_shoulder"),
-        ("left_shoulder", "left_elbow"),
-        ("right_shoulder", "right_elbow"),
-        ("left_elbow", "left_wrist"),
-        ("right_elbow", "right_wrist"),
-        ("left_eye", "right_eye"),
-        ("nose", "left_eye"),
-        ("nose", "right_eye"),
-        ("left_eye", "left_ear"),
-        ("right_eye", "right_ear"),
-        ("left_ear", "left_shoulder"),
-        ("right_ear", "right_shoulder"),
-        ("left_ankle", "left_heel"),
-        ("left_ankle", "left_big_toe"),
-        ("left_big_toe", "left_small_toe"),
-        ("right_ankle", "right_heel"),
-        ("right_ankle", "right_big_toe"),
-        ("right_big_toe", "right_small_toe"),
-    )
+    tuple(pair.split("-"))
+    for pair in "left_ankle-left_knee left_knee-left_hip right_ankle-right_knee right_knee-right_hip left_hip-right_hip"
+    " left_shoulder-left_hip right_shoulder-right_hip left_shoulder-right_shoulder left_shoulder-left_elbow"
+    " right_shoulder-right_elbow left_elbow-left_wrist right_elbow-right_wrist left_eye-right_eye nose-left_eye"
+    " nose-right_eye left_eye-left_ear right_eye-right_ear left_ear-left_shoulder right_ear-right_shoulder"
+    " left_ankle-left_heel left_ankle-left_big_toe left_big_toe-left_small_toe right_ankle-right_heel"
+    " right_ankle-right_big_toe right_big_toe-right_small_toe".split()
 )
 
 # Bones of the bone-length prior: segments whose length is fixed for a person (name -> joint names).
 BONE_JOINTS: dict[str, tuple[str, str]] = {
     "shoulders": ("left_shoulder", "right_shoulder"),
     "hips": ("left_hip", "right_hip"),
-    "left_torso": ("left_shoulder", "left_hip"),
-    "right_torso": ("right_shoulder", "right_hip"),
-    "left_upper_arm": ("left_shoulder", "left_elbow"),
-    "right_upper_arm": ("right_shoulder", "right_elbow"),
-    "left_forearm": ("left_elbow", "left_wrist"),
-    "right_forearm": ("right_elbow", "right_wrist"),
-    "left_thigh": ("left_hip", "left_knee"),
-    "right_thigh": ("right_hip", "right_knee"),
-    "left_shin": ("left_knee", "left_ankle"),
-    "right_shin": ("right_knee", "right_ankle"),
-    "left_nose_eye": ("nose", "left_eye"),
-    "right_nose_eye": ("nose", "right_eye"),
-    "left_eye_ear": ("left_eye", "left_ear"),
-    "right_eye_ear": ("right_eye", "right_ear"),
-    "left_ankle_heel": ("left_ankle", "left_heel"),
-    "right_ankle_heel": ("right_ankle", "right_heel"),
-    "left_ankle_big_toe": ("left_ankle", "left_big_toe"),
-    "right_ankle_big_toe": ("right_ankle", "right_big_toe"),
-    "left_toes": ("left_big_toe", "left_small_toe"),
-    "right_toes": ("right_big_toe", "right_small_toe"),
-    "left_heel_big_toe": ("left_heel", "left_big_toe"),
-    "right_heel_big_toe": ("right_heel", "right_big_toe"),
+}
+BONE_JOINTS |= {  # a sided bone: the left one, then the right one ({s} = left, right)
+    bone.format(s=s): (a.format(s=s), b.format(s=s))
+    for bone, (a, b) in {
+        "{s}_torso": ("{s}_shoulder", "{s}_hip"),
+        "{s}_upper_arm": ("{s}_shoulder", "{s}_elbow"),
+        "{s}_forearm": ("{s}_elbow", "{s}_wrist"),
+        "{s}_thigh": ("{s}_hip", "{s}_knee"),
+        "{s}_shin": ("{s}_knee", "{s}_ankle"),
+        "{s}_nose_eye": ("nose", "{s}_eye"),
+        "{s}_eye_ear": ("{s}_eye", "{s}_ear"),
+        "{s}_ankle_heel": ("{s}_ankle", "{s}_heel"),
+        "{s}_ankle_big_toe": ("{s}_ankle", "{s}_big_toe"),
+        "{s}_toes": ("{s}_big_toe", "{s}_small_toe"),
+        "{s}_heel_big_toe": ("{s}_heel", "{s}_big_toe"),
+    }.items()
+    for s in ("left", "right")
 }
 BONES: dict[str, tuple[int, int]] = dict(zip(BONE_JOINTS, name_pairs(BONE_JOINTS.values())))
 

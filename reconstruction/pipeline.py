@@ -70,10 +70,7 @@ class MultiViewPipeline:
         tracker: Tracker | None = None,
         coincident_m: float = 0.2,
     ) -> None:
-        self.rig = rig
-        self.matcher = matcher
-        self.reconstructor = reconstructor
-        self.tracker = tracker
+        self.rig, self.matcher, self.reconstructor, self.tracker = rig, matcher, reconstructor, tracker
         self.coincident_m = coincident_m  # reconstruction/coincident.py; 0: off
         self.timings: dict[str, float] = defaultdict(float)
         self.unmatched: Counter[str] = Counter()

@@ -50,24 +50,15 @@ def load_images(
     sources = camera_sources(rig, images, pattern)
     table = select_frames(align_frames(sources, align), frames)
     sizes = [checked_size(cam, source) for cam, source in zip(rig, sources)]
-    out = [
-        Frame(
-            index,
-            [ViewDetections.empty() for _ in rig],
-            images=partial(read_frame_images, tuple(sources), positions, tuple(cam.size for cam in rig)),
-            image_ids=[coco_image_id(index, v, len(rig)) for v in range(len(rig))],
-        )
-        for index, positions in table
-    ]
+    read, sizes_wh = partial(read_frame_images, tuple(sources)), tuple(cam.size for cam in rig)
+    ids = lambda index: [coco_image_id(index, v, len(rig)) for v in range(len(rig))]  # noqa: E731
+    empty = lambda: [ViewDetections.empty() for _ in rig]  # noqa: E731
+    out = [Frame(i, empty(), images=partial(read, p, sizes_wh), image_ids=ids(i)) for i, p in table]
     kinds = sorted({s.kind for s in sources})
     shown = "a mapping of cameras" if isinstance(images, Mapping) else str(images)
-    meta = {
-        "dataset": "images",
-        "cameras": str(cameras),
-        "images": {k: str(v) for k, v in images.items()} if isinstance(images, Mapping) else str(images),
-        "align": align,
-        "image_sizes": {cam.name: list(size) for cam, size in zip(rig, sizes)},
-    }
+    listed = {k: str(v) for k, v in images.items()} if isinstance(images, Mapping) else str(images)
+    meta = {"dataset": "images", "cameras": str(cameras), "images": listed, "align": align}
+    meta["image_sizes"] = {cam.name: list(size) for cam, size in zip(rig, sizes)}
     description = (
         f"{len(out)} frames of {len(rig)} cameras ({'/'.join(kinds)}) from {shown} "
         f"on {cameras}, no detections, no ground truth"
@@ -219,14 +210,8 @@ def coco_images(
     out = []
     for index, positions in table:
         for v, (cam, source, position) in enumerate(zip(rig, sources, positions)):
-            entry = {
-                "id": coco_image_id(index, v, len(rig)),
-                "frame": int(index),
-                "camera": cam.name,
-                "file_name": source.file_name(position),
-                "width": sizes[v][0],
-                "height": sizes[v][1],
-            }
+            entry = {"id": coco_image_id(index, v, len(rig)), "frame": int(index), "camera": cam.name}
+            entry |= {"file_name": source.file_name(position), "width": sizes[v][0], "height": sizes[v][1]}
             if source.kind == "video":
                 entry["video_frame"] = int(position)
             out.append(entry)

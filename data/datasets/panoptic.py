@@ -50,13 +50,8 @@ def load_panoptic_sequence(
     all_files = find_pose_files(seq_dir)
     files = _select_frames(all_files, frames, seq_dir / POSE_DIR)
     ground_truth = {frame: read_bodies(path) for frame, path in files.items()}
-    meta = {
-        "dataset": "panoptic",
-        "root": str(root),
-        "sequence": sequence,
-        "cameras": names,
-        "gt_min_confidence": GT_MIN_CONFIDENCE,
-    }
+    meta = {"dataset": "panoptic", "root": str(root), "sequence": sequence, "cameras": names}
+    meta["gt_min_confidence"] = GT_MIN_CONFIDENCE
     gt15 = {}
     if poses2d is not None:
         views_by_frame = read_poses2d(poses2d, list(rig.names), [c.size for c in rig])

@@ -48,15 +48,8 @@ def load_wildtrack_crowd(
 def _frame(number: int, positions: np.ndarray, rig: Rig, root: Path, seed: int, options: dict) -> Frame:
     """Frame ``number``: synthetic bodies standing at its annotated positions (P, 2), drawn from (seed, number)."""
     frame_seed = int(np.random.SeedSequence([int(seed), number]).generate_state(1)[0])
-    cfg = SyntheticConfig(
-        seed=frame_seed,
-        positions=[positions],
-        area=WILDTRACK_AREA,
-        min_spacing_m=0.0,
-        rig=str(root),
-        rig_format="wildtrack",
-        **options,
-    )
+    fixed = dict(area=WILDTRACK_AREA, min_spacing_m=0.0, rig=str(root), rig_format="wildtrack")
+    cfg = SyntheticConfig(seed=frame_seed, positions=[positions], **fixed, **options)
     frame = generate_sequence(cfg, rig=rig).frames[0]
     return Frame(number, frame.views, frame.gt_poses, frame.gt_ids)
 

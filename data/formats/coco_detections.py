@@ -71,10 +71,6 @@ def read_coco_detections(path: str | Path) -> CocoDetections:
         problem = entry_problem(entry)
         if problem:
             raise ValueError(f"{path}: entry {i} {problem}")
-    return CocoDetections(
-        path=path,
-        image_ids=np.array([e["image_id"] for e in doc], dtype=np.int64),
-        category_ids=np.array([e["category_id"] for e in doc], dtype=np.int64),
-        boxes=np.array([e["bbox"] for e in doc], dtype=np.float64).reshape(-1, 4),
-        scores=np.array([e["score"] for e in doc], dtype=np.float64),
-    )
+    image_ids, category_ids = (np.array([e[key] for e in doc], dtype=np.int64) for key in ("image_id", "category_id"))
+    boxes, scores = (np.array([e[key] for e in doc], dtype=np.float64) for key in ("bbox", "score"))
+    return CocoDetections(path, image_ids, category_ids, boxes.reshape(-1, 4), scores)

@@ -164,15 +164,11 @@ def load_4dassoc_detections(path: str | Path, image_size: tuple[int, int] = (103
         frame_points = points[first[f] : first[f] + joint_start[-1]]
         paf_values = layout.values[paf_pos[f, 0] : paf_pos[f, 0] + paf_start[-1]]  # a frame's PAFs lie in a row
         bounds, sizes, paf_bounds = joint_start.tolist(), counts[f].tolist(), paf_start.tolist()
+        candidates = [frame_points[bounds[j] : bounds[j + 1]] for j in range(BODY25_NUM_JOINTS)]
+        limbs = enumerate(BODY25_PAF_LIMBS)
+        pafs = [paf_values[paf_bounds[k] : paf_bounds[k + 1]].reshape(sizes[a], sizes[b]) for k, (a, b) in limbs]
         frames.append(
-            FrameCandidates(
-                [frame_points[bounds[j] : bounds[j + 1]] for j in range(BODY25_NUM_JOINTS)],
-                [
-                    paf_values[paf_bounds[k] : paf_bounds[k + 1]].reshape(sizes[a], sizes[b])
-                    for k, (a, b) in enumerate(BODY25_PAF_LIMBS)
-                ],
-                PackedCandidates(frame_points, joint_start, paf_values, paf_start),
-            )
+            FrameCandidates(candidates, pafs, PackedCandidates(frame_points, joint_start, paf_values, paf_start))
         )
     return frames
 

@@ -52,18 +52,10 @@ def _ground_truth(gt: Sequence[ImageRecord] | dict, joints: np.ndarray) -> dict:
     for ann in doc["annotations"]:
         bbox = [float(v) for v in ann["bbox"]]
         kps = _annotation_keypoints(ann)[joints]
-        anns.append(
-            {
-                "id": len(anns) + 1,  # pycocotools treats id 0 as "no match"
-                "image_id": int(ann["image_id"]),
-                "category_id": 1,
-                "bbox": bbox,
-                "keypoints": kps.ravel().tolist(),
-                "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0)),
-                "area": float(ann.get("area", bbox[2] * bbox[3])),
-                "iscrowd": int(ann.get("iscrowd", 0)),
-            }
-        )
+        # pycocotools treats id 0 as "no match"
+        entry = {"id": len(anns) + 1, "image_id": int(ann["image_id"]), "category_id": 1, "bbox": bbox}
+        entry |= {"keypoints": kps.ravel().tolist(), "num_keypoints": int(np.count_nonzero(kps[:, 2] > 0))}
+        anns.append(entry | {"area": float(ann.get("area", bbox[2] * bbox[3])), "iscrowd": int(ann.get("iscrowd", 0))})
     return {"images": [dict(img) for img in images], "annotations": anns, "categories": _CATEGORIES}
 
 
@@ -92,17 +84,9 @@ def _detections(predictions: Iterable[dict], image_ids: set[int], joints: np.nda
         kps = kps.reshape(NUM_JOINTS, 3)
         x0, y0 = kps[:, :2].min(axis=0)
         x1, y1 = kps[:, :2].max(axis=0)
-        anns.append(
-            {
-                "id": i + 1,
-                "image_id": int(pred["image_id"]),
-                "category_id": 1,
-                "keypoints": kps[joints].ravel().tolist(),
-                "score": float(pred["score"]),
-                "bbox": [x0, y0, x1 - x0, y1 - y0],
-                "area": float((x1 - x0) * (y1 - y0)),
-            }
-        )
+        entry = {"id": i + 1, "image_id": int(pred["image_id"]), "category_id": 1}
+        entry |= {"keypoints": kps[joints].ravel().tolist(), "score": float(pred["score"])}
+        anns.append(entry | {"bbox": [x0, y0, x1 - x0, y1 - y0], "area": float((x1 - x0) * (y1 - y0))})
     return anns
 
 
@@ -118,12 +102,9 @@ def write_coco_results(path: str | Path, predictions: Iterable[dict]) -> None:
     """Write predictions ({image_id, keypoints (23, 3), score, bbox?}) as a COCO results JSON, atomically."""
     out = []
     for pred in predictions:
-        entry = {
-            "image_id": int(pred["image_id"]),
-            "category_id": 1,
-            "keypoints": np.round(np.asarray(pred["keypoints"], dtype=np.float64).ravel(), 4).tolist(),
-            "score": float(pred["score"]),
-        }
+        keypoints = np.round(np.asarray(pred["keypoints"], dtype=np.float64).ravel(), 4).tolist()
+        entry = {"image_id": int(pred["image_id"]), "category_id": 1, "keypoints": keypoints}
+        entry["score"] = float(pred["score"])
         if pred.get("bbox") is not None:
             entry["bbox"] = np.round(np.asarray(pred["bbox"], dtype=np.float64), 4).tolist()
         out.append(entry)

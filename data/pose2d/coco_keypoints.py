@@ -96,16 +96,10 @@ def _area(path: Path, ann: dict, box: np.ndarray) -> float:
 
 def _record(img: dict, image_dir: Path, persons: list, labelled: np.ndarray) -> ImageRecord:
     """One ImageRecord of an image entry and its (keypoints (23, 3), box (4,), area) persons."""
-    return ImageRecord(
-        image_id=int(img["id"]),
-        file=image_dir / img["file_name"],
-        width=int(img["width"]),
-        height=int(img["height"]),
-        keypoints=np.array([p[0] for p in persons]).reshape(-1, NUM_JOINTS, 3),
-        boxes=np.array([p[1] for p in persons]).reshape(-1, 4),
-        areas=np.array([p[2] for p in persons]),
-        labelled=labelled.copy(),
-    )
+    keypoints, boxes, areas = (np.array([p[i] for p in persons]) for i in range(3))
+    size = int(img["width"]), int(img["height"])
+    keypoints, boxes = keypoints.reshape(-1, NUM_JOINTS, 3), boxes.reshape(-1, 4)
+    return ImageRecord(int(img["id"]), image_dir / img["file_name"], *size, keypoints, boxes, areas, labelled.copy())
 
 
 def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
@@ -219,18 +213,9 @@ def coco23_document(records: list[ImageRecord], image_root: str | Path | None = 
         images.append({"id": record.image_id, "file_name": name, "width": record.width, "height": record.height})
         for kps, box, area in zip(record.keypoints, record.boxes, record.areas):
             flat = [v for x, y, vis in kps.tolist() for v in (x, y, int(vis))]
-            annotations.append(
-                {
-                    "id": len(annotations) + 1,
-                    "image_id": record.image_id,
-                    "category_id": 1,
-                    "iscrowd": 0,
-                    "num_keypoints": int(np.sum(kps[:, 2] > 0)),
-                    "keypoints": flat,
-                    "bbox": box.tolist(),
-                    "area": float(area),
-                }
-            )
+            ann = {"id": len(annotations) + 1, "image_id": record.image_id, "category_id": 1, "iscrowd": 0}
+            ann |= {"num_keypoints": int(np.sum(kps[:, 2] > 0)), "keypoints": flat, "bbox": box.tolist()}
+            annotations.append(ann | {"area": float(area)})
     skeleton = [[a + 1, b + 1] for a, b in LIMBS]  # 1-based
     person = {"supercategory": "person", "id": 1, "name": "person", "keypoints": [*COCO23_NAMES], "skeleton": skeleton}
     return {"info": dict(info or {}), "categories": [person], "images": images, "annotations": annotations}

@@ -41,12 +41,8 @@ def generate_multiview_dataset(
             path = records[f * views + v].file
             if not cv2.imwrite(str(path), image, [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality]):
                 raise ValueError(f"{path}: cannot write the image")
-    info = {
-        "description": "synthetic multi-view crowd images (data.pose2d.multiview_images)",
-        "scene": cfg.to_dict(),
-        "render_seed": seed,
-        "cameras": sequence.rig.to_dict(),
-    }
+    info = {"description": "synthetic multi-view crowd images (data.pose2d.multiview_images)", "scene": cfg.to_dict()}
+    info |= {"render_seed": seed, "cameras": sequence.rig.to_dict()}
     ann_path = out_dir / "annotations.json"
     write_coco_keypoints(ann_path, records, image_root=image_dir, info=info)
     return ann_path
@@ -73,16 +69,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--preview", type=Path, help="also save a PNG grid of the first 6 images here")
     args = parser.parse_args(argv)
     try:
+        focal = args.focal if args.focal is not None else 1000.0 * args.size[0] / 1280
+        scene = dict(num_persons=args.persons, density=args.density, num_cameras=args.cameras, image_size=args.size)
         cfg = SyntheticConfig(
-            seed=args.seed,
-            num_frames=args.num_frames,
-            num_persons=args.persons,
-            density=args.density,
-            num_cameras=args.cameras,
-            image_size=args.size,
-            focal_px=args.focal if args.focal is not None else 1000.0 * args.size[0] / 1280,
-            rig=args.rig,
-            area=args.area,
+            seed=args.seed, num_frames=args.num_frames, **scene, focal_px=focal, rig=args.rig, area=args.area
         )
         ann = generate_multiview_dataset(args.out, cfg, args.render_seed, args.jpeg_quality)
     except ValueError as exc:

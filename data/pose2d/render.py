@@ -238,15 +238,9 @@ def view_person(camera: Camera, joints: np.ndarray, light: np.ndarray) -> Person
     cos = rel @ to_cam / np.maximum(np.linalg.norm(rel, axis=1) * np.linalg.norm(to_cam), 1e-12)
     face_seen = np.ones(NUM_JOINTS, dtype=bool)
     face_seen[:5] = cos[:5] >= FACE_VISIBLE_COS
-    return PersonView(
-        _fixed(outlines),
-        (da + db) / 2,
-        camera.project(joints),
-        face_seen,
-        bool(forward @ to_cam > 0),
-        max(0.12 * focal * HEAD_RADIUS_M / da[_HEAD], 0.8),
-        float(np.mean(camera.depth(joints))),
-    )
+    dot_px, person_depth = max(0.12 * focal * HEAD_RADIUS_M / da[_HEAD], 0.8), float(np.mean(camera.depth(joints)))
+    facing = bool(forward @ to_cam > 0)
+    return PersonView(_fixed(outlines), (da + db) / 2, camera.project(joints), face_seen, facing, dot_px, person_depth)
 
 
 def painting_order(views: list[PersonView]) -> np.ndarray:

@@ -190,20 +190,13 @@ def render_sequence(sequence: Sequence, seed: int) -> Sequence:
     for frame in sequence.frames:
         poses, ids, missing = _renderable(frame)
         left_out += missing
-        frames.append(
-            replace(
-                frame,
-                views=ground_truth_views(scene, frame.index, poses, ids),
-                images=partial(frame_images, scene, frame.index, poses, ids),
-                image_ids=[coco_image_id(frame.index, v, len(rig)) for v in range(len(rig))],
-            )
-        )
+        views = ground_truth_views(scene, frame.index, poses, ids)
+        images = partial(frame_images, scene, frame.index, poses, ids)
+        image_ids = [coco_image_id(frame.index, v, len(rig)) for v in range(len(rig))]
+        frames.append(replace(frame, views=views, images=images, image_ids=image_ids))
+    meta = {**sequence.meta, "render": {"seed": int(seed), "persons_left_out": left_out}}
     return replace(
-        sequence,
-        frames=frames,
-        meta={**sequence.meta, "render": {"seed": int(seed), "persons_left_out": left_out}},
-        protocols=list(sequence.protocols),
-        coco_images=coco_images(frames, rig),
+        sequence, frames=frames, meta=meta, protocols=list(sequence.protocols), coco_images=coco_images(frames, rig)
     )
 
 

@@ -174,12 +174,8 @@ def generate_dataset(
         boxes = sample.boxes
         records.append(ImageRecord(i + 1, path, w, h, sample.keypoints, boxes, boxes[:, 2] * boxes[:, 3]))
     ann_path = out_dir / "annotations.json"
-    info = {
-        "description": "synthetic crowded images (data.pose2d.synthetic_images)",
-        "seed": int(seed),
-        "num_images": int(num_images),
-        "size": [w, h],
-    }
+    info = {"description": "synthetic crowded images (data.pose2d.synthetic_images)", "seed": int(seed)}
+    info |= {"num_images": int(num_images), "size": [w, h]}
     write_coco_keypoints(ann_path, records, image_root=image_dir, info=info)
     return ann_path
 

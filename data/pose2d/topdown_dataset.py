@@ -143,17 +143,11 @@ class TopDownDataset(Dataset):
         else:
             w, h = self.codec.heatmap_size
             target, weight = np.zeros((NUM_JOINTS, h, w), np.float32), np.zeros(NUM_JOINTS, np.float32)
-        return {
-            "image": normalize_image(crop),
-            "target": torch.from_numpy(target),
-            "weight": torch.from_numpy(weight),
-            "affine_inv": torch.from_numpy(crop_affine(center, scale, rotation, self.input_size, inverse=True)),
-            "image_id": record.image_id,
-            "box": torch.from_numpy(np.asarray(box, dtype=np.float64)),
-            "area": area,
-            "score": score,
-            "flipped": flip,
-        }
+        affine_inv = torch.from_numpy(crop_affine(center, scale, rotation, self.input_size, inverse=True))
+        sample = {"image": normalize_image(crop), "target": torch.from_numpy(target)}
+        sample |= {"weight": torch.from_numpy(weight), "affine_inv": affine_inv, "image_id": record.image_id}
+        box = torch.from_numpy(np.asarray(box, dtype=np.float64))
+        return sample | {"box": box, "area": area, "score": score, "flipped": flip}
 
 
 class EpochSampler(Sampler[int]):

@@ -34,18 +34,13 @@ def ground_truth_document(frames: Sequence[Frame], rig: Rig) -> dict:
 
 def coco_images(frames: list[Frame], rig: Rig) -> list[dict]:
     """The COCO "images" entries (id, frame, camera, file_name, width, height) of rendered frames."""
-    return [
-        {
-            "id": frame.image_ids[v],
-            "frame": int(frame.index),
-            "camera": cam.name,
-            "file_name": f"{int(frame.index):06d}_{cam.name}.jpg",
-            "width": cam.size[0],
-            "height": cam.size[1],
-        }
-        for frame in frames
-        for v, cam in enumerate(rig)
-    ]
+    out = []
+    for frame in frames:
+        for v, cam in enumerate(rig):
+            entry = {"id": frame.image_ids[v], "frame": int(frame.index), "camera": cam.name}
+            entry["file_name"] = f"{int(frame.index):06d}_{cam.name}.jpg"
+            out.append(entry | {"width": cam.size[0], "height": cam.size[1]})
+    return out
 
 
 def results(frames: Sequence[Frame], rig: Rig, views: Sequence[Sequence[ViewDetections]] | None = None) -> list[dict]:
@@ -58,15 +53,9 @@ def results(frames: Sequence[Frame], rig: Rig, views: Sequence[Sequence[ViewDete
             raise ValueError(f"frame {frame.index}: {len(predicted)} predicted views for {len(rig)} cameras")
         for v, view in enumerate(predicted):
             for n in range(len(view)):
-                out.append(
-                    {
-                        "image_id": int(frame.image_ids[v]),
-                        "category_id": 1,
-                        "keypoints": view.keypoints[n].reshape(NUM_JOINTS * 3).tolist(),
-                        "score": float(view.scores[n]),
-                        "bbox": [float(b) for b in view.bboxes[n]],
-                    }
-                )
+                entry = {"image_id": int(frame.image_ids[v]), "category_id": 1}
+                entry["keypoints"] = view.keypoints[n].reshape(NUM_JOINTS * 3).tolist()
+                out.append(entry | {"score": float(view.scores[n]), "bbox": [float(b) for b in view.bboxes[n]]})
     return out
 
 

@@ -11,11 +11,4 @@ from reconstruction.matching.feet_epipolar import FeetEpipolarMatcher
 from reconstruction.matching.oracle import OracleMatcher
 from reconstruction.matching.ransac import RansacMatcher
 
-__all__ = [
-    "EpipolarMatcher",
-    "EvidenceMatcher",
-    "FeetEpipolarMatcher",
-    "FeetMatcher",
-    "OracleMatcher",
-    "RansacMatcher",
-]
+__all__ = ["EpipolarMatcher", "EvidenceMatcher", "FeetEpipolarMatcher", "FeetMatcher", "OracleMatcher", "RansacMatcher"]

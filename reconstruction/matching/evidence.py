@@ -123,17 +123,9 @@ def _merge(ga, gb, cost, counts: np.ndarray, linked: np.ndarray, min_views: int,
 
 def all_tested(V: int, has_feet: np.ndarray, var: np.ndarray) -> LinkTests:
     """The merge's inputs where every link test is among the links (a merge of given links): nothing to compute."""
-    J = var.shape[1]
-    det = Detections(
-        np.zeros((0, J, 2)),
-        np.ascontiguousarray(var, np.float64),
-        np.zeros(V + 1, np.int64),
-        np.ascontiguousarray(has_feet, bool),
-        np.zeros((0, 2)),
-        np.zeros((0, 2, 2)),
-        1.0,
-        np.zeros((V, V, 3, 3)),
-    )
+    J, z, has_feet = var.shape[1], np.zeros, np.ascontiguousarray(has_feet, bool)
+    var = np.ascontiguousarray(var, np.float64)
+    det = Detections(z((0, J, 2)), var, z(V + 1, np.int64), has_feet, z((0, 2)), z((0, 2, 2)), 1.0, z((V, V, 3, 3)))
     return LinkTests(det, np.ones((V, V), dtype=bool), ChiTest(np.full(J + 3, np.inf), 1, 1.0, 1.0))
 
 

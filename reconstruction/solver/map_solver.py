@@ -317,11 +317,8 @@ class MAPReconstruction:
             lengths, variances, self.bone_mean, self.proportion_sd, self.bone_tie_sd_m, BONE_GROUPS
         )
         weight = self.prior_weight / np.sqrt(sd**2 + self.bone_tie_sd_m**2)
-        return (
-            self._problem(first.uv, inv_sigma, first.proj, anchor, True, bone_ref=mean, bone_weight=weight),
-            info,
-            measured,
-        )
+        problem = self._problem(first.uv, inv_sigma, first.proj, anchor, True, bone_ref=mean, bone_weight=weight)
+        return problem, info, measured
 
 
 class MLEMAPReconstruction(MAPReconstruction):
