@@ -183,13 +183,13 @@ class EvidenceMatcher:
         min_score: float = 0.2,
         noise_model: NoiseModel | None = None,
         min_views: int = 2,
+        ambiguity_margin: float = 2.0,
         feet: dict | None = None,
         calibrate: bool = True,
         max_noise_scale: float = 4.0,
         min_calibration_pairs: int = 5,
         outlier_sd: float = 12.0,
         link_scale: float = 2.0,
-        ambiguity_margin: float = 0.0,
     ) -> None:
         if not 0 < reject_rate < 1 or int(min_dof) < 1 or int(min_views) < 1 or not evidence_per_dof >= 0:
             raise ValueError(
