@@ -181,7 +181,45 @@ def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj
     return keep
 
 
+@njit(cache=True, error_model="numpy")
+def swap_regrets(starts: np.ndarray, li: np.ndarray, lj: np.ndarray, cost: np.ndarray, keep: np.ndarray):
+    """Least extra cost of re-matching each accepted entry of :func:`solve_sparse_pairs`' problem within its view
+    pair -> (E,) (inf without an alternative, and for entries not accepted): an entry to a free row or column, or
+    swapping partners with another accepted entry (both cross entries allowed); as merge.swap_regret, sparse."""
+    regret = np.full(len(cost), np.inf)
+    for p in range(len(starts) - 1):
+        s, e = starts[p], starts[p + 1]
+        if e - s < 2:
+            continue
+        na, nb = li[s:e].max() + 1, lj[s:e].max() + 1
+        by_row, by_col, first = np.full(na, -1), np.full(nb, -1), np.zeros(na + 1, dtype=np.int64)
+        for k in range(s, e):
+            first[li[k] + 1] += 1
+            if keep[k]:
+                by_row[li[k]], by_col[lj[k]] = k, k
+        for r in range(na):
+            first[r + 1] += first[r]
+        fill, order = first[:-1].copy(), np.empty(e - s, dtype=np.int64)  # entries grouped by row
+        for k in range(s, e):
+            order[fill[li[k]]] = k
+            fill[li[k]] += 1
+        for k in range(s, e):
+            kr, kc = by_row[li[k]], by_col[lj[k]]  # the accepted entries holding k's row and column
+            if keep[k] or (kr < 0 and kc < 0):
+                continue
+            if kc < 0 or kr < 0:
+                held = max(kr, kc)
+                regret[held] = min(regret[held], cost[k] - cost[held])
+                continue
+            for m in order[first[li[kc]] : first[li[kc] + 1]]:  # the cross entry (row of kc, column of kr)
+                if lj[m] == lj[kr]:
+                    swap = cost[k] + cost[m] - cost[kr] - cost[kc]
+                    regret[kr], regret[kc] = min(regret[kr], swap), min(regret[kc], swap)
+    return regret
+
+
 def warm_up() -> None:
-    """Compile (or load) the sparse solver on a tiny problem."""
+    """Compile (or load) the sparse solver and its regrets on a tiny problem."""
     one = np.zeros(2, dtype=np.int64)
-    solve_sparse_pairs(np.array([0, 2]), np.ones((1, 2), np.int64), one, one, np.array([0.0, 1.0]))
+    keep = solve_sparse_pairs(np.array([0, 2]), np.ones((1, 2), np.int64), one, one, np.array([0.0, 1.0]))
+    swap_regrets(np.array([0, 2]), one, one, np.array([0.0, 1.0]), keep)

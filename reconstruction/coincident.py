@@ -22,10 +22,17 @@ def near_pairs(poses3d: np.ndarray, placed: np.ndarray, within_m: float) -> tupl
     return some[near.min(1)], some[near.max(1)]
 
 
-def close_pairs(poses3d: np.ndarray, placed: np.ndarray, within_m: float) -> tuple[np.ndarray, np.ndarray]:
+def close_pairs(
+    poses3d: np.ndarray, placed: np.ndarray, within_m: float, apart: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Pairs i < j whose mean distance over the joints both place is under within_m, closest first: (P, J, 3+),
-    placed (P, J) bool -> (K, 2) int, (K,) m."""
+    placed (P, J) bool[, apart (P,) int64 view masks: only pairs seen in no common view] -> (K, 2) int, (K,) m."""
     i, j = all_pairs(len(poses3d)) if len(poses3d) <= ALL_PAIRS_UP_TO else near_pairs(poses3d, placed, within_m)
+    if apart is not None:
+        disjoint = (apart[i] & apart[j]) == 0
+        i, j = i[disjoint], j[disjoint]
+    if not len(i):
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
     both = placed[i] & placed[j]
     diff = poses3d[i, :, :3] - poses3d[j, :, :3]
     total = (np.sqrt(np.einsum("kjc,kjc->kj", diff, diff)) * both).sum(1)
@@ -52,7 +59,8 @@ def merge_coincident(poses3d: np.ndarray, views: np.ndarray, assignment: np.ndar
     if within_m <= 0 or len(assignment) < 2:
         return assignment
     placed = (poses3d[..., 3] > 0) & (views >= 2)  # a joint placed by a prior may stray from its body
-    close, _ = close_pairs(poses3d, placed, within_m)
+    masks = (assignment >= 0) @ (1 << np.arange(assignment.shape[1], dtype=np.int64))  # views < 63 (the matcher's)
+    close, _ = close_pairs(poses3d, placed, within_m, masks)
     rows, alive = assignment, np.ones(len(assignment), dtype=bool)
     for i, j in close:
         if alive[i] and alive[j] and not np.any((rows[i] >= 0) & (rows[j] >= 0)):

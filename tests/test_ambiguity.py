@@ -1,12 +1,14 @@
-"""The sparse swap regret of an assignment's pairs against the dense reference (merge.swap_regret)."""
+"""The swap regret of a sparse assignment's pairs (data.assignment.swap_regrets) against the numpy oracle and the
+dense reference (merge.swap_regret); the evidence matcher refusing an ambiguous detection."""
 
 import numpy as np
 import pytest
 
+from data.assignment import solve_sparse_pairs, swap_regrets
 from data.multiview import ViewDetections
 from reconstruction.matching import EvidenceMatcher
-from reconstruction.matching.ambiguity import sparse_swap_regret
 from reconstruction.matching.merge import solve_pair, swap_regret
+from tests.oracles.ambiguity import sparse_swap_regret
 from tests.test_triangulation import ring
 
 
@@ -27,8 +29,27 @@ def test_sparse_swap_regret_equals_the_dense_reference(seed):
         cost += list(dense[ii, jj])
         where = {(i, j): first + n for n, (i, j) in enumerate(zip(ii, jj))}
         kept += [where[i, j] for i, j in zip(rows, cols)]
-    got = sparse_swap_regret(*(np.asarray(x) for x in (q, a, b)), np.asarray(cost, float), np.asarray(kept, int))
-    np.testing.assert_allclose(got, np.concatenate(expected))
+    q, a, b, cost, kept = (np.asarray(x) for x in (q, a, b, cost, kept))
+    np.testing.assert_allclose(sparse_swap_regret(q, a, b, cost.astype(float), kept), np.concatenate(expected))
+    starts = np.searchsorted(q, np.arange(4)).astype(np.int64)
+    keep = np.zeros(len(cost), dtype=bool)
+    keep[kept] = True
+    np.testing.assert_allclose(swap_regrets(starts, a, b, cost.astype(float), keep)[kept], np.concatenate(expected))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_kernel_equals_the_oracle_on_solved_sparse_problems(seed):
+    rng = np.random.default_rng(seed)
+    sizes = rng.integers(1, 30, (5, 2))
+    entries = [np.argwhere(rng.random(size) < 0.3) for size in sizes]
+    a = np.concatenate([e[:, 0] for e in entries]).astype(np.int64)
+    b = np.concatenate([e[:, 1] for e in entries]).astype(np.int64)
+    q = np.repeat(np.arange(len(sizes)), [len(e) for e in entries])
+    cost = rng.normal(-3.0, 2.0, len(a))
+    starts = np.concatenate([[0], np.cumsum([len(e) for e in entries])]).astype(np.int64)
+    keep = solve_sparse_pairs(starts, sizes.astype(np.int64), a, b, cost)
+    expected = sparse_swap_regret(q, a, b, cost, np.flatnonzero(keep))
+    np.testing.assert_allclose(swap_regrets(starts, a, b, cost, keep)[keep], expected)
 
 
 def test_two_equally_good_partners_have_no_regret_a_clear_pair_has():

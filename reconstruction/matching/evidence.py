@@ -28,11 +28,10 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from data import assignment
-from data.assignment import solve_sparse_pairs
+from data.assignment import solve_sparse_pairs, swap_regrets
 from data.geometry.camera import Rig
 from data.multiview import ViewDetections
 from reconstruction.matching import feet_kernels
-from reconstruction.matching.ambiguity import sparse_swap_regret
 from reconstruction.matching.epipolar import fundamentals
 from reconstruction.matching.evidence_kernels import ChiTest, Detections, LinkTests, Sample, merge_linked, pairs_chi2
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
@@ -261,11 +260,11 @@ class EvidenceMatcher:
         da, db = ev.gi[rows] - offsets[ev.view_pairs[q, 0]], ev.gj[rows] - offsets[ev.view_pairs[q, 1]]
         cost = 0.5 * ev.d2[rows] - self.evidence_per_dof * ev.dof[rows]
         starts = np.concatenate([[0], np.cumsum(np.bincount(q, minlength=len(ev.view_pairs)))]).astype(np.int64)
-        keep = np.flatnonzero(solve_sparse_pairs(starts, ev.counts[ev.view_pairs], da, db, cost))
-        refused = keep[:0]
+        keep = solve_sparse_pairs(starts, ev.counts[ev.view_pairs], da, db, cost)
+        refused = np.zeros_like(keep)
         if self.ambiguity_margin > 0:
-            clear = sparse_swap_regret(q, da, db, cost, keep, self.ambiguity_margin) >= self.ambiguity_margin
-            keep, refused = keep[clear], keep[~clear]
+            refused = keep & (swap_regrets(starts, da, db, cost, keep) < self.ambiguity_margin)
+            keep = keep & ~refused
         linked, kept = np.stack([ev.gi[links], ev.gj[links]], axis=1), rows[keep]
         assignment = _merge(ev.gi[kept], ev.gj[kept], cost[keep], ev.counts, linked, self.min_views, ev.lazy)
         ambiguous = np.concatenate([ev.gi[rows[refused]], ev.gj[rows[refused]]])

@@ -1,5 +1,5 @@
-"""How clearly a sparse assignment's pairs beat their alternatives: the swap regret of each accepted pair over the
-gated candidates of its view pair (the sparse counterpart of :func:`reconstruction.matching.merge.swap_regret`)."""
+"""The swap regret of a sparse assignment's accepted pairs in numpy: the reference for data.assignment.swap_regrets
+(the sparse counterpart of :func:`reconstruction.matching.merge.swap_regret`)."""
 
 from __future__ import annotations
 
