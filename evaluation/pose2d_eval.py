@@ -18,6 +18,7 @@ from torch.utils.data import DataLoader
 
 from data.formats.atomic_io import atomic_write_text
 from data.formats.poses2d_io import write_poses2d
+from data.formats.strict_json import finite
 from data.keypoints import NUM_JOINTS
 from data.multiview import ViewDetections
 from data.pose2d.coco_eval import evaluate_keypoints, write_coco_results
@@ -151,5 +152,5 @@ def evaluate_checkpoint(cfg: DictConfig, out_dir: str | Path) -> dict[str, Any]:
     cameras = write_predictions_poses2d(out_dir / pose2d.output, predictions, image_views(ann_file))
     run = dict(checkpoint=str(cfg.checkpoint), ann_file=str(ann_file), crops=len(dataset), decode=pose2d.decode)
     run.update(flip_test=pose2d.flip_test, cameras=cameras)
-    atomic_write_text(out_dir / cfg.metrics_file, json.dumps({"metrics": metrics, **run}, indent=2))
+    atomic_write_text(out_dir / cfg.metrics_file, json.dumps(finite({"metrics": metrics, **run}), indent=2))
     return metrics

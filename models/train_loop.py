@@ -20,6 +20,7 @@ from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 
 from data.formats.atomic_io import atomic_write_text
+from data.formats.strict_json import finite
 from data.pose2d.coco_eval import write_coco_results
 from data.pose2d.topdown_dataset import EpochSampler
 from models.checkpoint_io import read_checkpoint
@@ -147,7 +148,7 @@ def _validate(r: _Run, loader: DataLoader) -> dict[str, float]:
     writer.flush()
     write_coco_results(r.run_dir / r.cfg.predictions_file, result.predictions)
     latest = {"metrics": result.metrics, "step": step, "epoch": r.state.epoch}  # for sweep tables
-    atomic_write_text(r.run_dir / "metrics.json", json.dumps(latest, indent=2))
+    atomic_write_text(r.run_dir / "metrics.json", json.dumps(finite(latest), indent=2))
     log.info("validation at step %d: %s", step, ", ".join(f"{k} {v:.4f}" for k, v in result.metrics.items()))
     return result.metrics
 

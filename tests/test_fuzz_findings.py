@@ -174,3 +174,14 @@ def test_python_m_outside_the_repository_fails_in_one_line_and_runs_with_the_doc
     usage = " ".join((REPO / "docs" / "usage.md").read_text().split())
     assert "The tools run as python -m are modules of this repository, not an installed package" in usage
     assert "`PYTHONPATH`" in usage
+
+
+def test_finite_writes_numpy_nan_and_inf_as_null():
+    import json
+
+    import numpy as np
+
+    from data.formats.strict_json import finite
+
+    doc = {"ap": np.float64("nan"), "loss": [1.0, float("inf")], "n": 3}
+    assert json.loads(json.dumps(finite(doc))) == {"ap": None, "loss": [1.0, None], "n": 3}
