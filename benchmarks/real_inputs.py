@@ -9,7 +9,9 @@ oracle matching (GT identities: the upper bound; not on Shelf, whose detections 
 the default and fix_sides without tracking. Columns: GT persons found within ``evaluation.max_dist_m`` (%), and
 of those seen in >= 2 views (%); predictions matched to no GT person; matching pair precision / recall; absolute
 MPJPE (mm); PCP (%, alpha 0.5; Shelf: strict, actors 1-3); ms / frame of matching + reconstruction + tracking
-(Shelf: + PAF grouping) on one core.
+(Shelf: + PAF grouping) on one core. ``variants`` (benchmarks/input_variants.py): Shelf with every score x 4 and
+raised to the power 3 (other detectors' scales) and with each detection repeated 0.3 px away; Panoptic's exact 2D
+made detector-like. Every set's frames are cleaned as eval.py cleans them (data/frame_inputs.py).
 """
 
 from benchmarks import common  # isort: split
@@ -23,6 +25,8 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 from tqdm import tqdm
 
+from benchmarks import input_variants as variants
+from data.frame_inputs import clean_frames
 from data.multiview import Sequence
 from evaluation.report import format_table
 
@@ -36,6 +40,13 @@ ROWS = {
     "oracle": ("oracle + vanilla", ["matching=oracle", "reconstruction=vanilla", "tracking=off"]),
 }
 CROWD_SIZES = (10, 50, 100, 200, 400)
+VARIANTS = {  # label: (the dev set it is made from, the change of its 2D)
+    "Shelf, scores x4": ("Shelf", lambda s: variants.rescored(s, lambda x: 4.0 * x)),
+    "Shelf, scores ^3": ("Shelf", lambda s: variants.rescored(s, lambda x: x**3)),
+    "Shelf, doubled 0.3 px": ("Shelf", variants.doubled),
+    "Panoptic band1 detector-like": ("Panoptic band1 0 px", variants.detector_like),
+    "Panoptic band2 detector-like": ("Panoptic band2 0 px", variants.detector_like),
+}
 HEADERS = ("dev set", "configuration", "found (%)", "found of >=2 views (%)", "false pos.", "pair P (%)")
 HEADERS += ("pair R (%)", "MPJPE (mm)", "PCP (%)", "ms / frame")
 
@@ -56,6 +67,9 @@ def dev_sets(names: list[str], data: str, crowd_frames: int) -> dict[str, list[s
     if "crowd" in names:
         for n in CROWD_SIZES:
             sets[f"crowd {n} people"] = common.crowd(n, crowd_frames)
+    if "variants" in names:
+        bases = {"Shelf": common.shelf(data), **common.panoptic_sets(data, (0,))}
+        sets.update({label: bases[base] for label, (base, _) in VARIANTS.items()})
     return sets
 
 
@@ -85,7 +99,7 @@ def run_row(sequence: Sequence, cfg: DictConfig) -> list:
 def main(argv: list[str] | None = None) -> list[list]:
     """Print (and optionally write) the dev-set table; returns its rows."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--sets", default="shelf,panoptic,wildtrack,crowd,timing")
+    parser.add_argument("--sets", default="shelf,panoptic,wildtrack,crowd,timing,variants")
     parser.add_argument("--rows", default=",".join(ROWS), help=f"comma list of {', '.join(ROWS)}")
     parser.add_argument("--match", default="", help="only the dev sets whose label contains this text")
     parser.add_argument("--crowd-frames", type=int, default=3)
@@ -101,7 +115,10 @@ def main(argv: list[str] | None = None) -> list[list]:
             k: v for k, v in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items() if args.match in k
         }
         for label, dataset in tqdm(chosen.items(), desc="dev sets"):
-            sequence = instantiate(compose(config_name="eval", overrides=dataset).dataset, _convert_="all")
+            base = compose(config_name="eval", overrides=dataset)
+            sequence = instantiate(base.dataset, _convert_="all")
+            sequence = VARIANTS[label][1](sequence) if label in VARIANTS else sequence
+            sequence, _ = clean_frames(sequence, base.inputs.max_detections_per_frame, base.inputs.near_duplicate)
             for row, overrides in rows_wanted:
                 if row.startswith("oracle") and label.startswith("Shelf"):  # Shelf's detections carry no identities
                     table.append([label, row, *["-"] * 8])
