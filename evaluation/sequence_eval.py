@@ -18,6 +18,9 @@ from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
 from evaluation.report import format_table
 from evaluation.reprojection import frame_reprojection_errors, reprojection_stats
+from reconstruction.matching.epipolar import TOO_FEW_JOINTS
+from reconstruction.matching.evidence import AMBIGUOUS, NON_FINITE_KEYPOINTS, TOO_LITTLE_EVIDENCE
+from reconstruction.matching.feet import FEET_ABOVE_HORIZON, NO_COUNTERPART, NO_FOOT_JOINTS
 from reconstruction.pipeline import FrameResult, MultiViewPipeline
 
 
@@ -37,15 +40,17 @@ class SequenceReport:
 
 
 # the likeliest cause of a run that reconstructs nobody, by the matcher's commonest reason for leaving detections out
+FEW_SCORED = "too few joints scored >= matching.min_score (another detector's score scale?)"
 NOBODY_CAUSES = {
-    "no_counterpart": "no two views agree on a person, so the calibration does not fit the detections (a camera's "
+    NO_COUNTERPART: "no two views agree on a person, so the calibration does not fit the detections (a camera's "
     "R given camera -> world, swapped camera names, mirrored or flipped images, another image size): "
     "python -m data.geometry.check_rig cameras.json poses2d.json names the camera",
-    "too_little_evidence": "too few joints scored >= matching.min_score (another detector's score scale?)",
-    "too_few_joints": "too few joints scored >= matching.min_score (another detector's score scale?)",
-    "non_finite_keypoints": "the keypoints are NaN or infinite",
-    "no_foot_joints": "no foot or ankle joints scored: a feet matcher needs them (matching=evidence does not)",
-    "feet_above_horizon": "the feet meet no ground plane in front of the cameras: the calibration's up axis or "
+    TOO_LITTLE_EVIDENCE: FEW_SCORED,
+    TOO_FEW_JOINTS: FEW_SCORED,
+    NON_FINITE_KEYPOINTS: "the keypoints are NaN or infinite",
+    AMBIGUOUS: "every pair was refused as ambiguous (matching.ambiguity_margin)",
+    NO_FOOT_JOINTS: "no foot or ankle joints scored: a feet matcher needs them (matching=evidence does not)",
+    FEET_ABOVE_HORIZON: "the feet meet no ground plane in front of the cameras: the calibration's up axis or "
     "units do not fit (docs/formats.md)",
 }
 
@@ -93,8 +98,9 @@ def evaluate_sequence(
     timings = dict(pipeline.timings, evaluation=t_eval)
     protocols = {p.name: p.summary() for p in sequence.protocols}
     reports = [p.report() for p in sequence.protocols]
-    unmatched = Counter(pipeline.unmatched)
-    return SequenceReport(results, metrics, skipped, timings, unmatched, protocols, reports, detections)
+    return SequenceReport(
+        results, metrics, skipped, timings, Counter(pipeline.unmatched), protocols, reports, detections
+    )
 
 
 def nobody_diagnosis(report: SequenceReport) -> str | None:

@@ -91,8 +91,7 @@ class MultiViewPipeline:
         matches = self.matcher(frame.views, self.rig)
         self.unmatched += matches.unmatched
         t1 = time.perf_counter()
-        assignment, poses2d, result, association = self._reconstruct_once(frame, matches.assignment)
-        views = (poses2d[..., 2] > 0).sum(axis=0)  # gather_views zeroed the non-finite joints
+        assignment, views, result, association = self._reconstruct_once(frame, matches.assignment)
         t2 = time.perf_counter()
         self.timings["matching"] += t1 - t0
         self.timings["reconstruction"] += t2 - t1
@@ -111,17 +110,18 @@ class MultiViewPipeline:
         self, frame: Frame, assignment: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, Reconstruction, Association | None]:
         """Gather and reconstruct a frame's matched persons; where two coincide, join them and reconstruct again ->
-        the final assignment (P, V), poses2d (V, P, J, 3), Reconstruction and association (as _reconstruct)."""
+        the final assignment (P, V), the views that saw each joint (P, J), Reconstruction and association (as
+        _reconstruct)."""
         poses2d, bboxes = gather_views(frame.views, assignment)
+        views = (poses2d[..., 2] > 0).sum(axis=0)  # gather_views zeroed the non-finite joints
         if not len(assignment):
-            return assignment, poses2d, Reconstruction(np.zeros((0, poses2d.shape[2], 4))), None
+            return assignment, views, Reconstruction(np.zeros((0, poses2d.shape[2], 4))), None
         result, association = self._reconstruct(frame.index, poses2d, bboxes)
-        views = (poses2d[..., 2] > 0).sum(axis=0)
         merged = merge_coincident(result.poses, views, assignment, self.coincident_m)
         if merged is assignment:
-            return assignment, poses2d, result, association
+            return assignment, views, result, association
         poses2d, bboxes = gather_views(frame.views, merged)
-        return merged, poses2d, *self._reconstruct(frame.index, poses2d, bboxes)
+        return merged, (poses2d[..., 2] > 0).sum(axis=0), *self._reconstruct(frame.index, poses2d, bboxes)
 
     def _reconstruct(
         self, frame: int, poses2d: np.ndarray, bboxes: np.ndarray

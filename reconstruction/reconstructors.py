@@ -11,7 +11,6 @@ import numpy as np
 from data.geometry.camera import Rig
 from data.geometry.triangulation import triangulate_dlt
 from reconstruction.results import Reconstruction
-from reconstruction.solver.map_solver import seen_views
 
 
 class VanillaTriangulation:
@@ -26,4 +25,4 @@ class VanillaTriangulation:
         """Triangulate matched persons: (V, P, J, 3), (V, P, 4) -> Reconstruction (poses (P, J, 4))."""
         und = rig.undistort(poses2d)
         poses = triangulate_dlt(und, rig.projection_matrices(), self.min_views)
-        return Reconstruction(poses, provenance=seen_views(und)[0])
+        return Reconstruction(poses)

@@ -10,8 +10,8 @@ import numpy as np
 
 
 def joint_sources(scores: np.ndarray, views: np.ndarray, smoothed: np.ndarray) -> np.ndarray:
-    """Where each output joint came from, codes into data.formats.poses_io.JOINT_SOURCES: scores (P, J), views (P, J) int, smoothed (P,)
-    bool -> (P, J) int8. none: score 0 (not output); views: triangulated from 2+ views; fewer views: motion on a
+    """Where each output joint came from, codes into data.formats.poses_io.JOINT_SOURCES: scores (P, J), views
+    (P, J) int, smoothed (P,) bool -> (P, J) int8. none: score 0 (not output); views: triangulated from 2+ views; fewer views: motion on a
     person the tracker's motion model weighed in, else prior (the reconstruction's bone prior and fitted body)."""
     fewer = np.where(np.asarray(smoothed, dtype=bool)[:, None], 3, 2)
     return np.where(scores <= 0, 0, np.where(views >= 2, 1, fewer)).astype(np.int8)
@@ -28,13 +28,11 @@ class Matches(NamedTuple):
 class Reconstruction(NamedTuple):
     """A reconstruction's answer for one frame: poses (P, J, 4) x, y, z (m) and score; joint_variance (P, J) m^2 of
     each joint's estimate (None where the stage has none); bone_lengths (P, L) m measured in this frame (NaN where
-    unmeasured; None where the stage measures none); provenance (P, J) int, the number of views that observed each
-    joint (0: placed by the prior or the fitted body)."""
+    unmeasured; None where the stage measures none). Each joint's provenance is the pipeline's (FrameResult)."""
 
     poses: np.ndarray
     joint_variance: np.ndarray | None = None
     bone_lengths: np.ndarray | None = None
-    provenance: np.ndarray | None = None
 
 
 class SkeletonPrior(NamedTuple):

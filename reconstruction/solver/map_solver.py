@@ -269,7 +269,7 @@ class MAPReconstruction:
         settings = (self.output_min_views, self.single_view_score, self.unseen_score)
         conf = output_confidence(first.dlt[..., 3], views, score, first.placed, *settings)
         poses = np.concatenate([np.where(conf[..., None] > 0, X, 0.0), conf[..., None]], axis=-1)
-        return Reconstruction(poses, variance, bones, views)
+        return Reconstruction(poses, variance, bones)
 
     def __call__(self, poses2d: np.ndarray, bboxes: np.ndarray, rig: Rig) -> Reconstruction:
         """Reconstruct matched persons: (V, P, J, 3), (V, P, 4) -> Reconstruction (poses (P, J, 4))."""

@@ -6,15 +6,12 @@ from __future__ import annotations
 import numpy as np
 
 
-def sparse_swap_regret(
-    q: np.ndarray, a: np.ndarray, b: np.ndarray, cost: np.ndarray, kept: np.ndarray, cap: float = np.inf
-) -> np.ndarray:
+def sparse_swap_regret(q: np.ndarray, a: np.ndarray, b: np.ndarray, cost: np.ndarray, kept: np.ndarray) -> np.ndarray:
     """Least extra cost of re-matching each accepted pair within its view pair: candidates' view pair q, detections
     a, b and cost (E,) each, kept (K,) indices of the accepted candidates -> (K,), inf without an alternative.
 
     Alternatives: a candidate to a free detection, or swapping partners with another accepted pair of the view pair
-    (both cross candidates must exist); a pair that is not a candidate never counts. Swaps that cannot cost less
-    than cap are skipped: a regret >= cap is then a lower bound (the refusal test needs no more)."""
+    (both cross candidates must exist); a pair that is not a candidate never counts."""
     regret = np.full(len(kept), np.inf)
     if not len(kept):
         return regret
@@ -31,11 +28,6 @@ def sparse_swap_regret(
     np.minimum.at(regret, slot_b[free_a], cost[others[free_a]] - own[slot_b[free_a]])
     cross = np.flatnonzero((slot_a >= 0) & (slot_b >= 0))  # (a of k, b of l): the swap also needs (a of l, b of k)
     k, l = slot_a[cross], slot_b[cross]
-    if cap < np.inf:  # (a of l, b of k) costs at least a of l's cheapest candidate
-        cheapest = np.full(int(q.max() + 1) * width, np.inf)
-        np.minimum.at(cheapest, q * width + a, cost)
-        low = cost[others[cross]] - own[k] - own[l] + cheapest[q[kept][l] * width + a[kept][l]]
-        cross, k, l = cross[low < cap], k[low < cap], l[low < cap]
     pair_key = (q.astype(np.int64) * width + a) * width + b
     back = find(pair_key, (q[kept][k].astype(np.int64) * width + a[kept][l]) * width + b[kept][k])
     ok = back >= 0
