@@ -6,7 +6,7 @@ kept with its score and box size sqrt(w h). reconstruction.noise_model.NoiseMode
 sigma = max(sigma_min, sqrt(sigma_px^2 + (c sqrt(w h))^2) / score^score_power) is then fitted by least squares of
 log sigma on the median error of each (score, size) bin (an SD sigma per coordinate has median error
 sigma sqrt(2 ln 2)), so that left / right swaps and grouping mistakes do not inflate it. Printed: the bins, the
-fit and the configured model (configs/noise_model/fitted.yaml); ``--out`` writes the fit as such a file.
+fit and the configured model (configs/noise_model/fixed.yaml); ``--out`` writes the fit as such a file.
 """
 
 import argparse

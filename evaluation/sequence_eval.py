@@ -37,6 +37,7 @@ class SequenceReport:
     protocol_reports: list[str] = field(default_factory=list)
     detections: int = 0  # 2D detections over every view and frame run
     inputs: Counter = field(default_factory=Counter)  # detections dropped or merged before matching, by reason
+    noise_model: str | None = None  # the self-calibrated 2D noise model, in words (None: a fixed one)
 
 
 # the likeliest cause of a run that reconstructs nobody, by the matcher's commonest reason for leaving detections out
@@ -67,6 +68,10 @@ def evaluate_sequence(
     tracked = tracked and all(f.gt_ids is not None for f in sequence.frames if f.gt_poses is not None)
     identities = IdentityEvaluator(evaluator.max_dist_m) if tracked else None
     t_eval, detections = 0.0, 0
+    t0 = time.perf_counter()
+    noise = pipeline.calibrate_noise(sequence.frames)
+    if noise is not None:  # matching and reconstructing the first frames with the start model, then the fit
+        pipeline.timings["noise calibration"] += time.perf_counter() - t0
     for frame in tqdm(sequence.frames, desc="frames", unit="frame", disable=not progress):
         result = pipeline(frame)
         detections += sum(len(v) for v in frame.views)
@@ -99,7 +104,7 @@ def evaluate_sequence(
     protocols = {p.name: p.summary() for p in sequence.protocols}
     reports = [p.report() for p in sequence.protocols]
     return SequenceReport(
-        results, metrics, skipped, timings, Counter(pipeline.unmatched), protocols, reports, detections
+        results, metrics, skipped, timings, Counter(pipeline.unmatched), protocols, reports, detections, noise_model=noise
     )
 
 
@@ -148,7 +153,7 @@ def format_report(report: SequenceReport, num_frames: int, protocol: str) -> str
             "min {reprojection_min_px:.3f}, max {reprojection_max_px:.1f}, "
             "variance {reprojection_var_px2:.2f} px^2".format(**m)
         )
-    lines = []
+    lines = [report.noise_model] if report.noise_model else []
     if report.inputs:
         lines.append("Detections before matching: " + ", ".join(f"{n} {why}" for why, n in report.inputs.items()))
     if report.unmatched:

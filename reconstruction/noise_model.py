@@ -8,8 +8,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+
+
+class AnyNoiseModel(Protocol):
+    """What the stages read: NoiseModel here, or the self-calibrating one (reconstruction/noise_calibration.py)."""
+
+    def sigma(self, poses2d: np.ndarray, bboxes: np.ndarray, views: np.ndarray | None = None) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -30,20 +37,20 @@ class NoiseModel:
         if self.c == self.sigma_px == self.sigma_min == 0:
             raise ValueError("noise_model: c, sigma_px and sigma_min are all 0 (every joint would have SD 0)")
 
-    def sigma(self, poses2d: np.ndarray, bboxes: np.ndarray) -> np.ndarray:
-        """Pixel SD of every joint: (..., J, 3), (..., 4) x, y, w, h -> (..., J); unseen joints (score <= 0 or a
-        non-finite pixel) get inf. A box with no area falls back to the box of the person's seen joints."""
+    def sigma(self, poses2d: np.ndarray, bboxes: np.ndarray, views: np.ndarray | None = None) -> np.ndarray:
+        """Pixel SD of every joint: (..., J, 3), (..., 4) x, y, w, h, the view indices (...,) (unused here) -> (..., J);
+        unseen joints (score <= 0 or a non-finite pixel) get inf. A box with no area: the box of the seen joints."""
         poses2d = np.asarray(poses2d, dtype=np.float64)
         score = poses2d[..., 2]
         seen = (score > 0) & np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
-        spread = np.hypot(self.sigma_px, self.c * _box_size(poses2d, np.asarray(bboxes, np.float64), seen))
+        spread = np.hypot(self.sigma_px, self.c * box_size(poses2d, np.asarray(bboxes, np.float64), seen))
         powed = np.where(score > 0, score, 1.0) ** self.score_power
         with np.errstate(divide="ignore", invalid="ignore"):
             sigma = np.maximum(spread[..., None] / powed, self.sigma_min)
         return np.where(seen, sigma, np.inf)
 
 
-def _box_size(poses2d: np.ndarray, bboxes: np.ndarray, seen: np.ndarray) -> np.ndarray:
+def box_size(poses2d: np.ndarray, bboxes: np.ndarray, seen: np.ndarray) -> np.ndarray:
     """sqrt(w h) of each box (...,), the extent of the person's seen joints where the box has no area (0 if none)."""
     size = np.sqrt(np.maximum(bboxes[..., 2], 0.0) * np.maximum(bboxes[..., 3], 0.0))  # np.clip: slow dispatch
     missing = ~(size > 0)

@@ -13,6 +13,7 @@ from hydra.utils import instantiate
 from data.geometry.camera import Rig
 from data.multiview import Frame, ViewDetections
 from reconstruction.coincident import merge_coincident
+from reconstruction.noise_calibration import CalibratedNoiseModel, calibrate, describe
 from reconstruction.results import Matches, Reconstruction, joint_sources
 from tracking.tracker import Association, Tracker
 
@@ -82,6 +83,32 @@ class MultiViewPipeline:
         tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
         coincident_m = cfg.get("coincident_m", 0.2)
         return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker, coincident_m)
+
+    def calibrate_noise(self, frames: list[Frame]) -> str | None:
+        """Fit a self-calibrating 2D noise model (the stages', noise_model=calibrated) to the first frames and give
+        it to both stages -> the report's line on it; None where the stages' model is fixed."""
+        model = next((s.noise_model for s in self.stages() if isinstance(s.noise_model, CalibratedNoiseModel)), None)
+        if model is None:
+            return None
+        fitted, blocks, proj = model.fitted(None), None, self.rig.projection_matrices()
+        for _ in range(model.iterations):  # match with the last fit, then fit again
+            self._give_noise_model(fitted)
+            fitted, blocks = calibrate(model, [self._matched(frame) for frame in frames[: model.frames]], proj)
+        self._give_noise_model(fitted)
+        return describe(fitted, self.rig.names, blocks, len(frames[: model.frames]))
+
+    def stages(self) -> list[Any]:
+        """The matcher and the reconstructor where they read a 2D noise model."""
+        return [s for s in (self.matcher, self.reconstructor) if hasattr(s, "noise_model")]
+
+    def _give_noise_model(self, model: CalibratedNoiseModel) -> None:
+        for stage in self.stages():
+            stage.noise_model = model
+
+    def _matched(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+        """The frame's matched persons: undistorted poses (V, P, J, 3) and boxes (V, P, 4)."""
+        poses2d, bboxes = gather_views(frame.views, self.matcher(frame.views, self.rig).assignment)
+        return self.rig.undistort(poses2d), bboxes
 
     def __call__(self, frame: Frame) -> FrameResult:
         """Reconstruct one frame: Frame with V views -> FrameResult."""

@@ -342,12 +342,15 @@ def test_configs_instantiate_the_stages_with_the_configured_noise_model():
     from hydra import compose, initialize_config_dir
     from hydra.utils import instantiate
 
+    from reconstruction.noise_calibration import CalibratedNoiseModel
+
     stages = {"mle": MLEReconstruction, "map": MAPReconstruction, "mle_map": MLEMAPReconstruction, "paper": None}
     with initialize_config_dir(str(Path("configs").resolve()), version_base=None):
         for name, cls in stages.items():
             stage = instantiate(compose("eval", overrides=[f"reconstruction={name}"]).reconstruction)
             assert type(stage) is (cls or MLEMAPReconstruction)
-            assert stage.noise_model == (NoiseModel(0.02, 0.0, 1.0) if name == "paper" else NoiseModel())
+            calibrated = CalibratedNoiseModel(start=NoiseModel())  # configs/noise_model/calibrated.yaml
+            assert stage.noise_model == (NoiseModel(0.02, 0.0, 1.0) if name == "paper" else calibrated)
             assert stage.prior_weight == (0.0 if name == "mle" else 1.0)
 
 

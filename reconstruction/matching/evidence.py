@@ -36,7 +36,7 @@ from reconstruction.matching.epipolar import fundamentals
 from reconstruction.matching.evidence_kernels import ChiTest, Detections, LinkTests, Sample, merge_linked, pairs_chi2
 from reconstruction.matching.feet import NO_COUNTERPART, FeetMatcher
 from reconstruction.matching.merge import as_edges
-from reconstruction.noise_model import NoiseModel
+from reconstruction.noise_model import AnyNoiseModel, NoiseModel
 from reconstruction.results import Matches
 from reconstruction.solver.person_prior import chi2_medians
 
@@ -55,7 +55,7 @@ def gate_limits(reject_rate: float, max_dof: int) -> np.ndarray:
 
 
 def joint_variances(
-    views: list[ViewDetections], cameras: list, min_score: float, noise_model: NoiseModel, J: int
+    views: list[ViewDetections], cameras: list, min_score: float, noise_model: AnyNoiseModel, J: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Undistorted pixels (N, J, 2), pixel variances (N, J) (0: unusable) and any-non-finite (N,) of the
     detections of V views stacked in view order."""
@@ -64,7 +64,8 @@ def joint_variances(
     finite = np.isfinite(kp[..., 0]) & np.isfinite(kp[..., 1]) & np.isfinite(kp[..., 2])  # not .all(-1): slow on 3
     ok = finite & (kp[..., 2] >= min_score)
     clean = np.where(ok[..., None], kp, 0.0)
-    sigma = noise_model.sigma(clean, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0))
+    view_of = np.repeat(np.arange(len(views)), [len(v) for v in views])
+    sigma = noise_model.sigma(clean, np.nan_to_num(boxes, nan=0.0, posinf=0.0, neginf=0.0), view_of)
     var, bad = np.where(ok & np.isfinite(sigma), sigma**2, 0.0), ~finite.all(axis=1)
     if not any(cam.has_distortion for cam in cameras):  # the joints not ok are zero already
         return np.ascontiguousarray(clean[..., :2]), var, bad
@@ -180,7 +181,7 @@ class EvidenceMatcher:
         evidence_per_dof: float = 2.0,
         min_dof: int = 2,
         min_score: float = 0.2,
-        noise_model: NoiseModel | None = None,
+        noise_model: AnyNoiseModel | None = None,
         min_views: int = 2,
         ambiguity_margin: float = 2.0,
         feet: dict | None = None,

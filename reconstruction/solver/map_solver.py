@@ -18,7 +18,7 @@ import numpy as np
 from data.bone_lengths import ABSOLUTE_SD_M, BONE_MEAN, BONE_PAIRS, MEAN_POSE, resolve_bone_table
 from data.geometry.camera import Rig
 from data.geometry.triangulation import triangulate_dlt
-from reconstruction.noise_model import NoiseModel
+from reconstruction.noise_model import AnyNoiseModel, NoiseModel
 from reconstruction.results import Reconstruction, SkeletonPrior
 from reconstruction.solver.compiled_solver import ROBUST_LOSSES, PoseProblem, solve_poses
 from reconstruction.solver.person_prior import (
@@ -146,8 +146,8 @@ def _check(settings: dict[str, Any]) -> None:
             f"bone_prior must be one of {BONE_PRIORS} and noise_scale one of {NOISE_SCALES}, "
             f"got {settings['bone_prior']!r}, {settings['noise_scale']!r}"
         )
-    if not isinstance(settings["noise_model"], NoiseModel):
-        raise ValueError(f"noise_model must be a NoiseModel, got {type(settings['noise_model']).__name__}")
+    if not hasattr(settings["noise_model"], "sigma"):
+        raise ValueError(f"noise_model must have sigma() (NoiseModel, CalibratedNoiseModel), got {type(settings['noise_model']).__name__}")
 
 
 class MAPReconstruction:
@@ -158,7 +158,7 @@ class MAPReconstruction:
 
     def __init__(
         self,
-        noise_model: NoiseModel | None = None,
+        noise_model: AnyNoiseModel | None = None,
         prior_weight: float = 1.0,
         bone_table: str | Path | Mapping | None = None,
         bone_prior: str = "adaptive",
@@ -206,7 +206,7 @@ class MAPReconstruction:
 
     def _observations(self, poses2d_und: np.ndarray, bboxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (V, P, J, 2) (np.nan_to_num) and 1 / sigma (V, P, J) (0 where unseen) of undistorted poses."""
-        sigma = self.noise_model.sigma(poses2d_und, bboxes)
+        sigma = self.noise_model.sigma(poses2d_und, bboxes, np.arange(len(poses2d_und))[:, None])
         with np.errstate(divide="ignore"):
             inv_sigma = np.where(np.isfinite(sigma), 1.0 / sigma, 0.0)
         return np.nan_to_num(np.asarray(poses2d_und, dtype=np.float64)[..., :2]), inv_sigma

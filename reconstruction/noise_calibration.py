@@ -1,0 +1,260 @@
+"""A 2D noise model that calibrates itself on the run's own detections (``noise_model=calibrated``).
+
+log sigma^2 = base + camera + joint type + score rank + box size: one additive effect per level of each factor,
+fitted by median polish to the reprojection residuals of joints seen in >= 3 views of the first frames' matched
+persons. Each residual is divided by its dof (2 minus the view's leverage in the weighted triangulation), so a view
+that pulls the point towards itself is not read as precise. The score enters only by its rank among the
+calibration's scores: a detector scoring 0-5 and one scoring 0-0.3 get the same model. Docs: docs/design.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.special import gammaincinv
+
+from data.keypoints import COCO23_NAMES
+from data.geometry.triangulation import triangulate_dlt
+from reconstruction.noise_model import NoiseModel, box_size
+
+FACTORS = ("camera", "joint", "rank", "box")
+
+
+def joint_types(J: int) -> np.ndarray:
+    """Joint type per joint (J,): COCO-23's left and right joints share one; another layout, one per joint."""
+    if J != len(COCO23_NAMES):
+        return np.arange(J)
+    names = [n.removeprefix("left_").removeprefix("right_") for n in COCO23_NAMES]
+    return np.array([sorted(set(names), key=names.index).index(n) for n in names])
+
+
+@dataclass(frozen=True)
+class NoiseTable:
+    """Fitted effects: base (log px^2), effects per factor (levels,), bin edges of score and box size (bins - 1,)."""
+
+    base: float
+    effects: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # camera, joint type, score rank, box size
+    rank_edges: np.ndarray
+    box_edges: np.ndarray
+    residuals: int  # joint residuals the fit used
+
+    def codes(self, score: np.ndarray, box: np.ndarray, views: np.ndarray, J: int) -> list[np.ndarray]:
+        """Level of every factor for joints: score (..., J), box (...,), views (...,) -> 4 x (..., J) int."""
+        cam = np.where((views >= 0) & (views < len(self.effects[0])), views, -1)
+        shape = score.shape
+        return [
+            np.broadcast_to(cam[..., None], shape),
+            np.broadcast_to(joint_types(J), shape),
+            np.searchsorted(self.rank_edges, score, side="right"),
+            np.broadcast_to(np.searchsorted(self.box_edges, box, side="right")[..., None], shape),
+        ]
+
+    def log_variance(self, codes: list[np.ndarray]) -> np.ndarray:
+        """log sigma^2 of joints with the given levels (..., J); an unknown level (-1, or past the table) adds 0."""
+        out = np.full(codes[0].shape, self.base)
+        for effect, code in zip(self.effects, codes):
+            known = (code >= 0) & (code < len(effect))
+            out += np.where(known, effect[np.where(known, code, 0)], 0.0)
+        return out
+
+
+@dataclass(frozen=True)
+class CalibratedNoiseModel:
+    """The start model until fitted, then the table; keys as configs/noise_model/calibrated.yaml."""
+
+    start: NoiseModel = NoiseModel()
+    frames: int = 30  # the first frames whose matched persons calibrate the model
+    iterations: int = 2  # match, fit; match again with the fitted model, fit again ...
+    min_views: int = 3  # a joint's residuals count where it is seen in this many views
+    rank_bins: int = 5
+    box_bins: int = 4
+    min_count: int = 30  # a level with fewer residuals keeps effect 0 (the average)
+    table: NoiseTable | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("frames", "iterations", "rank_bins", "box_bins", "min_count"):
+            if isinstance(getattr(self, name), bool) or not int(getattr(self, name)) >= 1:
+                raise ValueError(f"noise_model.{name}={getattr(self, name)!r}: must be an integer >= 1")
+        if not int(self.min_views) >= 3:
+            raise ValueError(f"noise_model.min_views={self.min_views!r}: must be >= 3 (2 views leave no residual)")
+        if not isinstance(self.start, NoiseModel):
+            object.__setattr__(self, "start", NoiseModel(**dict(self.start)))
+
+    @property
+    def sigma_min(self) -> float:
+        return self.start.sigma_min
+
+    def sigma(self, poses2d: np.ndarray, bboxes: np.ndarray, views: np.ndarray | None = None) -> np.ndarray:
+        """Pixel SD of every joint: (..., J, 3), boxes (..., 4), view index (...,) or None -> (..., J); inf unseen."""
+        if self.table is None:
+            return self.start.sigma(poses2d, bboxes, views)
+        poses2d = np.asarray(poses2d, dtype=np.float64)
+        score = poses2d[..., 2]
+        seen = (score > 0) & np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
+        box = box_size(poses2d, np.asarray(bboxes, np.float64), seen)
+        views = np.full(box.shape, -1) if views is None else np.broadcast_to(views, box.shape)
+        log_var = self.table.log_variance(self.table.codes(score, box, views, poses2d.shape[-2]))
+        return np.where(seen, np.maximum(np.exp(0.5 * log_var), self.sigma_min), np.inf)
+
+    def fitted(self, table: NoiseTable | None) -> CalibratedNoiseModel:
+        """This model with a fitted table (None: the start model again)."""
+        return replace(self, table=table)
+
+
+def residual_blocks(
+    poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, sigma: np.ndarray, min_views: int = 3
+) -> dict[str, np.ndarray]:
+    """The K joints seen in >= min_views views, triangulated with weights 1 / sigma^2: (V, P, J, 3), (V, P, 4),
+    (V, 3, 4), SDs (V, P, J) -> {r2 (K, V) squared residuals, mix (K, V, V), seen (K, V), chi2, dof, joint (K,),
+    score, box (K, V)}; E[r2[k, v]] = sum_c mix[k, v, c] sigma_c^2 whatever the weights (mix: |(I - H)_vc|_F^2)."""
+    V, P, J, _ = poses2d_und.shape
+    finite = np.isfinite(sigma) & (poses2d_und[..., 2] > 0) & np.isfinite(poses2d_und[..., :2]).all(axis=-1)
+    p, j = np.nonzero(finite.sum(axis=0) >= min_views)
+    obs = np.where(finite[..., None], poses2d_und, 0.0)[:, p, j]  # (V, K, 3)
+    w = np.where(finite, 1.0 / np.where(finite, sigma, 1.0) ** 2, 0.0)[:, p, j].T  # (K, V)
+    X = triangulate_dlt(obs[:, :, None], proj)[:, 0, :3]
+    uv = obs[..., :2].transpose(1, 0, 2)
+    for _ in range(3):  # Gauss-Newton on the weighted reprojection error from the DLT
+        r, jac, depth = _linearised(X, uv, proj)
+        info, ok = _information(w * (depth > 0), jac)
+        step = np.linalg.solve(info, np.einsum("kv,kvai,kva->ki", w * (depth > 0), jac, r)[..., None])[..., 0]
+        X = X + np.where(ok[:, None], step, 0.0)
+    r, jac, depth = _linearised(X, uv, proj)
+    seen = (w > 0) & (depth > 0) & np.isfinite(r).all(axis=-1) & np.isfinite(jac).all(axis=(2, 3))
+    info, ok = _information(w * seen, np.where(seen[..., None, None], jac, 0.0))
+    k = np.flatnonzero(ok & (seen.sum(axis=1) >= min_views))
+    seen, w, jac, r, cov = seen[k], (w * seen)[k], jac[k], r[k], np.linalg.inv(info[k])
+    hat = np.einsum("kvai,kij,kcbj,kc->kvcab", jac, cov, jac, w)  # H's (v, c) blocks
+    mix = ((np.eye(V)[None, :, :, None, None] * np.eye(2) - hat) ** 2).sum(axis=(3, 4))
+    r2 = np.where(seen, (np.nan_to_num(r) ** 2).sum(axis=-1), 0.0)
+    box = box_size(poses2d_und, np.asarray(bboxes, np.float64), poses2d_und[..., 2] > 0)[:, p[k]].T
+    return {
+        "r2": r2,
+        "mix": mix * seen[:, :, None] * seen[:, None, :],
+        "seen": seen,
+        "chi2": (w * r2).sum(axis=1),
+        "dof": 2 * seen.sum(axis=1) - 3,
+        "joint": joint_types(J)[j[k]],
+        "score": obs[:, k, 2].T,
+        "box": box,
+    }
+
+
+def _information(w: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """sum_v w J^T J of (K, V) weights and (K, V, 2, 3) Jacobians -> (K, 3, 3) (identity where not finite or
+    singular) and which are usable (K,)."""
+    info = np.einsum("kv,kvai,kvaj->kij", w, np.nan_to_num(jac), np.nan_to_num(jac))
+    info = np.where(np.isfinite(info), info, 0.0)
+    ok = np.linalg.det(info) > 1e-12 * (np.trace(info, axis1=1, axis2=2) / 3.0) ** 3  # well-conditioned enough
+    return np.where(ok[:, None, None], info, np.eye(3)), ok
+
+
+def _linearised(X: np.ndarray, uv: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residuals uv - projection (K, V, 2) of points (K, 3), the projection's Jacobian (K, V, 2, 3), depth (K, V)."""
+    hom = np.einsum("vab,kb->kva", proj[:, :, :3], X) + proj[:, :, 3]
+    depth = hom[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pix = hom[..., :2] / depth[..., None]
+        jac = (proj[None, :, :2, :3] - pix[..., None] * proj[None, :, 2:3, :3]) / depth[..., None, None]
+    return uv - pix, jac, depth
+
+
+def block_codes(blocks: dict[str, np.ndarray], rank_edges: np.ndarray, box_edges: np.ndarray) -> list[np.ndarray]:
+    """Level of every factor for each joint's views: -> 4 x (K, V) int."""
+    K, V = blocks["seen"].shape
+    camera, joint = np.broadcast_to(np.arange(V), (K, V)), np.broadcast_to(blocks["joint"][:, None], (K, V))
+    rank = np.searchsorted(rank_edges, blocks["score"], side="right")
+    return [camera, joint, rank, np.searchsorted(box_edges, blocks["box"], side="right")]
+
+
+def fit_table(blocks: dict[str, np.ndarray], rank_bins: int, box_bins: int, min_count: int) -> NoiseTable | None:
+    """The factors of the variance solved one factor at a time from the moment equations sum r2 = sum mix sigma^2
+    over each level (unbiased whatever the triangulation's weights), without the joints whose chi^2 is an outlier
+    (a swap, a mismatch); None with fewer residuals than 4 min_count."""
+    blocks = {k: a[inliers(blocks["chi2"], blocks["dof"])] for k, a in blocks.items()}
+    seen = blocks["seen"]
+    if np.count_nonzero(seen) < 4 * min_count:
+        return None
+    rank_edges = np.quantile(blocks["score"][seen], np.arange(1, rank_bins) / rank_bins)
+    box_edges = np.quantile(blocks["box"][seen], np.arange(1, box_bins) / box_bins)
+    codes = block_codes(blocks, rank_edges, box_edges)
+    base = math.log(max(float(blocks["r2"][seen].sum() / blocks["mix"].sum()), 1e-12))
+    effects = [np.zeros(int(c[seen].max()) + 1) for c in codes]
+    var = np.full(seen.shape, math.exp(base))
+    for _ in range(4):
+        for f, code in enumerate(codes):
+            factor = _level_factors(blocks, code, var, len(effects[f]), min_count)
+            effects[f] += np.log(factor)
+            var = var * factor[code]
+    for f, code in enumerate(codes):  # each factor's observation-weighted mean effect into the base
+        shift = float(np.mean(effects[f][code[seen]]))
+        effects[f] = effects[f] - shift
+        base += shift
+    return NoiseTable(base, tuple(effects), rank_edges, box_edges, int(np.count_nonzero(seen)))
+
+
+def _level_factors(blocks: dict[str, np.ndarray], code: np.ndarray, var: np.ndarray, L: int, min_count: int):
+    """Multipliers (L,) of the levels' variances solving sum r2 = sum mix var over each level's residuals (levels
+    with fewer than min_count residuals: 1)."""
+    seen = blocks["seen"]
+    pair = code[:, :, None] * L + code[:, None, :]
+    A = np.bincount(pair.ravel(), (blocks["mix"] * var[:, None, :]).ravel(), L * L).reshape(L, L)
+    b = np.bincount(code[seen], blocks["r2"][seen], L)
+    free = np.bincount(code[seen], minlength=L) >= min_count
+    factor = np.ones(L)
+    if np.any(free):
+        rhs = b[free] - A[np.ix_(free, ~free)].sum(axis=1)
+        factor[free] = np.linalg.lstsq(A[np.ix_(free, free)], rhs, rcond=None)[0]
+    return np.clip(factor, 1e-2, 1e2)
+
+
+def inliers(chi2: np.ndarray, dof: np.ndarray, rate: float = 1e-3) -> np.ndarray:
+    """Joints whose chi^2 (K,) passes the test at ``rate`` for its dof (K,) once scaled by the robust common scale
+    (the median of chi^2 over its median under the model) -> (K,) bool."""
+    if not len(chi2):
+        return np.zeros(0, dtype=bool)
+    scale = float(np.median(chi2 / (2.0 * gammaincinv(dof / 2.0, 0.5))))
+    return chi2 <= scale * 2.0 * gammaincinv(dof / 2.0, 1.0 - rate)
+
+
+def calibrate(
+    model: CalibratedNoiseModel, gathered: list[tuple[np.ndarray, np.ndarray]], proj: np.ndarray, rounds: int = 3
+) -> tuple[CalibratedNoiseModel, dict[str, np.ndarray] | None]:
+    """Fit the model to matched frames' undistorted poses (V, P, J, 3) and boxes (V, P, 4), refitting ``rounds``
+    times with the weights of the last fit -> the fitted model (table None: too few residuals) and its blocks."""
+    fitted, blocks = model, None
+    views = np.arange(len(proj))[:, None]
+    for _ in range(rounds):
+        found = [residual_blocks(u, b, proj, fitted.sigma(u, b, views), model.min_views) for u, b in gathered]
+        blocks = {k: np.concatenate([f[k] for f in found]) for k in found[0]} if found else None
+        table = fit_table(blocks, model.rank_bins, model.box_bins, model.min_count) if blocks else None
+        if table is None:
+            return model.fitted(None), blocks
+        fitted = model.fitted(table)
+    return fitted, blocks
+
+
+def describe(model: CalibratedNoiseModel, names: list[str], blocks: dict[str, np.ndarray] | None, frames: int) -> str:
+    """The report's line on the fitted model: per camera the median sigma of its calibration joints, the factors."""
+    table = model.table
+    if table is None:
+        found = 0 if blocks is None else int(np.count_nonzero(blocks["seen"]))
+        return (
+            f"2D noise model: not calibrated ({found} joint residuals from persons seen in >= {model.min_views} views "
+            f"of the first {frames} frames, need {4 * model.min_count}); the start model"
+        )
+    sigma = np.exp(0.5 * table.log_variance(block_codes(blocks, table.rank_edges, table.box_edges)))
+    seen = blocks["seen"]
+    cams = ", ".join(f"{n} {np.median(sigma[:, v][seen[:, v]]):.1f}" for v, n in enumerate(names) if seen[:, v].any())
+    factor = lambda e: " ".join(f"{math.exp(0.5 * x):.2f}" for x in e)
+    types = [n.removeprefix("left_").removeprefix("right_") for n in COCO23_NAMES]
+    names = sorted(set(types), key=types.index) if len(table.effects[1]) == len(set(types)) else None
+    joints = ", ".join(f"{names[t] if names else t} {math.exp(0.5 * e):.2f}" for t, e in enumerate(table.effects[1]))
+    return (
+        f"2D noise model: self-calibrated on {table.residuals} joint residuals of persons seen in >= "
+        f"{model.min_views} views (first {frames} frames). Median sigma (px) by camera: {cams}; "
+        f"factor by score rank, lowest to highest: {factor(table.effects[2])}; by box size, smallest to largest: "
+        f"{factor(table.effects[3])}; by joint type: {joints}"
+    )
