@@ -104,7 +104,15 @@ def evaluate_sequence(
     protocols = {p.name: p.summary() for p in sequence.protocols}
     reports = [p.report() for p in sequence.protocols]
     return SequenceReport(
-        results, metrics, skipped, timings, Counter(pipeline.unmatched), protocols, reports, detections, noise_model=noise
+        results,
+        metrics,
+        skipped,
+        timings,
+        Counter(pipeline.unmatched),
+        protocols,
+        reports,
+        detections,
+        noise_model=noise,
     )
 
 

@@ -15,11 +15,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.special import gammaincinv
 
-from data.keypoints import COCO23_NAMES
 from data.geometry.triangulation import triangulate_dlt
+from data.keypoints import COCO23_NAMES
 from reconstruction.noise_model import NoiseModel, box_size
-
-FACTORS = ("camera", "joint", "rank", "box")
 
 
 def joint_types(J: int) -> np.ndarray:

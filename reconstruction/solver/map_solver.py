@@ -147,7 +147,9 @@ def _check(settings: dict[str, Any]) -> None:
             f"got {settings['bone_prior']!r}, {settings['noise_scale']!r}"
         )
     if not hasattr(settings["noise_model"], "sigma"):
-        raise ValueError(f"noise_model must have sigma() (NoiseModel, CalibratedNoiseModel), got {type(settings['noise_model']).__name__}")
+        raise ValueError(
+            f"noise_model must have sigma() (NoiseModel, CalibratedNoiseModel), got {type(settings['noise_model']).__name__}"
+        )
 
 
 class MAPReconstruction:
