@@ -69,10 +69,11 @@ class CalibratedNoiseModel:
     rank_bins: int = 5
     box_bins: int = 4
     min_count: int = 30  # a level with fewer residuals keeps effect 0 (the average)
+    max_joints: int = 5000  # the calibration's joints at most, spread evenly over its frames (a crowd's time)
     table: NoiseTable | None = None
 
     def __post_init__(self) -> None:
-        for name in ("frames", "iterations", "rank_bins", "box_bins", "min_count"):
+        for name in ("frames", "iterations", "rank_bins", "box_bins", "min_count", "max_joints"):
             if isinstance(getattr(self, name), bool) or not int(getattr(self, name)) >= 1:
                 raise ValueError(f"noise_model.{name}={getattr(self, name)!r}: must be an integer >= 1")
         if not int(self.min_views) >= 3:
@@ -102,14 +103,17 @@ class CalibratedNoiseModel:
 
 
 def residual_blocks(
-    poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, sigma: np.ndarray, min_views: int = 3
+    poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, sigma: np.ndarray, min_views: int = 3, most: int = 0
 ) -> dict[str, np.ndarray]:
     """The K joints seen in >= min_views views, triangulated with weights 1 / sigma^2: (V, P, J, 3), (V, P, 4),
     (V, 3, 4), SDs (V, P, J) -> {r2 (K, V) squared residuals, mix (K, V, V), seen (K, V), chi2, dof, joint (K,),
-    score, box (K, V)}; E[r2[k, v]] = sum_c mix[k, v, c] sigma_c^2 whatever the weights (mix: |(I - H)_vc|_F^2)."""
+    score, box (K, V)}; E[r2[k, v]] = sum_c mix[k, v, c] sigma_c^2 whatever the weights (mix: |(I - H)_vc|_F^2);
+    most > 0: at most that many joints, evenly spread over the candidates."""
     V, P, J, _ = poses2d_und.shape
     finite = np.isfinite(sigma) & (poses2d_und[..., 2] > 0) & np.isfinite(poses2d_und[..., :2]).all(axis=-1)
     p, j = np.nonzero(finite.sum(axis=0) >= min_views)
+    if 0 < most < len(p):
+        p, j = (a[np.linspace(0, len(p) - 1, most).astype(int)] for a in (p, j))
     obs = np.where(finite[..., None], poses2d_und, 0.0)[:, p, j]  # (V, K, 3)
     w = np.where(finite, 1.0 / np.where(finite, sigma, 1.0) ** 2, 0.0)[:, p, j].T  # (K, V)
     X = triangulate_dlt(obs[:, :, None], proj)[:, 0, :3]
@@ -117,15 +121,15 @@ def residual_blocks(
     for _ in range(3):  # Gauss-Newton on the weighted reprojection error from the DLT
         r, jac, depth = _linearised(X, uv, proj)
         info, ok = _information(w * (depth > 0), jac)
-        step = np.linalg.solve(info, np.einsum("kv,kvai,kva->ki", w * (depth > 0), jac, r)[..., None])[..., 0]
-        X = X + np.where(ok[:, None], step, 0.0)
+        grad = (np.nan_to_num(jac) * (w * (depth > 0))[..., None, None] * np.nan_to_num(r)[..., None]).sum(axis=(1, 2))
+        X = X + np.where(ok[:, None], np.linalg.solve(info, grad[..., None])[..., 0], 0.0)
     r, jac, depth = _linearised(X, uv, proj)
     seen = (w > 0) & (depth > 0) & np.isfinite(r).all(axis=-1) & np.isfinite(jac).all(axis=(2, 3))
     info, ok = _information(w * seen, np.where(seen[..., None, None], jac, 0.0))
     k = np.flatnonzero(ok & (seen.sum(axis=1) >= min_views))
-    seen, w, jac, r, cov = seen[k], (w * seen)[k], jac[k], r[k], np.linalg.inv(info[k])
-    hat = np.einsum("kvai,kij,kcbj,kc->kvcab", jac, cov, jac, w)  # H's (v, c) blocks
-    mix = ((np.eye(V)[None, :, :, None, None] * np.eye(2) - hat) ** 2).sum(axis=(3, 4))
+    seen, w, jac, r, cov = seen[k], (w * seen)[k], jac[k].reshape(len(k), 2 * V, 3), r[k], np.linalg.inv(info[k])
+    hat = (jac @ cov) @ (jac * np.repeat(w, 2, axis=1)[..., None]).transpose(0, 2, 1)  # (K, 2V, 2V)
+    mix = ((np.eye(2 * V) - hat) ** 2).reshape(len(k), V, 2, V, 2).sum(axis=(2, 4))  # |(I - H)_vc|_F^2
     r2 = np.where(seen, (np.nan_to_num(r) ** 2).sum(axis=-1), 0.0)
     box = box_size(poses2d_und, np.asarray(bboxes, np.float64), poses2d_und[..., 2] > 0)[:, p[k]].T
     return {
@@ -143,7 +147,8 @@ def residual_blocks(
 def _information(w: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """sum_v w J^T J of (K, V) weights and (K, V, 2, 3) Jacobians -> (K, 3, 3) (identity where not finite or
     singular) and which are usable (K,)."""
-    info = np.einsum("kv,kvai,kvaj->kij", w, np.nan_to_num(jac), np.nan_to_num(jac))
+    J = np.nan_to_num(jac).reshape(len(w), -1, 3)
+    info = (J * np.repeat(w, 2, axis=1)[..., None]).transpose(0, 2, 1) @ J
     info = np.where(np.isfinite(info), info, 0.0)
     ok = np.linalg.det(info) > 1e-12 * (np.trace(info, axis1=1, axis2=2) / 3.0) ** 3  # well-conditioned enough
     return np.where(ok[:, None, None], info, np.eye(3)), ok
@@ -178,6 +183,9 @@ def fit_table(blocks: dict[str, np.ndarray], rank_bins: int, box_bins: int, min_
     rank_edges = np.quantile(blocks["score"][seen], np.arange(1, rank_bins) / rank_bins)
     box_edges = np.quantile(blocks["box"][seen], np.arange(1, box_bins) / box_bins)
     codes = block_codes(blocks, rank_edges, box_edges)
+    k, v, c = np.nonzero(blocks["mix"] > 0)  # the view pairs both seen: flat (k, v), (k, c) indices and mix
+    V = seen.shape[1]
+    blocks["pairs"] = (k * V + v, k * V + c, blocks["mix"][k, v, c])
     base = math.log(max(float(blocks["r2"][seen].sum() / blocks["mix"].sum()), 1e-12))
     effects = [np.zeros(int(c[seen].max()) + 1) for c in codes]
     var = np.full(seen.shape, math.exp(base))
@@ -196,9 +204,9 @@ def fit_table(blocks: dict[str, np.ndarray], rank_bins: int, box_bins: int, min_
 def _level_factors(blocks: dict[str, np.ndarray], code: np.ndarray, var: np.ndarray, L: int, min_count: int):
     """Multipliers (L,) of the levels' variances solving sum r2 = sum mix var over each level's residuals (levels
     with fewer than min_count residuals: 1)."""
-    seen = blocks["seen"]
-    pair = code[:, :, None] * L + code[:, None, :]
-    A = np.bincount(pair.ravel(), (blocks["mix"] * var[:, None, :]).ravel(), L * L).reshape(L, L)
+    seen, (kv, kc, mix) = blocks["seen"], blocks["pairs"]
+    flat = code.ravel()
+    A = np.bincount(flat[kv] * L + flat[kc], mix * var.ravel()[kc], L * L).reshape(L, L)
     b = np.bincount(code[seen], blocks["r2"][seen], L)
     free = np.bincount(code[seen], minlength=L) >= min_count
     factor = np.ones(L)
@@ -213,8 +221,9 @@ def inliers(chi2: np.ndarray, dof: np.ndarray, rate: float = 1e-3) -> np.ndarray
     (the median of chi^2 over its median under the model) -> (K,) bool."""
     if not len(chi2):
         return np.zeros(0, dtype=bool)
-    scale = float(np.median(chi2 / (2.0 * gammaincinv(dof / 2.0, 0.5))))
-    return chi2 <= scale * 2.0 * gammaincinv(dof / 2.0, 1.0 - rate)
+    dofs, index = np.unique(dof, return_inverse=True)  # a few small integers: scipy once per value
+    median, limit = (2.0 * gammaincinv(dofs / 2.0, q)[index] for q in (0.5, 1.0 - rate))
+    return chi2 <= float(np.median(chi2 / median)) * limit
 
 
 def calibrate(
@@ -223,9 +232,9 @@ def calibrate(
     """Fit the model to matched frames' undistorted poses (V, P, J, 3) and boxes (V, P, 4), refitting ``rounds``
     times with the weights of the last fit -> the fitted model (table None: too few residuals) and its blocks."""
     fitted, blocks = model, None
-    views = np.arange(len(proj))[:, None]
+    views, most = np.arange(len(proj))[:, None], -(-model.max_joints // max(len(gathered), 1))
     for _ in range(rounds):
-        found = [residual_blocks(u, b, proj, fitted.sigma(u, b, views), model.min_views) for u, b in gathered]
+        found = [residual_blocks(u, b, proj, fitted.sigma(u, b, views), model.min_views, most) for u, b in gathered]
         blocks = {k: np.concatenate([f[k] for f in found]) for k in found[0]} if found else None
         table = fit_table(blocks, model.rank_bins, model.box_bins, model.min_count) if blocks else None
         if table is None:
