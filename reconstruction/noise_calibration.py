@@ -19,6 +19,8 @@ from data.geometry.triangulation import triangulate_dlt
 from data.keypoints import COCO23_NAMES
 from reconstruction.noise_model import NoiseModel, box_size
 
+SWEEPS = 20  # factor-by-factor solves of the moment equations (camera and box size are correlated: many)
+
 
 def joint_types(J: int) -> np.ndarray:
     """Joint type per joint (J,): COCO-23's left and right joints share one; another layout, one per joint."""
@@ -189,7 +191,7 @@ def fit_table(blocks: dict[str, np.ndarray], rank_bins: int, box_bins: int, min_
     base = math.log(max(float(blocks["r2"][seen].sum() / blocks["mix"].sum()), 1e-12))
     effects = [np.zeros(int(c[seen].max()) + 1) for c in codes]
     var = np.full(seen.shape, math.exp(base))
-    for _ in range(4):
+    for _ in range(SWEEPS):
         for f, code in enumerate(codes):
             factor = _level_factors(blocks, code, var, len(effects[f]), min_count)
             effects[f] += np.log(factor)
@@ -234,13 +236,24 @@ def calibrate(
     fitted, blocks = model, None
     views, most = np.arange(len(proj))[:, None], -(-model.max_joints // max(len(gathered), 1))
     for _ in range(rounds):
-        found = [residual_blocks(u, b, proj, fitted.sigma(u, b, views), model.min_views, most) for u, b in gathered]
+        found = [residual_blocks(u, b, proj, _weights(fitted, u, b, views), model.min_views, most) for u, b in gathered]
         blocks = {k: np.concatenate([f[k] for f in found]) for k in found[0]} if found else None
         table = fit_table(blocks, model.rank_bins, model.box_bins, model.min_count) if blocks else None
         if table is None:
             return model.fitted(None), blocks
         fitted = model.fitted(table)
     return fitted, blocks
+
+
+def _weights(model: CalibratedNoiseModel, poses2d: np.ndarray, bboxes: np.ndarray, views: np.ndarray) -> np.ndarray:
+    """The triangulation's SDs (V, P, J): the fit's, or before one the start model's at score 1 (the raw score's
+    scale would decide the fit), floored in quadrature at half their median (a view weighted far above the others
+    pins the point to its ray, leaving its own residual no information; the equations hold for any weights)."""
+    if model.table is None:
+        poses2d = np.concatenate([poses2d[..., :2], (poses2d[..., 2:] > 0).astype(float)], axis=-1)
+    sigma = model.sigma(poses2d, bboxes, views)
+    finite = np.isfinite(sigma)
+    return np.sqrt(sigma**2 + (0.5 * np.median(sigma[finite])) ** 2) if finite.any() else sigma
 
 
 def describe(model: CalibratedNoiseModel, names: list[str], blocks: dict[str, np.ndarray] | None, frames: int) -> str:
