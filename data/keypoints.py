@@ -1,5 +1,4 @@
-"""Keypoint metadata by name (COCO-23 = COCO-17 body + 6 foot joints); every index map is derived from the names.
-Index maps *gather*: ``coco23[j] = source[MAP[j]]``; ``MAP[j] == -1``: not in the source format, score 0 (to_coco23)."""
+"""Keypoint metadata by name (COCO-23 = COCO-17 + 6 feet); maps gather ``coco23[j] = source[MAP[j]]`` (-1: score 0)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,4 @@
-"""The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels.
-
-Owner map (H, W) uint16: 0 = no body, else 1 + person x parts + part. A joint is v = 2 when its own part is on top
-there and no body is in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image."""
+"""The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels."""
 
 from __future__ import annotations
 
