@@ -1,9 +1,4 @@
-"""One markdown table of Hydra multiruns: ``python -m benchmarks.gather_sweep DIR [DIR ...] [--out T.md]``.
-
-Every ``<sweep dir>/*/metrics.json`` (written by eval.py) is a row; the columns are the overrides that differ
-between runs (``<run>/.hydra/overrides.yaml``), then the ``--metrics``: keys of metrics.json's "metrics", or
-``<stage>_ms``, the stage's ms per frame from "timings_s" and ``dataset.num_frames``. A missing metric shows "-".
-"""
+"""One markdown table of Hydra multiruns: ``python -m benchmarks.gather_sweep DIR [DIR ...] [--out T.md]``."""
 
 import argparse
 import json
