@@ -1,8 +1,4 @@
-"""Dataset protocols: the benchmarks' own published metrics, beside the generic evaluation.
-
-A dataset loader may not import these: it lists their plain-data inputs in ``sequence.protocol_inputs``
-and :func:`attach_protocols` builds them (idempotent, so a sequence built in code is scored the same way).
-"""
+"""Dataset protocols: the benchmarks' own published metrics, built from ``sequence.protocol_inputs``."""
 
 from __future__ import annotations
 

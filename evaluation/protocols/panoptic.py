@@ -1,8 +1,4 @@
-"""CMU Panoptic protocols on 15 joints: VoxelPose's AP / recall / MPJPE, the paper's root-aligned MPJPE and PCP.
-
-VoxelPose AP: VOC-style, without VoxelPose's 1e-5 (perfect reads 100). Tables 4-5 (our reading): Hungarian pairs,
-root = mean of the hips, which COCO-23 predictions have (Panoptic's own mid-hip they lack).
-"""
+"""CMU Panoptic protocols on 15 joints: VoxelPose's AP / recall / MPJPE, the paper's root-aligned MPJPE and PCP."""
 
 from __future__ import annotations
 
