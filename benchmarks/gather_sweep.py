@@ -11,8 +11,7 @@ from omegaconf import OmegaConf
 from benchmarks import common
 from evaluation.report import format_table
 
-# name -> (column header, factor, format); fractions are shown as percentages
-METRIC_COLUMNS = {
+METRIC_COLUMNS = {  # name -> (column header, factor, format); fractions are shown as percentages
     "matching_precision": ("matching precision (%)", 100.0, ".1f"),
     "matching_recall": ("matching recall (%)", 100.0, ".1f"),
     "matching_recovered_share": ("persons recovered (%)", 100.0, ".1f"),

@@ -149,11 +149,7 @@ def grouped_to_view_detections(persons: np.ndarray, margin: float = 0.1) -> View
 
 
 def group_view(
-    frame: FrameCandidates,
-    min_paf: float = 0.05,
-    min_joints: int = 8,
-    min_mean_score: float = 0.4,
-    margin: float = 0.1,
+    frame: FrameCandidates, min_paf: float = 0.05, min_joints: int = 8, min_mean_score: float = 0.4, margin: float = 0.1
 ) -> ViewDetections:
     """One camera frame's BODY_25 candidates grouped into persons -> COCO-23 ViewDetections (the Shelf grouper)."""
     packed = frame.packed if frame.packed is not None else pack_candidates(frame.candidates, frame.pafs)

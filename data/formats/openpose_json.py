@@ -118,7 +118,7 @@ def convert(folders: dict[str, Path], margin: float = 0.1) -> dict[int, list[Vie
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line (module docstring); a bad folder or file stops with one line 'error: ...'."""
+    """Command line (docs/usage.md); a bad folder or file stops with one line 'error: ...'."""
     from data.formats.poses2d_io import read_poses2d, write_poses2d
 
     parser = argparse.ArgumentParser(

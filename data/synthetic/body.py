@@ -16,7 +16,7 @@ STATURE_SD_M = 0.09
 STATURE_RANGE_M = (1.52, 1.95)
 PROPORTION_SD = 0.02  # relative SD of every segment fraction, clipped at 2 SD
 
-# Segment lengths as fractions of stature (see the module docstring).
+# Segment lengths as fractions of stature (Drillis & Contini; docs/design.md).
 FRACTIONS: Mapping[str, float] = MappingProxyType(
     {
         "thigh": 0.530 - 0.285,  # hip -> knee

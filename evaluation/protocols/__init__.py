@@ -28,8 +28,7 @@ class DatasetProtocol(Protocol):
         """The console tables, each labelled with its protocol."""
 
 
-# protocol name in sequence.protocol_inputs -> builder(sequence, **arguments)
-BUILDERS: dict[str, Callable] = {
+BUILDERS: dict[str, Callable] = {  # protocol name in sequence.protocol_inputs -> builder(sequence, **arguments)
     "shelf": lambda sequence, **arguments: ShelfProtocol(**arguments),
     "panoptic": lambda sequence, **arguments: PanopticProtocol(**arguments),
     "reprojection_coco": lambda sequence, **arguments: ReprojectionCOCOProtocol(sequence.rig, **arguments),

@@ -39,8 +39,7 @@ def _line_distance(lines: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
     norm = np.hypot(lines[..., 0], lines[..., 1])
     defined = norm > 1e-12  # a point at the epipole has no epipolar line
     unit = lines / np.where(defined, norm, 1.0)[..., None]
-    # broadcasting, not einsum: einsum's per-joint batched dot is the slower at crowd sizes
-    dist = np.abs(
+    dist = np.abs(  # broadcasting, not einsum: einsum's per-joint batched dot is the slower at crowd sizes
         unit[:, None, :, 0] * points[None, :, :, 0] + unit[:, None, :, 1] * points[None, :, :, 1] + unit[:, None, :, 2]
     )
     return dist, defined[:, None, :]

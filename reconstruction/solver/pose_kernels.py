@@ -7,7 +7,6 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-# status codes per problem
 RUNNING, CONVERGED_STEP, CONVERGED_COST, CONVERGED_GRADIENT, STALLED, MAX_ITERATIONS = 0, 1, 2, 3, 4, 5
 MAX_DAMPING = 1e16  # relative to max diag(H): no step can reduce the cost any more
 SWITCH_RHO = 0.25  # gain ratio of an accepted safe step after which the exact model is used
@@ -130,8 +129,7 @@ def _joint_terms(
             rx, ry, sx, sy = rx * rsx, ry * rsy, sx * jsx, sy * jsy
         if not derivatives:
             continue
-        # dr_x/dX = -s_x (M0 - px M2), dr_y/dX = -s_y (M1 - py M2)
-        a0, a1, a2 = (
+        a0, a1, a2 = (  # dr_x/dX = -s_x (M0 - px M2), dr_y/dX = -s_y (M1 - py M2)
             proj[v, 0, 0] - px * proj[v, 2, 0],
             proj[v, 0, 1] - px * proj[v, 2, 1],
             proj[v, 0, 2] - px * proj[v, 2, 2],
