@@ -42,8 +42,7 @@ def register_resolvers() -> None:
 
 @contextmanager
 def one_line_errors(*errors: type[Exception], config: DictConfig | None = None) -> Iterator[None]:
-    """Stop with ``error: <message>`` (no traceback) on errors, and on what a config group's ``_target_`` raises
-    in instantiate: FileNotFoundError, or a TypeError / ValueError then naming the group's key (:func:`keyed`)."""
+    """Stop with ``error: <message>`` on errors, and on a ``_target_``'s FileNotFoundError, TypeError, ValueError."""
     try:
         yield
     except errors as err:

@@ -1,7 +1,4 @@
-"""Train the joint-candidate SPPE with the body+feet loss: ``python train.py [key=value ...]`` (configs/train.yaml).
-
-Torch is imported only once the config has passed its checks (or to read a resume checkpoint): a typo stops at once.
-"""
+"""Train the joint-candidate SPPE with the body+feet loss: ``python train.py [key=value ...]`` (configs/train.yaml)."""
 
 from __future__ import annotations
 

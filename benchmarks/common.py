@@ -1,8 +1,4 @@
-"""What the one-core benchmarks share: thread pinning, timers, dev-set overrides, evaluation runs, output.
-
-Importing it sets BLAS, OpenMP and numba to one thread, so it must come before numpy (``# isort: split``): the
-libraries read those variables when they load, and the speed targets are stated per core.
-"""
+"""What the one-core benchmarks share: thread pinning (import it before numpy), timers, dev sets, runs, output."""
 
 import os
 
@@ -46,8 +42,7 @@ def panoptic_sets(data: str, noises: tuple[float, ...]) -> dict[str, list[str]]:
 
 
 def wildtrack_scene(root: Path, positions: list, noise: float, seed: int) -> Any:
-    """Synthetic bodies at annotated Wildtrack ground positions (one list per frame), seen by the real 7-camera rig
-    with noise px: a Sequence (min_spacing_m 0: the annotations come as close as 0.09 m)."""
+    """Synthetic bodies at Wildtrack's annotated positions (a list per frame), its 7 cameras, noise px: a Sequence."""
     from data.geometry.calibration import load_wildtrack
     from data.synthetic import SyntheticConfig, generate_sequence
 
@@ -57,8 +52,7 @@ def wildtrack_scene(root: Path, positions: list, noise: float, seed: int) -> Any
 
 
 def evaluate(sequence: Any, cfg: Any, grouping: bool = False) -> tuple[Any, float]:
-    """cfg's pipeline on a copy of sequence -> (SequenceReport, ms per frame of matching + reconstruction +
-    tracking, with grouping: + the PAF grouping done while loading)."""
+    """cfg's pipeline on a copy of sequence -> (SequenceReport, ms per frame of the stages [+ PAF grouping])."""
     from evaluation.pose3d import Pose3DEvaluator
     from evaluation.sequence_eval import evaluate_sequence
     from reconstruction.pipeline import MultiViewPipeline

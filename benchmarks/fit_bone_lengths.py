@@ -1,13 +1,4 @@
-"""Re-estimate the bone-length table of the MAP prior from 3D ground truth (Shelf and/or CMU Panoptic).
-
-    python -m benchmarks.fit_bone_lengths                                   # Shelf gt.txt, print only
-    python -m benchmarks.fit_bone_lengths --panoptic ../shared/data/panoptic/160906_band1/hdPose3d_stage1_coco19
-    python -m benchmarks.fit_bone_lengths --output outputs/bones_shelf.json # then bone_table=<that path>
-
-Shelf's 14 joints give the 12 limb and torso bones, Panoptic (coco19) adds the face bones, neither has feet;
-bones without samples keep their default when the table is loaded (data.bone_lengths.resolve_bone_table). Samples
-of every frame are pooled, so the SD mixes the spread between persons with annotation noise.
-"""
+"""Re-estimate the bone-length table of the MAP prior from 3D ground truth (Shelf and/or CMU Panoptic)."""
 
 import argparse
 import json
@@ -32,8 +23,7 @@ def shelf_poses(path: str | Path) -> np.ndarray:
 
 
 def panoptic_poses(folder: str | Path, min_confidence: float = 0.1) -> np.ndarray:
-    """Every body of a folder's body3DScene_*.json files, metres, z up, COCO-23, valid where the Panoptic
-    confidence exceeds min_confidence (missing joints have -1): -> (N, 23, 4)."""
+    """Every body of a folder's body3DScene_*.json files: (N, 23, 4) m, z up, valid above min_confidence."""
     bodies = []
     for path in sorted(Path(folder).glob("body3DScene_*.json")):
         for body in json.loads(path.read_text()).get("bodies", []):

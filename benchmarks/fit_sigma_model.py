@@ -1,13 +1,4 @@
-"""Fit the 2D noise model (``noise_model`` config group) to the real errors of Shelf's OpenPose detections.
-
-Every PAF-grouped OpenPose detection is paired with the actor of ``tum/actorsGT.mat`` whose projected limb joints
-lie closest (median over the 12 Shelf-14 limb joints, below ``--max-px``); each scored limb joint's pixel error is
-kept with its score and box size sqrt(w h). reconstruction.noise_model.NoiseModel's
-sigma = max(sigma_min, sqrt(sigma_px^2 + (c sqrt(w h))^2) / score^score_power) is then fitted by least squares of
-log sigma on the median error of each (score, size) bin (an SD sigma per coordinate has median error
-sigma sqrt(2 ln 2)), so that left / right swaps and grouping mistakes do not inflate it. Printed: the bins, the
-fit and the configured model (configs/noise_model/fixed.yaml); ``--out`` writes the fit as such a file.
-"""
+"""Fit the 2D noise model (``noise_model`` config group) to the real errors of Shelf's OpenPose detections."""
 
 import argparse
 from pathlib import Path

@@ -1,10 +1,4 @@
-"""Per-frame time by stage of a tree's multi-view pipeline, this tree's or an older revision's.
-
-It times the tree whose packages are imported (the working directory's, or PYTHONPATH's) and imports nothing of
-the repository at its top, so that ``benchmarks.paired_speed --driver frames`` can run it in an older revision's
-worktree. One table in benchmarks.speed's format: per setting, the median over frames x repeats of matching,
-reconstruction, tracking and their sum, ms on one core (Shelf's PAF grouping is timed by benchmarks.speed).
-"""
+"""Per-frame time by stage of a tree's multi-view pipeline, this tree's or an older revision's."""
 
 import os
 
@@ -44,8 +38,7 @@ def build_pipeline(cfg: Any, rig: Any) -> Any:
 
 
 def stage_times(sequence: Any, cfg: Any, repeats: int) -> np.ndarray:
-    """Per-frame seconds of matching, reconstruction, tracking: (repeats * F, 3); a fresh pipeline per repeat
-    (the tracker starts anew), its first frame run once before on another pipeline (kernels loaded)."""
+    """Per-frame seconds of matching, reconstruction, tracking: (repeats * F, 3); a fresh pipeline per repeat."""
     rows = []
     for _ in range(repeats):
         build_pipeline(cfg, sequence.rig)(sequence.frames[0])
@@ -60,8 +53,7 @@ def stage_times(sequence: Any, cfg: Any, repeats: int) -> np.ndarray:
 def stage_rows(
     data: str, only: str, repeats: int, crowd_frames: int = 3, quick: bool = True, grouping: Any = None
 ) -> list:
-    """Rows setting, frames, grouping, matching, reconstruction, tracking, total (ms; NaN: not timed) of the settings
-    whose label contains only; grouping(label, cfg, sequence) -> grouping seconds per frame (repeats * F,) or None."""
+    """Rows (setting, frames, then ms of grouping, the stages, total; NaN: not timed) of the labels containing only."""
     from hydra import compose
     from hydra.errors import HydraException
     from hydra.utils import instantiate
@@ -86,8 +78,7 @@ def stage_rows(
 
 
 def markdown(header: list[str], rows: list[list]) -> str:
-    """A markdown table, floats with 2 decimals, NaN as '-' (not evaluation.report.format_table: an older tree may
-    lack it)."""
+    """A markdown table, floats with 2 decimals, NaN as '-' (an older tree may lack evaluation.report.format_table)."""
     cells = [[("-" if v != v else f"{v:.2f}") if isinstance(v, float) else str(v) for v in row] for row in rows]
     lines = ["| " + " | ".join(row) + " |" for row in [header, *cells]]
     return "\n".join([lines[0], "|" + "|".join("---" for _ in header) + "|", *lines[1:]])

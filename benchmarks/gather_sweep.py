@@ -1,9 +1,4 @@
-"""One markdown table of Hydra multiruns: ``python -m benchmarks.gather_sweep DIR [DIR ...] [--out T.md]``.
-
-Every ``<sweep dir>/*/metrics.json`` (written by eval.py) is a row; the columns are the overrides that differ
-between runs (``<run>/.hydra/overrides.yaml``), then the ``--metrics``: keys of metrics.json's "metrics", or
-``<stage>_ms``, the stage's ms per frame from "timings_s" and ``dataset.num_frames``. A missing metric shows "-".
-"""
+"""One markdown table of Hydra multiruns: ``python -m benchmarks.gather_sweep DIR [DIR ...] [--out T.md]``."""
 
 import argparse
 import json
@@ -16,8 +11,7 @@ from omegaconf import OmegaConf
 from benchmarks import common
 from evaluation.report import format_table
 
-# name -> (column header, factor, format); fractions are shown as percentages
-METRIC_COLUMNS = {
+METRIC_COLUMNS = {  # name -> (column header, factor, format); fractions are shown as percentages
     "matching_precision": ("matching precision (%)", 100.0, ".1f"),
     "matching_recall": ("matching recall (%)", 100.0, ".1f"),
     "matching_recovered_share": ("persons recovered (%)", 100.0, ".1f"),

@@ -1,5 +1,4 @@
-"""Other detectors' 2D made from the dev sets (real_inputs' ``variants``): another score scale, a second detector
-pass, and a detector-like error model on exact projections."""
+"""Other detectors' 2D made from the dev sets (real_inputs' ``variants``): scores, repeats, detector-like errors."""
 
 from __future__ import annotations
 
@@ -19,8 +18,7 @@ HIPS = joint_indices(("left_hip", "right_hip"))
 
 
 def each_view(sequence: Sequence, change: Callable[[ViewDetections, np.random.Generator], ViewDetections]) -> Sequence:
-    """The sequence with change(view, rng) applied to every view of every frame (a seeded rng, the caller's data left
-    as it is)."""
+    """The sequence with change(view, rng) applied to every view (a seeded rng; the caller's data left as it is)."""
     rng = np.random.default_rng(0)
     frames = [replace(f, views=[change(v, rng) for v in f.views]) for f in sequence.frames]
     return replace(sequence, frames=frames)
@@ -54,9 +52,7 @@ def doubled(sequence: Sequence, shift_px: float = 0.3) -> Sequence:
 
 
 def detector_like(sequence: Sequence, sigma_px: float = 5.0, swaps: float = 0.05, drops: float = 0.1) -> Sequence:
-    """Exact 2D made detector-like: error SD sigma_px x (0.25 + the joint's distance from the hips over the person's
-    median one), each arm and leg exchanged with the other side's at rate swaps, joints dropped at rate drops, scores
-    uniform in [0.2, 1] whatever the error."""
+    """Exact 2D made detector-like: errors growing from the hips, limb side swaps, dropped joints, uniform scores."""
 
     def change(v: ViewDetections, rng: np.random.Generator) -> ViewDetections:
         kp, seen = v.keypoints.copy(), v.keypoints[..., 2] > 0

@@ -1,12 +1,5 @@
 """Cross-view matching benchmark: evidence (the default) / feet / feet_distinct / feet_epipolar / epipolar / ransac /
-oracle on synthetic bodies, as markdown tables.
-
-(a) Wildtrack: the real 7-camera rig, synthetic bodies at the annotated positions of the first N frames.
-(b) Density sweep: 5 ring cameras around a fixed 9 x 9 m area, 10-80 people, 2D noise 2/5/10 px (SD at 5 m, growing
-    with depth), 0 or 30 % of the detections without their 6 foot joints.
-(c) Matching ms per frame vs people (7 views) and vs views (20 people), median over repeats, one core.
-Precision / recall over cross-view detection pairs; "pure+complete": the share of persons recovered exactly.
-"""
+oracle on synthetic bodies, as markdown tables."""
 
 from benchmarks import common  # isort: split
 

@@ -1,13 +1,4 @@
-"""Paired speed runs: this tree against a git revision, alternately, each run's stage medians compared.
-
-Alternating runs resolve a change of a few percent on a machine whose speed drifts over minutes. Each pair runs
-the driver in a temporary git worktree of the baseline, then in this tree, each tree with a numba cache of its own
-kept over the pairs. Drivers: ``frames`` runs this tree's benchmarks/frame_times.py in both trees (the same
-timing code; it runs on older revisions too); ``process`` times the warm whole ``python eval.py dataset=shelf``
-in each tree (median of ``--repeats``, seconds; ``--only`` does not apply). Printed: every pair's totals, and per
-setting and stage the medians, their ratio (baseline / this tree) and the mean paired difference (this tree -
-baseline) with its standard error.
-"""
+"""Paired speed runs: this tree against a git revision, alternately, each run's stage medians compared."""
 
 from benchmarks import common  # isort: split
 
@@ -85,8 +76,7 @@ def run_frames(tree: Path, cache: Path, args: argparse.Namespace) -> str:
 def run_process(
     tree: Path, cache: Path, args: argparse.Namespace, repeats: int | None = None
 ) -> dict[str, dict[str, float]]:
-    """Median wall seconds of ``repeats`` (default --repeats) Shelf ``python eval.py`` runs in tree, as a setting
-    whose total is those seconds (stages 0: a process has no stage table)."""
+    """Median wall seconds of ``repeats`` Shelf ``python eval.py`` runs in tree, as a setting (stages 0)."""
     threads = dict.fromkeys(common.THREAD_VARIABLES, "1")
     env = {**os.environ, **threads, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tree)}
     pin = (lambda: os.sched_setaffinity(0, {args.cpu})) if args.cpu is not None else None

@@ -1,13 +1,4 @@
-"""Speed of the SPPE stage's parts: FastPose crops per second, and decoding + association time per person.
-
-Network: FastPose-18 and -50 with random weights, inputs 256x192 and 128x96 (h x w), batches of 1 and 32 crops,
-flip test off and on, through models/heatmap_inference.predict_heatmaps on the CPU with 1 thread and torch's
-default thread count, and on CUDA with float16 autocast where there is a GPU. Each setting has untimed passes
-first (a new shape loads kernels), then passes until ``--min-time`` seconds have gone; crops/s = crops / mean
-pass time. Decoding: ``--persons`` people 12 px apart in one image, each crop's multi-modal target plus uniform
-noise (48x64 heatmaps), decoded by models/pose_decoding (3 candidates per joint, threshold 0.1) ``--repeats``
-times on 1 thread: the median ms per person and its share of a FastPose-50 256x192 crop (batch 32, 1 thread).
-"""
+"""Speed of the SPPE stage's parts: FastPose crops per second, and decoding + association time per person."""
 
 import argparse
 import time
@@ -76,8 +67,7 @@ def network_rows(
 
 
 def crowd_heatmaps(persons: int, seed: int = 0) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
-    """Noisy multi-modal targets (P, 23, 64, 48) float32 of one crowded image, crop-to-image affines (P, 2, 3) and
-    boxes (P, 4)."""
+    """Noisy multi-modal targets (P, 23, 64, 48) of a crowded image, crop-to-image affines (P, 2, 3), boxes (P, 4)."""
     rng = np.random.default_rng(seed)
     codec = MultiModalHeatmapCodec((192, 256), (48, 64), sigma=2.0, mu=0.5)
     corner = np.column_stack([np.arange(persons) * 12.0 + 100, rng.uniform(100, 120, persons)])

@@ -1,18 +1,4 @@
-"""Dev-set table: the default pipeline beside the paper's configuration and the baselines, same frames, same run.
-
-Dev sets: Shelf (real OpenPose BODY_25) as shipped and without its 6 foot keypoints (a COCO-17 detector's);
-Panoptic band1 / band2 (20 frames, 5 HD cameras, 2D projected from the GT with 0 / 2 / 5 px noise); Wildtrack
-(7 real cameras, synthetic bodies at the annotated positions, 5 px); the crowd sweep of 10-400 people; 100
-people in 7 ring views (``timing``). Rows (ROWS, overrides of ``configs/eval.yaml``): the default with tracking,
-without tracking and with fix_sides; the paper's exact method; epipolar matching with vanilla DLT or mle_map;
-oracle matching (GT identities: the upper bound; not on Shelf, whose detections carry none); every row but
-the default and fix_sides without tracking. Columns: GT persons found within ``evaluation.max_dist_m`` (%), and
-of those seen in >= 2 views (%); predictions matched to no GT person; matching pair precision / recall; absolute
-MPJPE (mm); PCP (%, alpha 0.5; Shelf: strict, actors 1-3); ms / frame of matching + reconstruction + tracking
-(Shelf: + PAF grouping) on one core. ``variants`` (benchmarks/input_variants.py): Shelf with every score x 4 and
-raised to the power 3 (other detectors' scales) and with each detection repeated 0.3 px away; Panoptic's exact 2D
-made detector-like. Every set's frames are cleaned as eval.py cleans them (data/frame_inputs.py).
-"""
+"""Dev-set table: the default pipeline beside the paper's configuration and the baselines, same frames, same run."""
 
 from benchmarks import common  # isort: split
 

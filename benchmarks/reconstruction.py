@@ -1,14 +1,4 @@
-"""3D reconstruction benchmark: vanilla / mle / map / mle_map on synthetic crowds, as one markdown report.
-
-(a) MPJPE (mm, Pose3DEvaluator protocol: joints valid in prediction and GT), MPJPE over the joints the vanilla
-    DLT outputs (the same joints for every stage), PCP (%) and ms per frame of the four stages, oracle matching,
-    occlusion on, 2D noise 2 / 5 / 10 px (SD at 5 m, growing with depth), on the real Wildtrack rig (synthetic
-    bodies at the annotated ground positions) and on a 5-camera ring.
-(b) Table 3 of the paper: reprojection error statistics (px) of map (no MLE step) and mle_map, against the 2D
-    detections and against the noise-free projections of the ground truth, at 5 px.
-(c) The robust losses (none / huber / cauchy) of mle_map against 2D outliers: 0, 10, 20 % of the detections
-    with left and right swapped, ring, 5 px.
-"""
+"""3D reconstruction benchmark: vanilla / mle / map / mle_map on synthetic crowds, as one markdown report."""
 
 from benchmarks import common  # isort: split
 

@@ -1,13 +1,4 @@
-"""Oracle upper bounds of per-frame multi-view reconstruction on Shelf's OpenPose detections.
-
-For every annotated actor 1-3 of every Shelf frame, strict Shelf PCP (alpha 0.5) of the pipeline's prediction
-beside two oracles that use the ground truth to choose, not to move, the points: the view-subset oracle
-triangulates every subset of >= 2 of the views the matcher put in the person and keeps, per joint, the point
-nearest the ground truth (the head as one part; the pipeline's own point is a candidate, so the bound is never
-below the pipeline); matching + view-subset oracle does the same with each view's detection nearest the projected
-ground truth (mean limb error below ``--max-px``) in place of the matcher's choice. No frame-by-frame
-reconstruction from these detections exceeds the second bound; tracking or a better 2D detector can.
-"""
+"""Oracle upper bounds of per-frame multi-view reconstruction on Shelf's OpenPose detections."""
 
 from benchmarks import common  # isort: split
 
@@ -33,8 +24,7 @@ METHODS = ("pipeline", "view-subset oracle", "matching + view-subset oracle")
 
 
 def subset_poses(keypoints: np.ndarray, rig: Rig) -> np.ndarray:
-    """Shelf-15 poses triangulated from every subset of >= 2 views holding a detection: (V, 23, 3) distorted
-    pixels + score (score 0 where the view has none) -> (S, 15, 3), NaN where a joint is seen in < 2 views."""
+    """Shelf-15 poses of every subset of >= 2 views with a detection: (V, 23, 3) px + score -> (S, 15, 3), NaN: < 2."""
     views = [v for v in range(len(keypoints)) if keypoints[v, :, 2].any()]
     subsets = [s for k in range(2, len(views) + 1) for s in itertools.combinations(views, k)]
     if not subsets:
@@ -48,8 +38,7 @@ def subset_poses(keypoints: np.ndarray, rig: Rig) -> np.ndarray:
 
 
 def oracle_pose(own: np.ndarray, candidates: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """Per limb joint the candidate nearest the GT, the head of the nearest candidate: (15, 3), (S, 15, 3),
-    (15, 3) -> (15, 3); the pipeline's own pose ``own`` is a candidate."""
+    """Per limb joint the candidate nearest gt (head: as one part), own a candidate: (15, 3), (S, 15, 3) -> (15, 3)."""
     cands = np.concatenate([own[None], candidates])
     err = np.linalg.norm(cands - gt[None], axis=-1)
     err = np.where(np.isfinite(err), err, np.inf)
@@ -61,8 +50,7 @@ def oracle_pose(own: np.ndarray, candidates: np.ndarray, gt: np.ndarray) -> np.n
 
 
 def nearest_detections(views: list, rig: Rig, gt: np.ndarray, max_px: float) -> np.ndarray:
-    """Per view the detection nearest the projected GT limbs (mean px error < max_px), else zeros:
-    V ViewDetections, (15, 3) -> (V, 23, 3)."""
+    """Per view the detection nearest the projected GT limbs (mean error < max_px px), else 0: -> (V, 23, 3)."""
     out = np.zeros((len(views), 23, 3))
     for v, (dets, cam) in enumerate(zip(views, rig)):
         if not len(dets):

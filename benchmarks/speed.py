@@ -1,10 +1,4 @@
-"""Speed of the default pipeline: per-frame time by stage, and whole-process times.
-
-Table 1: benchmarks/frame_times.py's per-frame stage medians (ms, one core, default config with tracking) of Shelf
-300-600 (plus its PAF grouping), 100 people in 7 ring views and the crowd sweep (10-400 people, 5 and 10 views).
-Table 2: ``python eval.py`` and the Shelf evaluation as fresh processes, warm (median of ``--repeats``, on
-``--cpu``) and as a fresh install's first run (a new, empty ``NUMBA_CACHE_DIR``; on every core).
-"""
+"""Speed of the default pipeline: per-frame time by stage, and whole-process times."""
 
 from benchmarks import common  # isort: split
 
@@ -47,8 +41,7 @@ def shelf_grouping(label: str, cfg: DictConfig, sequence: Sequence, repeats: int
 
 
 def eval_seconds(args: list[str], env: dict[str, str], runs: str, all_cores: bool = False) -> float:
-    """Wall seconds of one ``python eval.py ARGS`` from the repository root, its outputs in a new folder under runs;
-    all_cores: on every core of the machine, not only those this process is pinned to (--cpu)."""
+    """Wall seconds of one ``python eval.py ARGS``, outputs under runs; all_cores: not only the pinned (--cpu) cores."""
     command = [sys.executable, "eval.py", *args, f"hydra.run.dir={tempfile.mkdtemp(dir=runs)}"]
     every = set(range(os.cpu_count() or 1))
     unpin = (lambda: os.sched_setaffinity(0, every)) if all_cores and hasattr(os, "sched_setaffinity") else None

@@ -1,11 +1,4 @@
-"""Identity metrics and cost of the tracker (``tracking=on``) beside ``tracking=off``, same frames, one process.
-
-Sets: Shelf (actors 1-3), Panoptic band1 and band2 at 5 px (persistent body ids), the walking crowd of
-``configs/dataset/crowd.yaml`` with 10 and 100 people. Columns: identity switches (per 100 GT person-frames),
-the share of GT person-frames whose prediction carries the person's most frequent track id (IDF1-like, %),
-fragmentations, MPJPE (mm; Shelf: strict PCP %) with tracking on and off, and ms per frame on one core of the
-tracker and of the pipeline with tracking on and off (medians of ``--repeats`` interleaved on / off runs).
-"""
+"""Identity metrics and cost of the tracker (``tracking=on``) beside ``tracking=off``, same frames, one process."""
 
 from benchmarks import common  # isort: split
 

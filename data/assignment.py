@@ -1,11 +1,4 @@
-"""Assignment solvers shared by the matchers, the tracker and the evaluation: a person-label grouping and the
-gated sparse assignment of view pairs (dense problems: scipy's ``linear_sum_assignment``).
-
-:func:`solve_sparse_pairs` solves a gated problem (disallowed pairs at a big finite cost M, as
-``reconstruction.matching.merge.solve_pair``) one connected component of allowed pairs at a time, by scipy's shortest
-augmenting paths over the allowed entries alone: sum(cost - M) splits over the components, and a crowd's view pair
-has hundreds of small ones. Where the optimum is unique (float ties aside) the result is scipy's.
-"""
+"""Assignment solvers of the matchers, the tracker and the evaluation: label grouping, gated sparse assignment."""
 
 from __future__ import annotations
 
@@ -14,8 +7,7 @@ from numba import njit
 
 
 def assignment_from_labels(labels: list[np.ndarray], min_views: int = 2) -> np.ndarray:
-    """Group detections by person label: V arrays (N_v,) int (-1 = none) -> (P, V) detection index or -1; persons
-    ordered by label, those in fewer than ``min_views`` views dropped, a label twice in a view a ValueError."""
+    """Group by person label: V arrays (N_v,) int (-1 = none) -> (P, V) detection or -1; a label twice: ValueError."""
     V = len(labels)
     people: dict[int, np.ndarray] = {}
     for v, lab in enumerate(labels):
@@ -43,8 +35,7 @@ def find_root(parent: np.ndarray, i: int) -> int:
 
 @njit(cache=True, error_model="numpy")
 def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
-    """Assign one component, entries ks (rows ascending) -> keep[ks]; row_at (na,), col_at (nb,): -1 scratch. Each
-    row has its entries and an own column at cost big (unmatched); row reduction, then :func:`_sparse_augment`."""
+    """Assign one component, entries ks (rows ascending) -> keep[ks]; row_at (na,), col_at (nb,): -1 scratch."""
     E, R, C = len(ks), 0, 0
     cols = np.empty(E, dtype=np.int64)
     ptr = np.zeros(E + 1, dtype=np.int64)  # row r's entries: ks[ptr[r]:ptr[r + 1]]
@@ -84,10 +75,8 @@ def _solve_component(ks, li, lj, cost, big, row_at, col_at, keep) -> None:
 
 @njit(cache=True, error_model="numpy")
 def _sparse_augment(cur, ptr, cols, ks, cost, big, C, u, v, col4row, row4col, work) -> None:
-    """Assign free row cur along the shortest augmenting path (scipy's augmenting_path), relaxing only the columns
-    reached through the entries (row r's and its own column C + r at big); duals u (R,), v (n,) updated in place.
-    work: spc (n,) of inf, path (n,), scanned (n,) of False (both left as found), seen (n,), rows (R,) scratch."""
-    spc, path, scanned, seen, rows = work
+    """Assign free row cur along the shortest augmenting path; duals u (R,), v (n,) updated in place."""
+    spc, path, scanned, seen, rows = work  # spc (n,) inf, scanned (n,) False: left as found; path, seen (n,), rows (R,)
     n_rows, n_seen, n_scanned = 0, 0, 0  # seen[:n_seen]: reached, not scanned; then scanned from the end
     min_val, i, sink = 0.0, cur, -1
     while sink == -1:
@@ -138,8 +127,7 @@ def _sparse_augment(cur, ptr, cols, ks, cost, big, C, u, v, col4row, row4col, wo
 
 @njit(cache=True, error_model="numpy")
 def _components(s: int, e: int, na: int, nb: int, li, lj) -> tuple:
-    """The entries s:e of one view pair grouped by connected component: -> start (na + nb + 1,), order (e - s,)
-    (component r's entries order[start[r]:start[r + 1]], rows ascending)."""
+    """Entries s:e of a view pair by component -> start (na + nb + 1,), order (e - s,) (rows ascending)."""
     parent = np.arange(na + nb)
     for k in range(s, e):
         a, b = find_root(parent, li[k]), find_root(parent, na + lj[k])
@@ -160,8 +148,7 @@ def _components(s: int, e: int, na: int, nb: int, li, lj) -> tuple:
 
 @njit(cache=True, error_model="numpy")
 def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj: np.ndarray, cost: np.ndarray):
-    """Gated assignment of view pairs by their allowed entries -> accepted (E,) bool. Pair p: sizes[p] = (na, nb),
-    entries starts[p]:starts[p + 1] of li, lj (local row, column; by row) and cost (finite); others disallowed."""
+    """Gated assignment of view pairs p (sizes[p] = (na, nb)) by entries starts[p]:starts[p + 1] -> accepted (E,)."""
     keep = np.zeros(len(cost), dtype=np.bool_)
     for p in range(len(starts) - 1):
         s, e = starts[p], starts[p + 1]
@@ -183,9 +170,7 @@ def solve_sparse_pairs(starts: np.ndarray, sizes: np.ndarray, li: np.ndarray, lj
 
 @njit(cache=True, error_model="numpy")
 def swap_regrets(starts: np.ndarray, li: np.ndarray, lj: np.ndarray, cost: np.ndarray, keep: np.ndarray):
-    """Least extra cost of re-matching each accepted entry of :func:`solve_sparse_pairs`' problem within its view
-    pair -> (E,) (inf without an alternative, and for entries not accepted): an entry to a free row or column, or
-    swapping partners with another accepted entry (both cross entries allowed); as merge.swap_regret, sparse."""
+    """merge.swap_regret of solve_sparse_pairs' accepted entries -> (E,), inf without alternative or not accepted."""
     regret = np.full(len(cost), np.inf)
     for p in range(len(starts) - 1):
         s, e = starts[p], starts[p + 1]

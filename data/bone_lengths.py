@@ -1,10 +1,4 @@
-"""Reference bone lengths of the MAP bone prior (paper Eq. 7), and their estimation from 3D ground truth.
-
-Default means: the synthetic generator's 1.70 m mean body (data.synthetic.body), rounded to 0.1 mm. SDs: 5.7 %
-relative (stature spread 5.3 %, 2 % per segment) plus 1 cm in quadrature for where a keypoint sits on the body, which
-keeps the 5-9 cm face and foot bones from a prior the 2D keypoints cannot honour. Re-estimate from a dataset with
-``benchmarks/fit_bone_lengths.py`` and set ``bone_table`` to its JSON.
-"""
+"""Reference bone lengths of the MAP bone prior (paper Eq. 7), and their estimation from 3D ground truth."""
 
 from __future__ import annotations
 
@@ -84,8 +78,7 @@ def bone_lengths(poses: np.ndarray) -> np.ndarray:
 
 
 def estimate_bone_table(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean, SD (ddof 1) and count of every bone over poses whose two joints are valid and finite: (N, J, 4) ->
-    (L,), (L,), (L,); NaN mean without samples, NaN SD with fewer than two."""
+    """Mean, SD (ddof 1, NaN below 2 samples) and count of each bone over valid joint pairs: (N, J, 4) -> (L,) x3."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 4)
     ok = (poses[..., 3] > 0) & np.all(np.isfinite(poses[..., :3]), axis=-1)
     both = ok[:, BONE_PAIRS[:, 0]] & ok[:, BONE_PAIRS[:, 1]]
@@ -110,8 +103,7 @@ def bone_table_dict(mean: np.ndarray, std: np.ndarray, count: np.ndarray | None 
 
 
 def resolve_bone_table(table: str | Path | Mapping | None) -> tuple[np.ndarray, np.ndarray]:
-    """The reference (mean (L,), std (L,)) from None (defaults), a JSON path or a {"bones": ...} mapping; unnamed
-    bones keep the default, an unknown bone or a value not finite and > 0 is a ValueError."""
+    """Reference mean, std (L,) from None (defaults), a JSON path or {"bones": ...}; bad bone or value: ValueError."""
     mean, std = BONE_MEAN.copy(), BONE_STD.copy()
     if table is None:
         return mean, std

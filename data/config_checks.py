@@ -1,5 +1,4 @@
-"""Type and range checks of Hydra config values for the entry points: a bad value stops the run with one
-line that names the key (``trainer.batch_size=0: must be an integer >= 1``), before any work is done."""
+"""Type and range checks of Hydra config values: a bad one stops the run before any work, in one line naming the key."""
 
 from __future__ import annotations
 

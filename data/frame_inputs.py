@@ -1,6 +1,4 @@
-"""Each frame's detections checked against each other before matching (eval.py, config group ``inputs``): a frame
-with more than a cap stops the run; a detection repeated in its view (a detector run twice, an export written twice)
-is dropped, and a near-duplicate merged into the higher-scored one, so that no person is matched twice."""
+"""Each frame's detections checked against each other before matching (``inputs``): caps, repeats, near-duplicates."""
 
 from __future__ import annotations
 
@@ -30,8 +28,7 @@ def person_size(keypoints: np.ndarray) -> np.ndarray:
 
 
 def near_pairs(keypoints: np.ndarray, near: float) -> np.ndarray:
-    """Whether detection i's mean distance to detection j over the joints both detect is within near x j's
-    person_size: (N, J, 3) -> (N, N) bool, False on the diagonal."""
+    """Whether i's mean joint distance to j is within near x j's person_size: (N, J, 3) -> (N, N), diagonal False."""
     size, rows = person_size(keypoints), []
     for start in range(0, len(keypoints), 64):  # row blocks bound the (rows, N, J) distances' memory
         a, b = keypoints[start : start + 64, None], keypoints[None]
@@ -43,8 +40,7 @@ def near_pairs(keypoints: np.ndarray, near: float) -> np.ndarray:
 
 
 def merge_duplicates(view: ViewDetections, near: float) -> tuple[ViewDetections, int, int]:
-    """One view's detections (N, J, 3) without repeats -> (M, J, 3), exact and near counts: highest score first, a
-    detection near (near_pairs) a kept one merges into it, per joint the higher score; the kept keep their order."""
+    """One view's detections (N, J, 3) without repeats -> (M, J, 3), exact and near counts; the kept keep order."""
     kp, same = view.keypoints, near_pairs(view.keypoints, near)
     if not same.any():
         return view, 0, 0
@@ -62,8 +58,7 @@ def merge_duplicates(view: ViewDetections, near: float) -> tuple[ViewDetections,
 
 
 def clean_frames(sequence: Sequence, max_detections: int, near: float) -> tuple[Sequence, Counter]:
-    """The sequence with each view's repeats dropped or merged (merge_duplicates), and their counts; ConfigError
-    naming the frame and inputs.max_detections_per_frame for a frame with more detections over all views."""
+    """The sequence with each view's repeats merged, and their counts; ConfigError for a frame over max_detections."""
     counts: Counter = Counter()
     frames, first = [], None
     for frame in sequence.frames:

@@ -1,5 +1,4 @@
-"""COCO image ids of multi-view frames, the keys of a detections file (detector=file): ``id = frame * V + view + 1``
-(from 1, as in COCO), so an id does not change when a run selects other frames."""
+"""COCO image ids of multi-view frames (detector=file's keys): ``id = frame * V + view + 1``, whatever frames run."""
 
 from __future__ import annotations
 

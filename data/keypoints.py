@@ -1,5 +1,4 @@
-"""Keypoint metadata by name (COCO-23 = COCO-17 body + 6 foot joints); every index map is derived from the names.
-Index maps *gather*: ``coco23[j] = source[MAP[j]]``; ``MAP[j] == -1``: not in the source format, score 0 (to_coco23)."""
+"""Keypoint metadata by name (COCO-23 = COCO-17 + 6 feet); maps gather ``coco23[j] = source[MAP[j]]`` (-1: score 0)."""
 
 from __future__ import annotations
 
@@ -45,8 +44,7 @@ LEFT_ANKLE, RIGHT_ANKLE = joint_indices(("left_ankle", "right_ankle"))
 # Every left joint with its right partner, in COCO-23 order of the left joint.
 FLIP_PAIRS = name_pairs((n, "right_" + n[5:]) for n in COCO23_NAMES if n.startswith("left_"))
 
-# Limbs drawn in pictures: the COCO skeleton plus heel, big toe and small toe on each foot.
-LIMBS = name_pairs(
+LIMBS = name_pairs(  # drawn in pictures: the COCO skeleton plus heel, big toe and small toe on each foot
     tuple(pair.split("-"))
     for pair in "left_ankle-left_knee left_knee-left_hip right_ankle-right_knee right_knee-right_hip left_hip-right_hip"
     " left_shoulder-left_hip right_shoulder-right_hip left_shoulder-right_shoulder left_shoulder-left_elbow"
@@ -80,8 +78,7 @@ BONE_JOINTS |= {  # a sided bone: the left one, then the right one ({s} = left, 
 }
 BONES: dict[str, tuple[int, int]] = dict(zip(BONE_JOINTS, name_pairs(BONE_JOINTS.values())))
 
-# Joint groups of the per-joint error tables.
-JOINT_GROUPS: dict[str, tuple[int, ...]] = {
+JOINT_GROUPS: dict[str, tuple[int, ...]] = {  # of the per-joint error tables
     "head": joint_indices(("nose", "left_eye", "right_eye", "left_ear", "right_ear")),
     **{g: joint_indices((f"left_{g}", f"right_{g}")) for g in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")},
     "foot": FOOT_JOINTS,

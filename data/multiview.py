@@ -54,8 +54,7 @@ class Frame:
 
 @dataclass
 class Sequence:
-    """A rig, its frames, and the typed facts that change how they are run and scored; ``meta``: free-form extras.
-    ``protocol_inputs`` (``[{"name": ..., **arguments}]``) become ``protocols`` in evaluation.protocols."""
+    """A rig, its frames, and the typed facts that change how they are run and scored; ``meta``: free-form extras."""
 
     rig: Rig
     frames: list[Frame]
@@ -64,7 +63,7 @@ class Sequence:
     description: str = ""  # one line naming the data, shown in reports and picture titles
     persistent_ids: bool = False  # gt_ids name one person over the whole sequence: identity metrics apply
     views_are_ground_truth: bool = False  # views hold ground-truth 2D: a 2D stage's predictions are scored on them
-    protocol_inputs: list[dict] = field(default_factory=list)
+    protocol_inputs: list[dict] = field(default_factory=list)  # [{"name": ..., **arguments}] -> evaluation.protocols
     stage_seconds: dict[str, float] = field(default_factory=dict)  # stages run while loading, e.g. 2D grouping
     coco_images: list[dict] = field(default_factory=list)  # COCO "images" entries of the frames' images
     area: tuple[float, float, float, float] | None = None  # the persons' ground area (xmin, xmax, ymin, ymax), m

@@ -1,7 +1,4 @@
-"""2D evaluation of a train.py checkpoint on a COCO-format keypoint set (``python eval.py checkpoint=...``).
-
-Decoding, flip test and joint association are the SPPE stage's own; writes COCO OKS AP/AR, COCO results, poses2d.json.
-"""
+"""2D evaluation of a train.py checkpoint on a COCO-format keypoint set (``python eval.py checkpoint=...``)."""
 
 from __future__ import annotations
 

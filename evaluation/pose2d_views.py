@@ -1,7 +1,4 @@
-"""The 2D stage of a run on images, scored per view with COCO OKS AP/AR against the render's ground truth.
-
-Predictions take the ids of GT persons (one-to-one, OKS >= min_oks) so that the matching is scored as on simulations.
-"""
+"""The 2D stage of a run on images, scored per view with COCO OKS AP/AR against the render's ground truth."""
 
 from __future__ import annotations
 

@@ -1,7 +1,4 @@
-"""Checkpoint files of train.py: a versioned envelope (format, version, kind, sha256, payload) around the state.
-
-The payload is unpickled: load only trusted files.
-"""
+"""train.py's checkpoints: a versioned envelope (format, version, kind, sha256, payload); unpickled: trusted only."""
 
 from __future__ import annotations
 

@@ -1,7 +1,4 @@
-"""Multi-modal heatmap targets of the paper's Eq. 1 (T + mu C) and their decoding.
-
-Pixel centres at integers: x_hm = (x_in + 0.5) * w / W - 0.5, so a flip of the input is exactly a flip of the heatmap.
-"""
+"""Multi-modal heatmap targets of Eq. 1 (T + mu C) and their decoding; x_hm = (x_in + 0.5) * w / W - 0.5."""
 
 from __future__ import annotations
 

@@ -1,8 +1,4 @@
-"""CrowdPose's global maximum joints association (Li et al. CVPR 2019) over the boxes of one image.
-
-Per joint type, candidates of different boxes closer than dist_thresh * sigma_j * (s_p + s_q) / 2 (s = sqrt of box
-area) form nodes; persons x nodes is a maximum-weight matching. An unmatched person keeps its position with score 0.
-"""
+"""CrowdPose's global maximum joints association (Li et al. CVPR 2019) over the boxes of one image."""
 
 from __future__ import annotations
 

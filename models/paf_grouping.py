@@ -54,11 +54,7 @@ def _greedy_pairs(flat: np.ndarray, start: int, n_a: int, n_b: int, min_paf: flo
 def _assemble(
     paf_flat: np.ndarray, paf_start: np.ndarray, limbs: np.ndarray, cand_start: np.ndarray, min_paf: float
 ) -> np.ndarray:
-    """Fold every limb's greedy connections into persons -> slots (P, J): candidate index per joint or -1.
-
-    A connection extends the person holding one end (a filled slot keeps its stronger link), joins two persons
-    whose slots do not overlap, or starts a person.
-    """
+    """Fold every limb's greedy connections into persons -> slots (P, J): candidate index per joint or -1."""
     num_joints = len(cand_start) - 1
     owner = np.full(cand_start[-1], -1, dtype=np.int64)
     slots = np.full((cand_start[-1] // 2 + 1, num_joints), -1, dtype=np.int64)
@@ -94,12 +90,10 @@ def group_people(
     pafs: list[np.ndarray],
     limbs: tuple[tuple[int, int], ...] = BODY25_PAF_LIMBS,
     min_paf: float = 0.05,
-    min_joints: int = 8,
+    min_joints: int = 8,  # fewer: dropped (8: the dip between fragments and bodies on Shelf)
     min_mean_score: float = 0.4,
 ) -> np.ndarray:
-    """Candidates (J arrays (n_j, 3) x, y, score), limb PAFs (L arrays (n_a, n_b)) -> persons (N, J, 3), missing 0.
-
-    Drops persons with fewer than min_joints joints (8: the dip between fragments and bodies on Shelf)."""
+    """Candidates (J arrays (n_j, 3) x, y, score), limb PAFs (L arrays (n_a, n_b)) -> persons (N, J, 3), missing 0."""
     packed = pack_candidates(candidates, pafs, limbs)
     return group_packed(packed, np.array(limbs).reshape(-1, 2), min_paf, min_joints, min_mean_score)
 
@@ -155,11 +149,7 @@ def grouped_to_view_detections(persons: np.ndarray, margin: float = 0.1) -> View
 
 
 def group_view(
-    frame: FrameCandidates,
-    min_paf: float = 0.05,
-    min_joints: int = 8,
-    min_mean_score: float = 0.4,
-    margin: float = 0.1,
+    frame: FrameCandidates, min_paf: float = 0.05, min_joints: int = 8, min_mean_score: float = 0.4, margin: float = 0.1
 ) -> ViewDetections:
     """One camera frame's BODY_25 candidates grouped into persons -> COCO-23 ViewDetections (the Shelf grouper)."""
     packed = frame.packed if frame.packed is not None else pack_candidates(frame.candidates, frame.pafs)

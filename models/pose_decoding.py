@@ -1,5 +1,4 @@
-"""Heatmaps of person crops -> keypoints in image px (single: one peak per joint; association: candidates, then
-the global joint association), shared by the SPPE stage and evaluation/pose2d_eval.py."""
+"""Heatmaps of person crops -> keypoints in image px (one peak per joint, or candidates and joint association)."""
 
 from __future__ import annotations
 

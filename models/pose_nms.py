@@ -1,8 +1,4 @@
-"""Pose-NMS of one image's persons: duplicate boxes of one person merged into one pose (AlphaPose's idea, simplified).
-
-Greedy, best person first: b duplicates the kept a when OKS(a, b) over the joints a sees (a's box area, COCO-23
-sigmas) exceeds ``oks``; each joint a sees becomes the score-weighted mean of the group's agreeing joints.
-"""
+"""Pose-NMS of one image's persons: a person's duplicate boxes merged into one pose (AlphaPose's idea, simplified)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,4 @@
-"""Picture the multi-modal training targets of a keypoint file: crop, own-joint targets (red), others' mu C (green).
-
-``python -m models.show_targets --ann FILE --images DIR --out PNG [--mu 0.5] [--kind coco_wholebody]``
-"""
+"""Picture the multi-modal training targets of a keypoint file: crop, own-joint targets (red), others' mu C (green)."""
 
 from __future__ import annotations
 
@@ -43,8 +40,7 @@ def tile_grid(tiles: Sequence[np.ndarray], columns: int, gap: int = 2) -> np.nda
 def target_parts(
     dataset: TopDownDataset, index: int, affine_inv: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Own targets T (23, h, w), others' mu C (23, h, w) and own crop keypoints (23, 3) of an unflipped
-    training sample whose crop -> image affine is affine_inv (2, 3); T + mu C is the sample's target."""
+    """Own T, others' mu C (23, h, w) and crop keypoints (23, 3) of an unflipped sample (crop -> image: affine_inv)."""
     r, own = dataset.samples[index][:2]
     record, codec = dataset.records[r], dataset.codec
     affine = np.linalg.inv(np.vstack([np.asarray(affine_inv, np.float64), [0.0, 0.0, 1.0]]))[:2]

@@ -1,8 +1,4 @@
-"""The joint-candidate SPPE as the 2D stage of the multi-view pipeline (configs/pose2d/sppe.yaml).
-
-Pose-NMS runs per view BEFORE the joint association: a duplicate box would otherwise collect the runner-up
-candidates (neighbours' joints) and look like another person.
-"""
+"""The joint-candidate SPPE as the 2D stage of the multi-view pipeline (configs/pose2d/sppe.yaml)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,4 @@
-"""Training pieces of the top-down SPPE used by train.py: builders, one epoch, validation, checkpoints, distributed.
-
-Exact resumption: seeded per-epoch sample order and augmentation, checkpoints with position and RNG states.
-"""
+"""Training pieces of the top-down SPPE used by train.py: builders, one epoch, validation, checkpoints, distributed."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""Persons reconstructed twice: two output persons seen in different views and closer than a body could be to
-another are one person whose views the matcher split into two groups."""
+"""Persons reconstructed twice: two persons of different views closer than two bodies can be are one person."""
 
 from __future__ import annotations
 
@@ -25,8 +24,7 @@ def near_pairs(poses3d: np.ndarray, placed: np.ndarray, within_m: float) -> tupl
 def close_pairs(
     poses3d: np.ndarray, placed: np.ndarray, within_m: float, apart: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs i < j whose mean distance over the joints both place is under within_m, closest first: (P, J, 3+),
-    placed (P, J) bool[, apart (P,) int64 view masks: only pairs seen in no common view] -> (K, 2) int, (K,) m."""
+    """Pairs i < j closer than within_m, closest first: (P, J, 3+), placed (P, J)[, apart (P,)] -> (K, 2), (K,) m."""
     i, j = all_pairs(len(poses3d)) if len(poses3d) <= ALL_PAIRS_UP_TO else near_pairs(poses3d, placed, within_m)
     if apart is not None:
         disjoint = (apart[i] & apart[j]) == 0
@@ -52,10 +50,7 @@ def all_pairs(count: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def merge_coincident(poses3d: np.ndarray, views: np.ndarray, assignment: np.ndarray, within_m: float) -> np.ndarray:
-    """Join the persons seen in different views that stand closer than within_m over the joints both triangulated:
-    poses (P, J, 4), the views that saw each joint (P, J) int, assignment (P, V) -> the new assignment (P', V), or
-    the same object when nothing was joined. Closest pairs first. Two persons with detections in one view are
-    different detections there, so both are kept (bodies can touch; near-duplicate detections are merged earlier)."""
+    """Join coincident persons: poses (P, J, 4), views (P, J), assignment (P, V) -> (P', V), the same if none joined."""
     if within_m <= 0 or len(assignment) < 2:
         return assignment
     placed = (poses3d[..., 3] > 0) & (views >= 2)  # a joint placed by a prior may stray from its body

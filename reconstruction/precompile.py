@@ -58,11 +58,7 @@ def kernels_ready(jobs: list[Callable[[], None]]) -> bool:
 
 
 def precompile(workers: int | None = None) -> bool:
-    """Load every kernel from numba's cache, or compile the missing ones under NOTICE -> whether any was compiled.
-
-    The warm-ups compile in worker processes (forked, one per core, up to ``workers``), which write numba's cache;
-    this process then loads from it. Without fork (or with one core) they compile here.
-    """
+    """Load every kernel from numba's cache, or compile the missing ones under NOTICE -> whether any was compiled."""
     jobs = warm_ups()
     if kernels_ready(jobs):
         return False

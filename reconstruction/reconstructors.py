@@ -1,8 +1,4 @@
-"""3D reconstruction stages behind one interface: ``stage(poses2d, bboxes, rig) -> Reconstruction``.
-
-poses2d (V, P, J, 3) are distorted pixels + score as detected (0 = missing); bboxes (V, P, 4) x, y, w, h. Each stage
-is configured from ``configs/reconstruction/*.yaml``; the MLE / MAP stages are in ``reconstruction.solver``.
-"""
+"""3D reconstruction stages behind one interface: ``stage(poses2d, bboxes, rig) -> Reconstruction`` (CONTRIBUTING)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""Tracking over frames (layer 3): persons keep an id across a sequence (``tracking.tracker``; the identity metrics
-are in ``evaluation.identity``). May import ``data`` and the other stages; never ``evaluation`` or the entry points."""
+"""Tracking over frames (layer 3): persons keep an id across a sequence (``tracking.tracker``)."""
 
 from tracking.tracker import Association, Tracker
 

@@ -1,6 +1,4 @@
-"""Compiled (numba) loops of the tracker (tracker.py): the association's centres and pair distances, and the motion
-filter's, smoother's and robust skeleton's update of the hit tracks; the same arithmetic in the same order as numpy
-formulas (bit-identical but for the pair distances, summed joint by joint: 1e-16 relative)."""
+"""Compiled (numba) loops of the tracker (tracker.py): the association's distances and the hit tracks' updates."""
 
 from __future__ import annotations
 
@@ -14,48 +12,44 @@ MAD_TO_SD = 1.4826  # SD of a normal distribution per median absolute deviation
 
 
 class Filters(NamedTuple):
-    """The tracker's constants: unseen joint variance, process variance q and measurement variance r2 (m^2), the
-    smoother's least rate, process floor^2 and a new joint's process variance q0 (m^2), min hits, skeleton refresh."""
+    """The tracker's constants; variances in m^2."""
 
-    unseen_var: float
-    q: float
-    r2: float
-    rate: float
-    floor2: float
-    q0: float
+    unseen_var: float  # of a joint no view sees
+    q: float  # process variance
+    r2: float  # measurement variance
+    rate: float  # the smoother's least rate
+    floor2: float  # the smoother's process floor^2
+    q0: float  # a new joint's process variance
     min_hits: int
-    refresh: int
+    refresh: int  # hits between skeleton updates
 
 
 class Bodies(NamedTuple):
-    """The association's two sides: guesses (T, J, 3) with their seen joints (T, J), poses (P, J, 4) with their valid
-    joints (P, J), and core (J,) the head and trunk joints."""
+    """The association's two sides: guesses (T, J, 3), seen (T, J); poses (P, J, 4), valid (P, J)."""
 
     guess: np.ndarray
     seen: np.ndarray
     poses3d: np.ndarray
     valid: np.ndarray
-    core: np.ndarray
+    core: np.ndarray  # (J,) the head and trunk joints
 
 
 class Hits(NamedTuple):
-    """One frame's hits: frame, tracks (K,) of the state hit by persons (K,) of poses (P, J, 4) with variances (P, J)
-    m^2 and bone lengths (P, L) m; out (P, J, 4) takes the smoothed joints of confirmed tracks where smooth."""
+    """One frame's hits: tracks (K,) of the state hit by persons (K,) of poses (P, J, 4)."""
 
     frame: int
     tracks: np.ndarray
     persons: np.ndarray
     poses3d: np.ndarray
-    variance: np.ndarray
-    lengths: np.ndarray
-    out: np.ndarray
+    variance: np.ndarray  # (P, J) m^2
+    lengths: np.ndarray  # (P, L) m
+    out: np.ndarray  # (P, J, 4) takes the smoothed joints of confirmed tracks where smooth
     smooth: bool
 
 
 @njit(**_JIT)
 def centres(points: np.ndarray, ok: np.ndarray, core: np.ndarray) -> np.ndarray:
-    """Mean of the ok head and trunk joints (of all ok joints without any), summed joint by joint as numpy's sum over J
-    would: points (N, J, >= 3), ok (N, J), core (J,) -> (N, 3)."""
+    """Mean of the ok head and trunk joints (else all ok): points (N, J, >= 3), ok (N, J), core (J,) -> (N, 3)."""
     N, J = ok.shape
     out = np.empty((N, 3))
     for i in range(N):
@@ -104,8 +98,7 @@ def pair_mean_distances(bodies: Bodies, rows: np.ndarray, cols: np.ndarray, out:
 
 @njit(**_JIT)
 def near_mean_distances(bodies: Bodies, ca: np.ndarray, cb: np.ndarray, radius: float, out: np.ndarray) -> None:
-    """out (T, P) = the pair distances of every pair whose centres ca (T, 3) and cb (P, 3) (both finite) lie at most
-    radius apart, as tracker.near_pairs' dense path measures them: one pass over the T x P pairs, no pair lists."""
+    """out (T, P) = the pair distances where finite centres ca (T, 3), cb (P, 3) lie within radius (one pass)."""
     for t in range(len(ca)):
         if not (np.isfinite(ca[t, 0]) and np.isfinite(ca[t, 1]) and np.isfinite(ca[t, 2])):
             continue
@@ -125,8 +118,7 @@ def _maximum(a: float, b: float) -> float:
 
 @njit(**_JIT)
 def smooth_joints(st: tuple, t: int, pose: np.ndarray, variance: np.ndarray, dt: float, f: Filters) -> None:
-    """The smoother of track t's joints (st a tracker.TrackState) in place, before its motion filter: a random walk
-    whose process variance follows the innovations, updated with pose (J, 4) of variances (J,) after dt frames."""
+    """Adaptive random-walk smoother of track t's joints in place, with pose (J, 4), variances (J,) after dt frames."""
     sx, sp, sq = st.sx[t], st.sp[t], st.sq[t]
     rate = _maximum(f.rate, 1.0 / st.hits[t])
     for j in range(len(sp)):
@@ -158,8 +150,7 @@ def smooth_joints(st: tuple, t: int, pose: np.ndarray, variance: np.ndarray, dt:
 
 @njit(**_JIT)
 def kalman_joints(st: tuple, t: int, pose: np.ndarray, variance: np.ndarray, dt: float, f: Filters) -> None:
-    """Constant-velocity Kalman predict over dt frames and update with pose (J, 4) of variances (J,) of track t's
-    joints (st a tracker.TrackState), in place; a joint seen for the first time starts there."""
+    """Constant-velocity Kalman predict and update of track t's joints in place with pose (J, 4), variances (J,)."""
     position, velocity, p00, p01, p11 = st.position[t], st.velocity[t], st.p00[t], st.p01[t], st.p11[t]
     a00, a01, a11 = 2 * dt, dt**2, f.q * dt**4 / 4
     b01, c11 = f.q * dt**3 / 2, f.q * dt**2
@@ -208,8 +199,7 @@ def _select(buf: np.ndarray, m: int, k: int) -> float:
 
 @njit(**_JIT)
 def _sorted_median(values: np.ndarray, count: int, lo: int, hi: int, buf: np.ndarray) -> float:
-    """0.5 (s[lo] + s[hi]) of a row's values (W,) sorted NaN last, NaN if count is 0; the order statistics picked
-    without sorting (buf (W,) scratch)."""
+    """0.5 (s[lo] + s[hi]) of values (W,) sorted NaN last (NaN if count is 0), without sorting; buf (W,) scratch."""
     m = 0
     for v in values:
         if not np.isnan(v):
@@ -228,8 +218,7 @@ def _sorted_median(values: np.ndarray, count: int, lo: int, hi: int, buf: np.nda
 
 @njit(**_JIT)
 def robust_skeleton(bones: np.ndarray, median: np.ndarray, se: np.ndarray, count: np.ndarray, buf: np.ndarray) -> None:
-    """One track's robust bone lengths from its window bones (W, L), NaN unmeasured: median (L,) m, its standard error
-    se (L,) m (MAD-based SD / sqrt(count); inf below 2 lengths) and count (L,); buf (2, W) scratch."""
+    """One track's robust bone lengths from bones (W, L): median, standard error se, count (L,); buf (2, W) scratch."""
     W, L = bones.shape
     for b in range(L):
         n = 0
@@ -249,8 +238,7 @@ def robust_skeleton(bones: np.ndarray, median: np.ndarray, se: np.ndarray, count
 
 @njit(**_JIT)
 def correct_tracks(st: tuple, h: Hits, f: Filters) -> None:
-    """Each hit track's smoother, motion filter, bone window and (every f.refresh hits) robust skeleton, in place in
-    st (a tracker.TrackState); with h.smooth, h.out takes the confirmed tracks' smoothed joints where observed."""
+    """Each hit track's smoother, motion filter, bone window and robust skeleton, in place in st (a TrackState)."""
     bones = st.bones
     buf = np.empty((2, bones.shape[1]))
     for k in range(len(h.tracks)):

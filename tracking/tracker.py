@@ -1,9 +1,4 @@
-"""Online 3D pose tracker, frame by frame: ``associate`` pairs a frame's persons with the tracks (changing nothing),
-``skeleton_prior`` offers the MAP the tracks' bone lengths, ``update`` corrects the tracks and gives ids. Each joint
-moves with constant velocity (a Kalman filter; time in frames, so a gap is a longer prediction); with ``smooth`` it is
-also a random walk weighed against the reconstruction's joint variance (exact 2D keeps the triangulated point, a joint
-no view fixes follows the motion); a track's skeleton is the robust median of its recent bone lengths.
-"""
+"""Online 3D pose tracker, frame by frame: ``associate``, optionally ``skeleton_prior``, then ``update`` (ids)."""
 
 from __future__ import annotations
 
@@ -30,12 +25,11 @@ BODY_SPAN_M = 1.0  # m: the centres of any two subsets of one body's head and tr
 
 
 class Tracked(NamedTuple):
-    """One frame's output of the tracker: ids (P,), poses (P, J, 4), and smoothed (P,) bool, the persons whose joints
-    the motion model weighed in (a hit track, smoothing on, variances given)."""
+    """One frame's output of the tracker: ids (P,), poses (P, J, 4), and smoothed (P,) bool."""
 
     ids: np.ndarray
     poses3d: np.ndarray
-    smoothed: np.ndarray
+    smoothed: np.ndarray  # the persons the motion model weighed in (a hit track, smoothing on, variances given)
 
 
 class Association(NamedTuple):
@@ -48,34 +42,30 @@ class Association(NamedTuple):
 
 
 class TrackState(NamedTuple):
-    """All T tracks as arrays: ids (T,); position, velocity (T, J, 3); the per-axis covariance p00, p01, p11 (T, J)
-    of (position, velocity); seen (T, J); last_frame, hits, confirmed (T,); bones (T, W, L) a ring of bone lengths
-    (NaN: none) and its next slot (T,); the smoothed joints sx (T, J, 3), their variance sp and process variance sq
-    (T, J) m^2; live (T, J) measured at the last hit; the robust skeleton skel_median, skel_se, skel_count (T, L)."""
+    """All T tracks as arrays (T, ...); J joints, L bones, W the bone window."""
 
     ids: np.ndarray
-    position: np.ndarray
-    velocity: np.ndarray
-    p00: np.ndarray
+    position: np.ndarray  # (T, J, 3)
+    velocity: np.ndarray  # (T, J, 3)
+    p00: np.ndarray  # (T, J): p00, p01, p11 the per-axis covariance of (position, velocity)
     p01: np.ndarray
     p11: np.ndarray
-    seen: np.ndarray
+    seen: np.ndarray  # (T, J)
     last_frame: np.ndarray
     hits: np.ndarray
     confirmed: np.ndarray
-    bones: np.ndarray
-    slot: np.ndarray
-    sx: np.ndarray
-    sp: np.ndarray
-    sq: np.ndarray
-    live: np.ndarray
-    skel_median: np.ndarray
+    bones: np.ndarray  # (T, W, L) a ring of bone lengths (NaN: none)
+    slot: np.ndarray  # its next slot
+    sx: np.ndarray  # (T, J, 3) the smoothed joints
+    sp: np.ndarray  # (T, J) m^2 their variance
+    sq: np.ndarray  # (T, J) m^2 their process variance
+    live: np.ndarray  # (T, J) measured at the last hit
+    skel_median: np.ndarray  # (T, L): the robust skeleton
     skel_se: np.ndarray
     skel_count: np.ndarray
 
     def select(self, keep: np.ndarray, then: TrackState | None, pool: np.ndarray) -> TrackState:
-        """The tracks of a mask (T,) followed by then's, each field copied once; the bone windows stay in pool (C, W, L),
-        whose first T rows are self.bones (C >= the tracks out): a 100-track state's windows are 2 MB."""
+        """The tracks of a mask (T,), then then's; the bone windows stay in pool (C, W, L), first rows self.bones."""
         if keep.all() and then is None:
             return self
         rows, added = np.flatnonzero(keep), 0 if then is None else len(then.ids)
@@ -105,9 +95,7 @@ def _core_mask(joints: int) -> np.ndarray:
 
 
 def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max_m: float = np.inf) -> np.ndarray:
-    """Mean distance over the head and trunk joints both have (all shared joints where they share none): guesses
-    (T, J, 3), seen (T, J), poses (P, J, 4) -> (T, P) m, inf where nothing is shared or the centres are farther apart
-    than max_m + BODY_SPAN_M."""
+    """Mean head-and-trunk distance: guesses (T, J, 3), seen (T, J), poses (P, J, 4) -> (T, P) m, inf if far."""
     guess, seen = np.ascontiguousarray(guess, dtype=np.float64), np.ascontiguousarray(seen, dtype=bool)
     poses3d, J = np.ascontiguousarray(poses3d, dtype=np.float64), poses3d.shape[1]
     bodies = Bodies(guess=guess, seen=seen, poses3d=poses3d, valid=poses3d[..., 3] > 0, core=_core_mask(J))
@@ -122,16 +110,14 @@ def mean_distances(guess: np.ndarray, seen: np.ndarray, poses3d: np.ndarray, max
 
 
 def near_pairs(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Index pairs of points a (T, 3) and b (P, 3) at most radius apart by KD-trees (none for a non-finite point) ->
-    rows (K,), cols (K,)."""
+    """Index pairs of finite points a (T, 3) and b (P, 3) at most radius apart (KD-trees) -> rows (K,), cols (K,)."""
     ia, ib = np.flatnonzero(np.isfinite(a).all(axis=1)), np.flatnonzero(np.isfinite(b).all(axis=1))
     pairs = cKDTree(a[ia]).sparse_distance_matrix(cKDTree(b[ib]), radius, output_type="ndarray")
     return ia[pairs["i"]], ib[pairs["j"]]
 
 
 def predicted_positions(position: np.ndarray, velocity: np.ndarray, live: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """Each track moved by dt (T,) times its body velocity, the mean velocity of its live head and trunk joints (of
-    all its live joints without any; 0 without any): position, velocity (T, J, 3), live (T, J) -> (T, J, 3)."""
+    """Tracks moved by dt (T,) times their body velocity: position, velocity (T, J, 3), live (T, J) -> (T, J, 3)."""
     body = kernels.centres(velocity, live, _core_mask(live.shape[1]))
     return position + dt[:, None, None] * body[:, None, :]
 
@@ -147,8 +133,7 @@ def warm_up() -> None:
 
 @dataclass(eq=False)
 class Tracker:
-    """Frame-by-frame tracker of 3D poses (see the module): associate, optionally skeleton_prior, then update; the
-    parameters are those of configs/tracking/on.yaml."""
+    """Frame-by-frame tracker of 3D poses; the parameters are those of configs/tracking/on.yaml."""
 
     max_distance_m: float = 0.5  # m: gate of the mean joint distance between a track's prediction and a person
     gate_growth_m: float = 0.1  # m per frame since the track was last seen
@@ -193,8 +178,7 @@ class Tracker:
         self._next_id = 0
 
     def associate(self, frame: int, poses3d: np.ndarray) -> Association:
-        """Pair a coming frame's persons (P, J, 4) with the tracks alive since the last frame, changing nothing:
-        gated Hungarian assignment on the mean head-and-trunk distance to each track's prediction or last position."""
+        """Pair a coming frame's persons (P, J, 4) with the tracks alive since the last frame, changing nothing."""
         frame, poses3d = self._checked(frame, poses3d)
         none, st = np.zeros(0, dtype=np.int64), self.state
         if st is None:
@@ -217,8 +201,7 @@ class Tracker:
         return Association(frame, len(poses3d), st.ids[rows[pick[keep]]], cols[keep].astype(np.int64))
 
     def skeleton_prior(self, association: Association) -> SkeletonPrior:
-        """The robust bone lengths (P, L) m and standard errors (P, L) of the confirmed track each person joins (NaN /
-        inf where it joins none or a bone was seen in fewer than skeleton_min_frames frames)."""
+        """Robust bone lengths (P, L) m and standard errors (P, L) of each person's confirmed track (else NaN / inf)."""
         median = np.full((association.count, len(BONE_PAIRS)), np.nan)
         se = np.full(median.shape, np.inf)
         if not self.skeleton_min_frames or not len(association.tracks):
@@ -232,9 +215,7 @@ class Tracker:
         return SkeletonPrior(median, se)
 
     def update(self, association: Association, reconstruction: Reconstruction) -> Tracked:
-        """Correct the tracks with the associated persons of a Reconstruction (poses (P, J, 4), joint variances (P, J)
-        m^2, measured bone lengths (P, L) m, the latter two optional), start tracks for the others, drop the dead ->
-        Tracked(ids (P,), poses (P, J, 4), smoothed (P,)); the poses smoothed where ``smooth`` and variances are given."""
+        """Correct the tracks with a Reconstruction's associated persons, start the others, drop the dead -> Tracked."""
         frame, poses3d = self._checked(association.frame, reconstruction.poses)
         if association.count != len(poses3d):
             raise ValueError(f"tracking: the association is of {association.count} poses, the update of {len(poses3d)}")
@@ -292,8 +273,7 @@ class Tracker:
 
     @staticmethod
     def _bones(lengths: np.ndarray | None, poses3d: np.ndarray, variance: np.ndarray) -> np.ndarray:
-        """The bone lengths (P, L) each person adds to its track: the given ones, else those of the joints the
-        reconstruction measured (variance below UNSEEN_VAR_M2)."""
+        """Bone lengths (P, L) each person adds to its track: the given ones, else those of its measured joints."""
         if lengths is not None:
             lengths = np.asarray(lengths, dtype=np.float64)
             if lengths.shape != (len(poses3d), len(BONE_PAIRS)):
@@ -303,8 +283,7 @@ class Tracker:
         return np.where(ok[:, BONE_PAIRS[:, 0]] & ok[:, BONE_PAIRS[:, 1]], bone_lengths(poses3d), np.nan)
 
     def _variance(self, variance: np.ndarray | None, poses3d: np.ndarray) -> np.ndarray:
-        """The joints' measurement variances (P, J) m^2: the given ones where finite and > 0 (at most UNSEEN_VAR_M2),
-        UNSEEN_VAR_M2 where no view fixes the joint; without any, measurement_sd_m squared."""
+        """Measurement variances (P, J) m^2: the given ones, at most UNSEEN_VAR_M2; without any, measurement_sd_m^2."""
         if variance is None:
             return np.full(poses3d.shape[:2], self.r2)
         variance = np.asarray(variance, dtype=np.float64)
@@ -313,8 +292,7 @@ class Tracker:
         return np.where(np.isfinite(variance) & (variance > 0), np.minimum(variance, UNSEEN_VAR_M2), UNSEEN_VAR_M2)
 
     def _bone_pool(self, st: TrackState, tracks: int) -> np.ndarray:
-        """The buffer (C, W, L), C >= tracks, whose first rows are st's bone windows (moved into one twice as large
-        when short): TrackState.select keeps the windows in it instead of copying them every frame."""
+        """The buffer (C, W, L), C >= tracks, whose first rows are st's bone windows (doubled when short)."""
         pool = self._pool
         inside = pool is not None and st.bones.base is pool and st.bones.ctypes.data == pool.ctypes.data
         if not inside or len(pool) < tracks:

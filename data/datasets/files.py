@@ -1,6 +1,4 @@
-"""Your own rig: a calibration (any format :func:`data.geometry.calibration.load_rig` reads) and a poses2d.json
-turned into a Sequence without ground truth, checked by :mod:`data.geometry.check_rig` with the 2D poses.
-A selected frame without any detection stays a frame (a range is clamped to the file's first..last frame)."""
+"""Your own rig: a calibration (any load_rig format) and a poses2d.json as a Sequence without ground truth, checked."""
 
 from __future__ import annotations
 

@@ -1,9 +1,4 @@
-"""Multi-view images (dataset=images): a calibration and every camera's frames, no detections, no ground truth.
-
-A camera's frames (a folder, a video or one image) are found by its name, a ``pattern`` or a mapping, matched
-across cameras by position (align=index) or file stem (align=name), and read lazily at the calibration's size.
-``Sequence.coco_images`` (the CLI writes it) lists the COCO "images" for one's own detector (detector=file).
-"""
+"""Multi-view images (dataset=images): a calibration and every camera's frames, no detections, no ground truth."""
 
 from __future__ import annotations
 

@@ -1,8 +1,4 @@
-"""CMU Panoptic sequences as the dataset ships them (``<root>/<seq>/calibration_<seq>.json``,
-``hdPose3d_stage1_coco19/body3DScene_*.json``) as a :class:`data.multiview.Sequence`. Ground truth: ``joints19``
-in metres, z up, COCO-23 (no feet), valid above ``GT_MIN_CONFIDENCE`` (VoxelPose's rule); its first 15 joints go to
-the Panoptic protocol. 2D input: a ``poses2d.json``, or generated from the ground truth for protocol checks.
-"""
+"""CMU Panoptic sequences as shipped as a Sequence: GT joints19 in m, z up, as COCO-23; 2D from poses2d.json or GT."""
 
 from __future__ import annotations
 
@@ -33,14 +29,13 @@ _POSE_FILE = re.compile(r"body3DScene_(\d+)\.json")
 def load_panoptic_sequence(
     root: str | Path,
     sequence: str = "160906_band1",
-    cameras: list[str] | None = None,
-    frames: list[int] | slice | str | None = None,
+    cameras: list[str] | None = None,  # None: DEFAULT_CAMERAS
+    frames: list[int] | slice | str | None = None,  # frame numbers, or a slice / "start:stop[:step]" of positions
     poses2d: str | None = None,
     seed: int = 0,
     **observation: Any,
 ) -> Sequence:
-    """One Panoptic sequence: rig of ``cameras`` (default DEFAULT_CAMERAS), GT (P, 23, 4) and V 2D views per frame;
-    ``frames``: a list of frame numbers, or a slice or "start:stop[:step]" of positions among the frames found."""
+    """One Panoptic sequence: the rig of ``cameras``, GT (P, 23, 4) and V 2D views per frame."""
     keys = ("noise_px", "occlusion", "occluded_drop_prob", "occluded_noise_scale", "min_joints_in_view")
     fixed = dict(noise_depth_exponent=0.0, miss_rate=0.0, fp_rate=0.0)
     observation = observation_options("load_panoptic_sequence", observation, keys, **fixed)
@@ -129,8 +124,7 @@ def _coco23(joints19: np.ndarray) -> np.ndarray:
 def observe_ground_truth(
     rig: Rig, gt_poses: np.ndarray, gt_ids: np.ndarray, cfg: SyntheticConfig, rng: np.random.Generator
 ) -> list[ViewDetections]:
-    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera: V ViewDetections;
-    invalid GT joints are filled in for the capsule model only (feet at the ankle, others at the mean)."""
+    """Noisy, occluded 2D detections of GT poses (P, 23, 4) with ids (P,) in every camera: V ViewDetections."""
     gt_poses = np.asarray(gt_poses, dtype=np.float64)
     ids = np.asarray(gt_ids, dtype=np.int64)
     valid_by_id = {int(i): gt_poses[n, :, 3] > 0 for n, i in enumerate(ids)}

@@ -1,9 +1,4 @@
-"""The Shelf benchmark (frames 300..600) as a :class:`data.multiview.Sequence`, scored by its own protocol.
-
-Read from 4D Association's data/shelf (../shared/data/PROVENANCE.md): the 5 cameras, OpenPose BODY_25 candidates
-grouped into COCO-23 persons by ``grouper`` (or a ``poses2d.json``), gt.txt and skel.txt (the baseline). Shelf-14 is
-not COCO-23: ``gt_poses`` is None and :class:`evaluation.protocols.shelf.ShelfProtocol` gets ``protocol_inputs``.
-"""
+"""The Shelf benchmark (frames 300..600, 4D Association's files) as a Sequence, scored by its own protocol."""
 
 from __future__ import annotations
 
@@ -28,7 +23,7 @@ def load_shelf(
     gt: str = "4d_association/gt.txt",
     baseline: str | None = "4d_association/skel.txt",
     first_frame: int = 300,
-    frames: str | list[int] | None = None,
+    frames: str | list[int] | None = None,  # positions "start:stop[:step]" in gt.txt, or frame numbers
     min_paf: float = 0.05,
     min_joints: int = 8,
     min_mean_score: float = 0.4,
@@ -36,11 +31,9 @@ def load_shelf(
     poses2d: str | None = None,
     alpha: float = 0.5,
     drop_feet: bool = False,
-    grouper: Callable | None = None,
+    grouper: Callable | None = None,  # (frame_candidates, min_paf=, min_joints=, min_mean_score=, margin=) -> views
 ) -> Sequence:
-    """The Shelf rig (5 views) and one Frame per chosen frame (``index`` = Shelf frame number), views (N, 23, 3);
-    paths under ``root`` unless absolute; ``frames``: positions "start:stop[:step]" in gt.txt or frame numbers.
-    ``grouper(frame_candidates, min_paf=, min_joints=, min_mean_score=, margin=bbox_margin) -> ViewDetections``."""
+    """The Shelf rig (5 views), one Frame per chosen frame (index: Shelf's number); paths under root unless absolute."""
     root = Path(root)
     rig = load_4dassoc(_under(root, calibration))
     gt_path = _under(root, gt)

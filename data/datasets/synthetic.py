@@ -6,8 +6,7 @@ from data.multiview import Sequence
 
 
 def load_synthetic(render: bool = False, render_seed: int | None = None, **options) -> Sequence:
-    """The built-in synthetic crowd (options: SyntheticConfig's fields); render=True replaces the views by the
-    render's ground-truth 2D with lazy images and COCO image ids (render_seed None = seed)."""
+    """The built-in synthetic crowd (SyntheticConfig's options); render: views of a render (render_seed None: seed)."""
     from data.synthetic import SyntheticConfig, generate_sequence
 
     if not isinstance(render, bool):

@@ -1,10 +1,4 @@
-"""Wildtrack as a semi-synthetic crowd: the 7 real calibrations, synthetic bodies at the annotated positions.
-
-Wildtrack ships only ground-plane positions (``gt_positions_mvdet.txt``, frames 0, 5, ..., 1995) and no
-identities across frames, so each chosen frame is generated on its own (standing bodies, own seed) and
-``gt_ids`` number the positions within a frame. It asks for the paper's Table 1 protocol (COCO AP/AR of the
-reprojected 3D poses, ``reprojection_coco``) through ``Sequence.protocol_inputs``.
-"""
+"""Wildtrack as a semi-synthetic crowd: the 7 real calibrations, synthetic bodies at the annotated positions."""
 
 from __future__ import annotations
 

@@ -1,5 +1,4 @@
-"""Atomic file output (docs/formats.md): write a temporary ``.<name>.<host>.<pid>.<random>.tmp`` beside the target,
-then rename it into place; removed on every exit Python sees, or by the next write after a killed writer."""
+"""Atomic file output (docs/formats.md): a temporary file beside the target, then renamed into place."""
 
 from __future__ import annotations
 

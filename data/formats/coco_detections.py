@@ -1,5 +1,4 @@
-"""COCO detection-results files (AlphaPose / mmpose / Detectron convention), read and checked entry by entry:
-``[{"image_id": 7, "category_id": 1, "bbox": [x, y, w, h], "score": 0.93}, ...]``, pixels of the image."""
+"""COCO detection-results files (``[{"image_id", "category_id", "bbox": [x, y, w, h], "score"}]``), checked."""
 
 from __future__ import annotations
 

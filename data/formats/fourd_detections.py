@@ -1,8 +1,4 @@
-"""Ungrouped OpenPose BODY_25 detections as stored by 4D Association (shelf/4d_association/detection/*.txt).
-
-Each frame holds, per BODY_25 joint, its candidates (x, y, score) and, per part-affinity limb, the
-matrix of PAF scores between the candidates of the limb's two joints. See ../shared/data/PROVENANCE.md.
-"""
+"""Ungrouped OpenPose BODY_25 detections as stored by 4D Association (shelf/4d_association/detection/*.txt)."""
 
 from __future__ import annotations
 
@@ -45,8 +41,7 @@ class FrameCandidates:
 
 
 class _Layout:
-    """Where each frame's blocks lie in a file's numbers, found in one pass over the counts; errors name the block:
-    cand_pos (F, 25) of joint j's x block (then y, score), counts (F, 25), paf_pos (F, 26) of limb k's PAF block."""
+    """Where each frame's blocks lie in a file's numbers, found in one pass over the counts; errors name the block."""
 
     def __init__(self, path: Path, values: np.ndarray) -> None:
         self.path, self.values, self.pos = path, values, 0
@@ -71,7 +66,7 @@ class _Layout:
         return int(value)
 
     def frames(self, num_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Walk num_frames frames: cand_pos (F, 25), counts (F, 25), paf_pos (F, 26)."""
+        """Walk num_frames frames: cand_pos (F, 25) of each x block (then y, score), counts (F, 25), paf_pos (F, 26)."""
         return self._frames_unchecked(num_frames) or self._frames_checked(num_frames)
 
     def _frames_unchecked(self, num_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -141,8 +136,7 @@ def _float_or_nan(token: str) -> float:
 
 
 def load_4dassoc_detections(path: str | Path, image_size: tuple[int, int] = (1032, 776)) -> list[FrameCandidates]:
-    """A 4D Association detection file -> per frame 25 candidate arrays (n_j, 3) px and 26 PAFs (n_a, n_b);
-    normalised coordinates to pixels x * (w - 1), y * (h - 1) of image_size."""
+    """A 4D Association detection file -> per frame 25 candidates (n_j, 3) px (x (w - 1), y (h - 1)), 26 PAFs."""
     path = Path(path)
     layout = _Layout(path, _numbers(path))
     skeleton = layout.count("the header's skeleton type")

@@ -8,8 +8,7 @@ import numpy as np
 
 
 def load_4dassoc_skeletons(path: str | Path) -> list[dict[int, np.ndarray]]:
-    """gt.txt / skel.txt -> per frame {actor id: (J, 4) x, y, z (m), valid}: header 'J F', per frame a person
-    count, per person its id and a 4 x J matrix; list item i is the file's frame i."""
+    """gt.txt / skel.txt -> per frame of the file {actor id: (J, 4) x, y, z (m), valid}."""
     path = Path(path)
     try:
         tokens = path.read_text().split()

@@ -1,5 +1,4 @@
-"""The frames of one camera on disk, read lazily as (H, W, 3) uint8 BGR: a folder of images (natural order),
-a video (OpenCV, seeking by index) or one image; a failure is an :class:`ImageSourceError` naming the path."""
+"""One camera's frames (a folder, a video or one image) read lazily as (H, W, 3) uint8 BGR; ImageSourceError."""
 
 from __future__ import annotations
 

@@ -1,10 +1,4 @@
-"""OpenPose's ``--write_json`` output (BODY_25 people per image) read as COCO-23 detections; a CLI to poses2d.json::
-
-    python -m data.formats.openpose_json cam_a=openpose/cam_a cam_b=openpose/cam_b -o poses2d.json
-    python -m data.formats.openpose_json 'openpose/*' -o poses2d.json      # camera name = folder name
-
-Scores are clipped to [0, 1]; ``--cameras cameras.json`` checks names and pixels against a calibration.
-"""
+"""OpenPose ``--write_json`` output as COCO-23 detections (scores clipped to [0, 1]); a CLI to poses2d.json."""
 
 from __future__ import annotations
 
@@ -27,8 +21,7 @@ OPENPOSE_FILE = re.compile(r"^(?P<name>.*)_(?P<frame>\d{12})_keypoints\.json$")
 
 
 def keypoints_to_view_detections(keypoints: np.ndarray, margin: float = 0.1) -> ViewDetections:
-    """Detections (N, J, 3) x, y, score -> ViewDetections: boxes around the scored joints grown by ``margin`` per
-    side (joints miss the head top, hands, outline), score = their mean (0 and a zero box without any), ids -1."""
+    """Detections (N, J, 3) -> ViewDetections: scored joints' boxes grown by margin per side, mean scores, ids -1."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     have = keypoints[..., 2] > 0
     seen = have.any(axis=1)
@@ -125,7 +118,7 @@ def convert(folders: dict[str, Path], margin: float = 0.1) -> dict[int, list[Vie
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line (module docstring); a bad folder or file stops with one line 'error: ...'."""
+    """Command line (docs/usage.md); a bad folder or file stops with one line 'error: ...'."""
     from data.formats.poses2d_io import read_poses2d, write_poses2d
 
     parser = argparse.ArgumentParser(

@@ -1,8 +1,4 @@
-"""poses2d.json (docs/formats.md): one entry per person per camera per frame, COCO-23 keypoints in pixels:
-{"frame": int, "camera": str, "bbox": [x, y, w, h], "score": float, "keypoints": 69 numbers, "id"?}. The reader
-rejects in one line (Poses2DError) bad entries, unknown cameras, non-finite or out-of-range values; repeated
-detections are kept (data/frame_inputs.py drops them before matching, counted in the run's report).
-"""
+"""poses2d.json (docs/formats.md) read and written; bad entries are a one-line Poses2DError, repeats are kept."""
 
 from __future__ import annotations
 
@@ -89,8 +85,7 @@ def _entry(path: Path, i: int, entry: Any, cameras: dict[str, int]) -> tuple[int
 
 
 def _check_values(where: str, det: tuple, size: tuple[int, int] | None) -> tuple:
-    """Scores in [0, 1] (clipped from up to 1 + SCORE_SLACK), scored keypoints and the box near the image
-    of `size` (w, h) (OUTSIDE_IMAGE_TOLERANCE); `where` = 'file: entry i: frame f, camera c'."""
+    """Scores in [0, 1] (clipped up to 1 + SCORE_SLACK), scored keypoints and box near the image of size (w, h)."""
     keypoints, bbox, score, pid = det
     if not 0.0 <= score <= 1.0 + SCORE_SLACK:
         raise Poses2DError(f"{where}: score {score:g} is outside [0, 1]")
@@ -142,8 +137,7 @@ def _load(path: Path) -> list:
 def read_poses2d(
     path: str | Path, camera_names: list[str], image_sizes: list[tuple[int, int]] | None = None
 ) -> dict[int, list[ViewDetections]]:
-    """Read poses2d.json -> {frame: one ViewDetections (N, 23, 3) per camera in camera_names order (empty
-    where none)}; with image_sizes (w, h) per camera, scored keypoints far outside the image are errors."""
+    """Read poses2d.json -> {frame: ViewDetections (N, 23, 3) per camera}; image_sizes (w, h): check the pixels."""
     path = Path(path)
     cameras = {str(name): v for v, name in enumerate(camera_names)}
     grouped: dict[int, list[list[tuple]]] = {}

@@ -15,9 +15,7 @@ JOINT_SOURCES = ("none", "views", "prior", "motion")  # an output joint's proven
 
 
 def poses3d_document(frames: Iterable[tuple], camera_names: list[str], fill: bool = True) -> dict:
-    """The poses3d.json document of (frame, poses (P, 23, 4), assignment (P, V)[, ids (P,)[, joint_views (P, 23),
-    joint_source (P, 23) codes into JOINT_SOURCES]]) tuples; without ids a person's id is its index in the frame
-    (docs/formats.md: with tracking, the track id). fill=False writes joints seen in fewer than 2 views with score 0."""
+    """poses3d.json of (frame, poses (P, 23, 4), assignment (P, V)[, ids[, joint_views, joint_source]]) (formats.md)."""
     out_frames = []
     for frame, poses, assignment, *rest in frames:
         ids, views, source = (*rest, None, None, None)[:3]
@@ -65,8 +63,7 @@ def read_poses3d(path: str | Path) -> dict[int, np.ndarray]:
 
 
 def read_joint_provenance(path: str | Path) -> dict[int, tuple[np.ndarray, list[list[str]]]]:
-    """Each frame's joint provenance in poses3d.json: {frame: (joint_views (P, 23) int, joint_source P x 23 names)};
-    files written before provenance was recorded give -1 views and source "unknown"."""
+    """{frame: (joint_views (P, 23) int, joint_source P x 23 names)} of poses3d.json; older files: -1, "unknown"."""
     doc = json.loads(Path(path).read_text())
     out = {}
     for f in doc["frames"]:

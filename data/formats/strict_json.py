@@ -1,5 +1,4 @@
-"""JSON objects read strictly: a key given twice is an error (json keeps the last one silently); written strictly:
-null for NaN and infinities (json writes NaN, which most readers refuse)."""
+"""JSON read strictly (a key twice is an error, json keeps the last) and written strictly (null for NaN, inf)."""
 
 from __future__ import annotations
 

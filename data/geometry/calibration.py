@@ -1,8 +1,4 @@
-"""Calibration loaders and savers: every dataset's camera format to one `Rig` (docs/formats.md conventions).
-
-Bad files raise `CalibrationError` naming file, camera and key. View order: the file's (cameras.json, Panoptic),
-numeric keys (4D Association, VoxelPose), CVLab1-4 then IDIAP1-3 (Wildtrack), P0.. named "0".. (Shelf P files).
-"""
+"""Calibration loaders and savers: every dataset's camera format to one `Rig`; a bad file is a `CalibrationError`."""
 
 from __future__ import annotations
 
@@ -173,8 +169,7 @@ def load_4dassoc(path: str | Path) -> Rig:
 
 
 def load_voxelpose(path: str | Path, image_size: tuple[int, int] = SHELF_SIZE) -> Rig:
-    """VoxelPose calibration_*.json: R (3, 3), T (3, 1) = camera centre in mm, fx fy cx cy, k (3, 1), p (2, 1);
-    x_cam = R (X - T). The file has no image size: Shelf's (1032, 776) unless given."""
+    """VoxelPose calibration_*.json (x_cam = R (X - T), T the centre in mm); no image size: Shelf's unless given."""
     cameras = []
     for name, entry in _camera_entries(_read_json(path), path, numeric_order=True):
         R = _rotation(_array(entry, "R", (3, 3), path, name), path, name, "R")

@@ -1,8 +1,4 @@
-"""Pinhole cameras with OpenCV distortion, and rigs of named cameras.
-
-Conventions (docs/formats.md): world in metres, z up, ground z = 0; x_cam = R x_world + t; pixels of the
-original image; ``dist`` = OpenCV (k1, k2, p1, p2, k3).
-"""
+"""Pinhole cameras with OpenCV distortion (k1, k2, p1, p2, k3), and rigs of named cameras (formats.md conventions)."""
 
 from __future__ import annotations
 
@@ -104,8 +100,7 @@ class Camera:
         return out.reshape(uv.shape)
 
     def in_view(self, points: np.ndarray, margin: float = 0.0) -> np.ndarray:
-        """Whether world points are in front and inside the image: (..., 3) -> (...,) bool; points outside the
-        calibrated field of view are rejected first (distortion folds far points back into the image)."""
+        """Whether world points are in front, in the calibrated field of view and the image: (..., 3) -> (...,)."""
         cam = self.world_to_camera(points)
         z = cam[..., 2]
         safe_z = np.where(z > 1e-9, z, 1.0)

@@ -1,12 +1,5 @@
 """Plausibility checks of a calibrated rig, and of 2D poses against it: ``python -m data.geometry.check_rig
-cameras.json [poses2d.json]``.
-
-A calibration can load and still be wrong (t in mm, R transposed, a camera copied, z not up): a `RigError` where
-every result would be garbage, else `RigWarning`s naming the camera and the likely mistake. `rig_findings` checks
-the geometry (tolerances in `RigTolerances`) on every `load_rig`; `pose_findings` measures the epipolar
-residual of each view pair's mutual best detection pairs, names the cameras that fit the rest several times worse
-than the rest fit each other, and the fixes (of the calibration or the 2D poses) that make them fit.
-"""
+cameras.json [poses2d.json]``."""
 
 from __future__ import annotations
 
@@ -198,8 +191,7 @@ def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
 
 # --- 2D poses against the rig ------------------------------------------------------------------------
 def _pair_costs(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.ndarray, min_joints: int) -> np.ndarray:
-    """Median reprojection error / image diagonal of every detection pair of two views, inf where they
-    share fewer than min_joints joints or lie behind a camera: (Na, 23, 3), (Nb, 23, 3) -> (Na, Nb)."""
+    """Median reprojection error / image diagonal of detection pairs (Na, 23, 3), (Nb, 23, 3) -> (Na, Nb), or inf."""
     Na, Nb, J = len(kp_a), len(kp_b), kp_a.shape[1]
     ua = np.concatenate([cam_a.undistort_points(kp_a[..., :2]), kp_a[..., 2:]], -1)
     ub = np.concatenate([cam_b.undistort_points(kp_b[..., :2]), kp_b[..., 2:]], -1)
@@ -231,8 +223,7 @@ def _mutual_best(cost: np.ndarray) -> np.ndarray:
 
 
 def _frames(views_by_frame: Mapping[int, list[ViewDetections]], tol: RigTolerances) -> list[list[np.ndarray]]:
-    """Keypoints (n, 23, 3) per view of at most max_frames frames spread evenly over the sequence, n at most the
-    max_detections highest-scored: the pair costs grow with the product of two views' counts."""
+    """Keypoints (n, 23, 3) per view of <= max_frames frames spread evenly, n <= max_detections highest-scored."""
     keys = sorted(views_by_frame)
     pick = np.unique(np.linspace(0, len(keys) - 1, min(tol.max_frames, len(keys))).round().astype(int)) if keys else []
     cut = [views_by_frame[keys[i]] for i in pick]
@@ -240,8 +231,7 @@ def _frames(views_by_frame: Mapping[int, list[ViewDetections]], tol: RigToleranc
 
 
 def epipolar_residuals(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.ndarray, min_joints: int) -> np.ndarray:
-    """Signed distances (undistorted px, the mean of both views') to each other's epipolar lines of the joints of two
-    views' mutual best detection pairs that triangulate in front of both cameras: (Na, 23, 3), (Nb, 23, 3) -> (n,)."""
+    """Signed epipolar distances (px) of the joints of mutual best pairs of (Na, 23, 3), (Nb, 23, 3) -> (n,)."""
     pairs = _mutual_best(_pair_costs(cam_a, cam_b, kp_a, kp_b, min_joints))
     ka, kb = kp_a[pairs[:, 0]], kp_b[pairs[:, 1]]
     both = (ka[..., 2] > 0) & (kb[..., 2] > 0)
@@ -258,8 +248,7 @@ def epipolar_residuals(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.
 def pair_fit(
     cam_a: Camera, cam_b: Camera, frames: list[list[np.ndarray]], a: int, b: int, tol: RigTolerances
 ) -> np.ndarray:
-    """Views a, b's epipolar residual: (median distance, |median signed distance|) px over the frames, (2,); nan
-    without detections in both, inf where none of their pairs triangulates in front of both cameras."""
+    """Views a, b's epipolar (median distance, |median signed distance|) px, (2,); nan: no detections, inf: none fit."""
     shared = [f for f in frames if len(f[a]) and len(f[b])]
     d = np.concatenate([epipolar_residuals(cam_a, cam_b, f[a], f[b], tol.min_joints) for f in shared] or [[]])
     if not len(d):
@@ -283,8 +272,7 @@ def _fit_matrix(cams: list[Camera], frames: list[list[np.ndarray]], tol: RigTole
 
 
 def _fitting_group(M: np.ndarray, tol: RigTolerances) -> tuple[list[int], float]:
-    """The cameras that fit each other, grown from the best pair while the best-fitting other camera's residual
-    plus shift is within residual_ratio times the group's (min_residual_px at least), and that limit (px)."""
+    """The cameras that fit each other, grown from the best pair, and the limit (px) a camera joins within."""
     score = np.nan_to_num(M.sum(-1), nan=np.inf)
     good = [int(i) for i in np.unravel_index(np.argmin(score), score.shape)]
     while True:
@@ -352,9 +340,7 @@ def _exchanged(cams: list[Camera], frames: list[list[np.ndarray]], M: np.ndarray
 def pose_findings(
     rig: Rig, views_by_frame: Mapping[int, list[ViewDetections]], tol: RigTolerances = RigTolerances()
 ) -> list[Finding]:
-    """Cameras whose 2D poses {frame: V ViewDetections (N, 23, 3)} do not fit the others', with the fixes that make
-    them fit: a group grown from the best-fitting pair sets the rig's own residual, so one wrong camera neither
-    blames its partners nor hides behind a fixed threshold."""
+    """Cameras whose 2D poses {frame: V ViewDetections (N, 23, 3)} do not fit the others', with the fixes."""
     cams, frames = list(rig), _frames(views_by_frame, tol)
     M = _fit_matrix(cams, frames, tol)
     if len(cams) < 2 or np.isnan(M).all():

@@ -8,8 +8,7 @@ _CYCLIC = np.ix_([1, 2, 0, 1, 2], [1, 2, 0, 1, 2])  # E[i, j] = A[(i + 1) % 3, (
 
 
 def inverse_3x3(A: np.ndarray, check: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-    """Inverses and positive definiteness (None unless check) of symmetric 3x3 matrices stored first:
-    (3, 3, ...) -> (3, 3, ...), (...); cofactors over the determinant, inf / NaN when singular."""
+    """Inverses (inf / NaN if singular), positive definiteness (if check) of symmetric (3, 3, ...) -> same, (...)."""
     E = A[_CYCLIC]  # cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1], mod 3
     cof = E[:3, :3] * E[1:4, 1:4] - E[:3, 1:4] * E[1:4, :3]
     det = (A[0] * cof[0]).sum(axis=0)

@@ -10,8 +10,7 @@ RQI_TOLERANCE = 1e-10  # accepted eigenvector error bound (sine of the angle); t
 
 
 def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -> np.ndarray:
-    """Score-weighted DLT of every joint: undistorted (u, v, score) (V, P, J, 3), proj (V, 3, 4) -> (P, J, 4);
-    confidence = mean score of the views used, zeros where fewer than min_views see it or the equations overflow."""
+    """Score-weighted DLT: undistorted (u, v, score) (V, P, J, 3), proj (V, 3, 4) -> (P, J, 4), 0 where unsolvable."""
     poses2d = np.asarray(poses2d, dtype=np.float64)
     proj = np.asarray(proj, dtype=np.float64)
     V, P, J, _ = poses2d.shape
@@ -35,9 +34,7 @@ def triangulate_dlt(poses2d: np.ndarray, proj: np.ndarray, min_views: int = 2) -
 def _normal_matrices(
     poses: np.ndarray, proj: np.ndarray, min_views: int, N: np.ndarray, conf: np.ndarray, solve: np.ndarray
 ) -> None:
-    """A^T A of the DLT rows of n points: poses (V, n, 3), proj (V, 3, 4) -> N (n, 4, 4), mean score conf (n,) of the
-    views that see it (finite pixel and score > 0), solve (n,) = at least min_views. Row r of view v is
-    (u_r P_3 - P_r) / |u_r P_3 - P_r| times score / the point's top score (so huge scores cannot overflow)."""
+    """A^T A of the DLT rows of poses (V, n, 3), proj (V, 3, 4) -> N (n, 4, 4), mean score conf (n,), solve (n,)."""
     V, n = poses.shape[0], poses.shape[1]
     a = np.empty(4)
     for i in range(n):
@@ -72,8 +69,7 @@ def _normal_matrices(
 
 
 def smallest_eigenvectors(N: np.ndarray, use: np.ndarray | None = None) -> np.ndarray:
-    """Unit eigenvectors of the smallest eigenvalues of symmetric PSD 4x4 matrices: (n, 4, 4), use (n,) -> (n, 4),
-    zeros where not used; compiled Rayleigh quotient iteration, eigh for the results it cannot certify."""
+    """Unit eigenvectors of the smallest eigenvalues of symmetric PSD (n, 4, 4), use (n,) -> (n, 4), 0 where unused."""
     N = np.ascontiguousarray(N, dtype=np.float64)
     use = np.ones(len(N), dtype=np.bool_) if use is None else np.ascontiguousarray(use, dtype=np.bool_)
     v, ok = np.empty((len(N), 4)), np.empty(len(N), dtype=np.bool_)
@@ -87,12 +83,7 @@ def smallest_eigenvectors(N: np.ndarray, use: np.ndarray | None = None) -> np.nd
 def _rayleigh_quotient(
     N: np.ndarray, iterations: int, tol: float, use: np.ndarray, out: np.ndarray, ok: np.ndarray
 ) -> None:
-    """Smallest eigenvectors of N (n, 4, 4) where use (n,) -> out (n, 4), certified ok (n,) (zeros, ok, where not used).
-
-    With N = [[B, c], [c^T, d]], each step solves (N - rho I) z = v by the Schur complement of B - rho I, from
-    v_0 = [-B^-1 c, 1]. Certificate: by Cauchy interlacing lambda_2(N) >= lambda_min(B) >= 1 / tr(B^-1), so a
-    residual |N v - rho v| <= tol (1 / tr(B^-1) - rho) bounds v's angle to the eigenvector by tol (Davis-Kahan).
-    """
+    """Smallest eigenvectors of N (n, 4, 4) where use (n,) -> out (n, 4), certified ok (n,) (0 and ok where unused)."""
     B_inv, C_inv, v, z, cv = np.empty((3, 3)), np.empty((3, 3)), np.empty(4), np.empty(4), np.empty(3)
     for i in range(N.shape[0]):
         if not use[i]:

@@ -1,5 +1,4 @@
-"""COCO-format keypoint files (COCO-WholeBody, COCO-23, CrowdPose) to and from ImageRecords: one record per
-``images`` entry, every non-crowd person in COCO-23 order (all are needed for the multi-modal targets)."""
+"""COCO-format keypoint files (COCO-WholeBody, COCO-23, CrowdPose) to and from ImageRecords, one per image."""
 
 from __future__ import annotations
 
@@ -115,8 +114,7 @@ def load_coco_wholebody(ann_file: str | Path, image_dir: str | Path, skip_crowd:
 
 
 def load_coco23(ann_file: str | Path, image_dir: str | Path, skip_crowd: bool = True) -> list[ImageRecord]:
-    """COCO-format keypoints of 23 x 3 numbers (or COCO-17's 17 x 3, feet unlabelled) -> records; the count comes
-    from the person category's ``keypoints`` names, else the first annotation, and every annotation must have it."""
+    """COCO-format keypoints of 23 x 3 numbers (or COCO-17's 17 x 3, feet unlabelled) -> records."""
     path = Path(ann_file)
     doc = _read_coco(path)
     count = _coco23_count(path, doc)
@@ -192,8 +190,7 @@ def load_keypoint_dataset(
     skip_crowd: bool = True,
     det_score_threshold: float = 0.0,
 ) -> list[ImageRecord]:
-    """Records of a keypoint dataset ("coco_wholebody", "coco23", "crowdpose"): images with a person of at least
-    min_keypoints labelled joints (<= 0 keeps all), every non-crowd person kept; det_file adds detector boxes."""
+    """Records of a keypoint dataset's images with a person of >= min_keypoints labelled joints (<= 0: all)."""
     loaders = {"coco_wholebody": load_coco_wholebody, "coco23": load_coco23, "crowdpose": load_crowdpose}
     if kind not in loaders:
         raise ValueError(f"unknown keypoint dataset kind {kind!r}; expected one of {', '.join(KINDS)}")

@@ -1,7 +1,4 @@
-"""The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels.
-
-Owner map (H, W) uint16: 0 = no body, else 1 + person x parts + part. A joint is v = 2 when its own part is on top
-there and no body is in the way, v = 1 when hidden, v = 0 (x = y = 0) outside the image."""
+"""The one drawing path of the synthetic images: capsule bodies, shading, shadows, ground lines, grain, labels."""
 
 from __future__ import annotations
 
@@ -15,8 +12,7 @@ from data.geometry.camera import Camera
 from data.keypoints import LIMBS, NUM_JOINTS
 from data.synthetic.capsules import HEAD_RADIUS_M, body_capsules, capsule_radii, occluded_joints
 
-# Part groups that get one clothing colour per person.
-SHIRT, SLEEVE, TROUSERS, SHIN, SHOES, SKIN, HAIR = range(7)
+SHIRT, SLEEVE, TROUSERS, SHIN, SHOES, SKIN, HAIR = range(7)  # part groups of one clothing colour per person
 SKIN_TONES = np.array([(185, 205, 240), (150, 180, 225), (110, 150, 205), (80, 115, 170), (50, 75, 120)], float)
 HAIR_TONES = np.array([(20, 20, 25), (30, 45, 70), (40, 80, 130), (120, 170, 210), (140, 140, 140)], float)
 SHADE_LAYERS = ((1.0, 0.0, 0.62), (0.78, 0.10, 0.84), (0.45, 0.30, 1.0))  # (radius, light shift, brightness)
@@ -290,7 +286,7 @@ def _draw_face(image: np.ndarray, view: PersonView, skin: np.ndarray) -> None:
 def person_labels(
     camera: Camera, poses: np.ndarray, views: list[PersonView], owner: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Keypoints (P, 23, 3) x, y, v and boxes (P, 4) x, y, w, h of painted persons (P, 23, 3) (module docstring)."""
+    """Keypoints (P, 23, 3) x, y, v and boxes (P, 4) x, y, w, h of painted persons (P, 23, 3) (docs/design.md)."""
     w, h = camera.size
     num, parts = len(poses), len(PART_GROUPS)
     uv = np.array([v.uv for v in views]).reshape(num, NUM_JOINTS, 2)

@@ -1,5 +1,4 @@
-"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies and its ground-truth 2D. A person's
-look depends only on (seed, person id), an image only on (seed, frame, view)."""
+"""Rendered views of a multi-view 3D crowd: each camera's image of the bodies and its ground-truth 2D."""
 
 from __future__ import annotations
 
@@ -169,8 +168,7 @@ def ground_truth_views(scene: Scene, frame: int, poses: np.ndarray, ids: np.ndar
 
 
 def ground_truth_detections(rendered: RenderedView, ids: np.ndarray, rng: np.random.Generator) -> ViewDetections:
-    """The painted persons of a render as detections, shuffled by rng: keypoints (N, 23, 3) x, y, score 1 where
-    labelled (v > 0), occluded (N, 23) where v = 1, boxes of the painted pixels, scores 1, person_ids (N,)."""
+    """The painted persons of a render as detections (N, 23, 3), score 1 where labelled, shuffled by rng."""
     v = rendered.keypoints[..., 2]
     kept = np.flatnonzero((rendered.boxes[:, 2] > 0) & np.any(v > 0, axis=1))
     kept = kept[rng.permutation(len(kept))]
@@ -182,8 +180,7 @@ def ground_truth_detections(rendered: RenderedView, ids: np.ndarray, rng: np.ran
 
 
 def render_sequence(sequence: Sequence, seed: int) -> Sequence:
-    """A new Sequence whose frames' views are the ground truth of the render of their gt_poses (P, 23, 4), with
-    lazy ``images`` and COCO ``image_ids``; persons with an unannotated joint are left out of the render."""
+    """A Sequence whose views are the ground truth of the render of gt_poses (P, 23, 4), with lazy images and ids."""
     rig = sequence.rig
     scene = Scene(rig, int(seed), _area(sequence))
     frames, left_out = [], 0

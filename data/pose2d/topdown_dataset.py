@@ -1,5 +1,4 @@
-"""Top-down person crops with multi-modal heatmap targets (paper Sec. 3.1), and a resumable epoch sampler; augmentation
-comes from default_rng([seed, epoch, index]): independent of workers, order and interruptions."""
+"""Top-down person crops with multi-modal heatmap targets (Sec. 3.1), and a resumable epoch sampler (design.md)."""
 
 from __future__ import annotations
 

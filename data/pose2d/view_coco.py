@@ -44,8 +44,7 @@ def coco_images(frames: list[Frame], rig: Rig) -> list[dict]:
 
 
 def results(frames: Sequence[Frame], rig: Rig, views: Sequence[Sequence[ViewDetections]] | None = None) -> list[dict]:
-    """COCO keypoint results (image_id, category_id, keypoints 69 numbers x, y, score, score, bbox) of
-    predicted views, per frame V ViewDetections (N, 23, 3); ``views`` None = the frames' own views."""
+    """COCO keypoint results of per frame V ViewDetections (N, 23, 3); ``views`` None = the frames' own views."""
     out = []
     for f, frame in enumerate(frames):
         predicted = _views(frame, rig) if views is None else list(views[f])

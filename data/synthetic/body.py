@@ -1,9 +1,4 @@
-"""Synthetic adult bodies and their COCO-23 joints when standing or walking.
-
-Proportions: Drillis & Contini (1966) via Winter, "Biomechanics and Motor Control" fig. 4.1; stature
-N(1.70, 0.09) m, fractions jittered 2 % per person. Gait keyframes: Perry, "Gait Analysis" (1992). Body frame:
-x forward, y left, z up, origin below the mid-hip; heading theta faces (cos theta, sin theta).
-"""
+"""Synthetic adult bodies and their COCO-23 joints when standing or walking (sources: docs/design.md)."""
 
 from __future__ import annotations
 
@@ -21,7 +16,7 @@ STATURE_SD_M = 0.09
 STATURE_RANGE_M = (1.52, 1.95)
 PROPORTION_SD = 0.02  # relative SD of every segment fraction, clipped at 2 SD
 
-# Segment lengths as fractions of stature (see the module docstring).
+# Segment lengths as fractions of stature (Drillis & Contini; docs/design.md).
 FRACTIONS: Mapping[str, float] = MappingProxyType(
     {
         "thigh": 0.530 - 0.285,  # hip -> knee
@@ -165,8 +160,7 @@ def local_pose(body: BodyShape, phase: float, walking: bool) -> np.ndarray:
 def pose_joints(
     body: BodyShape, x: float, y: float, theta: float, phase: float = 0.0, walking: bool = False
 ) -> np.ndarray:
-    """COCO-23 world joints (23, 3) at ground point (x, y), heading theta (rad), left-leg gait ``phase`` in [0, 1)
-    (0 = left heel strike; ignored when standing); the lowest sole point is on z = 0."""
+    """COCO-23 world joints (23, 3) at ground (x, y), heading theta (rad), gait phase; the lowest sole on z = 0."""
     local = local_pose(body, phase, walking)
     c, s = math.cos(theta), math.sin(theta)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

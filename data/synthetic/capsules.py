@@ -72,8 +72,7 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     # t outside [0, 1]: clamp it and recompute s for the clamped t.
     s = np.where(t < 0, np.clip(-c / safe_a, 0, 1), np.where(t > 1, np.clip((b - c) / safe_a, 0, 1), s))
     t = np.clip(t, 0, 1)
-    # Degenerate segments.
-    point2 = e <= eps
+    point2 = e <= eps  # degenerate segments
     s = np.where(point2, np.clip(-c / safe_a, 0, 1), s)
     t = np.where(point2, 0.0, t)
     point1 = a <= eps

@@ -1,7 +1,4 @@
-"""Pictures over time: the HTML viewer and the ground trajectories PNG of a sequence.
-
-``python -m evaluation.pictures.sequence_view <run dir>/poses3d.json <cameras> [-o out.html] [--png traj.png]``
-"""
+"""Pictures over time: the HTML viewer and the ground trajectories PNG of a sequence."""
 
 from __future__ import annotations
 

@@ -1,8 +1,4 @@
-"""Dataset protocols: the benchmarks' own published metrics, beside the generic evaluation.
-
-A dataset loader may not import these: it lists their plain-data inputs in ``sequence.protocol_inputs``
-and :func:`attach_protocols` builds them (idempotent, so a sequence built in code is scored the same way).
-"""
+"""Dataset protocols: the benchmarks' own published metrics, built from ``sequence.protocol_inputs``."""
 
 from __future__ import annotations
 
@@ -32,8 +28,7 @@ class DatasetProtocol(Protocol):
         """The console tables, each labelled with its protocol."""
 
 
-# protocol name in sequence.protocol_inputs -> builder(sequence, **arguments)
-BUILDERS: dict[str, Callable] = {
+BUILDERS: dict[str, Callable] = {  # protocol name in sequence.protocol_inputs -> builder(sequence, **arguments)
     "shelf": lambda sequence, **arguments: ShelfProtocol(**arguments),
     "panoptic": lambda sequence, **arguments: PanopticProtocol(**arguments),
     "reprojection_coco": lambda sequence, **arguments: ReprojectionCOCOProtocol(sequence.rig, **arguments),

@@ -1,8 +1,4 @@
-"""CMU Panoptic protocols on 15 joints: VoxelPose's AP / recall / MPJPE, the paper's root-aligned MPJPE and PCP.
-
-VoxelPose AP: VOC-style, without VoxelPose's 1e-5 (perfect reads 100). Tables 4-5 (our reading): Hungarian pairs,
-root = mean of the hips, which COCO-23 predictions have (Panoptic's own mid-hip they lack).
-"""
+"""CMU Panoptic protocols on 15 joints: VoxelPose's AP / recall / MPJPE, the paper's root-aligned MPJPE and PCP."""
 
 from __future__ import annotations
 
@@ -68,7 +64,7 @@ def average_precision(
 
 
 class PanopticAPEvaluator:
-    """VoxelPose's Panoptic AP protocol (module docstring), accumulated frame by frame."""
+    """VoxelPose's Panoptic AP protocol (docs/design.md), accumulated frame by frame."""
 
     def __init__(self) -> None:
         self.scores: list[float] = []
@@ -129,7 +125,7 @@ def _true_positives(
 
 
 class PanopticPoseEvaluator(PairedEvaluator):
-    """Root-aligned 13-joint MPJPE and PCP by part on Hungarian-paired persons (module docstring)."""
+    """Root-aligned 13-joint MPJPE and PCP by part on Hungarian-paired persons (docs/design.md)."""
 
     def update(self, pred: np.ndarray, gt: np.ndarray) -> None:
         """Add a frame: pred (P, 15, 4), gt (G, 15, 4)."""

@@ -1,7 +1,4 @@
-"""The paper's Table 1 metric: COCO keypoint AP/AR of reconstructed 3D poses reprojected into every view.
-
-``max_dets`` (default 100) lifts COCO's 20 detections per image, as crowded views hold up to 40 people.
-"""
+"""The paper's Table 1 metric: COCO keypoint AP/AR of reconstructed 3D poses reprojected into every view."""
 
 from __future__ import annotations
 

@@ -1,8 +1,4 @@
-"""The standard Shelf PCP protocol (VoxelPose ``Shelf.evaluate``), and 4D Association's stored output scored by it.
-
-Each annotated actor takes the prediction with the smallest mean distance (not one-to-one); the headline is the
-mean PCP of Actors 1-3. STRICT: an actor without a prediction scores all parts wrong; LENIENT: the frame is skipped.
-"""
+"""The standard Shelf PCP protocol (VoxelPose ``Shelf.evaluate``), and 4D Association's stored output scored by it."""
 
 from __future__ import annotations
 

@@ -1,8 +1,4 @@
-"""Cross-view person matching (layer 3; paper section 3.2): ``matcher(views, rig) -> Matches(assignment,
-unmatched)``, assignment (P, V) the detection index of person p in view v or -1, unmatched the frame's left-out
-detections by reason. Each matcher is a callable class configured from ``configs/matching/*.yaml``; may import
-``data`` and the other stages, never ``evaluation`` or the entry points.
-"""
+"""Cross-view person matching (layer 3; Sec. 3.2): configs/matching/*.yaml's ``matcher(views, rig) -> Matches``."""
 
 from reconstruction.matching.epipolar import EpipolarMatcher
 from reconstruction.matching.evidence import EvidenceMatcher

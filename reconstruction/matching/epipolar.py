@@ -1,10 +1,4 @@
-"""The epipolar-constraint baseline of the paper's Table 6 ("EC", ``matching=epipolar``).
-
-The affinity of detections i (view a) and j (view b) is the symmetric distance (px) of their joints to each other's
-epipolar lines, (d(x_b, F x_a) + d(x_a, F^T x_b)) / 2, averaged over the joints confident in both (inf with fewer
-than ``min_common_joints``); each view pair is a gated assignment, merged cheapest edge first as the feet matcher.
-The pieces shared by the joint-based baselines (confident undistorted joints, unmatched counts) live here.
-"""
+"""The epipolar-constraint baseline of the paper's Table 6 ("EC", ``matching=epipolar``), and the shared pieces."""
 
 from __future__ import annotations
 
@@ -24,8 +18,7 @@ NO_COUNTERPART = "no_counterpart"  # enough joints, but ended in no person of >=
 
 
 def undistorted_joints(view: ViewDetections, camera: Camera, min_score: float) -> tuple[np.ndarray, np.ndarray]:
-    """Undistorted joint pixels and confidence (finite, score >= min_score): keypoints (N, J, 3) -> uv (N, J, 2) (0
-    where not confident), ok (N, J) bool."""
+    """Undistorted confident joints (finite, score >= min_score): (N, J, 3) -> uv (N, J, 2) (else 0), ok (N, J)."""
     kp = np.asarray(view.keypoints, dtype=np.float64)
     ok = np.isfinite(kp).all(axis=-1) & (np.nan_to_num(kp[..., 2], nan=-np.inf) >= min_score)
     uv = camera.undistort_points(np.where(ok[..., None], kp[..., :2], 0.0))
@@ -46,16 +39,14 @@ def _line_distance(lines: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, n
     norm = np.hypot(lines[..., 0], lines[..., 1])
     defined = norm > 1e-12  # a point at the epipole has no epipolar line
     unit = lines / np.where(defined, norm, 1.0)[..., None]
-    # broadcasting, not einsum: einsum's per-joint batched dot is the slower at crowd sizes
-    dist = np.abs(
+    dist = np.abs(  # broadcasting, not einsum: einsum's per-joint batched dot is the slower at crowd sizes
         unit[:, None, :, 0] * points[None, :, :, 0] + unit[:, None, :, 1] * points[None, :, :, 1] + unit[:, None, :, 2]
     )
     return dist, defined[:, None, :]
 
 
 def epipolar_distances(uv_a: np.ndarray, uv_b: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric joint-to-epipolar-line distances (px): (Na, J, 2), (Nb, J, 2), F (3, 3) -> (Na, Nb, J), defined
-    (Na, Nb, J) (False, distance 0, where a joint sits on an epipole)."""
+    """Symmetric epipolar distances (px): (Na, J, 2), (Nb, J, 2), F (3, 3) -> (Na, Nb, J) (0 at an epipole), defined."""
     ha = np.concatenate([uv_a, np.ones(uv_a.shape[:-1] + (1,))], axis=-1)
     hb = np.concatenate([uv_b, np.ones(uv_b.shape[:-1] + (1,))], axis=-1)
     in_b, ok_b = _line_distance(ha @ F.T, uv_b)  # lines of a's joints in view b
@@ -67,8 +58,7 @@ def epipolar_distances(uv_a: np.ndarray, uv_b: np.ndarray, F: np.ndarray) -> tup
 def epipolar_affinity(
     uv_a: np.ndarray, ok_a: np.ndarray, uv_b: np.ndarray, ok_b: np.ndarray, F: np.ndarray, min_common_joints: int = 3
 ) -> np.ndarray:
-    """Mean symmetric epipolar distance over common joints: (Na, J, 2), (Na, J), (Nb, J, 2), (Nb, J) -> (Na, Nb);
-    inf with fewer than min_common_joints joints confident in both."""
+    """Mean symmetric epipolar distance over >= min_common_joints common joints, else inf: -> (Na, Nb)."""
     dist, defined = epipolar_distances(uv_a, uv_b, F)
     common = ok_a[:, None, :] & ok_b[None, :, :] & defined
     count = common.sum(axis=-1)

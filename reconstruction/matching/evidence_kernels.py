@@ -1,10 +1,4 @@
-"""Compiled loops of the evidence matcher: the chi-square of every detection pair of a frame's view pairs, and the
-complete-linkage merge.
-
-A pair's evidence is its feet term plus, over the joints both detections see, the Sampson distance to the epipolar
-geometry; the loop stops as soon as a pair cannot pass its test any more, so the unrelated pairs of a crowd cost a
-joint or two each, and only the pairs that pass are returned (a crowd's view pair has ~1 per detection, not Na x Nb).
-"""
+"""Compiled loops of the evidence matcher: the chi-square of the detection pairs of view pairs; complete linkage."""
 
 from __future__ import annotations
 
@@ -17,47 +11,40 @@ from data.assignment import find_root
 
 
 class Detections(NamedTuple):
-    """A frame's N detections stacked over its V views (view v: offsets[v]:offsets[v + 1]).
+    """A frame's N detections stacked over its V views (view v: offsets[v]:offsets[v + 1])."""
 
-    uv (N, J, 2) undistorted pixels, var (N, J) pixel variances (0: unusable joint), offsets (V + 1,), has_p (N,),
-    p (N, 2), cov (N, 2, 2) the feet midpoint on the ground and its covariance, floor2 (m^2) added to both feet
-    variances, fundamentals (V, V, 3, 3) with x_b^T F[a, b] x_a = 0."""
-
-    uv: np.ndarray
-    var: np.ndarray
-    offsets: np.ndarray
-    has_p: np.ndarray
-    p: np.ndarray
-    cov: np.ndarray
-    floor2: float
-    fundamentals: np.ndarray
+    uv: np.ndarray  # (N, J, 2) undistorted pixels
+    var: np.ndarray  # (N, J) pixel variances, 0: unusable joint
+    offsets: np.ndarray  # (V + 1,)
+    has_p: np.ndarray  # (N,) bool
+    p: np.ndarray  # (N, 2) the feet midpoint on the ground (m)
+    cov: np.ndarray  # (N, 2, 2) its covariance
+    floor2: float  # m^2, added to both feet variances
+    fundamentals: np.ndarray  # (V, V, 3, 3) with x_b^T F[a, b] x_a = 0
 
 
 class ChiTest(NamedTuple):
-    """A pair passes when D^2 = feet + body / scale2 <= limits[dof] (D + 1,), D >= J + 2, and dof >= min_dof; one
-    joint adds at most cap (a swapped or hidden joint counts as one bad joint, not as a wrong person)."""
+    """A pair passes when D^2 = feet + body / scale2 <= limits[dof] (D + 1,), D >= J + 2, and dof >= min_dof."""
 
     limits: np.ndarray
     min_dof: int
-    cap: float
+    cap: float  # most one joint adds: a swapped or hidden joint is one bad joint, not a wrong person
     scale2: float
 
 
 class Sample(NamedTuple):
-    """The noise calibration's sample: body chi^2 / medians[body dof] (D + 1,) of each view pair's mutual best
-    partners (cost 0.5 chi^2 - evidence_per_dof dof) until there are size of them (0: no sample)."""
+    """Noise calibration sample: body chi^2 / medians[body dof] (D + 1,) of each view pair's mutual best partners."""
 
     medians: np.ndarray
-    evidence_per_dof: float
-    size: int
+    evidence_per_dof: float  # partners by cost 0.5 chi^2 - evidence_per_dof dof
+    size: int  # until there are size of them (0: no sample)
 
 
 class LinkTests(NamedTuple):
-    """What the merge needs to compute a link test not among the links: the detections, tested (V, V) bool (True:
-    every pair of the two views that passes the link test is a link) and the link test."""
+    """What the merge needs to compute a link test not among the links."""
 
     det: Detections
-    tested: np.ndarray
+    tested: np.ndarray  # (V, V) bool, True: every pair of the two views that passes the link test is a link
     test: ChiTest
 
 
@@ -84,8 +71,7 @@ def _masks(var: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def _lines(uv: np.ndarray, F: np.ndarray, transpose: bool) -> np.ndarray:
-    """Epipolar lines F x (or F^T x) of every joint and l0^2 + l1^2 (the Sampson denominator's term): (N, J, 2) ->
-    (N, J, 4)."""
+    """Epipolar lines F x (or F^T x) of the joints and l0^2 + l1^2 (Sampson): (N, J, 2) -> (N, J, 4)."""
     N, J = uv.shape[0], uv.shape[1]
     out = np.empty((N, J, 4))
     for i in range(N):
@@ -117,8 +103,7 @@ def _feet_columns(det: Detections, s: int, n: int) -> tuple:
 
 @njit(cache=True, error_model="numpy")
 def _feet_terms(det: Detections, i: int, far: float, cols: tuple, num, den, rejects) -> None:
-    """Feet term num / den (n,) (feet_uncertainty.mahalanobis_distances squared) of detection i with each of cols, and
-    rejects (n,): both have feet and num > far den. Branch-free over contiguous columns, so LLVM vectorises it."""
+    """Squared Mahalanobis feet term num / den (n,) of detection i with cols; rejects (n,): num > far den."""
     x, y, c00, c11, c01, c10, has = cols
     p, cov, floor2 = det.p, det.cov, det.floor2
     p0, p1, a0, d0, b0 = p[i, 0], p[i, 1], cov[i, 0, 0], cov[i, 1, 1], cov[i, 0, 1] + cov[i, 1, 0]
@@ -133,9 +118,7 @@ def _feet_terms(det: Detections, i: int, far: float, cols: tuple, num, den, reje
 
 @njit(cache=True, error_model="numpy")
 def _view_pair(det: Detections, masks, F, sa, na, sb, nb, test: ChiTest, q, ints, floats, n):
-    """Append the pairs of detections sa:sa + na (view a) and sb:sb + nb (view b) that pass to ints (q, i, j, dof) and
-    floats (chi^2, feet) from row n: -> the new n. One loop without calls per pair (numba's reference counting of
-    array arguments would cost more than an unrelated pair); the feet test first, for all of b at once."""
+    """Append the passing pairs of sa:sa + na x sb:sb + nb to ints (q, i, j, dof), floats (chi^2, feet) -> new n."""
     uv, var, has_p = det.uv, det.var, det.has_p
     limits, min_dof, cap, scale2 = test
     J = var.shape[1]
@@ -189,10 +172,7 @@ def _view_pair(det: Detections, masks, F, sa, na, sb, nb, test: ChiTest, q, ints
 
 @njit(cache=True, error_model="numpy")
 def pairs_chi2(det: Detections, view_pairs, q0: int, test: ChiTest, sample: Sample, ints, floats, ratios, n, nr):
-    """The detection pairs of view pairs q0, q0 + 1, ... (rows of view_pairs (K, 2)) that pass ``test``, from rows
-    n of ints (M, 4) (view pair row, i, j, dof) and floats (M, 2) (chi^2, inf where untestable; feet term or NaN) and
-    nr of ratios (R,) (the calibration sample) -> (n, nr, view pairs done). Stops before a view pair ints has no room
-    for and after the one that completes the sample."""
+    """Passing pairs of view_pairs (K, 2) from q0 into ints (M, 4), floats (M, 2), ratios (R,) -> (n, nr, done)."""
     offsets = det.offsets
     masks = _masks(det.var)
     for q in range(q0, len(view_pairs)):
@@ -212,8 +192,7 @@ def pairs_chi2(det: Detections, view_pairs, q0: int, test: ChiTest, sample: Samp
 
 @njit(cache=True, error_model="numpy")
 def _mutual_best_ratios(ints, floats, first, n, sa, sb, na, nb, scale2, sample: Sample, ratios, nr):
-    """Append body chi^2 / medians[body dof] of the mutual best partners among rows first:n (one view pair, sorted by
-    i, then j) to ratios from nr: -> the new nr."""
+    """Append body chi^2 / medians[dof] of the mutual best partners of rows first:n to ratios -> the new nr."""
     best_row_cost, best_row = np.full(na, np.inf), np.full(na, -1)
     best_col_cost, best_col = np.full(nb, np.inf), np.full(nb, -1)
     for k in range(first, n):
@@ -259,10 +238,7 @@ def _adjacency(links: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 @njit(cache=True, error_model="numpy")
 def merge_linked(ga: np.ndarray, gb: np.ndarray, view_of: np.ndarray, links: np.ndarray, lazy: LinkTests):
-    """Complete-linkage merge of edges (ga[k], gb[k]) (E,) in the given order -> root of every detection (N,).
-
-    Two persons join when no view is in both and every cross pair is linked: among links (L, 2) (either order),
-    sharing no evidence (nothing to test), or, in a pair of views not ``lazy.tested``, passing the link test now."""
+    """Complete-linkage merge of edges (ga[k], gb[k]) (E,) in order, links (L, 2) -> root of every detection (N,)."""
     masks = _masks(lazy.det.var)
     n = len(view_of)
     indptr, partners = _adjacency(links, n)
@@ -314,8 +290,7 @@ def _all_linked(a, b, nxt, indptr, partners, view_of, masks, lazy: LinkTests, ro
 
 @njit(cache=True, error_model="numpy")
 def _linked_now(x, y, view_of, masks, lazy: LinkTests, row) -> bool:
-    """Whether detections x and y (other views) pass the link test, computed now: :func:`pairs_chi2`'s loop for the
-    one pair, then the calibrated D^2 (evidence.calibrated_chi2's arithmetic) against the limit."""
+    """Whether detections x and y (other views) pass the link test: pairs_chi2's loop, then the calibrated D^2."""
     if view_of[x] > view_of[y]:
         x, y = y, x
     F = lazy.det.fundamentals[view_of[x], view_of[y]]

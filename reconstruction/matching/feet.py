@@ -1,10 +1,4 @@
-"""The paper's feet-assignment matcher (Sec. 3.2): persons matched across views by their feet on the ground.
-
-Each detection's feet give a location p (their midpoint) and a stride v = right - left; every view pair is scored
-by Eq. 4, solved as a gated assignment and merged cheapest edge first (:func:`.merge.match_pairs`). The location term
-is the paper's Euclidean distance (m) or, by default, the Mahalanobis distance under each point's propagated pixel
-noise (:mod:`.feet_uncertainty`).
-"""
+"""The paper's feet-assignment matcher (Sec. 3.2): persons matched across views by their feet on the ground."""
 
 from __future__ import annotations
 
@@ -37,9 +31,7 @@ _FOOT_COLUMNS = (*LEFT_FOOT, *RIGHT_FOOT, LEFT_ANKLE, RIGHT_ANKLE)  # gathered o
 
 @dataclass(frozen=True)
 class FeetFeatures:
-    """Feet of N detections: left, right, p, v (N, 2); has_left, has_right, has_p, has_stride (N,);
-    reason (N,) str, "" where the detection has a location; cov (N, 2, 2) covariance of p, or None
-    where no pixel noise was propagated. Missing points are 0, never NaN."""
+    """Feet of N detections: left, right, p, v (N, 2), has_* (N,) bool; missing points are 0, never NaN."""
 
     left: np.ndarray
     right: np.ndarray
@@ -49,8 +41,8 @@ class FeetFeatures:
     v: np.ndarray
     has_p: np.ndarray
     has_stride: np.ndarray
-    reason: np.ndarray
-    cov: np.ndarray | None = None
+    reason: np.ndarray  # (N,) str, "" where the detection has a location
+    cov: np.ndarray | None = None  # (N, 2, 2) covariance of p; None where no pixel noise was propagated
 
     def __len__(self) -> int:
         return len(self.p)
@@ -65,8 +57,7 @@ def features_from_feet(
     cov_left: np.ndarray | None = None,
     cov_right: np.ndarray | None = None,
 ) -> FeetFeatures:
-    """Location and stride from two feet: (N, 2) x2, (N,) x2 [, reason (N,), covariances (N, 2, 2) x2] ->
-    FeetFeatures; with one foot only, p is that foot and the stride is unknown."""
+    """Location and stride from two feet (N, 2), (N,) each [, covariances (N, 2, 2)]; one foot: p = it, no stride."""
     has_left = np.asarray(has_left, dtype=bool)
     has_right = np.asarray(has_right, dtype=bool)
     left = np.where(has_left[:, None], np.asarray(left, dtype=np.float64), 0.0)
@@ -84,8 +75,7 @@ def features_from_feet(
 
 
 def feet_features(keypoints: np.ndarray, camera: Camera, rule: str = "mean", **settings) -> FeetFeatures:
-    """Ground-plane feet (m) of N detections: keypoints (N, 23, 3) distorted pixels + score -> FeetFeatures; settings:
-    :func:`views_feet_features`'s."""
+    """Ground-plane feet (m) of keypoints (N, 23, 3) distorted px + score -> FeetFeatures (views_feet_features)."""
     return views_feet_features([keypoints], [camera], rule, **settings)
 
 
@@ -100,12 +90,7 @@ def views_feet_features(
     foot_joint_height_m: float = 0.0,
     sigma_score_power: float = 0.0,
 ) -> FeetFeatures:
-    """Ground-plane feet (m) of the detections of V views, view after view: V (N_v, 23, 3), V cameras -> FeetFeatures.
-
-    A foot is its joints (big toe, small toe, heel) scored > min_score, each cut with the horizontal plane at its
-    height (foot_joint_height_m, ankle_height_m; behind the camera: unusable): the lowest in the image (rule
-    "lowest") or the mean of their ground points ("mean"); without any, the ankle if ankle_fallback. With
-    pixel_sigma (px, times score^-sigma_score_power), the covariance of p is propagated too."""
+    """Ground-plane feet (m) of V views' detections, view after view: V (N_v, 23, 3), V cameras -> FeetFeatures."""
     if rule not in FOOT_RULES:
         raise ValueError(f"foot rule must be one of {FOOT_RULES}, got {rule!r}")
     kps = [np.asarray(k, dtype=np.float64) for k in keypoints]
@@ -148,8 +133,7 @@ def pair_homography(camera_l: Camera, camera_m: Camera) -> np.ndarray:
 
 
 def to_image(features: FeetFeatures, camera: Camera) -> FeetFeatures:
-    """Ground feet (m) into undistorted pixels of ``camera`` (as :func:`pair_homography` maps them): FeetFeatures ->
-    FeetFeatures; feet behind the camera (mirrored pixels) become missing."""
+    """Ground feet (m) -> FeetFeatures in undistorted pixels of ``camera``; feet behind the camera become missing."""
     feet = np.stack([features.left, features.right], axis=1)
     front = camera.depth(np.concatenate([feet, np.zeros_like(feet[..., :1])], axis=-1)) > 0
     uv = camera.ground_to_image(feet, distort=False)
@@ -168,9 +152,7 @@ def edge_costs(
     metric: str = "euclidean",
     floor_m: float = 0.05,
 ) -> np.ndarray:
-    """Eq. 4, k1 |p_a - p_b| + k2 | |v_a| - |v_b| | + k3 |v_a x v_b| / (|v_a| |v_b|): (Na,), (Nb,) feet -> (Na, Nb),
-    inf without a location; unknown_stride_cost replaces the stride terms where a stride is unknown. With metric
-    "mahalanobis" |p_a - p_b| is in standard deviations of S_a + S_b + floor_m^2 I."""
+    """Eq. 4 costs of (Na,), (Nb,) feet -> (Na, Nb), inf without a location (design.md: feet.py)."""
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
     if metric == "euclidean":
@@ -198,12 +180,7 @@ def metric_defaults(metric: str) -> tuple[float, float, float, float]:
 
 
 class FeetMatcher:
-    """Feet assignment across views: ``matcher(views, rig) -> Matches``.
-
-    location_metric "mahalanobis" (space="ground"'s default) measures in SDs of the propagated pixel noise
-    (pixel_sigma px, floor ground_sigma_floor m), "euclidean" in metres; k2, k3, gate and unknown_stride_cost left
-    None take the metric's defaults. space="image" (the paper's literal variant) compares both views' feet in pixels
-    of view l (gate, unknown_stride_cost in pixels). margin > 0 keeps only distinct pairs (:func:`.merge.solve_pair`)."""
+    """Feet assignment across views: ``matcher(views, rig) -> Matches`` (settings: docs/design.md, feet.py)."""
 
     def __init__(
         self,

@@ -1,11 +1,4 @@
-"""Feet assignment with epipolar evidence from the other joints (``matching=feet_epipolar``).
-
-The feet cost (:mod:`.feet`, Mahalanobis, SD) places two detections at one spot of the floor, the epipolar cost
-(:mod:`.epipolar`, px) checks that the rest of the body agrees: c = sqrt(d_feet^2 + (e / epipolar_sigma_px)^2),
-solved and merged as the feet matcher. A pair needs min_common_joints joints confident in both. Without a usable
-foot, missing_feet_cost (SD) stands in for d_feet; None (the default) never matches such a detection, since bodies
-matched without their feet were wrong often enough in crowds (benchmarks/matching.py).
-"""
+"""Feet assignment with epipolar evidence from the other joints (``matching=feet_epipolar``)."""
 
 from __future__ import annotations
 
@@ -28,8 +21,7 @@ def combined_cost(
     missing_feet: np.ndarray | None = None,
     missing_feet_cost: float | None = None,
 ) -> np.ndarray:
-    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), inf where either is; where
-    missing_feet (Na, Nb) and missing_feet_cost is given, that cost replaces feet."""
+    """sqrt(feet^2 + (epipolar / sigma)^2): (Na, Nb) SD, (Na, Nb) px -> (Na, Nb), inf where either is."""
     if missing_feet is not None and missing_feet_cost is not None:
         feet_cost = np.where(missing_feet, missing_feet_cost, feet_cost)
     with np.errstate(invalid="ignore"):
@@ -38,8 +30,7 @@ def combined_cost(
 
 
 class FeetEpipolarMatcher:
-    """Feet + epipolar matching: ``matcher(views, rig) -> Matches``; feet: FeetMatcher keys (Mahalanobis; its gate
-    unused); gate and margin (0: off) on the combined cost in SD, as :class:`FeetMatcher`'s."""
+    """Feet + epipolar matching: ``matcher(views, rig) -> Matches``; feet: FeetMatcher keys (its gate unused)."""
 
     def __init__(
         self,

@@ -1,5 +1,4 @@
-"""Compiled loops of the feet features (feet.py, feet_uncertainty.py): every foot joint of a frame's detections cut
-with its horizontal plane, its ground covariance, and each foot's point, without (N, K, 3, 3) temporaries."""
+"""Compiled loops of the feet features (feet.py, feet_uncertainty.py), without (N, K, 3, 3) temporaries."""
 
 from __future__ import annotations
 
@@ -11,10 +10,7 @@ from numba import njit
 
 @njit(cache=True, error_model="numpy")
 def plane_points(und, H, view, level, heights, axis, offset, var, und_jac, xy, depth, cov) -> None:
-    """Undistorted pixels und (N, K, 2) of joints at heights (K,) (plane level[k] of H) seen by view[n] -> their
-    plane (X, Y) xy (N, K, 2), depth (N, K) in the camera (optical axis (V, 3), its offset (V,)) and, with
-    var (N, K) px^2 (empty: none), covariance cov (N, K, 2, 2) of (X, Y) under isotropic pixel noise; H (V, levels,
-    3, 3) image -> plane homographies (NaN: none); und_jac (N, K, 2, 2) the undistortion's Jacobian (empty: none)."""
+    """Undistorted px und (N, K, 2) at heights (K,) -> plane xy (N, K, 2), depth (N, K), cov (N, K, 2, 2) if var."""
     N, K = und.shape[0], und.shape[1]
     for n in range(N):
         v = view[n]
@@ -42,11 +38,7 @@ def plane_points(und, H, view, level, heights, axis, offset, var, und_jac, xy, d
 
 @njit(cache=True, error_model="numpy")
 def foot_points(ground, cov, depth, y, scored, lowest, ankle_fallback, point, point_cov, ok) -> None:
-    """Each detection's left and right foot (side s: joints 3 s .. 3 s + 2, ankle 6 + s) from its joints' ground
-    points (N, 8, 2), covariances (N, 8, 2, 2), depths (N, 8), image y (N, 8) and scored (N, 8): among the usable
-    joints (scored, a finite ground point in front of the camera) the lowest in the image (lowest) or the mean of
-    them (their covariance / n^2), else the ankle (ankle_fallback) -> point (2, N, 2), point_cov (2, N, 2, 2), ok
-    (2, N); a foot not ok gets zeros."""
+    """Left and right feet of ground (N, 8, 2) -> point (2, N, 2), point_cov (2, N, 2, 2), ok (2, N) (else zeros)."""
     for n in range(ground.shape[0]):
         for s in range(2):
             count, pick, top = 0, -1, -np.inf

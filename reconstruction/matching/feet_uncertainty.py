@@ -1,10 +1,4 @@
-"""Uncertainty of the feet matcher's ground points, and its Mahalanobis location cost.
-
-A foot joint's pixel meets the plane z = h at the point of that plane's homography (``K [r1 r2 h r3 + t]``); an
-isotropic pixel noise sigma_px^2 I (distorted pixels: the undistortion's Jacobian by central differences) becomes the
-ground covariance sigma_px^2 J J^T, J the Jacobian of pixel -> plane. The location cost is sqrt(dp^T (S_a + S_b +
-s0^2 I)^-1 dp), s0 a floor (m) for what the model leaves out (foot size, joints above the ground, calibration).
-"""
+"""Uncertainty of the feet matcher's ground points, and its Mahalanobis location cost."""
 
 from __future__ import annotations
 
@@ -32,8 +26,7 @@ def plane_to_image_homography(camera: Camera, height: float = 0.0) -> np.ndarray
 
 
 def image_to_plane_homography(camera: Camera, height: float = 0.0) -> np.ndarray | None:
-    """Homography from undistorted pixels to (X, Y) on the plane z = height: (3, 3); None when the camera's centre
-    lies on that plane (no mapping)."""
+    """Homography from undistorted pixels to (X, Y) on z = height: (3, 3); None: the camera centre is on it."""
     try:
         H = np.linalg.inv(plane_to_image_homography(camera, height))
     except np.linalg.LinAlgError:
@@ -67,8 +60,7 @@ def undistortion_jacobian(camera: Camera, uv: np.ndarray) -> np.ndarray:
 def joints_on_planes(
     camera: Camera, uv: np.ndarray, heights: np.ndarray, sigma_px: float | np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Distorted pixels (N, K, 2) of joints at heights (K,) m -> plane (X, Y) (N, K, 2) (NaN: none), depth (N, K) in
-    the camera, and with sigma_px (scalar or (N, K) px) the (X, Y) covariance (N, K, 2, 2)."""
+    """Distorted px (N, K, 2) at heights (K,) m -> plane (X, Y) (N, K, 2), depth (N, K), covariance (N, K, 2, 2)."""
     uv = np.asarray(uv, dtype=np.float64)
     return views_joints_on_planes([camera], [len(uv)], uv, heights, sigma_px)
 
@@ -80,8 +72,7 @@ def views_joints_on_planes(
     heights: np.ndarray,
     sigma_px: float | np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """:func:`joints_on_planes` of the detections of V views stacked in view order (counts[v] rows of view v):
-    uv (N, K, 2) -> (N, K, 2), (N, K), (N, K, 2, 2) or None."""
+    """joints_on_planes of V views stacked in view order (counts[v] rows): uv (N, K, 2) -> (N, K, 2), (N, K), cov."""
     uv = np.asarray(uv, dtype=np.float64)
     heights = np.broadcast_to(np.asarray(heights, dtype=np.float64), uv.shape[1:2])
     levels, level = np.unique(heights, return_inverse=True)
@@ -137,8 +128,7 @@ def location_covariance(
 def mahalanobis_distances(
     pa: np.ndarray, pb: np.ndarray, cov_a: np.ndarray, cov_b: np.ndarray, floor_m: float = 0.05
 ) -> np.ndarray:
-    """sqrt(dp^T (S_a + S_b + floor^2 I)^-1 dp) for all pairs: (Na, 2), (Nb, 2), (Na, 2, 2), (Nb, 2, 2)
-    -> (Na, Nb) distances in standard deviations."""
+    """sqrt(dp^T (S_a + S_b + floor^2 I)^-1 dp): (Na, 2), (Nb, 2), (Na, 2, 2), (Nb, 2, 2) -> (Na, Nb) in SDs."""
     pa, pb = np.asarray(pa, dtype=np.float64), np.asarray(pb, dtype=np.float64)
     cov_a, cov_b = np.asarray(cov_a, dtype=np.float64), np.asarray(cov_b, dtype=np.float64)
     dx, dy = pa[:, None, 0] - pb[None, :, 0], pa[:, None, 1] - pb[None, :, 1]

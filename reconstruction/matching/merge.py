@@ -1,5 +1,4 @@
-"""Pieces shared by the pairwise matchers: every view pair solved as a gated assignment (:func:`solve_pair`), the
-accepted edges merged into persons cheapest first (:func:`merge_edges`; paper Sec. 3.2, "Solver")."""
+"""Pairwise matchers' pieces: each view pair a gated assignment, the edges merged cheapest first (Sec. 3.2, Solver)."""
 
 from __future__ import annotations
 
@@ -13,11 +12,7 @@ PairCost = Callable[[int, int], np.ndarray]  # (view a, view b) -> (N_a, N_b) ed
 
 
 def solve_pair(cost: np.ndarray, gate: float = np.inf, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Gated rectangular assignment: cost (Na, Nb) -> rows (K,), cols (K,) of the accepted pairs.
-
-    Non-finite or above-gate pairs get a big finite cost M > min(Na, Nb) (largest allowed cost), so scipy's solver
-    first maximises the number of allowed pairs, then minimises their cost (the paper's Eq. 5), and are dropped
-    after. With margin > 0 a pair is kept only if every alternative (:func:`swap_regret`) costs margin more."""
+    """Gated rectangular assignment (Eq. 5): cost (Na, Nb) -> rows (K,), cols (K,) of the pairs kept."""
     cost = np.asarray(cost, dtype=np.float64)
     if cost.ndim != 2:
         raise ValueError(f"cost must be 2-D (Na, Nb), got shape {cost.shape}")
@@ -37,9 +32,7 @@ def solve_pair(cost: np.ndarray, gate: float = np.inf, margin: float = 0.0) -> t
 
 
 def swap_regret(cost: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """Least extra cost of re-matching each accepted pair: cost (Na, Nb), rows (K,), cols (K,) -> (K,), inf without
-    an alternative: swapping partners with another accepted pair, or taking a free row or column (gated pairs count
-    with their cost, non-finite ones never)."""
+    """Least extra cost of re-matching each accepted pair: cost (Na, Nb), rows, cols (K,) -> (K,) (or inf)."""
     cost = np.where(np.isfinite(cost), np.asarray(cost, dtype=np.float64), np.inf)
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
     if len(rows) == 0:
@@ -77,10 +70,7 @@ def as_edges(edges: np.ndarray) -> np.ndarray:
 
 
 def merge_edges(edges: np.ndarray, num_detections: list[int], min_views: int = 2) -> np.ndarray:
-    """Persons from edges (E, 5) (view_a, det_a, view_b, det_b, cost) -> (P, V) detection index or -1.
-
-    Edges by increasing cost (ties by detection) merge their persons unless a view would hold two; persons seen in
-    >= min_views views, ordered by their smallest (view, detection)."""
+    """Persons from edges (E, 5) (view_a, det_a, view_b, det_b, cost) -> (P, V) detection index or -1."""
     edges = as_edges(edges)
     counts = np.asarray(num_detections, dtype=np.int64)
     V = len(counts)
@@ -117,8 +107,7 @@ def merge_edges(edges: np.ndarray, num_detections: list[int], min_views: int = 2
 def match_pairs(
     pair_cost: PairCost, num_detections: list[int], gate: float, min_views: int, margin: float = 0.0
 ) -> np.ndarray:
-    """Gated assignment of every view pair (a < b), pair_cost(a, b) (N_a, N_b) (inf: not allowed), then the
-    cheapest-first merge: -> (P, V); margin > 0 keeps only distinct pairs (:func:`solve_pair`)."""
+    """Gated assignment of each view pair by pair_cost(a, b) (N_a, N_b), merged cheapest first -> (P, V)."""
     edges = [np.zeros((0, 5))]
     for a, b in combinations(range(len(num_detections)), 2):
         cost = pair_cost(a, b)

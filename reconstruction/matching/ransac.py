@@ -1,15 +1,4 @@
-"""The RANSAC baseline of the paper's Table 6 (``matching=ransac``): persons matched across views by geometric consensus.
-
-For every candidate pair (i in view a, j in view b) with >= ``min_common_joints`` joints confident in both (the
-common joints C): each common joint is triangulated (two-view midpoint), giving its depths lam_a, lam_b along each
-camera's horizontal optical axis (:func:`depth_axis`: an upright body has one such depth). ``iterations`` minimal
-samples of ``sample_size`` joints of C (the same random joint orders from ``seed`` for every pair and call, so the
-result is deterministic) each hypothesise the body as a vertical plane at depth mean lam_a(sample) from camera a and
-mean lam_b(sample) from b. Every common joint is transferred a -> b and b -> a through that plane; its error is the
-mean pixel distance to the detected joint (inf behind the camera). The pair's cost is the best hypothesis' MSAC loss
-(Torr and Zisserman 2000), mean over C of min(error / inlier_px, 1), in [0, 1] (1 for a void hypothesis); each view
-pair is a gated assignment and the edges are merged cheapest first (:func:`~reconstruction.matching.merge.match_pairs`).
-"""
+"""The RANSAC baseline of the paper's Table 6 (``matching=ransac``): persons matched across views by consensus."""
 
 from __future__ import annotations
 
@@ -24,8 +13,7 @@ from reconstruction.results import Matches
 
 
 def depth_axis(camera: Camera) -> np.ndarray:
-    """The optical axis made horizontal (an upright body has one depth along it), or itself for a camera looking
-    within ~6 degrees of straight down or up: world (3,)."""
+    """The optical axis made horizontal, or itself for a camera looking within ~6 degrees of vertical: world (3,)."""
     axis = camera.R[2]
     flat = np.array([axis[0], axis[1], 0.0])
     norm = np.linalg.norm(flat)
@@ -33,8 +21,7 @@ def depth_axis(camera: Camera) -> np.ndarray:
 
 
 def world_rays(uv: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """Rays of undistorted pixels, unit depth along :func:`depth_axis`: (..., 2) -> world (..., 3), ok (...,) (False,
-    ray 0, where a ray does not advance along the axis)."""
+    """Rays of undistorted pixels, unit depth along depth_axis: (..., 2) -> world (..., 3), ok (...,) (else 0)."""
     homog = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
     rays = homog @ (camera.R.T @ np.linalg.inv(camera.K)).T
     along = rays @ depth_axis(camera)
@@ -45,8 +32,7 @@ def world_rays(uv: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 def midpoint_depths(
     rays_a: np.ndarray, rays_b: np.ndarray, center_a: np.ndarray, center_b: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Depths of the closest points of two rays: (Na, J, 3), (Nb, J, 3), (3,), (3,) -> lam_a, lam_b (Na, Nb, J), NaN
-    where the rays are (nearly) parallel."""
+    """Depths of the closest points of rays (Na, J, 3), (Nb, J, 3) from (3,), (3,) -> lam_a, lam_b (Na, Nb, J)/NaN."""
     w = center_a - center_b
     aa = np.sum(rays_a**2, axis=-1)[:, None]  # (Na, 1, J)
     cc = np.sum(rays_b**2, axis=-1)[None]  # (1, Nb, J)
@@ -73,8 +59,7 @@ def sample_masks(common: np.ndarray, keys: np.ndarray, sample_size: int) -> np.n
 def transfer_errors(
     depth: np.ndarray, rays_from: np.ndarray, center_from: np.ndarray, camera_to: Camera, uv_to: np.ndarray
 ) -> np.ndarray:
-    """Pixel error of joints moved along rays_from (..., 1, J, 3) to depth (Na, Nb, T) and projected into camera_to
-    against uv_to (..., 1, J, 2) -> (Na, Nb, T, J), inf behind it; float32 (errors good to ~1e-3 px)."""
+    """Float32 pixel error of rays_from (..., 1, J, 3) at depth (Na, Nb, T) vs uv_to -> (Na, Nb, T, J), inf behind."""
     P = camera_to.P
     origin = (P @ np.append(center_from, 1.0)).astype(np.float32)  # image of the ray origin (3,)
     q = (rays_from @ P[:, :3].T).astype(np.float32)  # image of the ray direction

@@ -1,9 +1,4 @@
-"""The MLE / MAP least-squares problem and its solve: a symbolic plan of the bone graph, then pose_kernels' loops.
-
-The cost separates over persons and over the connected components of the bone graph (COCO-23: the face, the body
-with the feet), so every (person, component) is its own Levenberg-Marquardt problem; without bones every joint is
-one. The plan (elimination order, fill-in, block storage) is built once per bone graph and cached.
-"""
+"""The MLE / MAP least-squares problem and its solve: a symbolic plan of the bone graph, then pose_kernels' loops."""
 
 from __future__ import annotations
 
@@ -161,8 +156,7 @@ def _kernel_problem(problem: PoseProblem, on: np.ndarray, P: int) -> Problem:
 def solve_poses(
     problem: PoseProblem, X0: np.ndarray, max_iterations: int = 15, xtol: float = 1e-6, ftol: float = 1e-10
 ) -> tuple[np.ndarray, SolveStats]:
-    """Minimise the problem's cost from X0 (P, J, 3) -> (P, J, 3) and the stats of the (P, C) problems; bones of
-    weight 0 for every person are dropped (they would only join components)."""
+    """Minimise the problem's cost from X0 (P, J, 3) -> (P, J, 3) and the stats of the (P, C) problems."""
     X = np.array(X0, dtype=np.float64)
     P, J, _ = X.shape
     L = len(problem.bone_pairs)

@@ -1,12 +1,4 @@
-"""What the MAP learns about each person from the MLE joints X (P, J, 3) before it applies the bone prior.
-
-noise_scale: the person's 2D noise over the sigma model, robustly: the median over joints seen in n >= 2 views of
-RSS_j / median(chi^2(2 n_j - 3)) (photogrammetry's a-posteriori variance factor). person_bone_lengths: the
-hierarchical prior in closed form, b_l = b_ref_l (1 + s_h z + s_g d_g(l)) with z the stature and d_g the proportion
-of bone group g (left = right), measured as n_l = b_l + e_l, e_l ~ N(0, v_l + tie^2); the Gaussian posterior of
-(z, d) gives each bone's mean and SD, so an accurately observed person keeps their own proportions and a poorly
-observed one borrows the population's, scaled to their stature.
-"""
+"""What the MAP learns about each person from the MLE joints X (P, J, 3) before it applies the bone prior."""
 
 from __future__ import annotations
 
@@ -46,10 +38,7 @@ def view_matmul(X: np.ndarray, proj: np.ndarray) -> np.ndarray:
 def joint_information(
     X: np.ndarray, proj: np.ndarray, inv_sigma: np.ndarray, hom: np.ndarray | None = None
 ) -> np.ndarray:
-    """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3).
-
-    d(x_k)/dX = (M_k - x_k M_2) / z, one 3-vector per view and joint; hom: :func:`view_matmul` of X, if at hand.
-    """
+    """Gauss-Newton information of every joint (model sigma units): (P, J, 3), (V, 3, 4), (V, P, J) -> (P, J, 3, 3)."""
     hom = view_matmul(X, proj) if hom is None else hom
     info = np.empty(X.shape[:2] + (3, 3))
     w = np.ascontiguousarray(inv_sigma, dtype=np.float64)
@@ -58,15 +47,14 @@ def joint_information(
 
 
 def noise_scale(
-    X: np.ndarray,
-    uv: np.ndarray,
-    inv_sigma: np.ndarray,
-    proj: np.ndarray,
+    X: np.ndarray,  # (P, J, 3)
+    uv: np.ndarray,  # (V, P, J, 2)
+    inv_sigma: np.ndarray,  # (V, P, J) 1/sigma, 0 unseen
+    proj: np.ndarray,  # (V, 3, 4)
     floor: float = 0.01,
-    hom: np.ndarray | None = None,
+    hom: np.ndarray | None = None,  # view_matmul of X
 ) -> np.ndarray:
-    """Each person's 2D noise over the sigma model from MLE residuals: (P, J, 3), (V, P, J, 2), (V, P, J) 1/sigma
-    (0 unseen), (V, 3, 4) -> (P,), at least ``floor``; 1 without a joint in >= 2 views. hom: view_matmul of X."""
+    """Each person's 2D noise over the sigma model from MLE residuals -> (P,) >= floor; 1 without a joint in 2 views."""
     hom = view_matmul(X, proj) if hom is None else hom
     median, ratio = np.empty(len(X)), np.empty(X.shape[1])
     as_float = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
@@ -84,9 +72,7 @@ def bone_groups(names: tuple[str, ...] = BONE_NAMES) -> np.ndarray:
 def bone_variances(
     X: np.ndarray, info: np.ndarray, pairs: np.ndarray, measured: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Bone lengths (P, L) of X (P, J, 3) and their variances (P, L) from the joints' information (P, J, 3, 3)
-    (in the units of the actual noise); inf where an end is not ``measured`` (P, J) bool or not fixed in
-    every direction."""
+    """Bone lengths (P, L) of X (P, J, 3), their variances (P, L) from info (P, J, 3, 3); inf: an end not measured."""
     P, J, L = X.shape[0], X.shape[1], len(pairs)
     cov, good = np.empty((P, J, 3, 3)), np.empty((P, J), dtype=bool)
     n, var = np.empty((P, L)), np.empty((P, L))
@@ -99,25 +85,21 @@ def bone_variances(
 def proportion_sds(
     bone_ref: np.ndarray, bone_std: np.ndarray, placement_sd: float, stature_sd: float = STATURE_SD
 ) -> np.ndarray:
-    """Relative SD of each bone given the stature: (L,), (L,) -> (L,), what the table's variance leaves after the
-    stature and the keypoint placement (``placement_sd``, m), 0 where nothing is left."""
+    """Relative SD of each bone given the stature and the placement SD (m): (L,), (L,) -> (L,), 0 where none is left."""
     rest = np.asarray(bone_std, dtype=np.float64) ** 2 - placement_sd**2 - (stature_sd * np.asarray(bone_ref)) ** 2
     return np.sqrt(np.maximum(rest, 0.0)) / np.maximum(bone_ref, 1e-9)
 
 
 def person_bone_lengths(
-    lengths: np.ndarray,
-    variances: np.ndarray,
-    bone_ref: np.ndarray,
-    proportion_sd: np.ndarray,
-    tie_sd: float,
-    groups: np.ndarray,
+    lengths: np.ndarray,  # (P, L) measured
+    variances: np.ndarray,  # (P, L), inf = unmeasured
+    bone_ref: np.ndarray,  # (L,) population means
+    proportion_sd: np.ndarray,  # (L,) relative
+    tie_sd: float,  # m
+    groups: np.ndarray,  # (L,)
     stature_sd: float = STATURE_SD,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Posterior mean and SD of each person's bones (see the module docstring): measured lengths (P, L), their
-    variances (P, L) (inf = unmeasured), population means (L,), relative proportion SDs (L,), tie SD (m),
-    groups (L,) -> (P, L), (P, L). A bone measured more than OUTLIER_SD SD from its posterior is dropped and
-    the posterior redone, once (:func:`~reconstruction.solver.prior_kernels.bone_posteriors`)."""
+    """Posterior mean and SD (P, L) of each person's bones; an outlier bone (OUTLIER_SD) is dropped and redone once."""
     P, L = lengths.shape
     G = int(groups.max()) + 1 if L else 0
     bone_ref = np.array(bone_ref, dtype=np.float64)  # a writable copy: one kernel type for read-only tables too

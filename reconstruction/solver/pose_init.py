@@ -1,11 +1,4 @@
-"""Start poses for the MLE / MAP: the DLT where a joint is triangulated, a fitted mean body elsewhere.
-
-DLT joints are kept unless behind a camera that sees them, farther than GROSS_OUTLIER_M from the mean body at the
-median of the person's joints, or farther than OUTLIER_M from the body fitted to the rest (a DLT of nearly parallel
-rays can land metres away). MEAN_POSE is aligned to the kept joints (Kabsch with >= FULL_FIT_MIN_JOINTS non-collinear
-joints, else a rotation about z: people stand upright) and supplies the other joints, each moved onto the ray of its
-best-scored view where one sees it. Scalar loops in numba (np.linalg's wrappers compile slowly).
-"""
+"""Start poses for the MLE / MAP: the DLT where a joint is triangulated, a fitted mean body elsewhere."""
 
 from __future__ import annotations
 
@@ -49,8 +42,7 @@ def _jacobi_svd(m: np.ndarray, sweeps: int) -> None:
 
 @njit(cache=True)
 def _fit_one(points: np.ndarray, known: np.ndarray, template: np.ndarray, out: np.ndarray, m: np.ndarray) -> bool:
-    """The template (J, 3) aligned to the known (J,) of points (J, 3) by rotation + translation into out (J, 3) ->
-    placed; m (12, 3) scratch. Compact loops: numba's compile time grows with every loop written out."""
+    """The template (J, 3) aligned to the known (J,) of points (J, 3) into out (J, 3) -> placed; m (12, 3) scratch."""
     for r in range(12):  # rows 0-2: cov -> U S; 3-5: I -> V; 6, 7: template, point centroids; 8: S; 9-11: R
         for k in range(3):
             m[r, k] = 0.0
@@ -102,16 +94,15 @@ def _score(poses2d: np.ndarray, v: int, p: int, j: int) -> float:
 
 
 class StartInputs(NamedTuple):
-    """_start_kernel's inputs: points (P, J, 3), known (P, J), poses2d (V, P, J, 3) undistorted px + score, proj
-    (V, 3, 4), Minv (V, 3, 3) = M^-1, centre (V, 3) camera centres, template (J, 3)."""
+    """_start_kernel's inputs."""
 
-    points: np.ndarray
-    known: np.ndarray
-    poses2d: np.ndarray
-    proj: np.ndarray
-    Minv: np.ndarray
-    centre: np.ndarray
-    template: np.ndarray
+    points: np.ndarray  # (P, J, 3)
+    known: np.ndarray  # (P, J)
+    poses2d: np.ndarray  # (V, P, J, 3) undistorted px + score
+    proj: np.ndarray  # (V, 3, 4)
+    Minv: np.ndarray  # (V, 3, 3) = M^-1
+    centre: np.ndarray  # (V, 3) camera centres
+    template: np.ndarray  # (J, 3)
 
 
 class StartScratch(NamedTuple):
@@ -125,8 +116,7 @@ class StartScratch(NamedTuple):
 
 @njit(cache=True)
 def _inliers(inp: StartInputs, p: int, work: StartScratch) -> bool:
-    """Person p's known joints in front of the cameras that see them and near the body (work.ok), the body fitted to
-    them into work.body -> placed."""
+    """Person p's plausible known joints into work.ok, the body fitted to them into work.body -> placed."""
     points, template, proj, ok, body, buf = inp.points, inp.template, inp.proj, work.ok, work.body, work.buf
     J = len(template)
     shift = body[J]
@@ -225,13 +215,11 @@ def _start(
 
 
 def initial_poses(dlt: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Start poses from the DLT and the fitted body: (P, J, 4), (V, P, J, 3) undistorted px + score, (V, 3, 4) ->
-    (P, J, 3), placed (P,) (False: no usable triangulated joint to anchor the body to)."""
+    """Start poses: DLT (P, J, 4), (V, P, J, 3) undistorted px + score, (V, 3, 4) -> (P, J, 3), placed (P,) bool."""
     dlt = np.asarray(dlt, dtype=np.float64)
     return _start(dlt[..., :3], dlt[..., 3] > 0, poses2d, proj)
 
 
 def reinitialise_outliers(X: np.ndarray, poses2d: np.ndarray, proj: np.ndarray) -> np.ndarray:
-    """The gross outliers of a solved pose reset as initial_poses does (an MLE joint seen along nearly parallel rays
-    can sit metres away): (P, J, 3), (V, P, J, 3) undistorted px + score, (V, 3, 4) -> (P, J, 3)."""
+    """Gross outliers of solved poses reset as initial_poses does: (P, J, 3), (V, P, J, 3), (V, 3, 4) -> (P, J, 3)."""
     return _start(X, np.any(np.asarray(poses2d)[..., 2] > 0, axis=0), poses2d, proj)[0]

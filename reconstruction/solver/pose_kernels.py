@@ -1,12 +1,4 @@
-"""Compiled (numba) Levenberg-Marquardt of the MLE / MAP pose problems, one (person, bone-graph component) at a time.
-
-Per person: reprojection residuals (q - pi_v(Q_j)) / sigma (optionally robust, scipy's rho), bone residuals
-w_l (b_ref_l - |Q_a - Q_b|) and a Tikhonov anchor tau (Q_j - A_j). The normal equations are 3x3 blocks per joint
-coupled along the bones, factorised by a block Cholesky in the elimination order of a :class:`Plan` (joints at
-solver *positions*, components contiguous; ``slot[i, j]`` (i >= j) stores block (i, j) with the fill-in;
-``later[k]`` the positions i > k with a block (i, k)). Damping after Nielsen (IMM-REP-1999-05); a component steps
-with the safe (PSD) curvature until a step gains rho >= SWITCH_RHO, then with the exact Hessian of the bone prior.
-"""
+"""Compiled (numba) Levenberg-Marquardt of the MLE / MAP pose problems, one (person, bone-graph component) at a time."""
 
 from __future__ import annotations
 
@@ -15,7 +7,6 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-# status codes per problem
 RUNNING, CONVERGED_STEP, CONVERGED_COST, CONVERGED_GRADIENT, STALLED, MAX_ITERATIONS = 0, 1, 2, 3, 4, 5
 MAX_DAMPING = 1e16  # relative to max diag(H): no step can reduce the cost any more
 SWITCH_RHO = 0.25  # gain ratio of an accepted safe step after which the exact model is used
@@ -33,17 +24,16 @@ _INLINE = {**_INNER, "inline": "always"}
 
 
 class Problem(NamedTuple):
-    """The kernels' problem: proj (V, 3, 4), uv (V, P, J, 2) px, w (V, P, J) 1/sigma (0 unseen), anchor (P, J, 3)
-    in joint order, ref and bw (P, L) bone lengths (m) and weights (1/m), tau2 anchor weight^2, robust code, C2."""
+    """The kernels' problem (arrays in joint order)."""
 
-    proj: np.ndarray
-    uv: np.ndarray
-    w: np.ndarray
-    anchor: np.ndarray
-    ref: np.ndarray
-    bw: np.ndarray
-    tau2: float
-    robust: int
+    proj: np.ndarray  # (V, 3, 4)
+    uv: np.ndarray  # (V, P, J, 2) px
+    w: np.ndarray  # (V, P, J) 1/sigma, 0 unseen
+    anchor: np.ndarray  # (P, J, 3)
+    ref: np.ndarray  # (P, L) bone lengths (m)
+    bw: np.ndarray  # (P, L) bone weights (1/m)
+    tau2: float  # anchor weight^2
+    robust: int  # ROBUST_CODES
     C2: float
 
 
@@ -114,8 +104,7 @@ def _robust(r: float, kind: int, C2: float) -> tuple[float, float, float]:
 def _joint_terms(
     cost: float, X0: float, X1: float, X2: float, p: int, j: int, prob: Problem, derivatives: bool
 ) -> tuple[float, float, float, float, float, float, float, float, float, float]:
-    """Joint j of person p at (X0, X1, X2) -> cost + its terms, gradient (3), block entries (00 01 02 11 12 22);
-    without ``derivatives`` the same cost by the same operations, and the anchor's gradient and block alone."""
+    """Joint j of person p at (X0, X1, X2) -> cost + its terms, gradient (3), block (00 01 02 11 12 22)."""
     proj, tau2 = prob.proj, prob.tau2
     dx0, dx1, dx2 = X0 - prob.anchor[p, j, 0], X1 - prob.anchor[p, j, 1], X2 - prob.anchor[p, j, 2]
     cost += 0.5 * tau2 * (dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
@@ -140,8 +129,7 @@ def _joint_terms(
             rx, ry, sx, sy = rx * rsx, ry * rsy, sx * jsx, sy * jsy
         if not derivatives:
             continue
-        # dr_x/dX = -s_x (M0 - px M2), dr_y/dX = -s_y (M1 - py M2)
-        a0, a1, a2 = (
+        a0, a1, a2 = (  # dr_x/dX = -s_x (M0 - px M2), dr_y/dX = -s_y (M1 - py M2)
             proj[v, 0, 0] - px * proj[v, 2, 0],
             proj[v, 0, 1] - px * proj[v, 2, 1],
             proj[v, 0, 2] - px * proj[v, 2, 2],
@@ -172,8 +160,7 @@ def _outer_plus_identity(A: np.ndarray, l: int, c: float, d: float, u0: float, u
 
 @njit(**_INNER)
 def _bone_terms(x: np.ndarray, c: int, p: int, prob: Problem, plan: Plan, lin: Linearisation) -> float:
-    """Prior cost of component c's bones of person p; adds their gradients to lin.g and safe blocks K to lin.D,
-    writes lin.K and lin.Kr: K = w^2 u u^T + max(curv, 0) (I - u u^T), Kr = min(curv, 0) (I - u u^T)."""
+    """Prior cost of component c's bones of person p; adds to lin.g and lin.D, writes lin.K and lin.Kr."""
     cost = 0.0
     D, g, K, Kr = lin
     for t in range(plan.comp_bones_ptr[c], plan.comp_bones_ptr[c + 1]):
@@ -533,8 +520,7 @@ def solve_all(
     it: np.ndarray,
     status: np.ndarray,
 ) -> None:
-    """Levenberg-Marquardt of every (person, component) problem: X (P, J, 3) updated in place (joint order);
-    cost, it, status (P, C) receive each problem's final cost, iterations and status."""
+    """Levenberg-Marquardt of every (person, component): X (P, J, 3) in place; final cost, it, status (P, C)."""
     pos_joint, comp_start, x = plan.pos_joint, plan.comp_start, work.x
     for p in range(X.shape[0]):
         for k in range(X.shape[1]):

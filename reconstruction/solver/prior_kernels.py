@@ -1,6 +1,4 @@
-"""Compiled (numba) loops of the person prior (person_prior.py): each joint's information, the bones' variances and
-the bones' posterior; numpy's arithmetic in numpy's order, without its (V, P, J, 3, 3) temporaries. Compiled like
-pose_kernels: numpy's error model, no reference counting (the caller allocates every array)."""
+"""Compiled (numba) loops of the person prior (person_prior.py): joint information, bone variances and posteriors."""
 
 from __future__ import annotations
 
@@ -18,9 +16,7 @@ _BIG = np.finfo(np.float64).max
 
 @njit(**_JIT)
 def information_sums(hom: np.ndarray, proj: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
-    """out (P, J, 3, 3) = sum over k = x, y of sum over views of r r^T, r = (M_k - x_k M_2) w / z: the Gauss-Newton
-    information of each joint from its projections (hom (V, 3, P J) = M X, person_prior.view_matmul), views proj (V, 3, 4)
-    and 1/sigma w (V, P, J) (0 unseen)."""
+    """Gauss-Newton information out (P, J, 3, 3) from hom (V, 3, P J) = M X, proj (V, 3, 4), 1/sigma w (V, P, J)."""
     V, P, J = w.shape
     for p in range(P):
         for j in range(J):
@@ -57,10 +53,7 @@ def _finite(a: float) -> float:
 
 @njit(**_INNER)
 def _joint_covariances(info: np.ndarray, measured: np.ndarray, cov: np.ndarray, good: np.ndarray) -> None:
-    """cov (P, J, 3, 3): the inverse of each joint's information (P, J, 3, 3) (np.nan_to_num'd) where ``good``: the
-    joint is ``measured`` (P, J) and fixed in every direction (det > 1e-9 (trace / 3)^3, trace > 0), else 0.
-    Inverse by cofactors over the determinant, cofactor (i, j) = A[i+1, j+1] A[i+2, j+2] - A[i+1, j+2] A[i+2, j+1]
-    (indices mod 3), as data.geometry.linalg.inverse_3x3."""
+    """cov (P, J, 3, 3) = info^-1 (P, J, 3, 3) by cofactors where good (P, J): measured and well-conditioned, else 0."""
     for p in range(info.shape[0]):
         for j in range(info.shape[1]):
             a00, a01, a02 = _finite(info[p, j, 0, 0]), _finite(info[p, j, 0, 1]), _finite(info[p, j, 0, 2])
@@ -91,9 +84,7 @@ def bone_sums(
     n_out: np.ndarray,
     var_out: np.ndarray,
 ) -> None:
-    """Length n_out (P, L) of each bone of X (P, J, 3) and the variance var_out (P, L) of the length, u^T (cov_a +
-    cov_b) u with u the unit bone direction and cov, good from :func:`_joint_covariances` of info and measured
-    (inf unless both ends are good); numpy's pairwise order of the 9-term sum."""
+    """Bone lengths n_out (P, L) of X (P, J, 3), variances var_out (P, L) u^T (cov_a + cov_b) u (inf: end not good)."""
     _joint_covariances(info, measured, cov, good)
     for p in range(X.shape[0]):
         for l in range(pairs.shape[0]):
@@ -125,27 +116,23 @@ def bone_sums(
 
 
 class BoneModel(NamedTuple):
-    """The hierarchical bone model of person_prior: bone_ref (L,) m, stature = bone_ref stature_sd and proportion =
-    bone_ref proportion_sd (L,) m, groups (L,) in 0..G - 1, tie2 = tie_sd^2, outlier_sd; use (L,) bool and scratch
-    (4, G) work space."""
+    """The hierarchical bone model of person_prior; (L,) arrays in m."""
 
     bone_ref: np.ndarray
-    stature: np.ndarray
-    proportion: np.ndarray
-    groups: np.ndarray
-    tie2: float
+    stature: np.ndarray  # bone_ref stature_sd
+    proportion: np.ndarray  # bone_ref proportion_sd
+    groups: np.ndarray  # (L,) in 0..G - 1
+    tie2: float  # tie_sd^2
     outlier_sd: float
-    use: np.ndarray
-    scratch: np.ndarray
+    use: np.ndarray  # (L,) bool work space
+    scratch: np.ndarray  # (4, G) work space
 
 
 @njit(**_JIT)
 def bone_posteriors(
     lengths: np.ndarray, variances: np.ndarray, model: BoneModel, mean: np.ndarray, sd: np.ndarray
 ) -> None:
-    """mean, sd (P, L): the posterior of each person's bones from lengths, variances (P, L). The precision
-    I + sum_l w_l a_l a_l^T is an arrowhead (stature row / column + diagonal): inverted in O(L) by the Schur
-    complement s = d0 - sum_g b_g^2 / D_g of its diagonal block."""
+    """mean, sd (P, L): the posterior of each person's bones from lengths, variances (P, L), inverted in O(L)."""
     bone_ref, stature, proportion, groups, tie2, outlier_sd, use, scratch = model
     P, L = lengths.shape
     b, D, r, theta = scratch[0], scratch[1], scratch[2], scratch[3]
@@ -190,17 +177,15 @@ def bone_posteriors(
 
 @njit(**_JIT)
 def noise_medians(
-    hom: np.ndarray,
+    hom: np.ndarray,  # (V, 3, P J) = M X (person_prior.view_matmul)
     proj: np.ndarray,
-    uv: np.ndarray,
-    w: np.ndarray,
-    medians: np.ndarray,
-    ratio: np.ndarray,
+    uv: np.ndarray,  # (V, P, J, 2) px
+    w: np.ndarray,  # (V, P, J) 1/sigma
+    medians: np.ndarray,  # chi^2 medians by degrees of freedom
+    ratio: np.ndarray,  # (J,) scratch
     out: np.ndarray,
 ) -> None:
-    """out (P,): each person's median over joints seen in n >= 2 views of RSS / median(chi^2(2n - 3)), -1 without any;
-    RSS the squared residuals of pixels uv (V, P, J, 2) in units of 1/w (V, P, J) against hom (V, 3, P J) = M X
-    (person_prior.view_matmul); medians: chi^2 medians by degrees of freedom; ratio (J,) scratch."""
+    """out (P,): median over joints seen in n >= 2 views of RSS / median(chi^2(2n - 3)), -1 without any."""
     V, P, J = w.shape
     for p in range(P):
         n = 0

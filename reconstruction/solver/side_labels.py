@@ -1,10 +1,4 @@
-"""Left / right labels of a person's joint pairs made consistent across views, then with the body, before the DLT.
-
-For 2D models that cannot tell a symmetric body's sides apart. consistent_sides: per pair, the labelling whose
-triangulation (seeded by every two views) reprojects best, where clearly better than as given; facing_sides: the
-central pairs turned to the way the body faces (nose before ears, toes before heels); chain_sides: limb pairs
-exchanged where they sit farther from their parent pair as labelled than exchanged.
-"""
+"""Left / right labels of a person's joint pairs made consistent across views, then with the body, before the DLT."""
 
 from __future__ import annotations
 
@@ -37,8 +31,7 @@ def _solve(N: np.ndarray) -> np.ndarray:
 
 
 def _project(X: np.ndarray, proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points X (..., 3) in the cameras (V, 3, 4) -> pixels (..., V, 2), in front of the camera (..., V)
-    (:func:`~reconstruction.solver.person_prior.project`, views moved last)."""
+    """Points X (..., 3) in the cameras (V, 3, 4) -> pixels (..., V, 2), in front of the camera (..., V)."""
     uv, z = project(X.reshape(-1, 1, 3), proj)  # (V, n, 1, 2), depths clamped to EPS_DEPTH
     shape = (*X.shape[:-1], len(proj))
     return np.moveaxis(uv[:, :, 0], 0, 1).reshape(*shape, 2), (z[:, :, 0] > EPS_DEPTH).T.reshape(shape)
@@ -51,8 +44,7 @@ def _errors(uv: np.ndarray, front: np.ndarray, points: np.ndarray, cap_px: float
 
 
 def _view_costs(A, B, proj, xl, xr, seen, cap_px):
-    """Costs (..., V) of every view labelled as given and exchanged for the pair's 3D points A, B (..., 3)
-    (0 where the view does not see both joints)."""
+    """Costs (..., V) of each view as given and exchanged for the pair's points A, B (..., 3); 0 where not seen."""
     (ua, fa), (ub, fb) = _project(A, proj), _project(B, proj)
     keep = _errors(ua, fa, xl, cap_px) + _errors(ub, fb, xr, cap_px)
     swap = _errors(ua, fa, xr, cap_px) + _errors(ub, fb, xl, cap_px)
@@ -62,11 +54,7 @@ def _view_costs(A, B, proj, xl, xr, seen, cap_px):
 def best_labellings(
     xl: np.ndarray, xr: np.ndarray, seen: np.ndarray, proj: np.ndarray, cap_px: float = 50.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Q joint pairs: points (Q, V, 2) as labelled left and right, the views that see both (Q, V), cameras
-    (V, 3, 4) -> (views to exchange (Q, V) bool, cost of that labelling (Q,), cost as given (Q,)), costs in px
-    summed over the views and both joints (reprojection distances capped at cap_px). Seeded by every two views
-    and their two relative labellings, refined from all views; by reprojection, which unlike epipolar distances
-    tells the joints apart at the cameras' height; of two labellings that differ in every view, the fewer changes."""
+    """Pairs xl, xr (Q, V, 2), seen (Q, V), proj (V, 3, 4) -> views to swap (Q, V), its cost, cost as given (Q,) px."""
     Q, V = seen.shape
     Ml, Mr = _normals(xl, proj), _normals(xr, proj)  # (Q, V, 4, 4)
     i, j = np.triu_indices(V, 1)
@@ -95,9 +83,7 @@ def best_labellings(
 def consistent_sides(
     poses2d: np.ndarray, proj: np.ndarray, cap_px: float = 50.0, ratio: float = 0.9, min_gain_px: float = 20.0
 ) -> np.ndarray:
-    """poses2d (V, P, J, 3) undistorted px + score, proj (V, 3, 4) -> a copy with each person's joint pairs
-    labelled consistently across the views that see both joints (:func:`best_labellings`; relabelled where the
-    best labelling's cost is below ratio of the given one and lower by min_gain_px)."""
+    """poses2d (V, P, J, 3) undistorted px + score, proj (V, 3, 4) -> a copy with joint pairs labelled consistently."""
     V, P = poses2d.shape[:2]
     out = poses2d.copy()
     if V < 2 or P == 0:
@@ -123,19 +109,14 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 def _across(v: np.ndarray, up: np.ndarray, min_share: float) -> np.ndarray:
-    """Directions v (P, 3) with their component along unit up (P, 3) removed, as unit vectors; zero where less
-    than min_share of v's length is left (a face looking down, a foot pointing at the sky)."""
+    """Unit directions v (P, 3) across unit up (P, 3); zero where less than min_share of v's length is left."""
     flat = v - (v * up).sum(-1, keepdims=True) * up
     share = np.linalg.norm(flat, axis=-1) / np.maximum(np.linalg.norm(v, axis=-1), 1e-9)
     return _unit(flat) * (share >= min_share)[:, None]
 
 
 def facing_directions(X: np.ndarray, min_share: float = 0.5) -> np.ndarray:
-    """The DLT X (P, J, 4) -> each person's left direction (P, 3), zero where unknown, from joints whose labels
-    do not matter: up from the hips' to the shoulders' midpoint, forward from the ears' midpoint to the nose
-    and from the heels' to the toes' midpoint, each across up (:func:`_across`); left = up x forward (a
-    right-handed world). Where the head and the feet disagree (forward directions more than 90 degrees apart),
-    zero."""
+    """The DLT X (P, J, 4) -> each person's left direction (P, 3) from joints whose labels do not matter, or 0."""
     ok = X[..., 3] > 0
 
     def mid(joints: list[int], all_seen: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -154,9 +135,7 @@ def facing_directions(X: np.ndarray, min_share: float = 0.5) -> np.ndarray:
 
 
 def facing_sides(poses2d: np.ndarray, X: np.ndarray, min_cos: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
-    """poses2d (V, P, J, 3), the DLT X (P, J, 4) -> copies with the body's central pairs (eyes, ears, shoulders,
-    hips) exchanged in every view and in X where left - right points to the person's right
-    (:func:`facing_directions`) by more than min_cos; the limbs follow their parents in :func:`chain_sides`."""
+    """poses2d (V, P, J, 3), the DLT X (P, J, 4) -> copies with the central pairs turned to the way the body faces."""
     poses2d, X = poses2d.copy(), X.copy()
     left = facing_directions(X)
     for a, b in ((1, 2), (3, 4), (5, 6), (11, 12)):
@@ -170,8 +149,7 @@ def facing_sides(poses2d: np.ndarray, X: np.ndarray, min_cos: float = 0.5) -> tu
 
 
 def chain_sides(poses2d: np.ndarray, X: np.ndarray, ratio: float = 0.9) -> tuple[np.ndarray, np.ndarray]:
-    """poses2d (V, P, J, 3), the DLT X (P, J, 4) -> copies with a limb pair exchanged (in every view and in X)
-    where its joints' distances to the parent pair, as labelled, sum to more than 1 / ratio times exchanged."""
+    """poses2d (V, P, J, 3), the DLT X (P, J, 4) -> copies with limb pairs exchanged where closer to the parent so."""
     poses2d, X = poses2d.copy(), X.copy()
     for (cl, cr), (pl, pr) in CHAINS:
         ok = (X[:, [cl, cr, pl, pr], 3] > 0).all(axis=1)

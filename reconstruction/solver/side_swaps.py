@@ -1,9 +1,4 @@
-"""Left / right swaps of 2D detectors (a wrist labelled as the other in one view), found and undone before the MAP.
-
-Per view and symmetric pair, the reprojection chi-square of the two detections as given is compared with that of the
-two exchanged, against the pair triangulated from the other views; the view whose exchange gains most is swapped
-when the exchange leaves at most ``ratio`` of a chi-square above ``min_chi2``.
-"""
+"""Left / right swaps of 2D detectors (a wrist labelled as the other in one view), found and undone before the MAP."""
 
 from __future__ import annotations
 
@@ -21,8 +16,7 @@ def _squared(d: np.ndarray) -> np.ndarray:
 
 
 def _given(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> np.ndarray:
-    """Chi-square of joint pairs as given: (V, P, J, 2) x2, (V, P, J), left / right indices (int or (K,)) -> (V, P)
-    or (V, P, K)."""
+    """Chi-square of joint pairs as given: (V, P, J, 2) x2, (V, P, J), left, right (int or (K,)) -> (V, P[, K])."""
     r2 = w2 * _squared(uv - xy)
     return r2[..., left] + r2[..., right]
 
@@ -35,16 +29,14 @@ def _exchanged(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> n
 
 def find_swaps(
     poses2d: np.ndarray,
-    inv_sigma: np.ndarray,
-    proj: np.ndarray,
-    full: np.ndarray | None = None,
+    inv_sigma: np.ndarray,  # 0 unseen
+    proj: np.ndarray,  # (V, 3, 4)
+    full: np.ndarray | None = None,  # (P, J, 4) the DLT from all views, if at hand
     pairs: tuple[tuple[int, int], ...] = FLIP_PAIRS,
     ratio: float = 0.25,
     min_chi2: float = 18.0,
 ) -> list[tuple[int, int, int, int]]:
-    """(view, person, left, right) to exchange: poses2d (V, P, J, 3) undistorted px + score, inv_sigma (V, P, J)
-    1 / sigma (0 unseen), proj (V, 3, 4); full (P, J, 4): the DLT from all views, if at hand. Only the pairs that
-    reproject badly and better exchanged from it (a swap shows both) are triangulated again without each view."""
+    """(view, person, left, right) to exchange: poses2d (V, P, J, 3) undistorted px + score, 1/sigma (V, P, J)."""
     V = len(proj)
     if V < 3 or poses2d.shape[1] == 0:
         return []
