@@ -1,11 +1,6 @@
-"""A 2D noise model that calibrates itself on the run's own detections (``noise_model=calibrated``).
-
-log sigma^2 = base + camera + joint type + score rank + box size: one additive effect per level of each factor,
-fitted by median polish to the reprojection residuals of joints seen in >= 3 views of the first frames' matched
-persons. Each residual is divided by its dof (2 minus the view's leverage in the weighted triangulation), so a view
-that pulls the point towards itself is not read as precise. The score enters only by its rank among the
-calibration's scores: a detector scoring 0-5 and one scoring 0-0.3 get the same model. Docs: docs/design.md.
-"""
+"""A 2D noise model that calibrates itself on the run's detections (``noise_model=calibrated``): log sigma^2 = base +
+camera + joint type + score rank + box size, solved from the residuals of the first frames' joints seen in >= 3
+views (docs/design.md). The score enters by its rank only, so any detector's score scale gets the same model."""
 
 from __future__ import annotations
 
@@ -22,12 +17,13 @@ from reconstruction.noise_model import NoiseModel, box_size
 SWEEPS = 20  # factor-by-factor solves of the moment equations (camera and box size are correlated: many)
 
 
+_SIDELESS = [n.removeprefix("left_").removeprefix("right_") for n in COCO23_NAMES]
+JOINT_TYPES = tuple(sorted(set(_SIDELESS), key=_SIDELESS.index))  # COCO-23's joints, left and right as one
+
+
 def joint_types(J: int) -> np.ndarray:
-    """Joint type per joint (J,): COCO-23's left and right joints share one; another layout, one per joint."""
-    if J != len(COCO23_NAMES):
-        return np.arange(J)
-    names = [n.removeprefix("left_").removeprefix("right_") for n in COCO23_NAMES]
-    return np.array([sorted(set(names), key=names.index).index(n) for n in names])
+    """Joint type per joint (J,): COCO-23's into JOINT_TYPES; another layout, one per joint."""
+    return np.array([JOINT_TYPES.index(n) for n in _SIDELESS]) if J == len(COCO23_NAMES) else np.arange(J)
 
 
 @dataclass(frozen=True)
@@ -83,10 +79,6 @@ class CalibratedNoiseModel:
         if not isinstance(self.start, NoiseModel):
             object.__setattr__(self, "start", NoiseModel(**dict(self.start)))
 
-    @property
-    def sigma_min(self) -> float:
-        return self.start.sigma_min
-
     def sigma(self, poses2d: np.ndarray, bboxes: np.ndarray, views: np.ndarray | None = None) -> np.ndarray:
         """Pixel SD of every joint: (..., J, 3), boxes (..., 4), view index (...,) or None -> (..., J); inf unseen."""
         if self.table is None:
@@ -97,7 +89,7 @@ class CalibratedNoiseModel:
         box = box_size(poses2d, np.asarray(bboxes, np.float64), seen)
         views = np.full(box.shape, -1) if views is None else np.broadcast_to(views, box.shape)
         log_var = self.table.log_variance(self.table.codes(score, box, views, poses2d.shape[-2]))
-        return np.where(seen, np.maximum(np.exp(0.5 * log_var), self.sigma_min), np.inf)
+        return np.where(seen, np.maximum(np.exp(0.5 * log_var), self.start.sigma_min), np.inf)
 
     def fitted(self, table: NoiseTable | None) -> CalibratedNoiseModel:
         """This model with a fitted table (None: the start model again)."""
@@ -269,9 +261,8 @@ def describe(model: CalibratedNoiseModel, names: list[str], blocks: dict[str, np
     seen = blocks["seen"]
     cams = ", ".join(f"{n} {np.median(sigma[:, v][seen[:, v]]):.1f}" for v, n in enumerate(names) if seen[:, v].any())
     factor = lambda e: " ".join(f"{math.exp(0.5 * x):.2f}" for x in e)
-    types = [n.removeprefix("left_").removeprefix("right_") for n in COCO23_NAMES]
-    names = sorted(set(types), key=types.index) if len(table.effects[1]) == len(set(types)) else None
-    joints = ", ".join(f"{names[t] if names else t} {math.exp(0.5 * e):.2f}" for t, e in enumerate(table.effects[1]))
+    types = JOINT_TYPES if len(table.effects[1]) == len(JOINT_TYPES) else range(len(table.effects[1]))
+    joints = ", ".join(f"{t} {math.exp(0.5 * e):.2f}" for t, e in zip(types, table.effects[1]))
     return (
         f"2D noise model: self-calibrated on {table.residuals} joint residuals of persons seen in >= "
         f"{model.min_views} views (first {frames} frames). Median sigma (px) by camera: {cams}; "
