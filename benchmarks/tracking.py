@@ -53,10 +53,12 @@ def main(argv: list[str] | None = None) -> list[list]:
     parser.add_argument("--sets", default="shelf,panoptic,crowd")
     parser.add_argument("--crowd-frames", type=int, default=50)
     parser.add_argument("--repeats", type=int, default=3, help="on / off runs, interleaved, for the timing medians")
+    parser.add_argument("overrides", nargs="*", help="eval.yaml overrides added to every run (noise_model=fixed ...)")
     args = parser.parse_args(argv)
     rows = []
     with initialize_config_dir(str(common.CONFIG_DIR), version_base="1.3"):
         for label, overrides in dev_sets(args.sets.split(","), args.data, args.crowd_frames).items():
+            overrides = [*overrides, *args.overrides]
             sequence = instantiate(compose("eval", overrides=overrides).dataset, _convert_="all")
             cfg_on = compose("eval", overrides=[*overrides, "tracking=on"])
             cfg_off = compose("eval", overrides=[*overrides, "tracking=off"])

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
 from scipy.special import gammaincinv
@@ -21,6 +22,7 @@ _SIDELESS = [n.removeprefix("left_").removeprefix("right_") for n in COCO23_NAME
 JOINT_TYPES = tuple(sorted(set(_SIDELESS), key=_SIDELESS.index))  # COCO-23's joints, left and right as one
 
 
+@lru_cache(maxsize=8)
 def joint_types(J: int) -> np.ndarray:
     """Joint type per joint (J,): COCO-23's into JOINT_TYPES; another layout, one per joint."""
     return np.array([JOINT_TYPES.index(n) for n in _SIDELESS]) if J == len(COCO23_NAMES) else np.arange(J)
@@ -36,24 +38,20 @@ class NoiseTable:
     box_edges: np.ndarray
     residuals: int  # joint residuals the fit used
 
-    def codes(self, score: np.ndarray, box: np.ndarray, views: np.ndarray, J: int) -> list[np.ndarray]:
-        """Level of every factor for joints: score (..., J), box (...,), views (...,) -> 4 x (..., J) int."""
-        cam = np.where((views >= 0) & (views < len(self.effects[0])), views, -1)
-        shape = score.shape
-        return [
-            np.broadcast_to(cam[..., None], shape),
-            np.broadcast_to(joint_types(J), shape),
-            np.searchsorted(self.rank_edges, score, side="right"),
-            np.broadcast_to(np.searchsorted(self.box_edges, box, side="right")[..., None], shape),
+    def log_variance(self, score: np.ndarray, box: np.ndarray, views: np.ndarray | None) -> np.ndarray:
+        """log sigma^2 of joints: scores (..., J), box sizes (...,), view indices (...,) or None (camera effect 0)."""
+        types = joint_types(score.shape[-1])  # a type the calibration never saw: effect 0
+        joint = self.effects[1]
+        joint = (joint if len(joint) > types.max(initial=-1) else np.pad(joint, (0, types.max() + 1 - len(joint))))[
+            types
         ]
-
-    def log_variance(self, codes: list[np.ndarray]) -> np.ndarray:
-        """log sigma^2 of joints with the given levels (..., J); an unknown level (-1, or past the table) adds 0."""
-        out = np.full(codes[0].shape, self.base)
-        for effect, code in zip(self.effects, codes):
-            known = (code >= 0) & (code < len(effect))
-            out += np.where(known, effect[np.where(known, code, 0)], 0.0)
-        return out
+        per_person = self.effects[3][np.searchsorted(self.box_edges, box, side="right")]
+        if views is not None:
+            cam, views = self.effects[0], np.asarray(views)
+            known = (views >= 0) & (views < len(cam))
+            per_person = per_person + np.where(known, cam[np.where(known, views, 0)], 0.0)
+        rank = self.effects[2][np.searchsorted(self.rank_edges, score, side="right")]
+        return self.base + joint + rank + per_person[..., None]
 
 
 @dataclass(frozen=True)
@@ -87,8 +85,7 @@ class CalibratedNoiseModel:
         score = poses2d[..., 2]
         seen = (score > 0) & np.isfinite(poses2d[..., 0]) & np.isfinite(poses2d[..., 1])
         box = box_size(poses2d, np.asarray(bboxes, np.float64), seen)
-        views = np.full(box.shape, -1) if views is None else np.broadcast_to(views, box.shape)
-        log_var = self.table.log_variance(self.table.codes(score, box, views, poses2d.shape[-2]))
+        log_var = self.table.log_variance(score, box, views)
         return np.where(seen, np.maximum(np.exp(0.5 * log_var), self.start.sigma_min), np.inf)
 
     def fitted(self, table: NoiseTable | None) -> CalibratedNoiseModel:
@@ -257,7 +254,8 @@ def describe(model: CalibratedNoiseModel, names: list[str], blocks: dict[str, np
             f"2D noise model: not calibrated ({found} joint residuals from persons seen in >= {model.min_views} views "
             f"of the first {frames} frames, need {4 * model.min_count}); the start model"
         )
-    sigma = np.exp(0.5 * table.log_variance(block_codes(blocks, table.rank_edges, table.box_edges)))
+    codes = block_codes(blocks, table.rank_edges, table.box_edges)
+    sigma = np.exp(0.5 * (table.base + sum(effect[code] for effect, code in zip(table.effects, codes))))
     seen = blocks["seen"]
     cams = ", ".join(f"{n} {np.median(sigma[:, v][seen[:, v]]):.1f}" for v, n in enumerate(names) if seen[:, v].any())
     factor = lambda e: " ".join(f"{math.exp(0.5 * x):.2f}" for x in e)
