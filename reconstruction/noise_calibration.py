@@ -138,7 +138,7 @@ def residual_blocks(
 def _information(w: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """sum_v w J^T J of (K, V) weights and (K, V, 2, 3) Jacobians -> (K, 3, 3) (identity where not finite or
     singular) and which are usable (K,)."""
-    J = np.nan_to_num(jac).reshape(len(w), -1, 3)
+    J = np.nan_to_num(jac).reshape(len(w), 2 * w.shape[1], 3)
     info = (J * np.repeat(w, 2, axis=1)[..., None]).transpose(0, 2, 1) @ J
     info = np.where(np.isfinite(info), info, 0.0)
     ok = np.linalg.det(info) > 1e-12 * (np.trace(info, axis1=1, axis2=2) / 3.0) ** 3  # well-conditioned enough

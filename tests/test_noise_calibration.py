@@ -76,6 +76,12 @@ def test_too_few_residuals_keep_the_start_model():
     np.testing.assert_array_equal(model.sigma(kp, boxes, np.zeros(len(kp), int)), start.sigma(kp, boxes))
 
 
+def test_two_views_leave_no_residual_and_keep_the_start_model():
+    sequence = noisy_sequence([2.0, 5.0], frames=2)
+    model, line = calibrated(sequence, CalibratedNoiseModel(frames=2))
+    assert model.table is None and line.startswith("2D noise model: not calibrated (0 joint residuals")
+
+
 def test_fixed_models_leave_the_pipeline_uncalibrated():
     sequence = noisy_sequence([2.0, 5.0, 10.0], frames=2)
     pipeline = MultiViewPipeline(sequence.rig, OracleMatcher(), MAPReconstruction(noise_model=NoiseModel()))
