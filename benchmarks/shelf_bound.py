@@ -81,6 +81,7 @@ def run(overrides: list[str], max_px: float) -> dict[str, dict[int, list[np.ndar
     sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))
     rig, protocol = sequence.rig, sequence.protocols[0]
     pipeline = MultiViewPipeline(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction))
+    pipeline.calibrate_noise(sequence.frames)  # the run's 2D noise model, as eval.py fits it
     rows: dict[str, dict[int, list[np.ndarray]]] = {m: {a: [] for a in AVERAGED_ACTOR_IDS} for m in METHODS}
     for frame in tqdm(sequence.frames, desc="Shelf frames"):
         result = pipeline(frame)
