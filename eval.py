@@ -99,6 +99,7 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
     write_poses3d(out_dir / cfg.output.poses3d, frames, sequence.rig.names, fill=cfg.output.fill)
     summary = {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped)}
     summary.update(inputs=dict(report.inputs), unmatched=dict(report.unmatched), timings_s=report.timings)
+    summary["noise_model"] = report.noise_model  # the self-calibrated 2D noise model in words (null: a fixed one)
     atomic_write_text(out_dir / cfg.metrics_file, json.dumps(finite(summary), indent=2))  # NaN -> null
     for protocol in sequence.protocols:
         if hasattr(protocol, "write"):  # e.g. the Shelf-14 predictions that were scored

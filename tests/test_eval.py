@@ -187,3 +187,11 @@ def test_frames_out_of_order_stop_a_tracked_run_with_one_line(tmp_path):
     with pytest.raises(eval_script.ConfigError, match="frame 1 comes after frame 2"):
         run_eval(tmp_path, files)
     run_eval(tmp_path, [*files, "tracking=off"])  # every frame on its own: any order
+
+
+def test_the_fitted_noise_model_is_reported_and_written_and_fixed_writes_null(tmp_path, capsys):
+    run_eval(tmp_path / "calibrated", ["dataset.num_frames=3"])
+    line = json.loads((tmp_path / "calibrated" / "metrics.json").read_text())["noise_model"]
+    assert line.startswith("2D noise model: self-calibrated") and line in capsys.readouterr().out
+    run_eval(tmp_path / "fixed", ["dataset.num_frames=3", "noise_model=fixed"])
+    assert json.loads((tmp_path / "fixed" / "metrics.json").read_text())["noise_model"] is None
