@@ -71,7 +71,9 @@ def test_the_frames_driver_prints_a_table_the_pairs_read(capsys):
     assert list(rows) == ["crowd 10 x 5 views"]
     stages = rows["crowd 10 x 5 views"]
     assert all(stages[s] > 0 for s in ("matching", "reconstruction", "tracking"))
-    assert stages["total"] == pytest.approx(stages["matching"] + stages["reconstruction"] + stages["tracking"], rel=0.5)
+    # each frame's total is the sum of its stages, so its median is at least each stage's median (medians of 3
+    # frames under a loaded machine are too noisy to compare with the sum of the stage medians)
+    assert stages["total"] >= max(stages["matching"], stages["reconstruction"], stages["tracking"])
     with pytest.raises(SystemExit):  # no setting of that name
         frame_times.main(["--only", "no such setting"])
 
