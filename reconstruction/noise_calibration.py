@@ -42,10 +42,7 @@ class NoiseTable:
     def log_variance(self, score: np.ndarray, box: np.ndarray, views: np.ndarray | None) -> np.ndarray:
         """log sigma^2 of joints: scores (..., J), box sizes (...,), view indices (...,) or None (camera effect 0)."""
         types = joint_types(score.shape[-1])  # a type the calibration never saw: effect 0
-        joint = self.effects[1]
-        joint = (joint if len(joint) > types.max(initial=-1) else np.pad(joint, (0, types.max() + 1 - len(joint))))[
-            types
-        ]
+        joint = np.append(self.effects[1], np.zeros(len(types)))[types]
         per_person = _step(box, self.box_edges, self.effects[3])
         if views is not None:
             cam, views = self.effects[0], np.asarray(views)
@@ -131,16 +128,9 @@ def residual_blocks(
     mix = ((np.eye(2 * V) - hat) ** 2).reshape(len(k), V, 2, V, 2).sum(axis=(2, 4))  # |(I - H)_vc|_F^2
     r2 = np.where(seen, (np.nan_to_num(r) ** 2).sum(axis=-1), 0.0)
     box = box_size(poses2d_und, np.asarray(bboxes, np.float64), poses2d_und[..., 2] > 0)[:, p[k]].T
-    return {
-        "r2": r2,
-        "mix": mix * seen[:, :, None] * seen[:, None, :],
-        "seen": seen,
-        "chi2": (w * r2).sum(axis=1),
-        "dof": 2 * seen.sum(axis=1) - 3,
-        "joint": joint_types(J)[j[k]],
-        "score": obs[:, k, 2].T,
-        "box": box,
-    }
+    seen2 = seen[:, :, None] * seen[:, None, :]
+    out = dict(r2=r2, mix=mix * seen2, seen=seen, chi2=(w * r2).sum(axis=1), dof=2 * seen.sum(axis=1) - 3)
+    return out | dict(joint=joint_types(J)[j[k]], score=obs[:, k, 2].T, box=box)
 
 
 def _information(w: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
