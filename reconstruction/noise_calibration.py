@@ -43,20 +43,17 @@ class NoiseTable:
         """log sigma^2 of joints: scores (..., J), box sizes (...,), view indices (...,) or None (camera effect 0)."""
         types = joint_types(score.shape[-1])  # a type the calibration never saw: effect 0
         joint = np.append(self.effects[1], np.zeros(len(types)))[types]
-        per_person = _step(box, self.box_edges, self.effects[3])
+        per_person = self.effects[3][np.searchsorted(self.box_edges, box, side="right")]
         if views is not None:
             cam, views = self.effects[0], np.asarray(views)
             known = (views >= 0) & (views < len(cam))
             per_person = per_person + np.where(known, cam[np.where(known, views, 0)], 0.0)
-        return self.base + joint + _step(score, self.rank_edges, self.effects[2]) + per_person[..., None]
-
-
-def _step(values: np.ndarray, edges: np.ndarray, levels: np.ndarray) -> np.ndarray:
-    """levels[searchsorted(edges, values, "right")] (...) as a sum of steps: a few comparisons beat a search."""
-    out = np.full(np.shape(values), levels[0])
-    for edge, rise in zip(edges, np.diff(levels)):
-        out += (values >= edge) * rise
-    return out
+        return (
+            self.base
+            + joint
+            + self.effects[2][np.searchsorted(self.rank_edges, score, side="right")]
+            + per_person[..., None]
+        )
 
 
 @dataclass(frozen=True)

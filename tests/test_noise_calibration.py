@@ -122,12 +122,3 @@ def test_the_default_config_calibrates_once_for_matcher_and_map():
     sigma = [median_sigma(pipeline.matcher.noise_model, sequence, v) for v in range(4)]
     assert sigma[0] < sigma[1] < sigma[2] and sigma[3] == pytest.approx(sigma[1], rel=0.2)
     assert len(pipeline(sequence.frames[0]).poses3d) == 6
-
-
-def test_the_step_lookup_equals_numpys_searchsorted_with_ties_and_edges():
-    from reconstruction.noise_calibration import _step
-
-    edges, levels = np.array([0.2, 0.4, 0.4, 0.8]), np.array([1.0, 2.0, 3.0, 4.0, 5.0])
-    values = np.random.default_rng(0).uniform(0, 1, (50, 23))
-    values[0, :5] = [0.2, 0.4, 0.8, 0.0, 1.0]
-    np.testing.assert_array_equal(_step(values, edges, levels), levels[np.searchsorted(edges, values, side="right")])
