@@ -129,6 +129,15 @@ def solver_plan(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> Plan:
     )
 
 
+@lru_cache(maxsize=32)
+def _work(num_joints: int, pairs: tuple[tuple[int, int], ...]) -> Work:
+    """The solver's scratch arrays for solver_plan(num_joints, pairs), made once (a solve overwrites what it reads)."""
+    plan = solver_plan(num_joints, pairs)
+    J, L, blocks = num_joints, len(pairs), np.empty((int(plan.slot.max()) + 1, 3, 3))
+    lin = (_linearisation(J, L), _linearisation(J, L))
+    return Work(x=np.empty((J, 3)), x_new=np.empty((J, 3)), h=np.empty((J, 3)), B=blocks, lin=lin[0], trial=lin[1])
+
+
 def _linearisation(J: int, L: int) -> Linearisation:
     """Uninitialised work arrays of one linearisation of J joints and L bones."""
     return Linearisation(D=np.empty((J, 3, 3)), g=np.empty((J, 3)), K=np.empty((L, 3, 3)), Kr=np.empty((L, 3, 3)))
@@ -162,15 +171,13 @@ def solve_poses(
     L = len(problem.bone_pairs)
     on = (np.asarray(problem.bone_weight).reshape(-1, L) > 0).any(axis=0) if L else np.zeros(0, dtype=bool)
     pairs = np.asarray(problem.bone_pairs, dtype=np.int64).reshape(-1, 2)[on]
-    plan = solver_plan(J, tuple(map(tuple, pairs.tolist())))
+    key = tuple(map(tuple, pairs.tolist()))
+    plan = solver_plan(J, key)
     C = len(plan.comp_start) - 1
     stats = SolveStats(np.zeros((P, C)), np.zeros((P, C), dtype=np.int64), np.zeros((P, C), dtype=np.int64))
     if P:
         settings = Settings(
             max_iterations=int(max_iterations), xtol=float(xtol), ftol=float(ftol), gtol=1e-10, tau=1e-3
         )
-        blocks = np.empty((int(plan.slot.max()) + 1, 3, 3))
-        lin = (_linearisation(J, len(pairs)), _linearisation(J, len(pairs)))
-        work = Work(x=np.empty((J, 3)), x_new=np.empty((J, 3)), h=np.empty((J, 3)), B=blocks, lin=lin[0], trial=lin[1])
-        pose_kernels.solve_all(X, _kernel_problem(problem, on, P), plan, settings, work, *stats)
+        pose_kernels.solve_all(X, _kernel_problem(problem, on, P), plan, settings, _work(J, key), *stats)
     return X, stats
