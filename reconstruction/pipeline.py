@@ -55,7 +55,8 @@ def gather_views(views: list[ViewDetections], assignment: np.ndarray) -> tuple[n
     have = (assignment >= 0).T[..., None]
     keypoints = np.concatenate([v.keypoints for v in views])[row]
     bboxes = np.concatenate([v.bboxes for v in views])[row]
-    poses2d = np.where(have[..., None] & np.isfinite(keypoints).all(axis=-1, keepdims=True), keypoints, 0.0)
+    finite = np.isfinite(keypoints[..., 0]) & np.isfinite(keypoints[..., 1]) & np.isfinite(keypoints[..., 2])
+    poses2d = np.where(have[..., None] & finite[..., None], keypoints, 0.0)  # not .all(-1): slow on an axis of 3
     return poses2d, np.where(have & np.isfinite(bboxes), bboxes, 0.0)
 
 
