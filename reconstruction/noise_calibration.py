@@ -41,19 +41,16 @@ class NoiseTable:
 
     def log_variance(self, score: np.ndarray, box: np.ndarray, views: np.ndarray | None) -> np.ndarray:
         """log sigma^2 of joints: scores (..., J), box sizes (...,), view indices (...,) or None (camera effect 0)."""
-        types = joint_types(score.shape[-1])  # a type the calibration never saw: effect 0
-        joint = np.append(self.effects[1], np.zeros(len(types)))[types]
+        types = joint_types(score.shape[-1])  # a type (or a camera) the calibration never saw: effect 0
+        out = self.base + np.append(self.effects[1], np.zeros(len(types)))[types]
+        out = out + self.effects[2][np.searchsorted(self.rank_edges, score, side="right")]
         per_person = self.effects[3][np.searchsorted(self.box_edges, box, side="right")]
         if views is not None:
             cam, views = self.effects[0], np.asarray(views)
-            known = (views >= 0) & (views < len(cam))
-            per_person = per_person + np.where(known, cam[np.where(known, views, 0)], 0.0)
-        return (
-            self.base
-            + joint
-            + self.effects[2][np.searchsorted(self.rank_edges, score, side="right")]
-            + per_person[..., None]
-        )
+            per_person = per_person + np.where(
+                (views >= 0) & (views < len(cam)), cam[np.clip(views, 0, len(cam) - 1)], 0
+            )
+        return out + per_person[..., None]
 
 
 @dataclass(frozen=True)
@@ -98,10 +95,7 @@ class CalibratedNoiseModel:
 def residual_blocks(
     poses2d_und: np.ndarray, bboxes: np.ndarray, proj: np.ndarray, sigma: np.ndarray, min_views: int = 3, most: int = 0
 ) -> dict[str, np.ndarray]:
-    """The K joints seen in >= min_views views, triangulated with weights 1 / sigma^2: (V, P, J, 3), (V, P, 4),
-    (V, 3, 4), SDs (V, P, J) -> {r2 (K, V) squared residuals, mix (K, V, V), seen (K, V), chi2, dof, joint (K,),
-    score, box (K, V)}; E[r2[k, v]] = sum_c mix[k, v, c] sigma_c^2 whatever the weights (mix: |(I - H)_vc|_F^2);
-    most > 0: at most that many joints, evenly spread over the candidates."""
+    """Joints seen in >= min_views views (at most ``most``): (V, P, J, 3), (V, P, 4), (V, 3, 4), (V, P, J) -> blocks."""
     V, P, J, _ = poses2d_und.shape
     finite = np.isfinite(sigma) & (poses2d_und[..., 2] > 0) & np.isfinite(poses2d_und[..., :2]).all(axis=-1)
     p, j = np.nonzero(finite.sum(axis=0) >= min_views)
@@ -125,14 +119,13 @@ def residual_blocks(
     mix = ((np.eye(2 * V) - hat) ** 2).reshape(len(k), V, 2, V, 2).sum(axis=(2, 4))  # |(I - H)_vc|_F^2
     r2 = np.where(seen, (np.nan_to_num(r) ** 2).sum(axis=-1), 0.0)
     box = box_size(poses2d_und, np.asarray(bboxes, np.float64), poses2d_und[..., 2] > 0)[:, p[k]].T
-    seen2 = seen[:, :, None] * seen[:, None, :]
+    seen2 = seen[:, :, None] * seen[:, None, :]  # blocks: (K, V) r2, seen, score, box; (K, V, V) mix; (K,) the rest
     out = dict(r2=r2, mix=mix * seen2, seen=seen, chi2=(w * r2).sum(axis=1), dof=2 * seen.sum(axis=1) - 3)
     return out | dict(joint=joint_types(J)[j[k]], score=obs[:, k, 2].T, box=box)
 
 
 def _information(w: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """sum_v w J^T J of (K, V) weights and (K, V, 2, 3) Jacobians -> (K, 3, 3) (identity where not finite or
-    singular) and which are usable (K,)."""
+    """sum_v w J^T J: (K, V), (K, V, 2, 3) -> (K, 3, 3) (identity where not finite or singular), usable (K,)."""
     J = np.nan_to_num(jac).reshape(len(w), 2 * w.shape[1], 3)
     info = (J * np.repeat(w, 2, axis=1)[..., None]).transpose(0, 2, 1) @ J
     info = np.where(np.isfinite(info), info, 0.0)
@@ -159,9 +152,7 @@ def block_codes(blocks: dict[str, np.ndarray], rank_edges: np.ndarray, box_edges
 
 
 def fit_table(blocks: dict[str, np.ndarray], rank_bins: int, box_bins: int, min_count: int) -> NoiseTable | None:
-    """The factors of the variance solved one factor at a time from the moment equations sum r2 = sum mix sigma^2
-    over each level (unbiased whatever the triangulation's weights), without the joints whose chi^2 is an outlier
-    (a swap, a mismatch); None with fewer residuals than 4 min_count."""
+    """The factors solved one at a time from sum r2 = sum mix sigma^2 per level, outlier joints out; None: too few."""
     blocks = {k: a[inliers(blocks["chi2"], blocks["dof"])] for k, a in blocks.items()}
     seen = blocks["seen"]
     if np.count_nonzero(seen) < 4 * min_count:
@@ -188,8 +179,7 @@ def fit_table(blocks: dict[str, np.ndarray], rank_bins: int, box_bins: int, min_
 
 
 def _level_factors(blocks: dict[str, np.ndarray], code: np.ndarray, var: np.ndarray, L: int, min_count: int):
-    """Multipliers (L,) of the levels' variances solving sum r2 = sum mix var over each level's residuals (levels
-    with fewer than min_count residuals: 1)."""
+    """Multipliers (L,) of the levels' variances solving sum r2 = sum mix var per level (1 under min_count)."""
     seen, (kv, kc, mix) = blocks["seen"], blocks["pairs"]
     flat = code.ravel()
     A = np.bincount(flat[kv] * L + flat[kc], mix * var.ravel()[kc], L * L).reshape(L, L)
@@ -203,8 +193,7 @@ def _level_factors(blocks: dict[str, np.ndarray], code: np.ndarray, var: np.ndar
 
 
 def inliers(chi2: np.ndarray, dof: np.ndarray, rate: float = 1e-3) -> np.ndarray:
-    """Joints whose chi^2 (K,) passes the test at ``rate`` for its dof (K,) once scaled by the robust common scale
-    (the median of chi^2 over its median under the model) -> (K,) bool."""
+    """Joints whose chi^2 (K,), over the median scale, passes the test at ``rate`` for its dof (K,) -> (K,) bool."""
     if not len(chi2):
         return np.zeros(0, dtype=bool)
     dofs, index = np.unique(dof, return_inverse=True)  # a few small integers: scipy once per value
@@ -215,8 +204,7 @@ def inliers(chi2: np.ndarray, dof: np.ndarray, rate: float = 1e-3) -> np.ndarray
 def calibrate(
     model: CalibratedNoiseModel, gathered: list[tuple[np.ndarray, np.ndarray]], proj: np.ndarray, rounds: int = 3
 ) -> tuple[CalibratedNoiseModel, dict[str, np.ndarray] | None]:
-    """Fit the model to matched frames' undistorted poses (V, P, J, 3) and boxes (V, P, 4), refitting ``rounds``
-    times with the weights of the last fit -> the fitted model (table None: too few residuals) and its blocks."""
+    """The model fitted to frames' poses (V, P, J, 3) and boxes (V, P, 4), ``rounds`` times -> model, its blocks."""
     fitted, blocks = model, None
     views, most = np.arange(len(proj))[:, None], -(-model.max_joints // max(len(gathered), 1))
     for _ in range(rounds):
@@ -230,9 +218,7 @@ def calibrate(
 
 
 def _weights(model: CalibratedNoiseModel, poses2d: np.ndarray, bboxes: np.ndarray, views: np.ndarray) -> np.ndarray:
-    """The triangulation's SDs (V, P, J): the fit's, or before one the start model's at score 1 (the raw score's
-    scale would decide the fit), floored in quadrature at half their median (a view weighted far above the others
-    pins the point to its ray, leaving its own residual no information; the equations hold for any weights)."""
+    """Weights' SDs (V, P, J): the fit's, or the start model's at score 1, floored at half their median (design.md)."""
     if model.table is None:
         poses2d = np.concatenate([poses2d[..., :2], (poses2d[..., 2:] > 0).astype(float)], axis=-1)
     sigma = model.sigma(poses2d, bboxes, views)
@@ -244,11 +230,9 @@ def describe(model: CalibratedNoiseModel, names: list[str], blocks: dict[str, np
     """The report's line on the fitted model: per camera the median sigma of its calibration joints, the factors."""
     table = model.table
     if table is None:
-        found = 0 if blocks is None else int(np.count_nonzero(blocks["seen"]))
-        return (
-            f"2D noise model: not calibrated ({found} joint residuals from persons seen in >= {model.min_views} views "
-            f"of the first {frames} frames, need {4 * model.min_count}); the start model"
-        )
+        found, need = 0 if blocks is None else int(np.count_nonzero(blocks["seen"])), 4 * model.min_count
+        where = f"persons seen in >= {model.min_views} views of the first {frames} frames"
+        return f"2D noise model: not calibrated ({found} joint residuals from {where}, need {need}); the start model"
     codes = block_codes(blocks, table.rank_edges, table.box_edges)
     sigma = np.exp(0.5 * (table.base + sum(effect[code] for effect, code in zip(table.effects, codes))))
     seen = blocks["seen"]

@@ -88,23 +88,17 @@ class MultiViewPipeline:
     def calibrate_noise(self, frames: list[Frame]) -> str | None:
         """Fit a self-calibrating 2D noise model (the stages', noise_model=calibrated) to the first frames and give
         it to both stages -> the report's line on it; None where the stages' model is fixed."""
-        model = next((s.noise_model for s in self.stages() if isinstance(s.noise_model, CalibratedNoiseModel)), None)
+        readers = [s for s in (self.matcher, self.reconstructor) if hasattr(s, "noise_model")]
+        model = next((s.noise_model for s in readers if isinstance(s.noise_model, CalibratedNoiseModel)), None)
         if model is None:
             return None
         fitted, blocks, proj = model.fitted(None), None, self.rig.projection_matrices()
-        for _ in range(model.iterations):  # match with the last fit, then fit again
-            self._give_noise_model(fitted)
-            fitted, blocks = calibrate(model, [self._matched(frame) for frame in frames[: model.frames]], proj)
-        self._give_noise_model(fitted)
+        for done in range(model.iterations + 1):  # match with the last fit (the start model first), fit; hand it on
+            for stage in readers:
+                stage.noise_model = fitted
+            if done < model.iterations:
+                fitted, blocks = calibrate(model, [self._matched(frame) for frame in frames[: model.frames]], proj)
         return describe(fitted, self.rig.names, blocks, len(frames[: model.frames]))
-
-    def stages(self) -> list[Any]:
-        """The matcher and the reconstructor where they read a 2D noise model."""
-        return [s for s in (self.matcher, self.reconstructor) if hasattr(s, "noise_model")]
-
-    def _give_noise_model(self, model: CalibratedNoiseModel) -> None:
-        for stage in self.stages():
-            stage.noise_model = model
 
     def _matched(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
         """The frame's matched persons: undistorted poses (V, P, J, 3) and boxes (V, P, 4)."""

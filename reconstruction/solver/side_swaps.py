@@ -29,9 +29,7 @@ def _exchanged(uv: np.ndarray, xy: np.ndarray, w2: np.ndarray, left, right) -> n
 
 @njit(cache=True, error_model="numpy")
 def _pair_chi2s(full, proj, poses2d, w2, left, right, given, exchanged) -> None:
-    """Chi-square of each pair (left, right) (K,) of every person in every view against the DLT full (P, J, 4), as
-    detected and exchanged: poses2d (V, P, J, 3), w2 (V, P, J) -> given, exchanged (V, P, K). A numpy version cost
-    11 % of the reconstruction stage on Shelf (one projection of every joint, then gathers)."""
+    """Chi^2 of pairs (K,) against full (P, J, 4) as detected and exchanged: (V, P, J, 3), (V, P, J) -> (V, P, K) x2."""
     for v in range(poses2d.shape[0]):
         for p in range(poses2d.shape[1]):
             for k in range(len(left)):
@@ -46,7 +44,7 @@ def _pair_chi2s(full, proj, poses2d, w2, left, right, given, exchanged) -> None:
 
 @njit(cache=True, error_model="numpy")
 def _projected(proj: np.ndarray, v: int, full: np.ndarray, p: int, j: int) -> tuple[float, float]:
-    """Pixel of joint j of person p of full (P, J, 4) in view v, its depth clamped as person_prior.project does."""
+    """Pixel of joint j of person p of full (P, J, 4) in view v, the depth clamped as person_prior.project does."""
     x, y, z = full[p, j, 0], full[p, j, 1], full[p, j, 2]
     h0 = proj[v, 0, 0] * x + proj[v, 0, 1] * y + proj[v, 0, 2] * z + proj[v, 0, 3]
     h1 = proj[v, 1, 0] * x + proj[v, 1, 1] * y + proj[v, 1, 2] * z + proj[v, 1, 3]
