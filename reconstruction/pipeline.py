@@ -92,12 +92,14 @@ class MultiViewPipeline:
         model = next((s.noise_model for s in readers if isinstance(s.noise_model, CalibratedNoiseModel)), None)
         if model is None:
             return None
-        fitted, blocks, proj = model.fitted(None), None, self.rig.projection_matrices()
-        for done in range(model.iterations + 1):  # match with the last fit (the start model first), fit; hand it on
+        model, blocks, proj = model.fitted(None), None, self.rig.projection_matrices()  # a refit starts afresh
+        fitted = model
+        for _ in range(model.iterations):  # match with the last fit (the start model first), then fit again
             for stage in readers:
                 stage.noise_model = fitted
-            if done < model.iterations:
-                fitted, blocks = calibrate(model, [self._matched(frame) for frame in frames[: model.frames]], proj)
+            fitted, blocks = calibrate(model, [self._matched(frame) for frame in frames[: model.frames]], proj)
+        for stage in readers:
+            stage.noise_model = fitted
         return describe(fitted, self.rig.names, blocks, len(frames[: model.frames]))
 
     def _matched(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
