@@ -118,7 +118,7 @@ class StartScratch(NamedTuple):
 def _inliers(inp: StartInputs, p: int, work: StartScratch) -> bool:
     """Person p's plausible known joints into work.ok, the body fitted to them into work.body -> placed."""
     points, template, proj, ok, body, buf = inp.points, inp.template, inp.proj, work.ok, work.body, work.buf
-    poses2d, m = inp.poses2d, work.m  # every field read once: reads through the tuple in a loop cost 75 %
+    poses2d, m = inp.poses2d, work.m  # every field read once, outside the loops (docs/design.md)
     J = len(template)
     shift = body[J]
     for j in range(J):  # behind a camera that sees it
