@@ -70,7 +70,7 @@ class MultiViewPipeline:
         matcher: Matcher,
         reconstructor: Reconstructor,
         tracker: Tracker | None = None,
-        coincident_m: float = 0.2,
+        coincident_m: float = 0.3,
     ) -> None:
         self.rig, self.matcher, self.reconstructor, self.tracker = rig, matcher, reconstructor, tracker
         self.coincident_m = coincident_m  # reconstruction/coincident.py; 0: off
@@ -82,7 +82,7 @@ class MultiViewPipeline:
         """The pipeline of an eval.yaml config: cfg.matching, cfg.reconstruction and, unless tracking=off (a
         group entry without ``_target_``), cfg.tracking, each built by Hydra's instantiate; cfg.coincident_m."""
         tracker = instantiate(cfg.tracking) if cfg.tracking.get("_target_") else None
-        coincident_m = cfg.get("coincident_m", 0.2)
+        coincident_m = cfg.get("coincident_m", 0.3)
         return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker, coincident_m)
 
     def calibrate_noise(self, frames: list[Frame]) -> str | None:

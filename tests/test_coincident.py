@@ -69,7 +69,7 @@ class SplittingMatcher:
         return Matches(np.array([[0, 0, -1, -1], [-1, -1, 0, 0]]), Counter())
 
 
-@pytest.mark.parametrize("coincident_m, persons", [(0.2, 1), (0.0, 2)])
+@pytest.mark.parametrize("coincident_m, persons", [(0.3, 1), (0.0, 2)])
 def test_the_pipeline_reconstructs_a_split_person_once(coincident_m, persons):
     rig = ring(4)
     uv = [np.concatenate([rig[v].project(BODY[None]), np.ones((1, 23, 1))], -1) for v in range(4)]
