@@ -104,6 +104,14 @@ CROWDPOSE14_NAMES: tuple[str, ...] = tuple(
 )
 
 BODY25_TO_COCO23 = index_map(BODY25_NAMES)
+# BlazePose's 33 landmarks (MediaPipe): its foot index (the tip of the foot) is named as the big toe; no small toe
+BLAZEPOSE33_NAMES: tuple[str, ...] = tuple(
+    "nose left_eye_inner left_eye left_eye_outer right_eye_inner right_eye right_eye_outer left_ear right_ear mouth_left"
+    " mouth_right left_shoulder right_shoulder left_elbow right_elbow left_wrist right_wrist left_pinky right_pinky"
+    " left_index right_index left_thumb right_thumb left_hip right_hip left_knee right_knee left_ankle right_ankle"
+    " left_heel right_heel left_big_toe right_big_toe".split()
+)
+BLAZEPOSE33_TO_COCO23 = index_map(BLAZEPOSE33_NAMES)
 PANOPTIC19_TO_COCO23 = index_map(PANOPTIC19_NAMES)
 SHELF14_TO_COCO23 = index_map(SHELF14_NAMES)
 CROWDPOSE14_TO_COCO23 = index_map(CROWDPOSE14_NAMES)

@@ -67,6 +67,11 @@ class Pose2DFrontEnd:
             )
         pose2d = instantiate(cfg.pose2d)
         detector = instantiate(cfg.detector) if pose2d.needs_boxes else None
+        if getattr(detector, "reads_ground_truth", False) and not any(len(v) for f in sequence.frames for v in f.views):
+            raise ConfigError(
+                "detector=gt: this dataset's frames carry no ground-truth persons (real images); choose a detector "
+                "that reads the images: detector=blazepose (offline), detector=torchvision, or detector=file"
+            )
         if hasattr(detector, "check_image_ids"):  # detector=file: every entry names an image of the dataset
             detector.check_image_ids({i for f in sequence.frames for i in (f.image_ids or [])})
         if hasattr(detector, "set_file_sizes") and sequence.coco_images:

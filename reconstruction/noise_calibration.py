@@ -164,7 +164,8 @@ def fit_table(blocks: dict[str, np.ndarray], rank_bins: int, box_bins: int, min_
     V = seen.shape[1]
     blocks["pairs"] = (k * V + v, k * V + c, blocks["mix"][k, v, c])
     base = math.log(max(float(blocks["r2"][seen].sum() / blocks["mix"].sum()), 1e-12))
-    effects = [np.zeros(int(c[seen].max()) + 1) for c in codes]
+    # every level a code can take, unseen views' included (a view's score or box can fall in a level no seen one has)
+    effects = [np.zeros(n) for n in (V, int(codes[1].max()) + 1, rank_bins, box_bins)]
     var = np.full(seen.shape, math.exp(base))
     for _ in range(SWEEPS):
         for f, code in enumerate(codes):

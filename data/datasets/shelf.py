@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import time
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from data.datasets.files import position_slice
+from data.datasets.images import read_frame_images
 from data.formats.fourd_detections import FrameCandidates, load_4dassoc_detections
 from data.formats.fourd_skeletons import load_4dassoc_skeletons
+from data.formats.image_sources import open_source
 from data.formats.poses2d_io import read_poses2d
 from data.geometry.calibration import load_4dassoc
 from data.geometry.camera import Rig
@@ -32,6 +37,8 @@ def load_shelf(
     alpha: float = 0.5,
     drop_feet: bool = False,
     grouper: Callable | None = None,  # (frame_candidates, min_paf=, min_joints=, min_mean_score=, margin=) -> views
+    images: str | None = None,  # a folder of camera images: the 2D stage runs on them instead of the detection files
+    image_pattern: str = "cam{i}.png",  # a frame's image under it: {i} view, {name} camera, {frame} Shelf frame number
 ) -> Sequence:
     """The Shelf rig (5 views), one Frame per chosen frame (index: Shelf's number); paths under root unless absolute."""
     root = Path(root)
@@ -40,8 +47,11 @@ def load_shelf(
     gts = load_4dassoc_skeletons(gt_path)
     numbers = _frame_numbers(frames, len(gts), first_frame, gt_path)
     meta = {"dataset": "shelf", "root": str(root), "first_frame": first_frame, "frames": len(numbers)}
-    stage_seconds = {}
-    if poses2d is None:
+    stage_seconds, frame_images = {}, None
+    if images is not None:
+        views, frame_images = {}, _image_reader(_under(root, images), image_pattern, rig, numbers)
+        source = f"camera images {_under(root, images) / image_pattern} (a 2D stage gives the poses)"
+    elif poses2d is None:
         folder = _under(root, detections)
         grouping = dict(min_paf=min_paf, min_joints=min_joints, min_mean_score=min_mean_score, margin=bbox_margin)
         views, stage_seconds["grouping"] = _grouped_views(folder, rig, numbers, first_frame, grouper, grouping)
@@ -58,7 +68,8 @@ def load_shelf(
     if drop_feet:
         views = {n: [without_feet(v) for v in vs] for n, vs in views.items()}
         source += "; the 6 foot keypoints removed (dataset.drop_feet)"
-    out = [Frame(n, views.get(n) or [ViewDetections.empty() for _ in rig.names]) for n in numbers]
+    empty = lambda: [ViewDetections.empty() for _ in rig.names]  # noqa: E731
+    out = [Frame(n, views.get(n) or empty(), images=frame_images and partial(frame_images, n)) for n in numbers]
     detected = sum(len(v) for f in out for v in f.views)
     description = (
         f"Shelf frames {numbers[0]}-{numbers[-1]} ({len(numbers)}), cameras "
@@ -67,6 +78,20 @@ def load_shelf(
     protocol = {"name": "shelf", "gt": {n: gts[n - first_frame] for n in numbers}, "gt_path": gt_path, "alpha": alpha}
     protocol.update(baseline_path=None if baseline is None else _under(root, baseline), first_frame=first_frame)
     return Sequence(rig, out, meta, description=description, protocol_inputs=[protocol], stage_seconds=stage_seconds)
+
+
+def _image_reader(folder: Path, pattern: str, rig: Rig, numbers: list[int]) -> Callable[[int], list[np.ndarray]]:
+    """frame number -> V images (H, W, 3) BGR at the calibration size; the first frame's files are checked now."""
+    if "{frame}" not in pattern and len(numbers) > 1:
+        raise ValueError(f"image_pattern={pattern!r} names one frame (no {{frame}}); select one with dataset.frames")
+
+    def read(number: int) -> list[np.ndarray]:
+        paths = [folder / pattern.format(i=v, name=name, frame=number) for v, name in enumerate(rig.names)]
+        return read_frame_images([open_source(p) for p in paths], [0] * len(paths), [c.size for c in rig])
+
+    for v, name in enumerate(rig.names):  # a missing or unreadable image stops the run now, naming it
+        open_source(folder / pattern.format(i=v, name=name, frame=numbers[0]))
+    return read
 
 
 def without_feet(view: ViewDetections) -> ViewDetections:

@@ -13,6 +13,7 @@ from data.geometry.camera import Camera, Rig
 from data.keypoints import LIMBS
 
 GT_COLOR = (0, 0, 0)  # ground truth over images: thin black lines
+DETECTION_COLOR = (255, 255, 255)  # the 2D detections the 3D came from: thin white lines
 CANVAS_GREY = 200  # background where a view has no image
 UNMATCHED_COLOR = (0.55, 0.55, 0.55)
 _SHIFT = 4  # cv2 sub-pixel bits: coordinates are drawn at 1/16 px
@@ -78,18 +79,25 @@ def draw_reprojections(
     poses3d: np.ndarray,
     image_scale: list[tuple[float, float]] | None = None,
     gt_poses: np.ndarray | None = None,
+    detections: list[np.ndarray] | None = None,
 ) -> list[np.ndarray]:
-    """3D poses (P, J, 4) reprojected (with distortion) over V images -> V RGB (H, W, 3); GT (G, J, 4) in thin black."""
+    """3D poses (P, J, 4) reprojected (with distortion) over V images -> V RGB (H, W, 3); GT (G, J, 4) in thin black,
+    each view's 2D detections (N, J, 3) in thin white."""
     poses3d = np.asarray(poses3d, dtype=np.float64)
     colors = [_rgb255(c) for c in person_colors(len(poses3d))]
     scales = image_scale if image_scale is not None else [(1.0, 1.0)] * len(rig)
     if len(images) != len(rig) or len(scales) != len(rig):
         raise ValueError(f"{len(images)} images and {len(scales)} scales for a rig of {len(rig)} cameras")
     out = []
-    for camera, image, scale in zip(rig, images, scales):
+    for v, (camera, image, scale) in enumerate(zip(rig, images, scales)):
         canvas = _canvas(image, camera)
         size = min(canvas.shape[:2])
         thick, radius = max(1, round(size / 300)), max(2, round(size / 200))
+        for pose in () if detections is None else np.asarray(detections[v], dtype=np.float64):
+            uv = pose[:, :2] * np.asarray(scale)
+            draw_skeleton(
+                canvas, uv, (pose[:, 2] > 0) & np.isfinite(uv).all(axis=1), DETECTION_COLOR, max(1, thick // 2), 1
+            )
         for pose in () if gt_poses is None else np.asarray(gt_poses, dtype=np.float64):
             draw_skeleton(canvas, *project_skeleton(camera, pose, scale), GT_COLOR, max(1, thick // 2), 0)
         for pose, color in zip(poses3d, colors):

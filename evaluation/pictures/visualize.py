@@ -52,7 +52,8 @@ def save_frame_pictures(
     if len(frame.views) != len(rig):
         raise ValueError(f"frame {frame.index} has {len(frame.views)} views, the rig {len(rig)}")
     poses, gt = np.asarray(result.poses3d, dtype=np.float64), frame.gt_poses
-    drawn = draw_reprojections(images if images is not None else [None] * len(rig), rig, poses, image_scale, gt)
+    images = images if images is not None else [None] * len(rig)
+    drawn = draw_reprojections(images, rig, poses, image_scale, gt, [view.keypoints for view in frame.views])
     paths = [write_png(out_dir / f"frame_{n}_views.png", image_png(image_grid(drawn, rig.names)))]
     title = f"frame {n}: {len(poses)} estimated" + ("" if gt is None else f", {len(gt)} ground-truth persons")
     paths.append(write_png(out_dir / f"frame_{n}_3d.png", figure_png(plot_scene_3d(poses, gt, rig, title))))

@@ -13,6 +13,7 @@ class GroundTruthDetector:
     """``frame.views[v].bboxes`` as person boxes, score 1, optionally jittered reproducibly per (seed, frame, view)."""
 
     needs_images = False
+    reads_ground_truth = True  # a dataset without ground-truth persons (real images) cannot feed it
 
     def __init__(self, jitter: float = 0.0, jitter_clip: float = 3.0, min_joints: int = 1, seed: int = 0) -> None:
         if not (is_number(jitter) and jitter >= 0):
