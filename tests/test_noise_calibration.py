@@ -122,3 +122,28 @@ def test_the_default_config_calibrates_once_for_matcher_and_map():
     sigma = [median_sigma(pipeline.matcher.noise_model, sequence, v) for v in range(4)]
     assert sigma[0] < sigma[1] < sigma[2] and sigma[3] == pytest.approx(sigma[1], rel=0.2)
     assert len(pipeline(sequence.frames[0]).poses3d) == 6
+
+
+def test_a_level_only_unseen_views_reach_is_no_error():
+    """fit_table: a camera none of whose views is seen (e.g. 1 frame, nobody in its view) keeps the fit working."""
+    from reconstruction.noise_calibration import fit_table
+
+    rng = np.random.default_rng(0)
+    K, V = 400, 4
+    seen = np.ones((K, V), bool)
+    seen[:, 3] = False  # camera 3 sees none of the joints
+    score = np.where(seen, rng.uniform(0.2, 0.6, (K, V)), 0.0)
+    mix = np.where(seen[:, :, None] & seen[:, None, :], 0.3, 0.0)
+    r2 = np.where(seen, rng.chisquare(2, (K, V)) * 4.0, 0.0)
+    blocks = dict(r2=r2, mix=mix, seen=seen, chi2=np.full(K, 3.0), dof=2 * seen.sum(axis=1) - 3)
+    blocks |= dict(joint=np.zeros(K, int), score=score, box=np.where(seen, rng.uniform(50, 200, (K, V)), np.nan))
+    table = fit_table(blocks, rank_bins=5, box_bins=4, min_count=10)
+    assert table is not None
+    assert [len(e) for e in table.effects] == [V, 1, 5, 4]
+    # the seen cameras' fit is the one without the empty camera
+    without = {k: (a[:, :3, :3] if k == "mix" else a[:, :3] if a.ndim == 2 else a) for k, a in blocks.items()}
+    without["dof"] = 2 * without["seen"].sum(axis=1) - 3
+    reference = fit_table(without, rank_bins=5, box_bins=4, min_count=10)
+    assert table.base == pytest.approx(reference.base)
+    np.testing.assert_allclose(table.effects[0][:3], reference.effects[0])
+    assert np.all(np.isfinite(np.concatenate(table.effects)))

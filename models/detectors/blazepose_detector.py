@@ -35,8 +35,7 @@ def tiles(width: int, height: int, grids: tuple[int, ...], overlap: float) -> np
     for n in grids:
         side = round(max(width, height) / n * (1 + overlap if n > 1 else 1))
         steps = [
-            0 if extent <= side * 1.05 else int(np.ceil((extent - side) * (1 + overlap) / side))
-            for extent in (width, height)
+            0 if extent <= side else int(np.ceil((extent - side) * (1 + overlap) / side)) for extent in (width, height)
         ]
         xs, ys = (np.linspace(0, e - side, k + 1) if k else [(e - side) / 2] for e, k in zip((width, height), steps))
         out += [(round(x), round(y), side) for y in ys for x in xs]
