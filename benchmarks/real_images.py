@@ -90,14 +90,15 @@ def coco_table(root: Path, checkpoint: str | None) -> str:
     from models.detectors.blazepose_detector import BlazePoseDetector
 
     records = load_coco_wholebody(root / "test_coco_wholebody.json", root)
-    models = {"blazepose (flip test)": BlazePose()}
+    models = {"blazepose (flip test)": BlazePose(), "blazepose, no flip test": BlazePose(flip_test=False)}
     if checkpoint:
         from models.sppe_stage import SppeStage
 
         models[f"sppe {Path(checkpoint).name}"] = SppeStage(checkpoint, device="cpu")
     rows = []
     for name, stage in models.items():
-        for boxes, detector in (("ground truth", None), ("detector=blazepose", BlazePoseDetector())):
+        box_sources = (("ground truth", None), ("detector=blazepose", BlazePoseDetector()))
+        for boxes, detector in box_sources if "no flip" not in name else box_sources[:1]:
             predictions, t_det, t_pose = coco_predictions(stage, detector, records)
             ap = [evaluate_keypoints(records, predictions, s) for s in ("all", "body", "foot")]
             rows.append([name, boxes, *(a["AP"] for a in ap), ap[1]["AR"], t_det / len(records), t_pose / len(records)])

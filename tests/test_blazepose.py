@@ -160,3 +160,16 @@ def test_shelf_real_images_to_3d_within_10_pcp_of_the_shipped_openpose(shared_da
         assert found[1]["frames"] == found[3]["frames"] == 1, name
     openpose, images = pcp.values()
     assert images >= openpose - 10, pcp
+    # dataset=images on the same files and calibration (README's command) gives the same 3D poses
+    shelf = f"{shared_data}/shelf"
+    plain = run_report(
+        [
+            "dataset=images",
+            f"dataset.cameras={shelf}/4d_association/calibration.json",
+            f"dataset.images={shelf}/images_000572",
+            "dataset.pattern='cam{i}.png'",
+            "pose2d=blazepose",
+            "detector=blazepose",
+        ]
+    )
+    np.testing.assert_array_equal(plain.results[0].poses3d, report.results[0].poses3d)
