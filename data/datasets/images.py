@@ -16,7 +16,14 @@ import numpy as np
 
 from data.datasets.files import frame_list, frame_range
 from data.formats.atomic_io import atomic_write_text
-from data.formats.image_sources import IMAGE_SUFFIXES, VIDEO_SUFFIXES, ImageSource, ImageSourceError, open_source
+from data.formats.image_sources import (
+    IMAGE_SUFFIXES,
+    VIDEO_SUFFIXES,
+    ImageSource,
+    ImageSourceError,
+    VideoReader,
+    open_source,
+)
 from data.geometry.calibration import load_rig
 from data.geometry.camera import Camera, Rig
 from data.image_ids import coco_image_id
@@ -44,35 +51,48 @@ def load_images(
     rig = load_rig(cameras)
     sources = camera_sources(rig, images, pattern)
     table = select_frames(align_frames(sources, align), frames)
+    return image_sequence(
+        rig, sources, table, {"dataset": "images", "cameras": str(cameras), "images": images, "align": align}
+    )
+
+
+def image_sequence(
+    rig: Rig, sources: list[ImageSource], table: list[tuple[int, tuple[int, ...]]], meta: dict
+) -> Sequence:
+    """One Frame per row (frame number, positions (V,)) of ``table``: empty views, V lazy images (H, W, 3) (a video
+    read forward through one open capture), image ids (V,). meta: "dataset", "cameras", the dataset's images key."""
     sizes = [checked_size(cam, source) for cam, source in zip(rig, sources)]
-    read, sizes_wh = partial(read_frame_images, tuple(sources)), tuple(cam.size for cam in rig)
+    readers = tuple(VideoReader(s) if s.kind == "video" else s for s in sources)
+    read, sizes_wh = partial(read_frame_images, readers), tuple(cam.size for cam in rig)
     ids = lambda index: [coco_image_id(index, v, len(rig)) for v in range(len(rig))]  # noqa: E731
     empty = lambda: [ViewDetections.empty() for _ in rig]  # noqa: E731
     out = [Frame(i, empty(), images=partial(read, p, sizes_wh), image_ids=ids(i)) for i, p in table]
-    kinds = sorted({s.kind for s in sources})
+    images, kinds = meta[meta["dataset"]], "/".join(sorted({s.kind for s in sources}))
     shown = "a mapping of cameras" if isinstance(images, Mapping) else str(images)
-    listed = {k: str(v) for k, v in images.items()} if isinstance(images, Mapping) else str(images)
-    meta = {"dataset": "images", "cameras": str(cameras), "images": listed, "align": align}
+    meta[meta["dataset"]] = {str(k): str(v) for k, v in images.items()} if isinstance(images, Mapping) else str(images)
     meta["image_sizes"] = {cam.name: list(size) for cam, size in zip(rig, sizes)}
     description = (
-        f"{len(out)} frames of {len(rig)} cameras ({'/'.join(kinds)}) from {shown} "
-        f"on {cameras}, no detections, no ground truth"
+        f"{len(out)} frames of {len(rig)} cameras ({kinds}) from {shown} on {meta['cameras']}, "
+        "no detections, no ground truth"
     )
     return Sequence(rig, out, meta, description=description, coco_images=coco_images(rig, sources, table, sizes))
 
 
 # --- finding each camera's frames ---------------------------------------------------------------------
-def camera_sources(rig: Rig, images: str | Path | Mapping[str, str | Path], pattern: str | None) -> list[ImageSource]:
-    """Each camera's ImageSource (rig order): from a mapping camera -> path, or under a root folder."""
+def camera_sources(
+    rig: Rig, images: str | Path | Mapping[str, str | Path], pattern: str | None, key: str = "images"
+) -> list[ImageSource]:
+    """Each camera's ImageSource (rig order): from a mapping camera -> path (``key`` in messages), or under a root."""
     if isinstance(images, Mapping):
         if pattern is not None:
             raise ValueError(f"pattern={pattern!r}: applies to one root folder of images; a mapping gives each path")
+        images = {str(name): path for name, path in images.items()}  # dataset.videos={1:a.mp4}: int keys
         extra = sorted(set(images) - set(rig.names))
         if extra:
-            raise ValueError(f"images: camera {extra[0]!r} is not in the calibration (cameras {rig.names})")
+            raise ValueError(f"{key}: camera {extra[0]!r} is not in the calibration (cameras {rig.names})")
         missing = [name for name in rig.names if name not in images]
         if missing:
-            raise ValueError(f"images: camera {missing[0]!r} has no entry in the mapping (cameras {rig.names})")
+            raise ValueError(f"{key}: camera {missing[0]!r} has no entry in the mapping (cameras {rig.names})")
         return [open_source(images[name]) for name in rig.names]
     root = Path(images)
     if not root.is_dir():
@@ -186,7 +206,9 @@ def checked_size(camera: Camera, source: ImageSource) -> tuple[int, int]:
     return size
 
 
-def read_frame_images(sources: Seq[ImageSource], positions: Seq[int], sizes: Seq[tuple[int, int]]) -> list[np.ndarray]:
+def read_frame_images(
+    sources: Seq[ImageSource | VideoReader], positions: Seq[int], sizes: Seq[tuple[int, int]]
+) -> list[np.ndarray]:
     """Frame ``positions[v]`` of every source, as (H, W, 3) uint8 BGR rescaled to sizes[v] = (w, h)."""
     out = []
     for source, position, (w, h) in zip(sources, positions, sizes):

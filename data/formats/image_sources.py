@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import glob
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,6 +93,7 @@ def read_image(path: Path) -> np.ndarray:
 
 def _open_video(path: Path) -> cv2.VideoCapture:
     """An opened capture of the video, or ImageSourceError naming it."""
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # FFmpeg quiet (read at the first open): our line says it
     capture = cv2.VideoCapture(str(path))
     if not capture.isOpened():
         capture.release()
@@ -127,3 +129,29 @@ def read_video_frame(path: Path, index: int) -> np.ndarray:
     if not ok or image is None:
         raise ImageSourceError(f"{path}: cannot read frame {index} of this video")
     return image
+
+
+class VideoReader:
+    """A video read forward through one open capture: grab() over gaps of up to ``max_skip`` frames, else a seek."""
+
+    def __init__(self, source: ImageSource, max_skip: int = 30) -> None:
+        self.source, self.max_skip = source, max_skip
+        self.capture: cv2.VideoCapture | None = None
+        self.next = 0  # the position the capture's next read() returns
+
+    def read(self, position: int) -> np.ndarray:
+        """Frame ``position`` (0-based) as (H, W, 3) uint8 BGR; opens the video on the first call."""
+        if not 0 <= position < self.source.num_frames:
+            raise ImageSourceError(f"{self.source.path}: no frame {position} (it has {self.source.num_frames})")
+        if self.capture is None:
+            self.capture, self.next = _open_video(self.source.path), 0
+        if not 0 <= position - self.next <= self.max_skip:  # backwards or far ahead
+            self.capture.set(cv2.CAP_PROP_POS_FRAMES, position)
+            self.next = position
+        ok = all(self.capture.grab() for _ in range(position - self.next))
+        ok, image = self.capture.read() if ok else (False, None)
+        if not ok or image is None:
+            self.capture = None  # reopened by the next call
+            raise ImageSourceError(f"{self.source.path}: cannot read frame {position} of this video")
+        self.next = position + 1
+        return image

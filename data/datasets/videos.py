@@ -1,0 +1,95 @@
+"""Synchronised videos (dataset=videos): one video per camera, per-camera frame offsets, frames read as a stream."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from data.datasets.files import frame_list, frame_range
+from data.datasets.images import camera_sources, image_sequence
+from data.formats.image_sources import ImageSource, ImageSourceError
+from data.frame_inputs import InputWarning
+from data.geometry.calibration import load_rig
+from data.geometry.camera import Rig
+from data.multiview import Sequence
+
+
+class VideoLengthWarning(InputWarning):
+    """The cameras' videos differ in length after their offsets: only the frames every camera has are used."""
+
+
+def load_videos(
+    cameras: str | Path,
+    videos: str | Path | Mapping[str, str | Path],
+    offsets: Mapping[str, int] | None = None,
+    frames: list[int] | int | str | None = None,
+) -> Sequence:
+    """The rig of ``cameras`` and one Frame per selected frame f: empty views, V images (H, W, 3) read forward from
+    every camera's video at position f + offsets[camera], image ids (V,)."""
+    rig = load_rig(cameras)
+    sources = camera_sources(rig, videos, None, key="videos")
+    for source in sources:
+        if source.kind != "video":
+            raise ImageSourceError(f"{source.path}: dataset=videos reads one video per camera, this is a {source.kind}")
+    shifts = camera_offsets(rig, sources, offsets)
+    table = [(f, tuple(f + s for s in shifts)) for f in frame_numbers(rig, sources, shifts, frames)]
+    meta = {"dataset": "videos", "cameras": str(cameras), "videos": videos, "offsets": dict(zip(rig.names, shifts))}
+    return image_sequence(rig, sources, table, meta)
+
+
+def camera_offsets(rig: Rig, sources: list[ImageSource], offsets: Mapping[str, int] | None) -> list[int]:
+    """Each camera's offset (V,), 0 where not given: its frame f is its video's frame f + offset."""
+    if not isinstance(offsets, (Mapping, type(None))):
+        raise ValueError(f"offsets={offsets!r}: a mapping camera -> frames (e.g. {{{rig.names[-1]}: 3}}), or null")
+    given = {str(name): shift for name, shift in (offsets or {}).items()}
+    unknown = sorted(set(given) - set(rig.names))
+    if unknown:
+        raise ValueError(f"offsets: camera {unknown[0]!r} is not in the calibration (cameras {rig.names})")
+    out = []
+    for name, source in zip(rig.names, sources):
+        shift = given.get(name, 0)
+        if isinstance(shift, bool) or not isinstance(shift, (int, np.integer)):
+            raise ValueError(f"offsets: camera {name!r}: {shift!r} is not an int number of frames")
+        if not 0 <= shift < source.num_frames:
+            where = "before the start" if shift < 0 else "past the end"
+            raise ValueError(
+                f"offsets: camera {name!r}: {shift} puts frame 0 {where} of {source.path} ({source.num_frames} frames;"
+                " offsets count from each video's first frame, >= 0: give the other cameras positive ones)"
+            )
+        out.append(int(shift))
+    return out
+
+
+def frame_numbers(
+    rig: Rig, sources: list[ImageSource], shifts: list[int], frames: list[int] | int | str | None
+) -> list[int]:
+    """The selected frame numbers (null: all that every camera has, a warning when the lengths differ)."""
+    ends = [source.num_frames - shift for source, shift in zip(sources, shifts)]  # each camera's frames 0..end-1
+    lengths = ", ".join(f"{name!r}: {end}" for name, end in zip(rig.names, ends))
+    if frames is None:
+        if len(set(ends)) > 1:
+            warnings.warn(
+                VideoLengthWarning(
+                    f"dataset.videos: the cameras have different numbers of frames after their offsets ({lengths}):"
+                    f" frames 0..{min(ends) - 1} used, those every camera has"
+                ),
+                stacklevel=2,
+            )
+        return list(range(min(ends)))
+    if isinstance(frames, str):
+        wanted = list(frame_range(frames, min(ends)))
+    else:
+        wanted = sorted(set([int(frames)] if isinstance(frames, (int, np.integer)) else frame_list(frames)))
+    if not wanted:
+        raise ValueError(f"frames={frames!r}: selects no frame (every camera has frames 0..{min(ends) - 1})")
+    for v, end in enumerate(ends):
+        bad = next((f for f in wanted if not 0 <= f < end), None)
+        if bad is not None:
+            raise ValueError(
+                f"frames={frames!r}: camera {rig.names[v]!r} has no frame {bad} ({sources[v].path}, offset "
+                f"{shifts[v]}: frames 0..{end - 1}; frames per camera after the offsets: {lengths})"
+            )
+    return wanted
