@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from data.config_checks import fail, is_int, is_number
+from data.config_checks import ConfigError, fail, is_int, is_number
 from data.formats.coco_detections import read_coco_detections
 from data.multiview import Frame
 from models.detectors.boxes import no_boxes, with_scores
@@ -36,12 +36,12 @@ class FileDetector:
         self._file_sizes = {int(k): (int(w), int(h)) for k, (w, h) in sizes.items()}
 
     def check_image_ids(self, known: set[int]) -> None:
-        """ValueError naming the first entry (file order) whose image id is not in ``known``."""
+        """ConfigError (one line in eval.py) naming the first entry (file order) whose image id is not in ``known``."""
         for entry, image_id in enumerate(self._image_ids.tolist()):
             if image_id not in known:
-                raise ValueError(
+                raise ConfigError(
                     f"{self.path}: entry {entry}: image_id {image_id} is not an image of the dataset "
-                    f"({len(known)} known image ids)"
+                    f"({len(known)} known image ids; dataset.frames selects which)"
                 )
 
     def boxes_of(self, image_id: int) -> np.ndarray:
