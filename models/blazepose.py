@@ -140,6 +140,11 @@ class BlazePose:
                 aligned = aligned_rois(image_xy[:, HIP_CENTRE], image_xy[:, BODY_EXTENT], ROI_SCALE)
                 rois = np.split(aligned, np.cumsum([len(r) for r in rois])[:-1])
         keypoints = np.concatenate([image_xy, marks[:, :, 2:]], axis=2)[:, :NUM_LANDMARKS]
+        size = np.concatenate(
+            [np.tile(im.shape[1::-1], (len(r), 1)) for im, r in zip(images, rois)] or [np.zeros((0, 2))]
+        )
+        outside = np.any((keypoints[:, :, :2] < 0) | (keypoints[:, :, :2] >= size[:, None]), axis=2)
+        keypoints[:, :, 2] *= ~outside  # a landmark guessed beyond the image is no measurement
         return self.to_views(keypoints, presence, boxes)
 
     def to_views(self, keypoints: np.ndarray, presence: np.ndarray, boxes: list[np.ndarray]) -> list[ViewDetections]:
