@@ -9,7 +9,8 @@ Layers, bottom to top (a repo module's layer is decided by its path):
 3. the stages: ``models/`` (2D network, PAF grouping), ``reconstruction/`` (matching, solver, pipeline),
    ``tracking/``;
 4. ``evaluation/`` (metrics, protocols, pictures);
-5. entry points and tools: ``eval.py``, ``train.py``, ``benchmarks/``, ``run_folders.py``.
+5. entry points and tools: ``eval.py``, ``train.py``, ``benchmarks/``, ``run_folders.py``;
+6. ``export/`` (motion files out of poses3d.json): it may import the layers below, nothing imports it.
 
 Every import is walked with ``ast``, those inside functions included; only imports under
 ``if TYPE_CHECKING:`` (annotations, never executed) are skipped. Tests may import anything.
@@ -21,7 +22,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("data", "models", "reconstruction", "tracking", "evaluation", "benchmarks")
+PACKAGES = ("data", "models", "reconstruction", "tracking", "evaluation", "benchmarks", "export")
 # (module prefix, layer); the longest matching prefix wins
 LAYERS = (
     ("data", 1),
@@ -38,6 +39,7 @@ LAYERS = (
     ("train", 5),
     ("run_folders", 5),
     ("benchmarks", 5),
+    ("export", 6),
 )
 
 
@@ -121,6 +123,7 @@ def test_layer_of_paths() -> None:
     assert layer_of("data.datasets.shelf") == 2 and layer_of("data.pose2d") == 2
     assert layer_of("reconstruction.solver.map_solver") == 3 and layer_of("evaluation.protocols.shelf") == 4
     assert layer_of("eval") == 5 and layer_of("evaluator") is None and layer_of("numpy") is None
+    assert layer_of("export.bvh") == 6 and layer_of("exporter") is None
 
 
 def test_walker_sees_imports_inside_functions(tmp_path) -> None:
