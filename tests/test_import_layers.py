@@ -9,7 +9,7 @@ Layers, bottom to top (a repo module's layer is decided by its path):
 3. the stages: ``models/`` (2D network, PAF grouping), ``reconstruction/`` (matching, solver, pipeline),
    ``tracking/``;
 4. ``evaluation/`` (metrics, protocols, pictures);
-5. entry points and tools: ``eval.py``, ``train.py``, ``benchmarks/``, ``run_folders.py``;
+5. entry points and tools: ``eval.py``, ``train.py``, ``stream.py``, ``benchmarks/``, ``run_folders.py``;
 6. ``export/`` (motion files out of poses3d.json): it may import the layers below, nothing imports it.
 
 Every import is walked with ``ast``, those inside functions included; only imports under
@@ -38,6 +38,7 @@ LAYERS = (
     ("eval", 5),
     ("train", 5),
     ("run_folders", 5),
+    ("stream", 5),
     ("benchmarks", 5),
     ("export", 6),
 )
@@ -59,7 +60,7 @@ def module_name(path: Path) -> str:
 
 
 def repo_modules() -> list[Path]:
-    files = [ROOT / "eval.py", ROOT / "train.py", ROOT / "run_folders.py"]
+    files = [ROOT / "eval.py", ROOT / "train.py", ROOT / "run_folders.py", ROOT / "stream.py"]
     for package in PACKAGES:
         files += sorted((ROOT / package).rglob("*.py"))
     return [f for f in files if f.exists()]
