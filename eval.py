@@ -117,7 +117,7 @@ def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: Se
 def draw_pictures(
     cfg: DictConfig, out_dir: Path, sequence: Sequence, report: SequenceReport, pipeline: MultiViewPipeline
 ) -> None:
-    """Pictures of one frame (vis=true) and over time (vis_sequence=true) into out_dir/cfg.vis_dir."""
+    """Pictures of one frame (vis=true), over time (vis_sequence=true) and the rerun recording (viewer) into vis_dir."""
     if cfg.vis:
         from evaluation.pictures.visualize import save_run_pictures  # matplotlib: only for runs that draw
 
@@ -146,6 +146,11 @@ def draw_pictures(
             out_dir / cfg.vis_dir, report.results, sequence.rig, title, cfg.vis_sequence_max_mb
         )
         print("Pictures over time: " + ", ".join(str(p) for p in pictures))
+    if cfg.viewer is not None:
+        from evaluation.pictures.rerun_view import save_rerun_recording  # rerun only for runs that ask for it
+
+        path = save_rerun_recording(out_dir / cfg.vis_dir, sequence, report.results, cfg.viewer, cfg.viewer_spawn)
+        print(f"Rerun recording: {path} (open it: rerun {path})")
 
 
 def run_2d_stage(
