@@ -47,7 +47,7 @@ def test_openpose_folders_round_trip_into_a_poses2d_json_dataset_files_reads(tmp
     assert main([str(tmp_path / "openpose" / "*"), "-o", str(out), "--cameras", str(EXAMPLE / "cameras.json")]) == 0
     assert "Wrote" in capsys.readouterr().out
     seq = load_files(EXAMPLE / "cameras.json", out)
-    assert [f.index for f in seq.frames] == [100, 101, 102]
+    assert [f.index for f in seq.frames] == sorted({frame for frame, _ in poses})  # 100..139
     for frame in seq.frames:
         for v, name in enumerate(seq.rig.names):
             got = frame.views[v].keypoints

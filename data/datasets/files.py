@@ -5,7 +5,9 @@ from __future__ import annotations
 import sys
 from bisect import bisect_left, bisect_right
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Mapping
+
+import numpy as np
 
 from data.formats.poses2d_io import read_poses2d
 from data.geometry.calibration import load_rig
@@ -15,13 +17,21 @@ from data.multiview import Frame, Sequence, ViewDetections
 FRAMES_EXPECTED = "expected a list of frame numbers or 'start:stop[:step]'"
 
 
-def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str | None = None) -> Sequence:
-    """The rig of ``cameras`` and one Frame, V ViewDetections (N, 23, 3), per frame of poses2d or of ``frames``."""
+def load_files(
+    cameras: str | Path,
+    poses2d: str | Path,
+    frames: list[int] | str | None = None,
+    offsets: Mapping[str, int] | None = None,
+) -> Sequence:
+    """The rig of ``cameras`` and one Frame, V ViewDetections (N, 23, 3), per frame of poses2d or of ``frames``;
+    camera c's detections of frame f + offsets[c] are its view of frame f."""
     rig = load_rig(cameras, check=False)
+    shifts = camera_shifts(rig.names, offsets)
     if not Path(poses2d).is_file():
         raise FileNotFoundError(f"{poses2d}: poses2d.json not found")
-    views = read_poses2d(poses2d, rig.names, [c.size for c in rig])
-    check_rig(rig, cameras, views)  # load_rig ran the geometric checks; this adds the 2D poses against the rig
+    views = shifted(read_poses2d(poses2d, rig.names, [c.size for c in rig]), shifts)
+    given = {name: s for name, s in zip(rig.names, shifts) if s}
+    check_rig(rig, cameras, views, offsets=given)  # load_rig ran the geometric checks; this adds the 2D poses
     first, last = (min(views), max(views)) if views else (0, -1)
     if frames is None:
         numbers = sorted(views)
@@ -40,9 +50,34 @@ def load_files(cameras: str | Path, poses2d: str | Path, frames: list[int] | str
         "poses2d": str(poses2d),
         "frames_without_detections": len(empty),
         "frames_not_selected": len(set(views) - set(numbers)),
+        "offsets": dict(zip(rig.names, shifts)),
     }
     description = f"{poses2d} ({detections} detections; {len(empty)} frames without any) on {cameras}, no ground truth"
     return Sequence(rig, out, meta, description=description)
+
+
+def camera_shifts(names: list[str], offsets: Mapping[str, int] | None) -> list[int]:
+    """Each camera's frame offset (V,), 0 where not given; a one-line ValueError for an unknown camera or a non-int."""
+    if not isinstance(offsets, (Mapping, type(None))):
+        raise ValueError(f"offsets={offsets!r}: a mapping camera -> frames (e.g. {{{names[-1]}: 3}}), or null")
+    given = {str(name): shift for name, shift in (offsets or {}).items()}
+    unknown = sorted(set(given) - set(names))
+    if unknown:
+        raise ValueError(f"offsets: camera {unknown[0]!r} is not in the calibration (cameras {names})")
+    for name, shift in given.items():
+        if isinstance(shift, bool) or not isinstance(shift, (int, np.integer)):
+            raise ValueError(f"offsets: camera {name!r}: {shift!r} is not an int number of frames")
+    return [int(given.get(name, 0)) for name in names]
+
+
+def shifted(views: dict[int, list[ViewDetections]], shifts: list[int]) -> dict[int, list[ViewDetections]]:
+    """{frame f: V ViewDetections}, camera v's of frame f + shifts[v] as its view of frame f (empty without one)."""
+    if not any(shifts):
+        return views
+    frames = sorted({f - s for f in views for v, s in enumerate(shifts) if len(views[f][v])})
+    return {
+        f: [views[f + s][v] if f + s in views else ViewDetections.empty() for v, s in enumerate(shifts)] for f in frames
+    }
 
 
 # --- the frames setting of the dataset loaders --------------------------------------------------------

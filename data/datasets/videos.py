@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from data.datasets.files import frame_list, frame_range
+from data.datasets.files import camera_shifts, frame_list, frame_range
 from data.datasets.images import camera_sources, image_sequence
 from data.formats.image_sources import ImageSource, ImageSourceError
 from data.frame_inputs import InputWarning
@@ -42,24 +42,14 @@ def load_videos(
 
 def camera_offsets(rig: Rig, sources: list[ImageSource], offsets: Mapping[str, int] | None) -> list[int]:
     """Each camera's offset (V,), 0 where not given: its frame f is its video's frame f + offset."""
-    if not isinstance(offsets, (Mapping, type(None))):
-        raise ValueError(f"offsets={offsets!r}: a mapping camera -> frames (e.g. {{{rig.names[-1]}: 3}}), or null")
-    given = {str(name): shift for name, shift in (offsets or {}).items()}
-    unknown = sorted(set(given) - set(rig.names))
-    if unknown:
-        raise ValueError(f"offsets: camera {unknown[0]!r} is not in the calibration (cameras {rig.names})")
-    out = []
-    for name, source in zip(rig.names, sources):
-        shift = given.get(name, 0)
-        if isinstance(shift, bool) or not isinstance(shift, (int, np.integer)):
-            raise ValueError(f"offsets: camera {name!r}: {shift!r} is not an int number of frames")
+    out = camera_shifts(rig.names, offsets)
+    for name, source, shift in zip(rig.names, sources, out):
         if not 0 <= shift < source.num_frames:
             where = "before the start" if shift < 0 else "past the end"
             raise ValueError(
                 f"offsets: camera {name!r}: {shift} puts frame 0 {where} of {source.path} ({source.num_frames} frames;"
                 " offsets count from each video's first frame, >= 0: give the other cameras positive ones)"
             )
-        out.append(int(shift))
     return out
 
 

@@ -190,6 +190,16 @@ def _scene_findings(cams: list[Camera], tol: RigTolerances) -> list[Finding]:
 
 
 # --- 2D poses against the rig ------------------------------------------------------------------------
+def _nanmedian_rows(x: np.ndarray) -> np.ndarray:
+    """np.nanmedian(x, axis=1) of (P, n) -> (P,), nan for all-nan rows: 5x faster than numpy's on small rows."""
+    x = np.sort(x, axis=1)  # nan last
+    n = np.count_nonzero(~np.isnan(x), axis=1)
+    lo = np.take_along_axis(x, np.maximum(n - 1, 0)[:, None] // 2, 1)[:, 0]
+    hi = np.take_along_axis(x, n[:, None] // 2, 1)[:, 0]
+    with np.errstate(invalid="ignore"):
+        return np.where(n > 0, (lo + hi) / 2, np.nan)
+
+
 def _pair_costs(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.ndarray, min_joints: int) -> np.ndarray:
     """Median reprojection error / image diagonal of detection pairs (Na, 23, 3), (Nb, 23, 3) -> (Na, Nb), or inf."""
     Na, Nb, J = len(kp_a), len(kp_b), kp_a.shape[1]
@@ -208,9 +218,7 @@ def _pair_costs(cam_a: Camera, cam_b: Camera, kp_a: np.ndarray, kp_b: np.ndarray
     diag = np.array([np.hypot(*cam_a.size), np.hypot(*cam_b.size)])[:, None, None]
     err = np.where(front[None], err / diag, np.inf)
     err = np.where(both.reshape(1, Na * Nb, J), err, np.nan)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        cost = np.nanmedian(np.concatenate([err[0], err[1]], axis=1), axis=1).reshape(Na, Nb)
+    cost = _nanmedian_rows(np.concatenate([err[0], err[1]], axis=1)).reshape(Na, Nb)
     cost = np.minimum(np.nan_to_num(cost, nan=np.inf), _COST_CAP)
     return np.where(both.sum(-1) >= min_joints, cost, np.inf)
 
@@ -338,9 +346,15 @@ def _exchanged(cams: list[Camera], frames: list[list[np.ndarray]], M: np.ndarray
 
 
 def pose_findings(
-    rig: Rig, views_by_frame: Mapping[int, list[ViewDetections]], tol: RigTolerances = RigTolerances()
+    rig: Rig,
+    views_by_frame: Mapping[int, list[ViewDetections]],
+    tol: RigTolerances = RigTolerances(),
+    offsets: Mapping[str, int] | None = None,
 ) -> list[Finding]:
-    """Cameras whose 2D poses {frame: V ViewDetections (N, 23, 3)} do not fit the others', with the fixes."""
+    """Cameras whose 2D poses {frame: V ViewDetections (N, 23, 3)} do not fit the others' (or do shifted in time,
+    ``offsets`` the frame offsets already applied), with the fixes."""
+    from data.geometry.sync_check import sync_findings  # it builds on this module's residuals
+
     cams, frames = list(rig), _frames(views_by_frame, tol)
     M = _fit_matrix(cams, frames, tol)
     if len(cams) < 2 or np.isnan(M).all():
@@ -351,8 +365,9 @@ def pose_findings(
         what = f"median epipolar residual {_share(best)} or more, more than {tol.max_residual:.0%}"
         why = "t in other units, R camera -> world, or the 2D poses of another rig?"
         return [Finding("warning", f"the 2D poses fit no camera pair ({what}): {why}")]
-    bad = [v for v in range(len(cams)) if v not in good and _median(M[v, good]).sum() > limit]
-    if not bad and len(cams) == 3:  # exchanged 2D poses spoil every pair of 3 cameras: none to compare against
+    shifted = sync_findings(cams, views_by_frame, tol, offsets)  # {view: finding}: its misfit is a time shift
+    bad = [v for v in range(len(cams)) if v not in good and v not in shifted and _median(M[v, good]).sum() > limit]
+    if not bad and not shifted and len(cams) == 3:  # exchanged 2D poses spoil every pair of 3 cameras
         return _exchanged(cams, frames, M, tol)
     (gr, gs), out = _median(M[a, b] for a, b in combinations(good, 2)), []
     for v in bad:
@@ -360,7 +375,7 @@ def pose_findings(
         fit = f"median epipolar residual {r:.1f} px, shifted {s:.1f} px to one side; {them}: {gr:.1f} px, {gs:.1f} px"
         what = f"its 2D poses do not fit the other cameras' ({fit}): {_diagnose(cams, frames, v, good, limit, tol)}"
         out.append(Finding("warning", f"camera {cams[v].name!r}: {what}"))
-    return out
+    return out + list(shifted.values())
 
 
 # --- running the check --------------------------------------------------------------------------------
@@ -370,14 +385,16 @@ def check_rig(
     views_by_frame: Mapping[int, list[ViewDetections]] | None = None,
     tol: RigTolerances = RigTolerances(),
     warn: bool = True,
+    offsets: Mapping[str, int] | None = None,
 ) -> list[Finding]:
-    """The findings (2D ones with views_by_frame); RigError on the first error, the warnings as RigWarning if warn."""
+    """The findings (2D ones with views_by_frame, shifted by offsets); RigError on the first error, the warnings as
+    RigWarning if warn."""
     findings = rig_findings(rig, tol)
     for f in findings:
         if f.level == "error":
             raise RigError(f"{path}: {f.message}")
     if views_by_frame is not None:
-        findings += pose_findings(rig, views_by_frame, tol)
+        findings += pose_findings(rig, views_by_frame, tol, offsets)
     if warn:
         for f in findings:
             warnings.warn(f"{path}: {f.message}", RigWarning, stacklevel=2)
