@@ -17,6 +17,7 @@ from omegaconf.errors import MissingMandatoryValue
 
 from data.config_checks import ConfigError, check_bool, check_int, check_number, check_target
 from data.formats.atomic_io import atomic_write_text, exit_on_sigterm
+from data.formats.image_sources import ImageSourceError
 from data.formats.poses2d_io import Poses2DError, write_poses2d
 from data.formats.poses_io import write_poses3d
 from data.formats.strict_json import finite
@@ -196,7 +197,7 @@ def run_pose2d(cfg: DictConfig, out_dir: Path) -> dict:
     return metrics
 
 
-def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """warnings.showwarning for the run: RigWarning and InputWarning as one line 'warning: ...', others as Python prints them."""
     if issubclass(category, (RigWarning, InputWarning)):
         print(f"warning: {message}", file=sys.stderr if file is None else file)
@@ -211,11 +212,11 @@ _show_warning = warnings.showwarning
 def main(cfg: DictConfig) -> dict:
     """Hydra entry point -> the metrics (for sweeps); bad input files and config values stop with one line."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    warnings.showwarning = _one_line_warning
+    warnings.showwarning = one_line_warning
     if cfg.checkpoint:
         return run_pose2d(cfg, out_dir)
     try:
-        with one_line_errors(ConfigError, CalibrationError, Poses2DError, config=cfg):
+        with one_line_errors(ConfigError, CalibrationError, Poses2DError, ImageSourceError, config=cfg):
             return run(cfg, out_dir).metrics
     except MissingMandatoryValue as err:  # e.g. dataset=files without dataset.cameras=...
         raise SystemExit(

@@ -31,7 +31,7 @@ from data.geometry.calibration import CalibrationError, load_rig
 from data.geometry.camera import Rig
 from data.image_ids import coco_image_id
 from data.multiview import Frame, Sequence, ViewDetections
-from eval import _one_line_warning, check_config, check_sequence
+from eval import check_config, check_sequence, one_line_warning
 from models.front_end import Pose2DFrontEnd
 from reconstruction.noise_calibration import CalibratedNoiseModel
 from reconstruction.pipeline import FrameResult, MultiViewPipeline
@@ -243,10 +243,11 @@ def main(argv: list[str] | None = None) -> list[FrameResult]:
     """python -m stream [cameras=<calibration> sources=<[0,1,..] | [a.mp4,..] | folder>] [out=..] [eval.yaml keys]."""
     argv = sys.argv[1:] if argv is None else argv
     if {"-h", "--help"} & set(argv):
-        print(f"{__doc__}\nkeys: {STREAM_KEYS} and eval.yaml's (without cameras=/sources=: its dataset=, e.g. shelf)")
+        usage = "usage: python -m stream [cameras=FILE sources=[0,1,..]|FOLDER|[a.mp4,..]] [out=FILE] [quiet=true] [key=value]"
+        print(f"{usage}\n\n{__doc__}\nkeys: {STREAM_KEYS} and eval.yaml's (without cameras=/sources=: its dataset=)")
         return []
     cfg = compose_config(argv)
-    warnings.showwarning = _one_line_warning  # RigWarning, InputWarning: one line, as in eval.py
+    warnings.showwarning = one_line_warning  # RigWarning, InputWarning: one line, as in eval.py
     with one_line_errors(ConfigError, CalibrationError, Poses2DError, ImageSourceError, config=cfg):
         sequence, frames = open_frames(cfg)
         return run_stream(Pipeline.from_config(cfg, sequence), frames, cfg)
