@@ -314,7 +314,12 @@ FORMAT_MIN_KEY_OVERLAP = 0.5
 
 def detect_format(path: str | Path) -> str:
     """The calibration format name of a file or folder (see load_rig)."""
+    from data.geometry.calibration_formats import detect_file_format  # it imports this module
+
     path = Path(path)
+    other = detect_file_format(path)  # anipose TOML, EasyMocap or OpenCV YAML
+    if other is not None:
+        return other
     if path.is_dir():
         if (path / "calibrations").is_dir() or (path / "intrinsic").is_dir():
             return "wildtrack"
@@ -334,12 +339,14 @@ def detect_format(path: str | Path) -> str:
     best = max(overlap, key=overlap.get)
     if overlap[best] >= FORMAT_MIN_KEY_OVERLAP:
         return best
-    expected = "cameras.json {name: {K, dist, R, t, size}}, 4D Association, VoxelPose or Panoptic JSON"
+    expected = "cameras.json {name: {K, dist, R, t, size}}, 4D Association, VoxelPose or Panoptic JSON; or .toml, .yml"
     raise _error(path, None, None, f"cannot detect the calibration format of this file (expected {expected})")
 
 
 def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: Any) -> Rig:
     """A calibration of format fmt (a key of ``loaders``, or auto), kwargs to its loader; check: run check_rig on it."""
+    from data.geometry.calibration_formats import LOADERS  # it imports this module
+
     loaders = {
         "cameras_json": load_cameras_json,
         "4dassoc": load_4dassoc,
@@ -347,6 +354,7 @@ def load_rig(path: str | Path, fmt: str = "auto", check: bool = True, **kwargs: 
         "panoptic": load_panoptic,
         "wildtrack": load_wildtrack,
         "shelf_p": load_shelf_projections,
+        **LOADERS,
     }
     fmt = detect_format(path) if fmt == "auto" else fmt
     if fmt not in loaders:
