@@ -14,13 +14,11 @@ from data.pose2d.coco_keypoints import load_coco_wholebody
 from evaluation.report import format_table
 
 SHELF_572 = ["dataset=shelf", "dataset.frames=[572]"]
+IMAGES = ["dataset.images=images_000572", "pose2d=blazepose", "detector=blazepose"]
 SHELF_ROWS = {
     "shipped OpenPose BODY_25 detections": [],
-    "images: detector=blazepose + pose2d=blazepose": [
-        "dataset.images=images_000572",
-        "pose2d=blazepose",
-        "detector=blazepose",
-    ],
+    "images: detector=blazepose + pose2d=blazepose": IMAGES,
+    "images, without view completion": [*IMAGES, "complete_views.enabled=false"],
 }
 
 
@@ -31,7 +29,7 @@ def shelf_table() -> str:
         report = run_report(SHELF_572 + overrides)
         ours, t = report.protocols["shelf"]["ours"], report.timings
         actors, mpjpe = ours["strict"]["actors"], ours["mpjpe_mm"]["actors"]
-        two_d = [t.get(k) for k in ("images", "detector", "pose2d")]
+        two_d = [t.get(k) for k in ("images", "detector", "pose2d", "view completion")]
         rest = sum(t.get(k, 0.0) for k in ("noise calibration", "matching", "reconstruction", "tracking"))
         persons = len(report.results[0].poses3d) if report.results else 0
         rows.append(
@@ -58,6 +56,7 @@ def shelf_table() -> str:
         "images s",
         "detector s",
         "pose2d s",
+        "completion s",
         "3D s",
     ]
     text = "Shelf frame 572 (5 real views, 1032 x 776): strict Shelf PCP (alpha 0.5; actors 1 and 3, actor 2 absent), "

@@ -10,6 +10,8 @@ from hydra.utils import instantiate
 
 from data.config_checks import ConfigError
 from data.multiview import Frame, Sequence, ViewDetections
+from models.view_completion import ViewCompletion
+from reconstruction.pipeline import MultiViewPipeline
 
 PersonDetector = Callable[[list[np.ndarray], Frame], list[np.ndarray]]
 
@@ -25,12 +27,15 @@ class Pose2DSource(Protocol):
 class Pose2DFrontEnd:
     """Frame with images -> V ViewDetections (person_ids -1), timing each stage."""
 
-    def __init__(self, pose2d: Pose2DSource, detector: PersonDetector | None = None) -> None:
+    def __init__(
+        self, pose2d: Pose2DSource, detector: PersonDetector | None = None, completion: ViewCompletion | None = None
+    ) -> None:
         if pose2d.needs_boxes and detector is None:
             raise ValueError(f"{type(pose2d).__name__} needs person boxes: give it a detector")
         self.pose2d, self.detector = pose2d, detector if pose2d.needs_boxes else None
+        self.completion = completion if pose2d.needs_boxes else None
         stages = ("images", "pose2d", "detector") if self.detector is not None else ("images", "pose2d")
-        self.timings = dict.fromkeys(stages, 0.0)
+        self.timings = dict.fromkeys(stages + (("view completion",) if self.completion else ()), 0.0)
 
     def __call__(self, frame: Frame) -> list[ViewDetections]:
         """The 2D poses of every view of ``frame`` (rig order); the frame must carry images."""
@@ -47,6 +52,9 @@ class Pose2DFrontEnd:
         self.timings["pose2d"] += t3 - t2
         if self.detector is not None:
             self.timings["detector"] += t2 - t1
+        if self.completion is not None:
+            views = self.completion(frame, images, views, self.pose2d)
+            self.timings["view completion"] += time.perf_counter() - t3
         return views
 
     @classmethod
@@ -76,4 +84,10 @@ class Pose2DFrontEnd:
             detector.check_image_ids({i for f in sequence.frames for i in (f.image_ids or [])})
         if hasattr(detector, "set_file_sizes") and sequence.coco_images:
             detector.set_file_sizes({im["id"]: (im["width"], im["height"]) for im in sequence.coco_images})
-        return cls(pose2d, detector)
+        completion = None
+        if pose2d.needs_boxes and cfg.complete_views.enabled:  # a first 3D pass of each frame, without tracking
+            first_pass = MultiViewPipeline(
+                sequence.rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), None, cfg.coincident_m
+            )
+            completion = ViewCompletion(first_pass, cfg.complete_views.min_oks, cfg.complete_views.min_joints)
+        return cls(pose2d, detector, completion)
