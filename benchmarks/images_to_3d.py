@@ -85,6 +85,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rows", default=",".join(ROWS), help=f"comma-separated, of {', '.join(ROWS)}")
     parser.add_argument("--out", help="also write the table (markdown) here")
     parser.add_argument("--real", action="store_true", help="the real-image tables instead (needs requirements-models)")
+    parser.add_argument("--set", action="append", default=[], help="an eval.yaml override for every row (repeatable)")
     args = parser.parse_args(argv)
     register_resolvers()
     if args.real:
@@ -111,7 +112,7 @@ def main(argv: list[str] | None = None) -> None:
         name, overrides = ROWS[row]
         if row.startswith("sppe"):
             overrides = [*overrides, f"pose2d.checkpoint={args.checkpoint}"]
-        metrics, timings = run_row(scene + overrides)
+        metrics, timings = run_row(scene + overrides + args.set)
         table.append(table_row(name, metrics, timings, args.frames))
         print(f"{name}: done", flush=True)
     header = ["2D source", "AP all", "AP body", "AP foot", "MPJPE mm", "PCP %", "found %", "2D ms/frame", "3D ms/frame"]
