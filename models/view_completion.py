@@ -49,7 +49,9 @@ class ViewCompletion:
             if not found:
                 continue
             detected = pose2d([images[v]] * len(found), [box[None] for _, box in found])
-            kept = [best(d) for (ref, box), d in zip(found, detected) if len(d) and self.agrees(ref, box, d.keypoints[0])]
+            kept = [
+                best(d) for (ref, box), d in zip(found, detected) if len(d) and self.agrees(ref, box, d.keypoints[0])
+            ]
             if kept:
                 views[v] = concatenate([views[v], *kept])
                 self.added += len(kept)
