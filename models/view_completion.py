@@ -50,7 +50,9 @@ class ViewCompletion:
                 continue
             detected = pose2d([images[v]] * len(found), [box[None] for _, box in found])
             kept = [
-                best(d) for (ref, box), d in zip(found, detected) if len(d) and self.agrees(ref, box, d.keypoints[0])
+                best(d)
+                for (ref, box), d in zip(found, detected)
+                if len(d) and self.agrees(ref, box, d.keypoints[0]) and not self.repeats(views[v], d.keypoints[0])
             ]
             if kept:
                 views[v] = concatenate([views[v], *kept])
@@ -62,6 +64,19 @@ class ViewCompletion:
         inside = projected[:, 2] > 0
         similarity = joint_similarity(projected, pose[None], float(box[2] * box[3]), OKS_SIGMAS)[0]
         return float(similarity[inside].mean()) >= self.min_oks
+
+    def repeats(self, view: ViewDetections, pose: np.ndarray) -> bool:
+        """Whether a 2D pose (23, 3) is a detection the view holds already (OKS >= min_oks): someone else, or one the
+        first pass left unmatched."""
+        for other in view.keypoints:
+            seen = (other[:, 2] > 0) & (pose[:, 2] > 0)
+            if not seen.any():
+                continue
+            extent = np.ptp(other[seen, :2], axis=0) if seen.sum() > 1 else np.ones(2)
+            similarity = joint_similarity(other, pose[None], float(max(np.prod(extent), 1.0)), OKS_SIGMAS)[0]
+            if float(similarity[seen].mean()) >= self.min_oks:
+                return True
+        return False
 
 
 def best(view: ViewDetections) -> ViewDetections:

@@ -69,3 +69,10 @@ def test_bad_keys_name_themselves():
         ViewCompletion(None, min_oks=0)
     with pytest.raises(ValueError, match="complete_views.min_joints"):
         ViewCompletion(None, min_joints=0)
+
+
+def test_a_pose_the_view_holds_already_is_a_repeat(scene):
+    sequence, frame, views, truth = scene
+    stage = completion(sequence)
+    assert stage.repeats(frame.views[2], truth)  # the view before person 0 was removed holds them
+    assert not stage.repeats(views[2], truth)  # after: only the others
