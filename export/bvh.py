@@ -140,13 +140,31 @@ def solve(pos: np.ndarray, offsets: np.ndarray, root: np.ndarray) -> tuple[np.nd
     return rot, fk
 
 
-def _held(x: np.ndarray) -> np.ndarray:
-    """Rows with NaN replaced by the last finite row (before the first: the first): (T, 3) -> (T, 3)."""
-    ok = np.isfinite(x).all(axis=1)
+def root_positions(pos: np.ndarray) -> np.ndarray:
+    """The root (T, 3) of BVH positions (T, J, 3): the hip centre where known; else where the seen joints put it, the
+    mean over them of (joint - its offset from the hip centre in the nearest frame where both are known; never: in
+    the mean body); a frame without any joint holds the last root (before the first: the first; none: the origin)."""
+    coco = [INDEX[n] for n in NAMES if n in JOINT_INDEX]
+    root, hip, t = pos[:, 0].copy(), np.isfinite(pos[:, 0]).all(axis=1), np.arange(len(pos))
+    votes = np.full((2, len(pos), len(coco), 3), np.nan)  # from the track's own frames, from the mean body
+    for i, j in enumerate(coco):
+        ref = np.flatnonzero(np.isfinite(pos[:, j]).all(axis=1) & hip)
+        votes[1, :, i] = pos[:, j] - (_TEMPLATE[j] - _TEMPLATE[0])
+        if len(ref):
+            after = ref[np.minimum(np.searchsorted(ref, t), len(ref) - 1)]
+            before = ref[np.maximum(np.searchsorted(ref, t, side="right") - 1, 0)]
+            near = np.where(np.abs(t - before) <= np.abs(after - t), before, after)
+            votes[0, :, i] = pos[:, j] - (pos[near, j] - pos[near, 0])
+    with warnings.catch_warnings():  # frames without a vote: NaN, held below
+        warnings.simplefilter("ignore", RuntimeWarning)
+        own, body = np.nanmean(votes, axis=2)
+    guess = np.where(np.isfinite(own).all(axis=1, keepdims=True), own, body)
+    root[~hip] = guess[~hip]
+    ok = np.isfinite(root).all(axis=1)
     if not ok.any():
-        return np.zeros_like(x)
-    last = np.maximum.accumulate(np.where(ok, np.arange(len(x)), -1))
-    return x[np.where(last < 0, ok.argmax(), last)]
+        return np.zeros_like(root)
+    last = np.maximum.accumulate(np.where(ok, t, -1))
+    return root[np.where(last < 0, ok.argmax(), last)]
 
 
 def bvh_text(offsets: np.ndarray, root: np.ndarray, rot: np.ndarray, frame_time: float) -> str:
@@ -188,7 +206,7 @@ def write_bvh(tracks: list[Track], base: Path, fps: float) -> list[str]:
     for track in tracks:
         pos = bvh_positions(to_y_up(track.xyz))
         offsets = rest_offsets(pos)
-        root = _held(pos[:, 0])
+        root = root_positions(pos)
         rot, fk = solve(pos, offsets, root)
         path = track_path(base, track, "bvh")
         atomic_write_text(path, bvh_text(offsets, root, rot, track.step / fps))

@@ -40,6 +40,12 @@ UNITS_M, ROTATIONS = {"m": 1.0, "cm": 0.01, "mm": 0.001}, ("world_to_camera", "c
 # file's unit is not a room rig in metres (but mm or cm); the file must state --units.
 MAX_ORIGIN_DISTANCE = 100.0
 MAX_BASELINE = 40.0
+# Units plausibility (a RigWarning, the rule above passes small rigs in cm: a 12 cm stereo bar reads as 12 m):
+# cameras set more than PLAUSIBLE_SPREAD apart in metres surround a scene they turn to and share within
+# PLAUSIBLE_VIEW_DISTANCE (the point nearest their optical axes, mean distance: Panoptic 2.8, Shelf 3.5, Wildtrack
+# 13 m), while a stereo bar or a close-up rig in cm looks parallel (no such point in front) or converges far away.
+PLAUSIBLE_SPREAD = 2.0
+PLAUSIBLE_VIEW_DISTANCE = 30.0
 GROUND_FRAMES = 100  # the first frames of poses2d.json whose feet fit the ground
 GROUND_INLIER_M = 0.03  # a foot point this close to the plane supports it (RANSAC)
 MIN_GROUND_POINTS = 30
@@ -210,11 +216,36 @@ def _looking(rig: Rig) -> np.ndarray:
     return np.array([sees_point(c, centre, RigTolerances().scene_margin) for c in rig])
 
 
+def viewed_point(rig: Rig) -> np.ndarray | None:
+    """The point nearest the cameras' optical axes (least squares), None when they are near parallel or it lies
+    behind a camera: (3,)."""
+    C, D = np.array([c.center for c in rig]), np.array([c.R[2] for c in rig])
+    P = np.eye(3) - D[:, :, None] * D[:, None, :]  # projections across each axis
+    A = P.sum(axis=0)
+    if np.linalg.eigvalsh(A)[0] < 1e-6 * len(rig):  # axes within ~0.1 deg of parallel
+        return None
+    X = np.linalg.solve(A, np.einsum("vij,vj->i", P, C))
+    return X if np.all(np.einsum("vi,vi->v", D, X - C) > 0) else None
+
+
+def _implausible_units(rig: Rig, path: str | Path) -> None:
+    """A RigWarning when the rig's size disagrees with its own view (PLAUSIBLE_SPREAD, PLAUSIBLE_VIEW_DISTANCE)."""
+    C = np.array([c.center for c in rig])
+    spread = float(np.linalg.norm(C[:, None] - C[None], axis=-1).max())
+    X = viewed_point(rig)
+    view = np.inf if X is None else float(np.linalg.norm(C - X, axis=1).mean())
+    if len(rig) > 1 and spread > PLAUSIBLE_SPREAD and view > PLAUSIBLE_VIEW_DISTANCE:
+        seen = "their optical axes meet no point in front" if X is None else f"they view a point {view:.3g} away"
+        what = f"cameras {spread:.3g} apart and {seen}: t may be in centimetres or millimetres, not metres"
+        fix = "state --units cm|mm (or --units m) to python -m data.formats.calibration"
+        warnings.warn(f"{path}: {what}: {fix}", RigWarning, stacklevel=3)
+
+
 def orient(rig: Rig, path: str | Path, units: str | None = None, rotation: str | None = None) -> Rig:
     """The rig in metres, world -> camera, as stated (units m|cm|mm, rotation world_to_camera|camera_to_world) or,
     unstated, checked: CalibrationError when at most a third of the cameras see the centroid of the camera centres
     and all do inverted (camera -> world), or a centre lies MAX_ORIGIN_DISTANCE from the origin or MAX_BASELINE
-    from another camera (not metres)."""
+    from another camera (not metres); a RigWarning when its size disagrees with its view (_implausible_units)."""
     if units not in (None, *UNITS_M) or rotation not in (None, *ROTATIONS):
         raise CalibrationError(f"{path}: units {units!r}, rotation {rotation!r}: expected {list(UNITS_M)}, {ROTATIONS}")
     if rotation == "camera_to_world":
@@ -238,6 +269,7 @@ def orient(rig: Rig, path: str | Path, units: str | None = None, rotation: str |
             raise _error(
                 path, rig.names[v], None, f"{what}: t looks like millimetres or centimetres, not metres: {fix}"
             )
+        _implausible_units(rig, path)
     scale = UNITS_M[units or "m"]
     return rig if scale == 1 else Rig(tuple(replace(c, t=c.t * scale) for c in rig))
 
