@@ -39,7 +39,8 @@ from reconstruction.precompile import precompile
 from run_folders import one_line_errors, register_resolvers
 
 REPO = Path(__file__).resolve().parent
-STREAM_KEYS = {"cameras": None, "sources": None, "out": "poses3d.json", "quiet": False}  # beside eval.yaml's keys
+# beside eval.yaml's keys; save_every: seconds between rewrites of `out` while streaming (null: at the end only)
+STREAM_KEYS = {"cameras": None, "sources": None, "out": "poses3d.json", "quiet": False, "save_every": 10.0}
 
 
 @dataclass
@@ -199,13 +200,17 @@ def frame_line(step: StepResult, fps: float) -> str:
 def run_stream(stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig) -> list[FrameResult]:
     """Step through frames, a line per result; at the end or Ctrl-C flush; always write cfg.out atomically."""
     results: list[FrameResult] = []
-    t0 = time.perf_counter()
+    t0 = saved = time.perf_counter()
 
     def emit(steps: list[StepResult]) -> None:
+        nonlocal saved
         for step in steps:
             results.append(step.result)
             if not cfg.quiet:
                 print(frame_line(step, len(results) / (time.perf_counter() - t0)), flush=True)
+        if cfg.save_every is not None and time.perf_counter() - saved >= cfg.save_every:  # the file so far, complete
+            write_results(cfg, results, stream.pipeline.rig.names)
+            saved = time.perf_counter()
 
     try:
         try:
@@ -215,12 +220,17 @@ def run_stream(stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig) -> li
             print(f"stopped (Ctrl-C) after {len(results) + len(stream.buffer)} frames", file=sys.stderr)
         emit(stream.flush())
     finally:  # an error or SIGTERM: the frames emitted so far
-        if cfg.out is not None:
-            rows = ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in results)
-            write_poses3d(cfg.out, rows, stream.pipeline.rig.names, fill=cfg.output.fill)
+        write_results(cfg, results, stream.pipeline.rig.names)
     fps = len(results) / max(time.perf_counter() - t0, 1e-9)
     print(f"{len(results)} frames, {fps:.1f} frame/s" + (f"; wrote {cfg.out}" if cfg.out is not None else ""))
     return results
+
+
+def write_results(cfg: DictConfig, results: list[FrameResult], names: list[str]) -> None:
+    """Every result so far into cfg.out (poses3d.json, atomically); nothing when out is null."""
+    if cfg.out is not None:
+        rows = ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in results)
+        write_poses3d(cfg.out, rows, names, fill=cfg.output.fill)
 
 
 def compose_config(argv: list[str]) -> DictConfig:
@@ -249,8 +259,13 @@ def main(argv: list[str] | None = None) -> list[FrameResult]:
     cfg = compose_config(argv)
     warnings.showwarning = one_line_warning  # RigWarning, InputWarning: one line, as in eval.py
     with one_line_errors(ConfigError, CalibrationError, Poses2DError, ImageSourceError, config=cfg):
-        sequence, frames = open_frames(cfg)
-        return run_stream(Pipeline.from_config(cfg, sequence), frames, cfg)
+        try:
+            sequence, frames = open_frames(cfg)
+            stream = Pipeline.from_config(cfg, sequence)
+        except KeyboardInterrupt:  # while loading models or opening cameras
+            print("stopped (Ctrl-C) before the first frame; nothing written", file=sys.stderr)
+            raise SystemExit(130) from None
+        return run_stream(stream, frames, cfg)
 
 
 if __name__ == "__main__":

@@ -156,3 +156,23 @@ def test_python_m_stream_runs_from_the_repository_root(tmp_path):
         bad.returncode == 1
         and bad.stderr == "error: cameras= and sources= go together: a calibration and one source per camera\n"
     )
+
+
+def test_the_file_is_rewritten_while_streaming(monkeypatch, tmp_path):
+    cfg = config("dataset.num_frames=6", "noise_model=fixed")
+    sequence = instantiate(cfg.dataset, _convert_="all")
+    out, seen = tmp_path / "live.json", []
+
+    def watched(frames):  # records how many frames the file holds before each new frame arrives
+        for frame in frames:
+            seen.append(len(json.loads(out.read_text())["frames"]) if out.exists() else 0)
+            yield frame
+
+    monkeypatch.setattr(stream, "open_frames", lambda cfg: (sequence, watched(sequence.frames)))
+    stream.main([f"out={out}", "dataset.num_frames=6", "noise_model=fixed", "save_every=0", "quiet=true"])
+    assert seen == [0, 1, 2, 3, 4, 5]  # each frame was on disk before the next one came
+    with_end_only = tmp_path / "end.json"
+    seen.clear()
+    out = with_end_only
+    stream.main([f"out={out}", "dataset.num_frames=6", "noise_model=fixed", "save_every=null", "quiet=true"])
+    assert seen == [0] * 6 and len(json.loads(out.read_text())["frames"]) == 6
