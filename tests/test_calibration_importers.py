@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -12,13 +13,13 @@ import pytest
 
 from data.formats.calibration import main
 from data.formats.poses2d_io import write_poses2d
-from data.geometry.calibration import CalibrationError, detect_format, load_rig
-from data.geometry.calibration_formats import fit_ground, load_anipose, load_easymocap, load_opencv
-from data.geometry.camera import Rig
+from data.geometry.calibration import SHELF_SIZE, CalibrationError, detect_format, load_rig
+from data.geometry.calibration_formats import fit_ground, load_anipose, load_easymocap, load_opencv, orient
+from data.geometry.camera import Camera, Rig
 from data.geometry.check_rig import RigWarning
 from data.multiview import ViewDetections
 from data.synthetic.body import mean_body, pose_joints
-from data.synthetic.rigs import ring_rig
+from data.synthetic.rigs import look_at_camera, ring_rig
 
 DIST = np.array([-0.12, 0.05, 0.001, -0.0005, 0.0])
 
@@ -130,6 +131,116 @@ def test_opencv_stereo_and_calibrate_round_trip(tmp_path: Path) -> None:
     one = load_rig(single, check=False)
     assert detect_format(single) == "opencv" and one.names == ["cam_left"] and one[0].size == (1280, 720)
     np.testing.assert_allclose(one[0].project(a.world_to_camera(points)), a.project(points), atol=0.01, rtol=0)
+
+
+def _shelf_rig(distortion: bool) -> Rig:
+    """_rig() at Shelf's image size (the VoxelPose and P-matrix files state none), cameras "0".."3"."""
+    return Rig(tuple(replace(c, name=str(i), size=SHELF_SIZE, dist=c.dist * distortion) for i, c in enumerate(_rig())))
+
+
+def _read_back(path: Path, fmt: str, rig: Rig, tmp_path: Path) -> None:
+    """path is detected as fmt and reads back to rig within 0.01 px, through load_rig and through the command line."""
+    points, out = _points(), tmp_path / f"{fmt}_cameras.json"
+    assert detect_format(path) == fmt
+    _same(load_rig(path), rig, points)
+    assert main([str(path), "-o", str(out)]) == 0
+    _same(load_rig(out), rig, points)
+
+
+def test_voxelpose_round_trip(tmp_path: Path) -> None:
+    # VoxelPose (lib/utils/cameras.py project_point_radial): x_cam = R (X - T), T (3x1) the centre in mm; fx fy cx
+    # cy scalars; k (3x1) k1 k2 k3, p (2x1) p1 p2 as OpenCV's; keys "0".. in any order; no image size.
+    rig, points = _shelf_rig(distortion=True), _points()
+    cams = {}
+    for c in reversed(list(rig)):  # numeric order, not file order
+        k, p = c.dist[[0, 1, 4]], c.dist[[2, 3]]
+        cams[c.name] = {"R": c.R.tolist(), "T": (1000 * c.center)[:, None].tolist(), "k": k[:, None].tolist()}
+        cams[c.name] |= {"p": p[:, None].tolist(), "fx": c.K[0, 0], "fy": c.K[1, 1], "cx": c.K[0, 2], "cy": c.K[1, 2]}
+    for c in rig:  # the file as VoxelPose projects it (points in mm), independent of the loader
+        e = {key: np.array(v, dtype=float) for key, v in cams[c.name].items()}
+        y = e["R"] @ (1000 * points.T - e["T"])
+        y = y[:2] / y[2]
+        r2 = np.sum(y**2, axis=0)
+        radial = 1 + e["k"][:, 0] @ np.stack([r2, r2**2, r2**3])
+        y = y * (radial + 2 * (e["p"][0] * y[1] + e["p"][1] * y[0])) + np.outer(e["p"][::-1, 0], r2)
+        uv = y * [[e["fx"]], [e["fy"]]] + [[e["cx"]], [e["cy"]]]
+        np.testing.assert_allclose(uv.T, c.project(points), atol=0.01, rtol=0)
+    path = tmp_path / "calibration_shelf.json"
+    path.write_text(json.dumps(cams))
+    _read_back(path, "voxelpose", rig, tmp_path)
+
+
+def test_shelf_projection_matrices_round_trip(tmp_path: Path) -> None:
+    # Shelf / Campus Calibration/P{i}.txt: 3 lines of 4 comma-separated numbers, P = K [R | t], metres, no
+    # distortion; a projection matrix is defined up to scale (P2 written times -0.5 projects alike).
+    rig, points = _shelf_rig(distortion=False), _points()
+    folder = tmp_path / "Calibration"
+    folder.mkdir()
+    for i, c in enumerate(rig):
+        P = c.K @ np.column_stack([c.R, c.t]) * (-0.5 if i == 2 else 1.0)
+        uv = np.column_stack([points, np.ones(len(points))]) @ P.T
+        np.testing.assert_allclose(uv[:, :2] / uv[:, 2:], c.project(points), atol=0.01, rtol=0)
+        (folder / f"P{c.name}.txt").write_text("".join(",".join(map(repr, row)) + "\n" for row in P.tolist()))
+    (folder / "Camera0.cal").write_text("not read\n")
+    _read_back(folder, "shelf_p", rig, tmp_path)
+
+
+def test_panoptic_round_trip(tmp_path: Path) -> None:
+    # CMU Panoptic calibration_<seq>.json: cameras [{name, type, resolution, K, distCoef (OpenCV 5), R, t (3x1)}],
+    # x_cam = R x + t with x in cm, y down: x_pan = 100 M^T x_ours (M = _PANOPTIC_M) so R = R_ours M, t = 100 t_ours.
+    rig, points = Rig(tuple(replace(c, name=f"00_{i:02d}") for i, c in enumerate(_rig()))), _points()
+    M = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+    cams = [{"name": "01_01", "type": "vga", "resolution": [640, 480], **_panoptic_entry(rig[0], M)}]
+    cams += [{"name": c.name, "type": "hd", "resolution": list(c.size), **_panoptic_entry(c, M)} for c in rig]
+    for c, e in zip(rig, cams[1:]):  # the file as the Panoptic toolbox projects it (cv2.projectPoints on cm points)
+        R, t, K, dist = (np.array(e[key], dtype=float) for key in ("R", "t", "K", "distCoef"))
+        uv = cv2.projectPoints(100 * points @ M, cv2.Rodrigues(R)[0], t, K, dist)[0][:, 0]
+        np.testing.assert_allclose(uv, c.project(points), atol=0.01, rtol=0)
+    path = tmp_path / "calibration_seq.json"
+    path.write_text(json.dumps({"calibDataSource": "synthetic", "cameras": cams}))
+    _read_back(path, "panoptic", rig, tmp_path)
+
+
+def _panoptic_entry(c: Camera, M: np.ndarray) -> dict:
+    """One camera's K, distCoef, R, t in Panoptic's convention (test_panoptic_round_trip)."""
+    return {"K": c.K.tolist(), "distCoef": c.dist.tolist(), "R": (c.R @ M).tolist(), "t": (100 * c.t)[:, None].tolist()}
+
+
+def _units_warnings(caught: list) -> list[str]:
+    """The messages of the units plausibility warnings among caught warnings."""
+    return [str(w.message) for w in caught if "--units" in str(w.message)]
+
+
+def _stereo_bar(toe_in: bool) -> Rig:
+    """Two cameras 12 cm apart about the origin (as stereoCalibrate's) looking along +y: parallel, or converging
+    1.5 m ahead (toe_in)."""
+    ahead = lambda x: (0.0, 1.5, 0.0) if toe_in else (x, 10.0, 0.0)
+    return Rig(
+        tuple(look_at_camera(n, (x, 0.0, 0.0), ahead(x), (1280, 720), 1000.0) for n, x in (("L", -0.06), ("R", 0.06)))
+    )
+
+
+def test_small_rig_in_centimetres_warns(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    points = _points() * 0.2 + [0.0, 2.5, -0.2]  # in front of the bar
+    for toe_in in (False, True):
+        bar = _stereo_bar(toe_in)
+        cm = _write_anipose(bar, tmp_path / f"stereo_{toe_in}.toml", scale=100.0)  # 12 cm written in cm: "12 m"
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            load_rig(cm, check=False)
+        (message,) = _units_warnings(caught)
+        assert message.startswith(f"{cm}: cameras 12 apart and ") and "centimetres" in message and "\n" not in message
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RigWarning)
+            _same(load_rig(cm, check=False, units="cm"), bar, points)  # stated: read in cm, no warning
+        assert main([str(cm), "-o", str(tmp_path / "cameras.json")]) == 0  # a warning, not an error
+        assert f"warning: {message}" in capsys.readouterr().out.splitlines()
+    metres = [_stereo_bar(False), _stereo_bar(True), _rig(), ring_rig(6, 3.0, 2.5)]  # the bars, 6 m and 3 m rings
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for i, rig in enumerate(metres):
+            orient(rig, f"rig{i}.toml")
+    assert not _units_warnings(caught)
 
 
 def test_camera_to_world_and_millimetres_are_named(tmp_path: Path) -> None:
@@ -257,7 +368,11 @@ def test_cli_reaches_the_dataset_formats(shared_data: Path, tmp_path: Path, name
     assert main([str(shared_data / name), "-o", str(out)]) == 0
     _same(load_rig(out), rig, _points())
     assert list(json.loads(out.read_text())) == rig.names
-    # the real rig as anipose TOML: no rule fires as it is; written camera -> world, the rotation rule names it
-    _same(load_rig(_write_anipose(rig, tmp_path / "w2c.toml")), rig, _points())
+    # the real rig as anipose TOML: no rule fires (the units warning neither) as it is; written camera -> world,
+    # the rotation rule names it
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _same(load_rig(_write_anipose(rig, tmp_path / "w2c.toml")), rig, _points())
+    assert not _units_warnings(caught)
     with pytest.raises(CalibrationError, match=r"w.toml: camera '.+': R, t look like camera -> world"):
         load_rig(_write_anipose(rig, tmp_path / "c2w.toml", inverted=True))
