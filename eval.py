@@ -51,8 +51,14 @@ def check_config(cfg: DictConfig) -> None:
         check_number(cfg, key)
     check_number(cfg, "coincident_m", 0.0, strict=False)
     check_int(cfg, "vis_frame", 0, nullable=True)
-    for key in ("vis", "vis_sequence", "progress", "overwrite", "output.fill"):
+    for key in ("vis", "vis_sequence", "progress", "overwrite", "output.fill", "viewer_spawn"):
         check_bool(cfg, key)
+    if cfg.viewer is not None:  # before the frames run, not after
+        from evaluation.pictures.rerun_view import import_rerun
+
+        if cfg.viewer != "rerun":
+            raise ConfigError(f"viewer={cfg.viewer!r}: must be null or rerun (the HTML viewer: vis_sequence=true)")
+        import_rerun()
 
 
 def check_sequence(cfg: DictConfig, sequence: Sequence) -> None:

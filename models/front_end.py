@@ -64,8 +64,9 @@ class Pose2DFrontEnd:
         if not cfg.pose2d.get("_target_"):
             if has_images and not any(len(v) for f in sequence.frames for v in f.views):
                 raise ConfigError(
-                    "pose2d=none: the dataset gives images, not 2D poses; choose a 2D stage: pose2d=sppe "
-                    "pose2d.checkpoint=<train.py checkpoint> [detector=gt|file|torchvision], or pose2d=keypointrcnn"
+                    "pose2d=none: the dataset gives images, not 2D poses; choose a 2D stage: pose2d=blazepose "
+                    "detector=blazepose (offline: pip install --no-deps -r requirements-models.txt), pose2d=sppe "
+                    "pose2d.checkpoint=<train.py checkpoint> [detector=gt|file|torchvision|blazepose], or pose2d=keypointrcnn"
                 )
             return None
         if not has_images:

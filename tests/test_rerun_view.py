@@ -104,7 +104,7 @@ def test_without_the_package_the_run_stops_with_one_line_naming_pip(tmp_path, mo
     monkeypatch.setitem(sys.modules, "rerun", None)  # import rerun raises ImportError
     with pytest.raises(ConfigError, match="pip install rerun-sdk") as err:
         run_eval(tmp_path, SMALL)
-    assert "\n" not in str(err.value) and (tmp_path / "poses3d.json").exists()  # the outputs are written
+    assert "\n" not in str(err.value) and not (tmp_path / "poses3d.json").exists()  # stopped before the frames ran
 
 
 @pytest.mark.parametrize(
@@ -113,3 +113,6 @@ def test_without_the_package_the_run_stops_with_one_line_naming_pip(tmp_path, mo
 def test_a_bad_viewer_value_names_its_key(tmp_path, viewer, spawn, key):
     with pytest.raises(ConfigError, match=key):
         save_rerun_recording(tmp_path, None, [], viewer, spawn)
+    with pytest.raises(ConfigError, match=key):  # eval.py checks it before the frames run
+        run_eval(tmp_path, [*SMALL, f"viewer={viewer}", f"viewer_spawn={spawn}"])
+    assert not (tmp_path / "poses3d.json").exists()

@@ -35,8 +35,7 @@ def import_rerun() -> ModuleType:
         import rerun
     except ImportError:
         raise ConfigError(
-            "viewer=rerun: the rerun SDK is not installed: pip install rerun-sdk (or viewer=null); no recording "
-            "written (the outputs and the report above are)"
+            "viewer=rerun: the rerun SDK is not installed: pip install rerun-sdk (or viewer=null)"
         ) from None
     return rerun
 
