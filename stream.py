@@ -139,7 +139,14 @@ class Camera:
     """A live camera, cv2.VideoCapture(index), with VideoReader's read(position): its next image (H, W, 3)."""
 
     def __init__(self, index: int) -> None:
-        self.capture = cv2.VideoCapture(index)
+        level = cv2.utils.logging.getLogLevel()
+        cv2.utils.logging.setLogLevel(
+            cv2.utils.logging.LOG_LEVEL_ERROR
+        )  # a missing camera: our one line, not its WARNs
+        try:
+            self.capture = cv2.VideoCapture(index)
+        finally:
+            cv2.utils.logging.setLogLevel(level)
         if not self.capture.isOpened():
             raise ImageSourceError(f"camera {index}: cv2.VideoCapture({index}) cannot open it")
 

@@ -11,7 +11,9 @@ import numpy as np
 from benchmarks.images_to_3d import run_report
 from data.pose2d.coco_eval import evaluate_keypoints
 from data.pose2d.coco_keypoints import load_coco_wholebody
+from data.pose2d.records import ImageRecord
 from evaluation.report import format_table
+from models.front_end import PersonDetector, Pose2DSource
 
 SHELF_572 = ["dataset=shelf", "dataset.frames=[572]"]
 IMAGES = ["dataset.images=images_000572", "pose2d=blazepose", "detector=blazepose"]
@@ -66,7 +68,9 @@ def shelf_table() -> str:
     )
 
 
-def coco_predictions(stage, detector, records) -> tuple[list[dict], float, float]:
+def coco_predictions(
+    stage: Pose2DSource, detector: PersonDetector | None, records: list[ImageRecord]
+) -> tuple[list[dict], float, float]:
     """COCO results of a pose stage on every record (ground-truth boxes, or the detector's), detector and pose s."""
     out, t_det, t_pose = [], 0.0, 0.0
     for record in records:

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
+from omegaconf import DictConfig
 
 import eval as eval_script
 import stream
@@ -20,7 +21,7 @@ from evaluation.report import format_table
 from run_folders import register_resolvers
 
 
-def stream_times(cfg) -> tuple[dict[str, list[float]], list[float], float, int, float]:
+def stream_times(cfg: DictConfig) -> tuple[dict[str, list[float]], list[float], float, int, float]:
     """Stream cfg's dataset: ({stage: ms per frame after the warm-up}, step() ms after it, ms of the warm-up's step,
     warm-up frames, Shelf's PAF grouping (done while loading) in mean ms per frame)."""
     sequence = instantiate(cfg.dataset, _convert_="all")
@@ -41,7 +42,7 @@ def stream_times(cfg) -> tuple[dict[str, list[float]], list[float], float, int, 
     return stages, steps, warm_up, stream.warmup_frames(pipe.pipeline), grouping
 
 
-def batch_ms(cfg) -> tuple[float, float]:
+def batch_ms(cfg: DictConfig) -> tuple[float, float]:
     """eval.run's ms per frame of matching, reconstruction and tracking, and its noise calibration's ms (silenced)."""
     with tempfile.TemporaryDirectory() as out, contextlib.redirect_stdout(io.StringIO()):
         report = eval_script.run(cfg, Path(out))

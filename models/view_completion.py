@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Callable
 
 import numpy as np
 
@@ -10,6 +11,9 @@ from data.config_checks import fail, is_int, is_number
 from data.keypoints import OKS_SIGMAS
 from data.multiview import Frame, ViewDetections
 from models.pose_nms import joint_similarity
+from reconstruction.pipeline import MultiViewPipeline
+
+Pose2D = Callable[[list[np.ndarray], list[np.ndarray]], list[ViewDetections]]  # images, boxes (N, 5) -> views
 
 
 class ViewCompletion:
@@ -17,7 +21,7 @@ class ViewCompletion:
     each person's pose projected into every view where nobody was matched to them; the 2D model run on the box of the
     projection; its pose added to that view where it agrees with the projection (OKS >= min_oks)."""
 
-    def __init__(self, pipeline, min_oks: float = 0.5, min_joints: int = 8) -> None:
+    def __init__(self, pipeline: MultiViewPipeline, min_oks: float = 0.5, min_joints: int = 8) -> None:
         if not (is_number(min_oks) and 0 < min_oks <= 1):
             fail("complete_views.min_oks", min_oks, "must be a number in (0, 1]")
         if not (is_int(min_joints) and min_joints >= 1):
@@ -41,7 +45,7 @@ class ViewCompletion:
         return out
 
     def __call__(
-        self, frame: Frame, images: list[np.ndarray], views: list[ViewDetections], pose2d
+        self, frame: Frame, images: list[np.ndarray], views: list[ViewDetections], pose2d: Pose2D
     ) -> list[ViewDetections]:
         """The frame's V views (N, 23, 3) with the poses found in the boxes of the persons each view missed."""
         views = list(views)
