@@ -14,9 +14,14 @@ shoulder + hip centre; ankle: big toe + heel; nose: left eye + right eye), else 
 twist relative to the parent) onto its one target. On rigid bones the joints come back exactly (the walking test:
 < 1 cm); on real ones off by their bone's length change (and the right eye and heel by their triangle's change);
 the CLI prints the mean and max distance per file. Gaps are not filled unless --fill: a joint without an observed
-target in a frame keeps its rest pose relative to its parent (rotation 0); a frame without the track or its hip
-centre holds the last known root position (before the first: the first; never known: the origin) while the other
-bones still aim at their joints, so an absent track stands in a T-pose where it was last seen.
+target in a frame keeps its rest pose relative to its parent (rotation 0). The root follows the person where the
+hip centre is missing (either hip unseen) but other joints are seen: each seen joint j votes for joint - d_j, d_j
+its offset from the hip centre linearly interpolated in time between the track's frames where both are known (held
+beyond the first and last; never known: the mean body's standing offset), the votes weighted by 1 / (variance of
+d_j over those frames + (2 cm)^2) so that the joints that keep their place about the hips (torso, head) lead; the
+pelvis then turns with the shoulder line in place of the hips. A frame without any joint of the track holds the
+last root (before the first: the first; none ever: the origin), so an absent track stands in a T-pose where it was
+last seen.
 """
 
 from __future__ import annotations
@@ -131,6 +136,9 @@ def solve(pos: np.ndarray, offsets: np.ndarray, root: np.ndarray) -> tuple[np.nd
             fk[:, j] = fk[:, INDEX[parent]] + up @ offsets[j]
         rot[:, j] = up  # bones aim from the FK joint at the observed targets: the secondary, then the primary
         bones = [(pos[:, INDEX[t]] - fk[:, j], rest[INDEX[t]] - rest[j]) for t in (second, first) if t]
+        if parent is None:  # no hips: the shoulder line (also +X at rest) turns the pelvis
+            line = pos[:, INDEX["left_shoulder"]] - pos[:, INDEX["right_shoulder"]]
+            bones[1] = (np.where(np.isfinite(bones[1][0]), bones[1][0], line), bones[1][1])
         for seen, bone in bones:
             swing = _swing(up @ bone, seen) @ up
             rot[:, j] = np.where(np.isfinite(swing).all(axis=(1, 2))[:, None, None], swing, rot[:, j])
@@ -141,25 +149,23 @@ def solve(pos: np.ndarray, offsets: np.ndarray, root: np.ndarray) -> tuple[np.nd
 
 
 def root_positions(pos: np.ndarray) -> np.ndarray:
-    """The root (T, 3) of BVH positions (T, J, 3): the hip centre where known; else where the seen joints put it, the
-    mean over them of (joint - its offset from the hip centre in the nearest frame where both are known; never: in
-    the mean body); a frame without any joint holds the last root (before the first: the first; none: the origin)."""
+    """The root (T, 3) of BVH positions (T, J, 3): the hip centre where known; else where the seen joints put it
+    (the module docstring); a frame without any seen joint holds the last root (before the first: the first)."""
     coco = [INDEX[n] for n in NAMES if n in JOINT_INDEX]
     root, hip, t = pos[:, 0].copy(), np.isfinite(pos[:, 0]).all(axis=1), np.arange(len(pos))
     votes = np.full((2, len(pos), len(coco), 3), np.nan)  # from the track's own frames, from the mean body
+    weight = np.ones((2, len(coco)))
     for i, j in enumerate(coco):
         ref = np.flatnonzero(np.isfinite(pos[:, j]).all(axis=1) & hip)
         votes[1, :, i] = pos[:, j] - (_TEMPLATE[j] - _TEMPLATE[0])
         if len(ref):
-            after = ref[np.minimum(np.searchsorted(ref, t), len(ref) - 1)]
-            before = ref[np.maximum(np.searchsorted(ref, t, side="right") - 1, 0)]
-            near = np.where(np.abs(t - before) <= np.abs(after - t), before, after)
-            votes[0, :, i] = pos[:, j] - (pos[near, j] - pos[near, 0])
-    with warnings.catch_warnings():  # frames without a vote: NaN, held below
-        warnings.simplefilter("ignore", RuntimeWarning)
-        own, body = np.nanmean(votes, axis=2)
-    guess = np.where(np.isfinite(own).all(axis=1, keepdims=True), own, body)
-    root[~hip] = guess[~hip]
+            offset = pos[ref, j] - pos[ref, 0]
+            votes[0, :, i] = pos[:, j] - np.stack([np.interp(t, ref, offset[:, c]) for c in range(3)], axis=1)
+            weight[0, i] = 1 / (offset.var(axis=0).sum() + 0.02**2)
+    seen = np.isfinite(votes).all(axis=-1) * weight[:, None]  # (2, T, J)
+    with np.errstate(invalid="ignore"):  # frames without a vote: NaN, held below
+        own, body = (np.nan_to_num(votes) * seen[..., None]).sum(axis=2) / seen.sum(axis=2)[..., None]
+    root[~hip] = np.where(np.isfinite(own), own, body)[~hip]
     ok = np.isfinite(root).all(axis=1)
     if not ok.any():
         return np.zeros_like(root)

@@ -1,7 +1,8 @@
 """Each track of a poses3d.json on the file's frame grid, the shared conventions of the exporters, and --fill.
 
 Grid: every frame number from the file's first to its last at the file's step (the greatest common divisor of
-its frame-number differences, usually 1), so the files of all tracks of one run stay in step; time = frame / fps.
+its frame-number differences, usually 1), so the files of all tracks of one run stay in step; time = frame / fps,
+fps: --fps, else the file's "fps" (written by runs on videos), else 30.
 Missing (score 0, or the track absent from the frame) is NaN. ``--fill`` interpolates each joint linearly over
 the frames between two of its observations (a track absent from a frame included), never before its first or
 after its last; the filled joints keep score 0. Y-up files (BVH, TRC) take OpenSim's / Pose2Sim's rotation of
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from data.formats.poses_io import read_poses3d_frames
+from data.formats.poses_io import read_poses3d_file
 from data.keypoints import NUM_JOINTS
 
 MAX_GRID_FRAMES = 1_000_000  # frame numbers spread wider than this are refused (the grid would not fit in memory)
@@ -26,7 +27,8 @@ MAX_GRID_FRAMES = 1_000_000  # frame numbers spread wider than this are refused 
 
 @dataclass(frozen=True)
 class Track:
-    """One track id: frames (T,), xyz (T, 23, 3) m world z up (NaN: missing), score (T, 23), present (T,) bool."""
+    """One track id: frames (T,), xyz (T, 23, 3) m world z up (NaN: missing), score (T, 23), present (T,) bool;
+    step and fps (the file's "fps", None without it) are the file's."""
 
     id: int
     frames: np.ndarray
@@ -34,6 +36,7 @@ class Track:
     score: np.ndarray
     present: np.ndarray
     step: int
+    fps: float | None = None
 
 
 def read_tracks(path: str | Path, track: int | None = None) -> list[Track]:
@@ -42,7 +45,7 @@ def read_tracks(path: str | Path, track: int | None = None) -> list[Track]:
     if not path.is_file():
         raise ValueError(f"{path}: no such file")
     try:
-        frames = read_poses3d_frames(path)
+        frames, fps = read_poses3d_file(path)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, ValueError, KeyError, TypeError, AttributeError) as e:
         raise ValueError(f"{path}: not a poses3d.json ({str(e).removeprefix(f'{path}: ')})") from None
     ids = sorted({int(i) for _, _, frame_ids in frames for i in frame_ids})
@@ -55,7 +58,7 @@ def read_tracks(path: str | Path, track: int | None = None) -> list[Track]:
     grid = np.arange(numbers[0], numbers[-1] + 1, step)
     if len(grid) > MAX_GRID_FRAMES:
         raise ValueError(f"{path}: frame numbers {numbers[0]}..{numbers[-1]} span over {MAX_GRID_FRAMES} frames")
-    return [_track(frames, grid, tid, step) for tid in (ids if track is None else [track])]
+    return [replace(_track(frames, grid, tid, step), fps=fps) for tid in (ids if track is None else [track])]
 
 
 def _track(frames: list, grid: np.ndarray, tid: int, step: int) -> Track:

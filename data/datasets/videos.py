@@ -6,6 +6,7 @@ import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from data.datasets.files import camera_shifts, frame_list, frame_range
@@ -21,6 +22,10 @@ class VideoLengthWarning(InputWarning):
     """The cameras' videos differ in length after their offsets: only the frames every camera has are used."""
 
 
+class VideoRateWarning(InputWarning):
+    """The cameras' videos declare frame rates more than 1 % apart: the first camera's is recorded."""
+
+
 def load_videos(
     cameras: str | Path,
     videos: str | Path | Mapping[str, str | Path],
@@ -28,7 +33,7 @@ def load_videos(
     frames: list[int] | int | str | None = None,
 ) -> Sequence:
     """The rig of ``cameras`` and one Frame per selected frame f: empty views, V images (H, W, 3) read forward from
-    every camera's video at position f + offsets[camera], image ids (V,)."""
+    every camera's video at position f + offsets[camera], image ids (V,); meta["fps"]: video_rate's, where known."""
     rig = load_rig(cameras)
     sources = camera_sources(rig, videos, None, key="videos")
     for source in sources:
@@ -37,7 +42,31 @@ def load_videos(
     shifts = camera_offsets(rig, sources, offsets)
     table = [(f, tuple(f + s for s in shifts)) for f in frame_numbers(rig, sources, shifts, frames)]
     meta = {"dataset": "videos", "cameras": str(cameras), "videos": videos, "offsets": dict(zip(rig.names, shifts))}
+    if fps := video_rate(rig, sources):
+        meta["fps"] = fps
     return image_sequence(rig, sources, table, meta)
+
+
+def video_rate(rig: Rig, sources: list[ImageSource]) -> float | None:
+    """The first camera's frame rate (its header's CAP_PROP_FPS; None where not a positive number), a warning when
+    the cameras' rates differ by more than 1 %."""
+    rates = []
+    for source in sources:
+        capture = cv2.VideoCapture(str(source.path))
+        rate = float(capture.get(cv2.CAP_PROP_FPS)) if capture.isOpened() else 0.0
+        capture.release()
+        rates.append(rate if np.isfinite(rate) and rate > 0 else None)
+    known = [r for r in rates if r]
+    if known and max(known) > 1.01 * min(known):
+        listed = ", ".join(f"{name!r}: {r:g}" if r else f"{name!r}: unknown" for name, r in zip(rig.names, rates))
+        warnings.warn(
+            VideoRateWarning(
+                f"dataset.videos: the cameras' videos declare different frame rates ({listed} frames per second):"
+                + (f" the first camera's, {rates[0]:g}, is recorded" if rates[0] else " none is recorded (the first's)")
+            ),
+            stacklevel=3,
+        )
+    return rates[0]
 
 
 def camera_offsets(rig: Rig, sources: list[ImageSource], offsets: Mapping[str, int] | None) -> list[int]:
