@@ -103,7 +103,9 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
 def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: SequenceReport) -> None:
     """Write poses3d.json, metrics.json, the protocols' files and report.txt into out_dir; print the report."""
     frames = ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in report.results)
-    write_poses3d(out_dir / cfg.output.poses3d, frames, sequence.rig.names, fill=cfg.output.fill)
+    write_poses3d(
+        out_dir / cfg.output.poses3d, frames, sequence.rig.names, fill=cfg.output.fill, fps=sequence.meta.get("fps")
+    )
     summary = {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped)}
     summary.update(inputs=dict(report.inputs), unmatched=dict(report.unmatched), timings_s=report.timings)
     summary["noise_model"] = report.noise_model  # the self-calibrated 2D noise model in words (null: a fixed one)

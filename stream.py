@@ -76,6 +76,7 @@ class Pipeline:
         self.inputs: Counter = Counter()  # detections dropped or merged before matching, by reason
         self.noise_model: str | None = None  # the calibrated model in words, once fitted
         self.last: int | None = None
+        self.fps: float | None = None  # the input's frame rate, written into poses3d.json (None: unknown)
 
     @classmethod
     def from_config(cls, cfg: DictConfig, sequence: Sequence) -> Pipeline:
@@ -216,7 +217,7 @@ def run_stream(stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig) -> li
             if not cfg.quiet:
                 print(frame_line(step, len(results) / (time.perf_counter() - t0)), flush=True)
         if cfg.save_every is not None and time.perf_counter() - saved >= cfg.save_every:  # the file so far, complete
-            write_results(cfg, results, stream.pipeline.rig.names)
+            write_results(cfg, results, stream.pipeline.rig.names, stream.fps)
             saved = time.perf_counter()
 
     try:
@@ -227,17 +228,17 @@ def run_stream(stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig) -> li
             print(f"stopped (Ctrl-C) after {len(results) + len(stream.buffer)} frames", file=sys.stderr)
         emit(stream.flush())
     finally:  # an error or SIGTERM: the frames emitted so far
-        write_results(cfg, results, stream.pipeline.rig.names)
+        write_results(cfg, results, stream.pipeline.rig.names, stream.fps)
     fps = len(results) / max(time.perf_counter() - t0, 1e-9)
     print(f"{len(results)} frames, {fps:.1f} frame/s" + (f"; wrote {cfg.out}" if cfg.out is not None else ""))
     return results
 
 
-def write_results(cfg: DictConfig, results: list[FrameResult], names: list[str]) -> None:
+def write_results(cfg: DictConfig, results: list[FrameResult], names: list[str], fps: float | None = None) -> None:
     """Every result so far into cfg.out (poses3d.json, atomically); nothing when out is null."""
     if cfg.out is not None:
         rows = ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in results)
-        write_poses3d(cfg.out, rows, names, fill=cfg.output.fill)
+        write_poses3d(cfg.out, rows, names, fill=cfg.output.fill, fps=fps)
 
 
 def compose_config(argv: list[str]) -> DictConfig:
@@ -269,6 +270,7 @@ def main(argv: list[str] | None = None) -> list[FrameResult]:
         try:
             sequence, frames = open_frames(cfg)
             stream = Pipeline.from_config(cfg, sequence)
+            stream.fps = sequence.meta.get("fps")
         except KeyboardInterrupt:  # while loading models or opening cameras
             print("stopped (Ctrl-C) before the first frame; nothing written", file=sys.stderr)
             raise SystemExit(130) from None

@@ -246,4 +246,5 @@ def test_eval_on_videos_writes_the_poses3d_json_of_dataset_images_with_a_frames_
         assert re.search(r"2D poses: 100%.* 3/3 .*(frame/s|s/frame)", bar), bar[-500:]
     doc = json.loads((tmp_path / "videos" / "poses3d.json").read_text())
     assert [f["frame"] for f in doc["frames"]] == [0, 2, 4] and any(f["poses"] for f in doc["frames"])
+    assert doc.pop("fps") == 5.0  # the videos' frame rate; image folders have none
     assert doc == json.loads((tmp_path / "images" / "poses3d.json").read_text())
