@@ -192,9 +192,7 @@ def with_mid_hip(shelf14: np.ndarray) -> np.ndarray:
     return np.concatenate([shelf14, shelf14[..., hips, :].mean(axis=-2, keepdims=True)], axis=-2)
 
 
-def flip_permutation() -> np.ndarray:
-    """Channel permutation of a horizontal flip: (23,) indices, left and right swapped."""
-    perm = np.arange(NUM_JOINTS)
-    for a, b in FLIP_PAIRS:
-        perm[a], perm[b] = b, a
-    return perm
+def flip_permutation(names: tuple[str, ...] = COCO23_NAMES) -> np.ndarray:
+    """Channel permutation of a horizontal flip: (J,) indices, each left joint's name swapped with its right one's."""
+    swapped = (n.replace("left", "#").replace("right", "left").replace("#", "right") for n in names)
+    return np.array([names.index(n) for n in swapped])

@@ -9,7 +9,8 @@ import numpy as np
 from scipy.special import expit
 
 from data.config_checks import fail, is_int, is_number
-from data.keypoints import BLAZEPOSE33_TO_COCO23, to_coco23
+from data.formats.boxes_from_poses import pose_box
+from data.keypoints import BLAZEPOSE33_NAMES, BLAZEPOSE33_TO_COCO23, flip_permutation, to_coco23
 from data.multiview import ViewDetections
 from models.pose_nms import pose_nms
 from models.sppe_stage import nms_threshold
@@ -18,12 +19,12 @@ from models.tflite_models import TFLiteModel, mediapipe_model
 NUM_LANDMARKS = 33
 HIP_CENTRE, BODY_EXTENT = 33, 34  # auxiliary landmarks: the next crop's centre and its half size (MediaPipe's ROI)
 ROI_SCALE = 1.25  # MediaPipe's crop side around the body circle: 1.25 x its diameter (what the model was trained on)
-LEFT_RIGHT = np.array([0, 4, 5, 6, 1, 2, 3, 8, 7, 10, 9, *np.arange(11, 33).reshape(-1, 2)[:, ::-1].ravel(), 33, 34])
+LEFT_RIGHT = np.append(flip_permutation(BLAZEPOSE33_NAMES), [HIP_CENTRE, BODY_EXTENT])  # the auxiliary two: central
 
 
 def box_rois(boxes: np.ndarray, scale: float) -> np.ndarray:
     """Person boxes (N, >=4) x, y, w, h -> square upright crops (N, 4) centre x, centre y, side, angle 0."""
-    boxes = np.asarray(boxes, np.float64).reshape(-1, boxes.shape[-1] if len(boxes) else 5)
+    boxes = np.asarray(boxes, np.float64)
     side = np.maximum(boxes[:, 2], boxes[:, 3]) * scale
     return np.column_stack([boxes[:, 0] + boxes[:, 2] / 2, boxes[:, 1] + boxes[:, 3] / 2, side, np.zeros(len(boxes))])
 
@@ -164,9 +165,6 @@ class BlazePose:
 
 
 def tight_boxes(poses: np.ndarray) -> np.ndarray:
-    """COCO-23 poses (N, 23, 3) -> (N, 4) x, y, w, h around their joints with a score > 0."""
-    if not len(poses):
-        return np.zeros((0, 4))
-    xy = np.where(poses[:, :, 2:] > 0, poses[:, :, :2], np.nan)
-    low, high = np.nanmin(xy, axis=1), np.nanmax(xy, axis=1)
-    return np.column_stack([low, high - low])
+    """COCO-23 poses (N, 23, 3) -> (N, 4) x, y, w, h around their joints with a score > 0 (zeros: none scored)."""
+    boxes = [pose_box(pose, 0.0) for pose in poses]
+    return np.array([np.zeros(4) if b is None else b for b in boxes]).reshape(len(poses), 4)

@@ -11,7 +11,7 @@ from omegaconf import OmegaConf
 
 from data.config_checks import ConfigError
 from data.datasets.shelf import load_shelf
-from data.keypoints import BLAZEPOSE33_NAMES, BLAZEPOSE33_TO_COCO23, COCO23_NAMES
+from data.keypoints import BLAZEPOSE33_NAMES, BLAZEPOSE33_TO_COCO23, COCO23_NAMES, flip_permutation
 from data.pose2d.coco_eval import evaluate_keypoints
 from data.pose2d.coco_keypoints import load_coco_wholebody
 from models.blazepose import LEFT_RIGHT, aligned_rois, crop_to_image, refine_from_heatmap
@@ -55,8 +55,12 @@ def test_crop_geometry_puts_the_body_upright():
 
 
 def test_left_right_and_coco23_maps_follow_the_names():
-    swap = {n: n.replace("left", "#").replace("right", "left").replace("#", "right") for n in BLAZEPOSE33_NAMES}
-    assert [BLAZEPOSE33_NAMES[i] for i in LEFT_RIGHT[:33]] == [swap[n] for n in BLAZEPOSE33_NAMES]
+    # MediaPipe's landmark indices: eye inner 1 / 4, mouth 9 / 10, shoulders 11 / 12, foot index 31 / 32; nose and the
+    # two auxiliary landmarks (33, 34) stay
+    for a, b in ((1, 4), (2, 5), (3, 6), (7, 8), (9, 10), (11, 12), (23, 24), (29, 30), (31, 32)):
+        assert LEFT_RIGHT[a] == b and LEFT_RIGHT[b] == a
+    assert LEFT_RIGHT[0] == 0 and LEFT_RIGHT[33] == 33 and LEFT_RIGHT[34] == 34
+    assert BLAZEPOSE33_NAMES[9:11] == ("mouth_left", "mouth_right") and len(BLAZEPOSE33_NAMES) == 33
     np.testing.assert_array_equal(LEFT_RIGHT[LEFT_RIGHT], np.arange(len(LEFT_RIGHT)))
     missing = [COCO23_NAMES[j] for j in np.flatnonzero(BLAZEPOSE33_TO_COCO23 < 0)]
     assert missing == ["left_small_toe", "right_small_toe"]  # documented: score 0
@@ -138,10 +142,7 @@ def test_flip_test_is_mirror_symmetric(shared_data):
     stage = BlazePose(passes=1, refine=False)
     pose = stage([image], [np.array([[*box, 1.0]])])[0].keypoints[0]
     other = stage([image[:, ::-1].copy()], [np.array([[*mirrored_box, 1.0]])])[0].keypoints[0]
-    flip = [
-        COCO23_NAMES.index(n.replace("left", "#").replace("right", "left").replace("#", "right")) for n in COCO23_NAMES
-    ]
-    other = other[flip]
+    other = other[flip_permutation()]
     other[:, 0] = image.shape[1] - other[:, 0]
     seen = (pose[:, 2] > 0) & (other[:, 2] > 0)
     assert np.median(np.linalg.norm(pose[seen, :2] - other[seen, :2], axis=1)) < 0.02 * max(w, h)
