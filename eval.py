@@ -7,6 +7,7 @@ import json
 import sys
 import time
 import warnings
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import hydra
@@ -29,7 +30,7 @@ from evaluation.pose3d import Pose3DEvaluator
 from evaluation.protocols import attach_protocols
 from evaluation.sequence_eval import SequenceReport, evaluate_sequence, format_report
 from models.front_end import Pose2DFrontEnd
-from reconstruction.pipeline import MultiViewPipeline
+from reconstruction.pipeline import FrameResult, MultiViewPipeline
 from reconstruction.precompile import precompile
 from run_folders import one_line_errors, register_resolvers
 
@@ -53,12 +54,12 @@ def check_config(cfg: DictConfig) -> None:
     check_int(cfg, "vis_frame", 0, nullable=True)
     for key in ("vis", "vis_sequence", "progress", "overwrite", "output.fill", "viewer_spawn"):
         check_bool(cfg, key)
+    check_int(cfg, "inputs.max_detections_per_frame", 1)
+    check_number(cfg, "inputs.near_duplicate", strict=False)
     if cfg.viewer is not None:  # before the frames run, not after
-        from evaluation.pictures.rerun_view import import_rerun
+        from evaluation.pictures.rerun_view import check_viewer
 
-        if cfg.viewer != "rerun":
-            raise ConfigError(f"viewer={cfg.viewer!r}: must be null or rerun (the HTML viewer: vis_sequence=true)")
-        import_rerun()
+        check_viewer(cfg.viewer, cfg.viewer_spawn)
 
 
 def check_sequence(cfg: DictConfig, sequence: Sequence) -> None:
@@ -83,8 +84,6 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     sequence = attach_protocols(instantiate(cfg.dataset, _convert_="all"))  # protocols: evaluation/protocols
     t_data = time.perf_counter() - t0
     check_sequence(cfg, sequence)
-    check_int(cfg, "inputs.max_detections_per_frame", 1)
-    check_number(cfg, "inputs.near_duplicate", strict=False)
     sequence, repaired = clean_frames(sequence, cfg.inputs.max_detections_per_frame, cfg.inputs.near_duplicate)
     sequence, front_timings, view_report = run_2d_stage(cfg, sequence, out_dir)
     pipeline = MultiViewPipeline.from_config(cfg, sequence.rig)
@@ -100,11 +99,16 @@ def run(cfg: DictConfig, out_dir: Path) -> SequenceReport:
     return report
 
 
+def poses3d_rows(results: Iterable[FrameResult]) -> Iterator[tuple]:
+    """write_poses3d's rows of FrameResults: (frame, poses3d (P, 23, 4), assignment (P, V), ids, joint views, sources)."""
+    return ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in results)
+
+
 def write_outputs(cfg: DictConfig, out_dir: Path, sequence: Sequence, report: SequenceReport) -> None:
     """Write poses3d.json, metrics.json, the protocols' files and report.txt into out_dir; print the report."""
-    frames = ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in report.results)
+    rows = poses3d_rows(report.results)
     write_poses3d(
-        out_dir / cfg.output.poses3d, frames, sequence.rig.names, fill=cfg.output.fill, fps=sequence.meta.get("fps")
+        out_dir / cfg.output.poses3d, rows, sequence.rig.names, fill=cfg.output.fill, fps=sequence.meta.get("fps")
     )
     summary = {"metrics": report.metrics, **report.protocols, "skipped": dict(report.skipped)}
     summary.update(inputs=dict(report.inputs), unmatched=dict(report.unmatched), timings_s=report.timings)

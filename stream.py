@@ -31,9 +31,8 @@ from data.geometry.calibration import CalibrationError, load_rig
 from data.geometry.camera import Rig
 from data.image_ids import coco_image_id
 from data.multiview import Frame, Sequence, ViewDetections
-from eval import check_config, check_sequence, one_line_warning
+from eval import check_config, check_sequence, one_line_warning, poses3d_rows
 from models.front_end import Pose2DFrontEnd
-from reconstruction.noise_calibration import CalibratedNoiseModel
 from reconstruction.pipeline import FrameResult, MultiViewPipeline
 from reconstruction.precompile import precompile
 from run_folders import one_line_errors, register_resolvers
@@ -55,8 +54,8 @@ class StepResult:
 
 def warmup_frames(pipeline: MultiViewPipeline) -> int:
     """The frames the calibrated noise model fits on (noise_model.frames), buffered before the first result; 0: fixed."""
-    models = [getattr(stage, "noise_model", None) for stage in (pipeline.matcher, pipeline.reconstructor)]
-    return next((m.frames for m in models if isinstance(m, CalibratedNoiseModel)), 0)
+    model = pipeline.calibrated_model()
+    return 0 if model is None else model.frames
 
 
 class Pipeline:
@@ -76,7 +75,6 @@ class Pipeline:
         self.inputs: Counter = Counter()  # detections dropped or merged before matching, by reason
         self.noise_model: str | None = None  # the calibrated model in words, once fitted
         self.last: int | None = None
-        self.fps: float | None = None  # the input's frame rate, written into poses3d.json (None: unknown)
 
     @classmethod
     def from_config(cls, cfg: DictConfig, sequence: Sequence) -> Pipeline:
@@ -205,8 +203,11 @@ def frame_line(step: StepResult, fps: float) -> str:
     return f"frame {r.frame}: {len(r.poses3d)} persons, ids {ids} | ms {stages} | waited {step.wait_ms:.1f} | {fps:.1f} frame/s"
 
 
-def run_stream(stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig) -> list[FrameResult]:
-    """Step through frames, a line per result; at the end or Ctrl-C flush; always write cfg.out atomically."""
+def run_stream(
+    stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig, fps: float | None = None
+) -> list[FrameResult]:
+    """Step through frames, a line per result; at the end or Ctrl-C flush; always write cfg.out atomically (fps: the
+    input's frame rate, written into it; None: unknown)."""
     results: list[FrameResult] = []
     t0 = saved = time.perf_counter()
 
@@ -217,7 +218,7 @@ def run_stream(stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig) -> li
             if not cfg.quiet:
                 print(frame_line(step, len(results) / (time.perf_counter() - t0)), flush=True)
         if cfg.save_every is not None and time.perf_counter() - saved >= cfg.save_every:  # the file so far, complete
-            write_results(cfg, results, stream.pipeline.rig.names, stream.fps)
+            write_results(cfg, results, stream.pipeline.rig.names, fps)
             saved = time.perf_counter()
 
     try:
@@ -228,7 +229,7 @@ def run_stream(stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig) -> li
             print(f"stopped (Ctrl-C) after {len(results) + len(stream.buffer)} frames", file=sys.stderr)
         emit(stream.flush())
     finally:  # an error or SIGTERM: the frames emitted so far
-        write_results(cfg, results, stream.pipeline.rig.names, stream.fps)
+        write_results(cfg, results, stream.pipeline.rig.names, fps)
     fps = len(results) / max(time.perf_counter() - t0, 1e-9)
     print(f"{len(results)} frames, {fps:.1f} frame/s" + (f"; wrote {cfg.out}" if cfg.out is not None else ""))
     return results
@@ -237,8 +238,7 @@ def run_stream(stream: Pipeline, frames: Iterable[Frame], cfg: DictConfig) -> li
 def write_results(cfg: DictConfig, results: list[FrameResult], names: list[str], fps: float | None = None) -> None:
     """Every result so far into cfg.out (poses3d.json, atomically); nothing when out is null."""
     if cfg.out is not None:
-        rows = ((r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in results)
-        write_poses3d(cfg.out, rows, names, fill=cfg.output.fill, fps=fps)
+        write_poses3d(cfg.out, poses3d_rows(results), names, fill=cfg.output.fill, fps=fps)
 
 
 def compose_config(argv: list[str]) -> DictConfig:
@@ -270,11 +270,10 @@ def main(argv: list[str] | None = None) -> list[FrameResult]:
         try:
             sequence, frames = open_frames(cfg)
             stream = Pipeline.from_config(cfg, sequence)
-            stream.fps = sequence.meta.get("fps")
         except KeyboardInterrupt:  # while loading models or opening cameras
             print("stopped (Ctrl-C) before the first frame; nothing written", file=sys.stderr)
             raise SystemExit(130) from None
-        return run_stream(stream, frames, cfg)
+        return run_stream(stream, frames, cfg, sequence.meta.get("fps"))
 
 
 if __name__ == "__main__":

@@ -85,11 +85,16 @@ class MultiViewPipeline:
         coincident_m = cfg.get("coincident_m", 0.3)
         return cls(rig, instantiate(cfg.matching), instantiate(cfg.reconstruction), tracker, coincident_m)
 
+    def calibrated_model(self) -> CalibratedNoiseModel | None:
+        """The stages' self-calibrating noise model (noise_model=calibrated), None where it is fixed."""
+        models = [getattr(stage, "noise_model", None) for stage in (self.matcher, self.reconstructor)]
+        return next((m for m in models if isinstance(m, CalibratedNoiseModel)), None)
+
     def calibrate_noise(self, frames: list[Frame]) -> str | None:
         """Fit a self-calibrating 2D noise model (the stages', noise_model=calibrated) to the first frames and give
         it to both stages -> the report's line on it; None where the stages' model is fixed."""
         readers = [s for s in (self.matcher, self.reconstructor) if hasattr(s, "noise_model")]
-        model = next((s.noise_model for s in readers if isinstance(s.noise_model, CalibratedNoiseModel)), None)
+        model = self.calibrated_model()
         if model is None:
             return None
         model, blocks, proj = model.fitted(None), None, self.rig.projection_matrices()  # a refit starts afresh

@@ -46,8 +46,7 @@ def stream_bytes(pipe: stream.Pipeline, frames, path: Path, fill: bool = False) 
     """poses3d.json of pipe stepped over frames then flushed (written as eval.py writes it), and each step's results."""
     steps = [pipe.step(frame) for frame in frames] + [pipe.flush()]
     results = [s.result for step in steps for s in step]
-    rows = [(r.frame, r.poses3d, r.assignment, r.ids, r.joint_views, r.joint_source) for r in results]
-    write_poses3d(path, rows, pipe.pipeline.rig.names, fill=fill)
+    write_poses3d(path, eval_script.poses3d_rows(results), pipe.pipeline.rig.names, fill=fill)
     return path.read_bytes(), steps
 
 
@@ -124,7 +123,7 @@ def test_cli_on_video_files_and_live_cameras_writes_eval_py_dataset_videos_outpu
     front_end = Pose2DFrontEnd(instantiate(cfg.pose2d), instantiate(cfg.detector))  # no dataset to check ids against
     pipe = stream.Pipeline(MultiViewPipeline.from_config(cfg, rig), front_end)
     got, steps = stream_bytes(pipe, stream.live_frames(rig, [0, 1, 2]), tmp_path / "live.json")
-    assert json.loads(got) | {"fps": 5.0} == json.loads(expected)  # live cameras: no frame rate recorded
+    assert json.loads(got) | {"fps": 5.0} == json.loads(expected)  # stream_bytes writes no rate; eval.py's 5 fps
     assert [len(s) for s in steps] == [0, 0, 0, 0, 4]  # 4 frames: flushed, calibrated on them
     assert {"2D", "noise calibration", "matching"} <= set(steps[-1][-1].latency_ms)
 

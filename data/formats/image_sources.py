@@ -44,7 +44,7 @@ class ImageSource:
         if not 0 <= position < self.num_frames:
             raise ImageSourceError(f"{self.path}: no frame {position} (it has {self.num_frames})")
         if self.kind == "video":
-            return read_video_frame(self.path, position)
+            return VideoReader(self).read(position)  # one frame; a stream keeps its own VideoReader
         return read_image(self.files[0] if self.kind == "image" else self.files[position])
 
     def frame_size(self) -> tuple[int, int]:
@@ -115,20 +115,6 @@ def video_frame_count(path: Path) -> int:
     if count == 0:
         raise ImageSourceError(f"{path}: this video holds no frame OpenCV can read")
     return count
-
-
-def read_video_frame(path: Path, index: int) -> np.ndarray:
-    """Frame ``index`` (0-based) of a video as (H, W, 3) uint8 BGR, seeking by frame index."""
-    capture = _open_video(path)
-    try:
-        if index > 0:
-            capture.set(cv2.CAP_PROP_POS_FRAMES, index)
-        ok, image = capture.read()
-    finally:
-        capture.release()
-    if not ok or image is None:
-        raise ImageSourceError(f"{path}: cannot read frame {index} of this video")
-    return image
 
 
 class VideoReader:

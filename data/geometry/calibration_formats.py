@@ -16,7 +16,7 @@ import numpy as np
 
 from data.geometry.calibration import CalibrationError, _array, _camera, _error
 from data.geometry.camera import Camera, Rig
-from data.geometry.check_rig import RigTolerances, RigWarning, _mutual_best, _pair_costs, sees_point
+from data.geometry.check_rig import RigTolerances, RigWarning, _mutual_best, _pair_costs, axes_point, sees_point
 from data.geometry.triangulation import triangulate_dlt
 from data.keypoints import joint_indices
 from data.multiview import ViewDetections
@@ -217,15 +217,11 @@ def _looking(rig: Rig) -> np.ndarray:
 
 
 def viewed_point(rig: Rig) -> np.ndarray | None:
-    """The point nearest the cameras' optical axes (least squares), None when they are near parallel or it lies
-    behind a camera: (3,)."""
+    """The point nearest the cameras' optical axes (check_rig.axes_point), None when they are near parallel or it
+    lies behind a camera: (3,)."""
+    X = axes_point(list(rig), RigTolerances().max_axes_condition)
     C, D = np.array([c.center for c in rig]), np.array([c.R[2] for c in rig])
-    P = np.eye(3) - D[:, :, None] * D[:, None, :]  # projections across each axis
-    A = P.sum(axis=0)
-    if np.linalg.eigvalsh(A)[0] < 1e-6 * len(rig):  # axes within ~0.1 deg of parallel
-        return None
-    X = np.linalg.solve(A, np.einsum("vij,vj->i", P, C))
-    return X if np.all(np.einsum("vi,vi->v", D, X - C) > 0) else None
+    return X if X is not None and np.all(np.einsum("vi,vi->v", D, X - C) > 0) else None
 
 
 def _implausible_units(rig: Rig, path: str | Path) -> None:

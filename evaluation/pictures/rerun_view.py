@@ -19,14 +19,23 @@ from data.keypoints import LIMBS, NUM_JOINTS
 from data.multiview import Sequence, ViewDetections
 from evaluation.pictures.sequence_data import id_colors, pose_roots, sequence_frames, valid_joints
 from evaluation.pictures.sequence_html import _scene_points, grid_spec
+from evaluation.pictures.vis_draw import DETECTION_COLOR
 
 RRD_NAME = "recording.rrd"
 TIMELINE = "frame"  # the frame numbers of the dataset
 IMAGE_SIDE = 480  # px: the longest side of each camera's logged image space (images, detections, pinhole)
 JPEG_QUALITY = 75
-DETECTION_RGB = (255, 255, 255)  # the 2D detections, white as in the vis=true pictures
 LIMB_RADIUS_M, JOINT_RADIUS_M, FRUSTUM_M = 0.015, 0.025, 0.4
 _LIMB_A, _LIMB_B = np.asarray(LIMBS).T
+
+
+def check_viewer(viewer: str | None, spawn: bool) -> ModuleType:
+    """The rerun SDK for viewer=rerun; a ConfigError naming the key for another value or a missing package."""
+    if viewer not in (None, "rerun"):
+        fail("viewer", viewer, "must be null or rerun (the HTML viewer: vis_sequence=true)")
+    if not isinstance(spawn, bool):
+        fail("viewer_spawn", spawn, "must be true or false")
+    return import_rerun()
 
 
 def import_rerun() -> ModuleType:
@@ -100,8 +109,8 @@ def log_view(rec: Any, rr: ModuleType, camera: Camera, view: ViewDetections, ima
         rec.log(f"{path}/image", rr.EncodedImage(contents=jpeg, media_type="image/jpeg"))
     xy, scores = view.keypoints[..., :2] * scale, view.keypoints[..., 2]
     ok = (scores > 0) & np.isfinite(view.keypoints).all(axis=-1)
-    rec.log(f"{path}/detections", rr.LineStrips2D(limb_segments(xy, ok)[0], colors=DETECTION_RGB))
-    rec.log(f"{path}/detections/joints", rr.Points2D(xy[ok], colors=DETECTION_RGB, radii=1.5))
+    rec.log(f"{path}/detections", rr.LineStrips2D(limb_segments(xy, ok)[0], colors=DETECTION_COLOR))
+    rec.log(f"{path}/detections/joints", rr.Points2D(xy[ok], colors=DETECTION_COLOR, radii=1.5))
 
 
 def log_skeletons(rec: Any, rr: ModuleType, poses: np.ndarray, ids: np.ndarray, colors: dict) -> None:
@@ -141,11 +150,7 @@ def save_rerun_recording(
     out_dir: str | Path, sequence: Sequence, results: Iterable[Any], viewer: str | None, spawn: bool
 ) -> Path:
     """recording.rrd of a run's sequence and results (FrameResult: frame, poses3d (P, 23, 4), ids) -> its path."""
-    if viewer not in (None, "rerun"):
-        fail("viewer", viewer, "must be null or rerun (the HTML viewer: vis_sequence=true)")
-    if not isinstance(spawn, bool):
-        fail("viewer_spawn", spawn, "must be true or false")
-    rr = import_rerun()
+    rr = check_viewer(viewer, spawn)
     frames, _ = sequence_frames((r.frame, r.poses3d, r.ids) for r in results)
     by_number = {f.frame: f for f in frames}
     colors = id_colors(i for f in frames for i in f.ids)
